@@ -1,0 +1,6 @@
+//! Odometry: encoder arithmetic (eq 1), wheel distance (eqs 3-6), pose (eqs 7-15) and
+//! uncertainty (eqs 19-28).
+
+pub mod params;
+
+pub use params::{ChassisParams, ParamError, UncertaintyModel, WheelHarmonics, WHEEL_HARMONICS};

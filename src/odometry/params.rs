@@ -1,0 +1,188 @@
+//! Chassis and encoder parameters, under the names shared by the firmware commands, the
+//! settings store, the CSV/TOML files and the host tool.
+
+/// Number of Fourier harmonics of each wheel's per-angle radius function (eqs 3-5).
+pub const WHEEL_HARMONICS: usize = 3;
+
+/// Per-angle wheel function of one wheel: the wheel's effective radius over one turn,
+/// relative to its mean, as a short Fourier series referenced to the index (N) pulse.
+///
+/// With phase `theta` in radians (`2 pi (Gamma - Gamma_index) / ticks_per_rev`), the
+/// distance travelled per increment is
+/// `c * (1 + sum_h cos[h-1] * cos(h theta) + sin[h-1] * sin(h theta))`, `h = 1..=3`,
+/// where `c = pi * diameter / ticks_per_rev`. The coefficients are dimensionless; all zero
+/// means a round, centred wheel (eq 6). Keys: `left_cos1`..`left_cos3`, `left_sin1`..`left_sin3`
+/// and the same for `right_`.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct WheelHarmonics {
+    /// Cosine coefficients of harmonics 1..=3 (dimensionless).
+    pub cos: [f32; WHEEL_HARMONICS],
+    /// Sine coefficients of harmonics 1..=3 (dimensionless).
+    pub sin: [f32; WHEEL_HARMONICS],
+}
+
+impl WheelHarmonics {
+    /// A round, centred wheel: the constant transfer constant of eq (6).
+    pub const ROUND: Self = Self {
+        cos: [0.0; WHEEL_HARMONICS],
+        sin: [0.0; WHEEL_HARMONICS],
+    };
+
+    /// True when every coefficient is zero (eq 6 applies exactly).
+    pub fn is_round(&self) -> bool {
+        self.cos.iter().chain(self.sin.iter()).all(|c| *c == 0.0)
+    }
+}
+
+/// Kinematic and uncertainty parameters of the chassis.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ChassisParams {
+    /// `left_diameter`: effective diameter of wheel 1 (left), metres.
+    pub left_diameter: f64,
+    /// `right_diameter`: effective diameter of wheel 2 (right), metres.
+    pub right_diameter: f64,
+    /// `track_width`: distance between the wheels' contact points, metres (w of eq 8).
+    pub track_width: f64,
+    /// `ticks_per_rev`: encoder increments per wheel turn after x4 decoding (P of eq 2).
+    pub ticks_per_rev: u32,
+    /// `delta_left`: uncertainty coefficient of wheel 1, metres per increment (eq 19):
+    /// sigma of the wheel's distance over one sample = `delta_left * |dGamma_1|`.
+    pub delta_left: f32,
+    /// `delta_right`: uncertainty coefficient of wheel 2, metres per increment.
+    pub delta_right: f32,
+    /// `delta_diff`: the paper's proposed partial uncertainty of opposite-phase slip when
+    /// turning, metres per increment of `|dGamma_1 - dGamma_2|` (0 = the paper's model).
+    pub delta_diff: f32,
+    /// `uncertainty_model`: which propagation fills the sigmas of a record.
+    pub uncertainty_model: UncertaintyModel,
+    /// `kappa_left`: for the covariance model, variance of wheel 1's distance per metre it
+    /// rolled, m^2/m (Chong & Kleeman).
+    pub kappa_left: f32,
+    /// `kappa_right`: the same for wheel 2, m^2/m.
+    pub kappa_right: f32,
+    /// Per-angle wheel function of wheel 1 (`left_cos1`.. `left_sin3`).
+    pub left_wheel: WheelHarmonics,
+    /// Per-angle wheel function of wheel 2 (`right_cos1`.. `right_sin3`).
+    pub right_wheel: WheelHarmonics,
+}
+
+impl ChassisParams {
+    /// The paper's designed values (Table 2, Table 3): 0.260 m wheels, 0.563 m track,
+    /// 20,000 increments per turn, delta = 3.90e-8 m per increment, round wheels.
+    pub const DESIGNED: Self = Self {
+        left_diameter: 0.260,
+        right_diameter: 0.260,
+        track_width: 0.563,
+        ticks_per_rev: 20_000,
+        delta_left: 3.90e-8,
+        delta_right: 3.90e-8,
+        delta_diff: 0.0,
+        uncertainty_model: UncertaintyModel::Paper,
+        kappa_left: 1.0e-7,
+        kappa_right: 1.0e-7,
+        left_wheel: WheelHarmonics::ROUND,
+        right_wheel: WheelHarmonics::ROUND,
+    };
+
+    /// Smallest accepted wheel diameter or track width, metres.
+    pub const MIN_LENGTH: f64 = 0.01;
+    /// Largest accepted wheel diameter or track width, metres.
+    pub const MAX_LENGTH: f64 = 10.0;
+    /// Accepted range of `ticks_per_rev`.
+    pub const TICKS_PER_REV_RANGE: core::ops::RangeInclusive<u32> = 4..=1_048_576;
+    /// Largest accepted uncertainty coefficient, metres per increment.
+    pub const MAX_DELTA: f32 = 1.0e-3;
+    /// Largest accepted covariance-model coefficient, m^2/m.
+    pub const MAX_KAPPA: f32 = 1.0e-2;
+    /// Largest accepted magnitude of one wheel-function coefficient (relative radius).
+    pub const MAX_HARMONIC: f32 = 0.05;
+
+    /// Checks every parameter against its documented range; the first offending key is
+    /// named in the error.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        let length = |key: &'static str, v: f64| {
+            if !v.is_finite() {
+                Err(ParamError::NotFinite(key))
+            } else if !(Self::MIN_LENGTH..=Self::MAX_LENGTH).contains(&v) {
+                Err(ParamError::OutOfRange(key))
+            } else {
+                Ok(())
+            }
+        };
+        length("left_diameter", self.left_diameter)?;
+        length("right_diameter", self.right_diameter)?;
+        length("track_width", self.track_width)?;
+        if !Self::TICKS_PER_REV_RANGE.contains(&self.ticks_per_rev) {
+            return Err(ParamError::OutOfRange("ticks_per_rev"));
+        }
+        let delta = |key: &'static str, v: f32| {
+            if !v.is_finite() {
+                Err(ParamError::NotFinite(key))
+            } else if !(0.0..=Self::MAX_DELTA).contains(&v) {
+                Err(ParamError::OutOfRange(key))
+            } else {
+                Ok(())
+            }
+        };
+        delta("delta_left", self.delta_left)?;
+        delta("delta_right", self.delta_right)?;
+        delta("delta_diff", self.delta_diff)?;
+        let kappa = |key: &'static str, v: f32| {
+            if !v.is_finite() {
+                Err(ParamError::NotFinite(key))
+            } else if !(0.0..=Self::MAX_KAPPA).contains(&v) {
+                Err(ParamError::OutOfRange(key))
+            } else {
+                Ok(())
+            }
+        };
+        kappa("kappa_left", self.kappa_left)?;
+        kappa("kappa_right", self.kappa_right)?;
+        for (key, wheel) in [("left_cos/sin", &self.left_wheel), ("right_cos/sin", &self.right_wheel)] {
+            for c in wheel.cos.iter().chain(wheel.sin.iter()) {
+                if !c.is_finite() {
+                    return Err(ParamError::NotFinite(key));
+                }
+                if c.abs() > Self::MAX_HARMONIC {
+                    return Err(ParamError::OutOfRange(key));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Default for ChassisParams {
+    fn default() -> Self {
+        Self::DESIGNED
+    }
+}
+
+/// Which uncertainty propagation the integrator runs (`uncertainty_model`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum UncertaintyModel {
+    /// The paper's eqs (19)-(28): sigmas summed linearly (plus `delta_diff` when non-zero).
+    #[default]
+    Paper,
+    /// First-order 3x3 covariance propagation of x, y, heading (Chong & Kleeman), with wheel
+    /// distance variances `kappa * |ds|`.
+    Covariance,
+}
+
+/// A parameter set that cannot be used; names the offending key.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ParamError {
+    /// The value is NaN or infinite.
+    NotFinite(&'static str),
+    /// The value is outside its documented range.
+    OutOfRange(&'static str),
+}
+
+impl core::fmt::Display for ParamError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::NotFinite(k) => write!(f, "{k}: not a finite number"),
+            Self::OutOfRange(k) => write!(f, "{k}: out of range"),
+        }
+    }
+}
