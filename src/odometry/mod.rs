@@ -4,3 +4,11 @@
 pub mod params;
 
 pub use params::{ChassisParams, ParamError, UncertaintyModel, WheelHarmonics, WHEEL_HARMONICS};
+pub mod encoder;
+pub mod integrator;
+pub mod trig;
+pub mod uncertainty;
+pub mod wheel;
+
+pub use encoder::CounterExtender;
+pub use integrator::{IndexRefs, Integrator, Pose, PoseSigma, StepStatus, WheelCounts};

@@ -90,6 +90,10 @@ impl ChassisParams {
     pub const MAX_LENGTH: f64 = 10.0;
     /// Accepted range of `ticks_per_rev`.
     pub const TICKS_PER_REV_RANGE: core::ops::RangeInclusive<u32> = 4..=1_048_576;
+    /// Largest distance one increment may stand for, metres (`pi * diameter / ticks_per_rev`).
+    pub const MAX_DISTANCE_PER_COUNT: f64 = 0.03;
+    /// Largest heading change one increment may stand for, radians.
+    pub const MAX_HEADING_PER_COUNT: f64 = 0.01;
     /// Largest accepted uncertainty coefficient, metres per increment.
     pub const MAX_DELTA: f32 = 1.0e-3;
     /// Largest accepted covariance-model coefficient, m^2/m.
@@ -124,6 +128,16 @@ impl ChassisParams {
                 Ok(())
             }
         };
+        // Keep one increment's distance and heading change within the fixed-point ranges of
+        // the integrator: at most 3 cm and 0.01 rad per increment.
+        for diameter in [self.left_diameter, self.right_diameter] {
+            let c = core::f64::consts::PI * diameter / f64::from(self.ticks_per_rev);
+            if c > Self::MAX_DISTANCE_PER_COUNT
+                || c / self.track_width > Self::MAX_HEADING_PER_COUNT
+            {
+                return Err(ParamError::OutOfRange("ticks_per_rev"));
+            }
+        }
         delta("delta_left", self.delta_left)?;
         delta("delta_right", self.delta_right)?;
         delta("delta_diff", self.delta_diff)?;
@@ -138,7 +152,10 @@ impl ChassisParams {
         };
         kappa("kappa_left", self.kappa_left)?;
         kappa("kappa_right", self.kappa_right)?;
-        for (key, wheel) in [("left_cos/sin", &self.left_wheel), ("right_cos/sin", &self.right_wheel)] {
+        for (key, wheel) in [
+            ("left_cos/sin", &self.left_wheel),
+            ("right_cos/sin", &self.right_wheel),
+        ] {
             for c in wheel.cos.iter().chain(wheel.sin.iter()) {
                 if !c.is_finite() {
                     return Err(ParamError::NotFinite(key));

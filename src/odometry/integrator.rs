@@ -1,0 +1,447 @@
+//! The pose integrator: eqs (7)-(15) in drift-free fixed point, with the uncertainty of
+//! eqs (19)-(28) (or the covariance model) alongside.
+//!
+//! # Numerics
+//!
+//! The Cortex-M4F has only a single-precision FPU, and an f32 running sum of position loses
+//! centimetres per kilometre (at 10 m from the origin an f32 ulp is 1 um, the size of a whole
+//! sample's motion at a crawl). So the state is held in integers and f32 is used only for
+//! the small per-sample corrections:
+//!
+//! * Heading: a binary angle (`u64`, 2^64 units per turn, 3.4e-19 rad) plus a turn count.
+//!   Each sample adds `k_1 dGamma_1 - k_2 dGamma_2` with `k_i = c_i / (2 pi w)` turns per
+//!   increment in 2^-64 units, by wrapping integer arithmetic, which is exact: the heading
+//!   is the cumulative count difference times a constant, never a sum of rounded floats
+//!   (only the per-angle wheel function's bounded correction comes from f32).
+//! * Wheel distances: `c_i dGamma_i` in units of 2^-48 m (exact integer products).
+//! * Position: x and y in units of 2^-32 m (2.3e-10 m) in `i64` (range +-2.1e9 m). Each
+//!   sample adds `dd sin(theta)`, `dd cos(theta)` with `dd` in fixed point and sin/cos from the
+//!   integer kernel of [`trig::sin_cos`] (error < 2e-9), rounded to nearest: the worst-case
+//!   systematic error is about 2e-9 of the distance travelled plus 1.2e-10 m per sample,
+//!   against 4e-5 m per increment of encoder resolution.
+//! * The chord factor of eq (9) is applied as `dd = ds - ds * chord_defect(dalpha/2)`, the
+//!   correction in f32: on a straight line it is exactly zero, on a curve its f32 error is
+//!   below 1e-7 of an already small term.
+//!
+//! The host tests compare this against an f64 implementation of the paper's equations over a
+//! 10 km drive at 50 Hz (agreement within 1 mm and 1e-6 rad).
+//!
+//! # Limits of one sample
+//!
+//! A sample whose increments exceed [`MAX_STEP_COUNTS`] on a wheel, or whose heading change
+//! exceeds [`MAX_STEP_DALPHA`] (pi/2), is not integrated: the counts are taken as the new
+//! starting point and the step reports [`StepStatus::overrange`]. Such a sample is a fault
+//! (a counter misread, or a chassis spinning faster than any sampling rate can follow).
+
+use super::params::{ChassisParams, ParamError, UncertaintyModel};
+use super::trig;
+use super::uncertainty::{
+    CovarianceUncertainty, PaperUncertainty, StepGeometry, StepJacobian, UncertaintyCoefficients,
+};
+use super::wheel::{WheelModel, DISTANCE_SCALE};
+
+/// Largest increment count of one wheel in one sample that is integrated (2^18).
+pub const MAX_STEP_COUNTS: u64 = 1 << 18;
+/// Largest heading change of one sample that is integrated, radians (pi/2).
+pub const MAX_STEP_DALPHA: f32 = core::f32::consts::FRAC_PI_2;
+
+/// Position units per metre: 2^32.
+const POSITION_SCALE: f64 = 4_294_967_296.0;
+/// Binary-angle units per turn: 2^64.
+const TURN: f64 = 18_446_744_073_709_551_616.0;
+/// 2 pi.
+const TAU: f64 = core::f64::consts::TAU;
+
+/// A pose in the plane: x east and y north in metres, heading `alpha` in radians, 0 along
+/// +y and growing clockwise. The heading is cumulative (eq 15): it is not wrapped, so a
+/// chassis that turned twice on the spot reads 4 pi.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Pose {
+    /// East, metres.
+    pub x: f64,
+    /// North, metres.
+    pub y: f64,
+    /// Heading alpha, radians, clockwise from +y, cumulative.
+    pub heading: f64,
+}
+
+/// The uncertainty of a pose: standard uncertainties of x and y (metres) and heading
+/// (radians), and the x-y covariance (m^2; zero for the paper's model, which has none).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PoseSigma {
+    /// sigma of x, metres.
+    pub x: f32,
+    /// sigma of y, metres.
+    pub y: f32,
+    /// sigma of heading, radians.
+    pub heading: f32,
+    /// Covariance of x and y, m^2 (covariance model only).
+    pub xy: f32,
+}
+
+impl PoseSigma {
+    /// The horizontal uncertainty `sigma_h = sqrt(sigma_x^2 + sigma_y^2)`, metres.
+    pub fn horizontal(&self) -> f32 {
+        trig::hypot(self.x, self.y)
+    }
+}
+
+/// Absolute increment counts `Gamma_1` (left) and `Gamma_2` (right), increments.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct WheelCounts {
+    /// `Gamma_1`, wheel 1 (left).
+    pub left: i64,
+    /// `Gamma_2`, wheel 2 (right).
+    pub right: i64,
+}
+
+/// The absolute count latched at each wheel's last index (N) pulse; `None` until the wheel's
+/// first index pulse has been seen.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct IndexRefs {
+    /// Wheel 1 (left).
+    pub left: Option<i64>,
+    /// Wheel 2 (right).
+    pub right: Option<i64>,
+}
+
+/// What one [`Integrator::step`] did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct StepStatus {
+    /// Wheel 1's calibrated per-angle function was applied (its index has been seen and it
+    /// has non-zero harmonics).
+    pub left_referenced: bool,
+    /// The same for wheel 2.
+    pub right_referenced: bool,
+    /// The sample exceeded [`MAX_STEP_COUNTS`] or [`MAX_STEP_DALPHA`] and was not integrated.
+    pub overrange: bool,
+}
+
+/// The periodic part of a wheel's function at the previous sample, valid for one index phase.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct PeriodicCache {
+    /// `(-index) mod P`: which phase origin the value belongs to.
+    origin: u32,
+    /// `R(theta)` at the previous sample's count, metres.
+    value: f32,
+}
+
+/// Odometry and uncertainty integrator of a differential-drive chassis.
+#[derive(Debug, Clone)]
+pub struct Integrator {
+    params: ChassisParams,
+    wheels: [WheelModel; 2],
+    /// Heading change per increment, 2^-64 turn.
+    heading_per_count: [u64; 2],
+    /// Heading change per metre of wheel-distance difference, 2^-64 turn (f32).
+    heading_per_metre: f32,
+    /// Transfer constants in f32, metres per increment.
+    c: [f32; 2],
+    inv_track: f32,
+    /// Radians per binary-angle unit, f32.
+    rad_per_binary: f32,
+    coefficients: UncertaintyCoefficients,
+    counts: WheelCounts,
+    x: i64,
+    y: i64,
+    heading: u64,
+    turns: i64,
+    periodic: [Option<PeriodicCache>; 2],
+    paper: PaperUncertainty,
+    covariance: CovarianceUncertainty,
+}
+
+impl Integrator {
+    /// An integrator with parameters `params`, whose first sample is `counts`, at `pose`
+    /// with zero uncertainty.
+    pub fn new(
+        params: &ChassisParams,
+        counts: WheelCounts,
+        pose: Pose,
+    ) -> Result<Self, ParamError> {
+        params.validate()?;
+        let mut s = Self {
+            params: *params,
+            wheels: [
+                WheelModel::new(
+                    params.left_diameter,
+                    params.ticks_per_rev,
+                    &params.left_wheel,
+                ),
+                WheelModel::new(
+                    params.right_diameter,
+                    params.ticks_per_rev,
+                    &params.right_wheel,
+                ),
+            ],
+            heading_per_count: [0; 2],
+            heading_per_metre: 0.0,
+            c: [0.0; 2],
+            inv_track: 0.0,
+            rad_per_binary: trig::RAD_PER_BINARY as f32,
+            coefficients: UncertaintyCoefficients::default(),
+            counts,
+            x: 0,
+            y: 0,
+            heading: 0,
+            turns: 0,
+            periodic: [None; 2],
+            paper: PaperUncertainty::default(),
+            covariance: CovarianceUncertainty::default(),
+        };
+        s.derive_constants();
+        s.reset_pose(pose);
+        Ok(s)
+    }
+
+    /// Recomputes everything derived from `self.params` (already validated).
+    fn derive_constants(&mut self) {
+        let p = &self.params;
+        self.wheels = [
+            WheelModel::new(p.left_diameter, p.ticks_per_rev, &p.left_wheel),
+            WheelModel::new(p.right_diameter, p.ticks_per_rev, &p.right_wheel),
+        ];
+        let per_metre = TURN / (TAU * p.track_width);
+        for i in 0..2 {
+            let c = self.wheels[i].transfer_constant();
+            self.heading_per_count[i] = (c * per_metre + 0.5) as u64;
+            self.c[i] = c as f32;
+        }
+        self.heading_per_metre = per_metre as f32;
+        self.inv_track = (1.0 / p.track_width) as f32;
+        self.coefficients = UncertaintyCoefficients {
+            delta: [p.delta_left, p.delta_right],
+            delta_diff: p.delta_diff,
+            kappa: [p.kappa_left, p.kappa_right],
+        };
+        self.periodic = [None; 2];
+    }
+
+    /// Replaces the parameters, keeping pose, uncertainty and counts. On error nothing changes.
+    pub fn set_params(&mut self, params: &ChassisParams) -> Result<(), ParamError> {
+        params.validate()?;
+        self.params = *params;
+        self.derive_constants();
+        Ok(())
+    }
+
+    /// The parameters in use.
+    pub fn params(&self) -> &ChassisParams {
+        &self.params
+    }
+
+    /// Sets the pose and zeroes the uncertainty (counts are kept).
+    pub fn reset_pose(&mut self, pose: Pose) {
+        self.x = metres_to_position(pose.x);
+        self.y = metres_to_position(pose.y);
+        let (turns, frac) = radians_to_binary(pose.heading);
+        self.turns = turns;
+        self.heading = frac;
+        self.paper = PaperUncertainty::default();
+        self.covariance = CovarianceUncertainty::default();
+    }
+
+    /// Takes the counts as the new starting point without integrating the motion since the
+    /// last sample (after a counter reset, for instance).
+    pub fn rebase_counts(&mut self, counts: WheelCounts) {
+        self.counts = counts;
+        self.periodic = [None; 2];
+    }
+
+    /// The absolute counts of the last sample.
+    pub fn counts(&self) -> WheelCounts {
+        self.counts
+    }
+
+    /// The current pose (x east, y north, metres; cumulative heading, radians).
+    pub fn pose(&self) -> Pose {
+        Pose {
+            x: self.x as f64 / POSITION_SCALE,
+            y: self.y as f64 / POSITION_SCALE,
+            heading: (self.turns as f64 + self.heading as f64 / TURN) * TAU,
+        }
+    }
+
+    /// Position in fixed point, units of 2^-32 m: `(x, y)`.
+    pub fn position_fixed(&self) -> (i64, i64) {
+        (self.x, self.y)
+    }
+
+    /// Heading as whole turns plus a binary fraction of a turn (2^64 units per turn).
+    pub fn heading_binary(&self) -> (i64, u64) {
+        (self.turns, self.heading)
+    }
+
+    /// The current uncertainty, from the model selected by `uncertainty_model`.
+    pub fn sigma(&self) -> PoseSigma {
+        match self.params.uncertainty_model {
+            UncertaintyModel::Paper => {
+                let (x, y, heading) = self.paper.sigmas();
+                PoseSigma {
+                    x,
+                    y,
+                    heading,
+                    xy: 0.0,
+                }
+            }
+            UncertaintyModel::Covariance => {
+                let (x, y, heading, xy) = self.covariance.sigmas();
+                PoseSigma { x, y, heading, xy }
+            }
+        }
+    }
+
+    /// The change of wheel `i`'s periodic distance term between `before` and `now`, if its
+    /// phase is referenced by an index pulse (metres).
+    fn periodic_delta(
+        &mut self,
+        i: usize,
+        before: i64,
+        now: i64,
+        index: Option<i64>,
+    ) -> Option<f32> {
+        let wheel = &self.wheels[i];
+        let Some(index) = index.filter(|_| !wheel.is_round()) else {
+            self.periodic[i] = None;
+            return None;
+        };
+        let origin = wheel.phase(0, index);
+        let r_before = match self.periodic[i] {
+            Some(cache) if cache.origin == origin => cache.value,
+            _ => wheel.periodic(wheel.phase(before, index)),
+        };
+        let r_now = wheel.periodic(wheel.phase(now, index));
+        self.periodic[i] = Some(PeriodicCache {
+            origin,
+            value: r_now,
+        });
+        Some(r_now - r_before)
+    }
+
+    /// Integrates the motion from the previous sample's counts to `counts` (eqs 1-15) and
+    /// propagates the uncertainty (eqs 19-28). `index` holds the counts latched at each
+    /// wheel's last index pulse, which reference the per-angle wheel functions.
+    pub fn step(&mut self, counts: WheelCounts, index: IndexRefs) -> StepStatus {
+        let before = self.counts;
+        self.counts = counts;
+        let d = [
+            counts.left.wrapping_sub(before.left),
+            counts.right.wrapping_sub(before.right),
+        ];
+        let mut status = StepStatus::default();
+        if d[0].unsigned_abs() > MAX_STEP_COUNTS || d[1].unsigned_abs() > MAX_STEP_COUNTS {
+            status.overrange = true;
+            self.periodic = [None; 2];
+            return status;
+        }
+        let d = [d[0] as i32, d[1] as i32];
+
+        // Wheel distances, eqs (3)-(6): exact linear part plus the periodic correction.
+        let mut s = [
+            self.wheels[0].transfer_constant_fixed() * i64::from(d[0]),
+            self.wheels[1].transfer_constant_fixed() * i64::from(d[1]),
+        ];
+        let mut s_f = [self.c[0] * d[0] as f32, self.c[1] * d[1] as f32];
+        let mut heading_inc = self.heading_per_count[0]
+            .wrapping_mul(i64::from(d[0]) as u64)
+            .wrapping_sub(self.heading_per_count[1].wrapping_mul(i64::from(d[1]) as u64))
+            as i64;
+        let r = [
+            self.periodic_delta(0, before.left, counts.left, index.left),
+            self.periodic_delta(1, before.right, counts.right, index.right),
+        ];
+        status.left_referenced = r[0].is_some();
+        status.right_referenced = r[1].is_some();
+        if r[0].is_some() || r[1].is_some() {
+            let r = [r[0].unwrap_or(0.0), r[1].unwrap_or(0.0)];
+            for i in 0..2 {
+                s[i] += (r[i] * DISTANCE_SCALE as f32) as i64;
+                s_f[i] += r[i];
+            }
+            heading_inc = heading_inc.wrapping_add(((r[0] - r[1]) * self.heading_per_metre) as i64);
+        }
+
+        // Heading change, eq (8), checked against the wrap-safe range of the binary angle.
+        if ((s_f[0] - s_f[1]) * self.inv_track).abs() > MAX_STEP_DALPHA {
+            status.overrange = true;
+            self.periodic = [None; 2];
+            return status;
+        }
+        let dalpha = heading_inc as f32 * self.rad_per_binary;
+
+        // Centre distance and chord, eqs (7), (9), (10).
+        let ds_f = 0.5 * (s_f[0] + s_f[1]);
+        let defect = trig::chord_defect(0.5 * dalpha);
+        let correction = (ds_f * defect * DISTANCE_SCALE as f32) as i64;
+        let chord = ((s[0] + s[1]) >> 1) - correction;
+
+        // Direction of the chord and position update, eqs (11)-(14).
+        let theta = self.heading.wrapping_add((heading_inc >> 1) as u64);
+        let (sin, cos) = trig::sin_cos(theta);
+        self.x += mul_q30_shift16(chord, sin);
+        self.y += mul_q30_shift16(chord, cos);
+
+        // Heading, eq (15).
+        let (frac, carry) = self.heading.overflowing_add(heading_inc as u64);
+        self.heading = frac;
+        if heading_inc >= 0 && carry {
+            self.turns += 1;
+        } else if heading_inc < 0 && !carry {
+            self.turns -= 1;
+        }
+
+        // Uncertainty, eqs (19)-(28), or the covariance model.
+        let geometry = StepGeometry {
+            abs_counts: [d[0].unsigned_abs() as f32, d[1].unsigned_abs() as f32],
+            abs_count_difference: (i64::from(d[0]) - i64::from(d[1])).unsigned_abs() as f32,
+            wheel_distance: s_f,
+            ds: ds_f,
+            dalpha,
+            chord: ds_f * (1.0 - defect),
+            sin: trig::q30_to_f32(sin),
+            cos: trig::q30_to_f32(cos),
+            inv_track: self.inv_track,
+        };
+        let jacobian = StepJacobian::of(&geometry);
+        match self.params.uncertainty_model {
+            UncertaintyModel::Paper => self.paper.step(&self.coefficients, &geometry, &jacobian),
+            UncertaintyModel::Covariance => {
+                self.covariance
+                    .step(&self.coefficients, &geometry, &jacobian)
+            }
+        }
+        status
+    }
+}
+
+/// `round(a * b / 2^46)`: a distance in 2^-48 m times a Q30 factor, in 2^-32 m.
+#[inline]
+fn mul_q30_shift16(a: i64, b: i32) -> i64 {
+    ((i128::from(a) * i128::from(b) + (1 << 45)) >> 46) as i64
+}
+
+/// Metres to position units (2^-32 m), rounded, saturating.
+fn metres_to_position(v: f64) -> i64 {
+    let scaled = v * POSITION_SCALE;
+    if scaled.is_nan() {
+        0
+    } else if scaled >= 0.0 {
+        (scaled + 0.5) as i64
+    } else {
+        (scaled - 0.5) as i64
+    }
+}
+
+/// Radians to (whole turns, binary fraction of a turn).
+fn radians_to_binary(heading: f64) -> (i64, u64) {
+    if !heading.is_finite() {
+        return (0, 0);
+    }
+    let t = heading / TAU;
+    let mut turns = t as i64;
+    if (turns as f64) > t {
+        turns -= 1;
+    }
+    let frac = (t - turns as f64) * TURN;
+    (turns, frac as u64)
+}
