@@ -1,0 +1,1 @@
+//! Text command lines from the host (work in progress).

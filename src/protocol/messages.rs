@@ -1,0 +1,539 @@
+//! Message bodies: fixed little-endian layouts, written and read field by field.
+//!
+//! Every body layout is given with byte offsets in `docs/PROTOCOL.md`. A reader accepts a body
+//! longer than the layout it knows (fields appended by a later minor revision) and ignores the
+//! extra bytes; a shorter body is an error.
+
+use super::bytes::{Reader, Writer};
+use super::{DecodeError, EncodeError, MsgType};
+use crate::odometry::UncertaintyModel;
+use heapless::String;
+
+/// How the sample clock is disciplined (bits 0-1 of [`StatusFlags`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum SyncMode {
+    /// Samples are timed by the MCU clock alone (code 0).
+    #[default]
+    FreeRunning,
+    /// Samples are locked to the GNSS 1-PPS edges (code 1).
+    PpsLocked,
+    /// PPS was lost; samples continue on the MCU clock disciplined by the last PPS (code 2).
+    Holdover,
+}
+
+impl SyncMode {
+    /// Wire code (0, 1, 2).
+    pub fn code(self) -> u32 {
+        match self {
+            Self::FreeRunning => 0,
+            Self::PpsLocked => 1,
+            Self::Holdover => 2,
+        }
+    }
+    /// From the wire code; 3 is reserved and gives `None`.
+    pub fn from_code(code: u32) -> Option<Self> {
+        match code {
+            0 => Some(Self::FreeRunning),
+            1 => Some(Self::PpsLocked),
+            2 => Some(Self::Holdover),
+            _ => None,
+        }
+    }
+}
+
+/// Per-wheel status bits (4 bits per wheel in [`StatusFlags`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct WheelStatus {
+    /// The encoder's fault (state) line is active.
+    pub fault: bool,
+    /// At least one index (N) pulse has been seen since start, so the latched index count
+    /// is meaningful.
+    pub index_seen: bool,
+    /// The count between the last two index pulses differed from `ticks_per_rev`
+    /// (missed or spurious increments).
+    pub index_mismatch: bool,
+    /// The calibrated per-angle wheel function (non-zero harmonics, referenced to the index)
+    /// was used for this sample; otherwise the constant transfer constant of eq (6).
+    pub calibrated: bool,
+}
+
+impl WheelStatus {
+    fn bits(self) -> u32 {
+        (self.fault as u32)
+            | (self.index_seen as u32) << 1
+            | (self.index_mismatch as u32) << 2
+            | (self.calibrated as u32) << 3
+    }
+    fn from_bits(b: u32) -> Self {
+        Self {
+            fault: b & 1 != 0,
+            index_seen: b & 2 != 0,
+            index_mismatch: b & 4 != 0,
+            calibrated: b & 8 != 0,
+        }
+    }
+}
+
+/// The 32-bit status word of a [`PoseRecord`] and a [`Status`] message.
+///
+/// Bits: 0-1 [`SyncMode`] code; 2 time tag valid; 3-6 left wheel (fault, index seen, index
+/// mismatch, calibrated); 7-10 right wheel (same order); 11 uncertainty model (0 = paper,
+/// 1 = covariance); 12-31 reserved, sent as 0, ignored by readers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct StatusFlags {
+    /// Sample clock discipline.
+    pub sync: SyncMode,
+    /// The GNSS time fields hold the time of the sample.
+    pub time_valid: bool,
+    /// Wheel 1 (left).
+    pub left: WheelStatus,
+    /// Wheel 2 (right).
+    pub right: WheelStatus,
+    /// Which uncertainty propagation filled the sigmas.
+    pub model: UncertaintyModel,
+}
+
+impl StatusFlags {
+    /// Mask of the bits defined by this protocol version.
+    pub const DEFINED_BITS: u32 = 0x0FFF;
+
+    /// The wire word.
+    pub fn to_bits(&self) -> u32 {
+        self.sync.code()
+            | (self.time_valid as u32) << 2
+            | self.left.bits() << 3
+            | self.right.bits() << 7
+            | (matches!(self.model, UncertaintyModel::Covariance) as u32) << 11
+    }
+
+    /// From the wire word; reserved bits are ignored, the reserved sync code 3 is an error.
+    pub fn from_bits(bits: u32) -> Result<Self, DecodeError> {
+        Ok(Self {
+            sync: SyncMode::from_code(bits & 3).ok_or(DecodeError::BadField("sync mode"))?,
+            time_valid: bits & (1 << 2) != 0,
+            left: WheelStatus::from_bits((bits >> 3) & 0xF),
+            right: WheelStatus::from_bits((bits >> 7) & 0xF),
+            model: if bits & (1 << 11) != 0 {
+                UncertaintyModel::Covariance
+            } else {
+                UncertaintyModel::Paper
+            },
+        })
+    }
+}
+
+/// GNSS time of a sample (meaningful when [`StatusFlags::time_valid`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct GnssTime {
+    /// GPS week number (weeks since 1980-01-06, not rolled over at 1024).
+    pub week: u16,
+    /// Time of week of the PPS edge that starts the sample's second, milliseconds
+    /// (0..604_800_000; a multiple of 1000 in normal operation).
+    pub tow_ms: u32,
+    /// Index of the sample within that second: 0 is the sample on the PPS edge, `k` is
+    /// `k / rate` seconds after it.
+    pub sample_in_second: u16,
+}
+
+/// One odometry sample (message type 0x01). Body length [`PoseRecord::BODY_LEN`] bytes.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PoseRecord {
+    /// Sample sequence number: counts every sample the unit computed since start (wrapping),
+    /// whether or not it was sent; consecutive records differ by `output_divider` unless
+    /// records were dropped.
+    pub sequence: u32,
+    /// Status word.
+    pub flags: StatusFlags,
+    /// MCU time of the sample (counter snapshot), microseconds since start.
+    pub mcu_time_us: u64,
+    /// GNSS time of the sample; valid when `flags.time_valid`, otherwise all zero.
+    pub gnss: GnssTime,
+    /// x (east) of the chassis reference point, metres.
+    pub x: f64,
+    /// y (north), metres.
+    pub y: f64,
+    /// Heading alpha, radians: 0 along +y (north), growing clockwise; cumulative, not
+    /// wrapped (eq 15).
+    pub heading: f64,
+    /// Standard uncertainty of x, metres.
+    pub sigma_x: f32,
+    /// Standard uncertainty of y, metres.
+    pub sigma_y: f32,
+    /// Standard uncertainty of heading, radians.
+    pub sigma_heading: f32,
+    /// Covariance of x and y, m^2 (0 unless the covariance model filled the record).
+    pub sigma_xy: f32,
+    /// Absolute count of encoder 1 (left), Gamma_1, increments (x4 decoded, 64-bit).
+    pub gamma_left: i64,
+    /// Absolute count of encoder 2 (right), Gamma_2, increments.
+    pub gamma_right: i64,
+    /// Gamma_1 latched at the left wheel's last index pulse (valid when
+    /// `flags.left.index_seen`, 0 otherwise).
+    pub index_left: i64,
+    /// Gamma_2 latched at the right wheel's last index pulse (valid when
+    /// `flags.right.index_seen`).
+    pub index_right: i64,
+    /// Records computed but not sent (queue full) since the previous sent record
+    /// (saturating). Records skipped by `output_divider` are not counted.
+    pub dropped: u32,
+}
+
+impl PoseRecord {
+    /// Body length in bytes.
+    pub const BODY_LEN: usize = 100;
+
+    /// Writes the body into `out`; returns its length.
+    pub fn write_body(&self, out: &mut [u8]) -> Result<usize, EncodeError> {
+        let mut w = Writer::new(out);
+        (|| {
+            w.u32(self.sequence)?;
+            w.u32(self.flags.to_bits())?;
+            w.u64(self.mcu_time_us)?;
+            w.u32(self.gnss.tow_ms)?;
+            w.u16(self.gnss.week)?;
+            w.u16(self.gnss.sample_in_second)?;
+            w.f64(self.x)?;
+            w.f64(self.y)?;
+            w.f64(self.heading)?;
+            w.f32(self.sigma_x)?;
+            w.f32(self.sigma_y)?;
+            w.f32(self.sigma_heading)?;
+            w.f32(self.sigma_xy)?;
+            w.i64(self.gamma_left)?;
+            w.i64(self.gamma_right)?;
+            w.i64(self.index_left)?;
+            w.i64(self.index_right)?;
+            w.u32(self.dropped)
+        })()
+        .map_err(|_| EncodeError::BufferTooSmall)?;
+        Ok(w.pos())
+    }
+
+    /// Reads a body (at least [`Self::BODY_LEN`] bytes; extra bytes are ignored).
+    pub fn read_body(body: &[u8]) -> Result<Self, DecodeError> {
+        let short = DecodeError::BodyTooShort(MsgType::PoseRecord as u8);
+        let mut r = Reader::new(body);
+        let sequence = r.u32().map_err(|_| short)?;
+        let flags = r.u32().map_err(|_| short)?;
+        let mut rest = || -> Result<Self, super::bytes::OutOfSpace> {
+            Ok(Self {
+                sequence,
+                flags: StatusFlags::default(),
+                mcu_time_us: r.u64()?,
+                gnss: GnssTime {
+                    tow_ms: r.u32()?,
+                    week: r.u16()?,
+                    sample_in_second: r.u16()?,
+                },
+                x: r.f64()?,
+                y: r.f64()?,
+                heading: r.f64()?,
+                sigma_x: r.f32()?,
+                sigma_y: r.f32()?,
+                sigma_heading: r.f32()?,
+                sigma_xy: r.f32()?,
+                gamma_left: r.i64()?,
+                gamma_right: r.i64()?,
+                index_left: r.i64()?,
+                index_right: r.i64()?,
+                dropped: r.u32()?,
+            })
+        };
+        let mut rec = rest().map_err(|_| short)?;
+        rec.flags = StatusFlags::from_bits(flags)?;
+        Ok(rec)
+    }
+}
+
+/// Where the settings in use came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum SettingsSource {
+    /// No valid settings record in flash: the built-in defaults (code 0).
+    #[default]
+    Defaults,
+    /// Loaded from the flash settings store (code 1).
+    Flash,
+}
+
+impl SettingsSource {
+    fn code(self) -> u8 {
+        match self {
+            Self::Defaults => 0,
+            Self::Flash => 1,
+        }
+    }
+    fn from_code(c: u8) -> Result<Self, DecodeError> {
+        match c {
+            0 => Ok(Self::Defaults),
+            1 => Ok(Self::Flash),
+            _ => Err(DecodeError::BadField("settings source")),
+        }
+    }
+}
+
+/// Periodic heartbeat (message type 0x02, about once per second). Body length
+/// [`Status::BODY_LEN`] bytes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Status {
+    /// MCU time since start, microseconds.
+    pub uptime_us: u64,
+    /// Status word of the latest sample.
+    pub flags: StatusFlags,
+    /// Current sample rate, Hz.
+    pub rate_hz: u32,
+    /// Samples computed since start (wrapping).
+    pub samples: u32,
+    /// Records dropped since start (queue full), wrapping.
+    pub dropped_total: u32,
+    /// PPS edges accepted since start.
+    pub pps_edges: u32,
+    /// PPS edges rejected as glitches since start.
+    pub pps_rejected: u32,
+    /// Command lines rejected as too long plus UART receive errors since start.
+    pub rx_errors: u32,
+    /// Where the settings in use came from.
+    pub settings_source: SettingsSource,
+    /// The settings in use differ from the ones stored (a `save` is pending).
+    pub settings_dirty: bool,
+}
+
+impl Status {
+    /// Body length in bytes.
+    pub const BODY_LEN: usize = 40;
+
+    /// Writes the body into `out`; returns its length.
+    pub fn write_body(&self, out: &mut [u8]) -> Result<usize, EncodeError> {
+        let mut w = Writer::new(out);
+        (|| {
+            w.u64(self.uptime_us)?;
+            w.u32(self.flags.to_bits())?;
+            w.u32(self.rate_hz)?;
+            w.u32(self.samples)?;
+            w.u32(self.dropped_total)?;
+            w.u32(self.pps_edges)?;
+            w.u32(self.pps_rejected)?;
+            w.u32(self.rx_errors)?;
+            w.u8(self.settings_source.code())?;
+            w.u8(self.settings_dirty as u8)?;
+            w.u16(0)
+        })()
+        .map_err(|_| EncodeError::BufferTooSmall)?;
+        Ok(w.pos())
+    }
+
+    /// Reads a body (at least [`Self::BODY_LEN`] bytes).
+    pub fn read_body(body: &[u8]) -> Result<Self, DecodeError> {
+        if body.len() < Self::BODY_LEN {
+            return Err(DecodeError::BodyTooShort(MsgType::Status as u8));
+        }
+        let mut r = Reader::new(body);
+        let short = |_| DecodeError::BodyTooShort(MsgType::Status as u8);
+        let uptime_us = r.u64().map_err(short)?;
+        let flags = StatusFlags::from_bits(r.u32().map_err(short)?)?;
+        let rate_hz = r.u32().map_err(short)?;
+        let samples = r.u32().map_err(short)?;
+        let dropped_total = r.u32().map_err(short)?;
+        let pps_edges = r.u32().map_err(short)?;
+        let pps_rejected = r.u32().map_err(short)?;
+        let rx_errors = r.u32().map_err(short)?;
+        let settings_source = SettingsSource::from_code(r.u8().map_err(short)?)?;
+        let settings_dirty = match r.u8().map_err(short)? {
+            0 => false,
+            1 => true,
+            _ => return Err(DecodeError::BadField("settings dirty")),
+        };
+        Ok(Self {
+            uptime_us,
+            flags,
+            rate_hz,
+            samples,
+            dropped_total,
+            pps_edges,
+            pps_rejected,
+            rx_errors,
+            settings_source,
+            settings_dirty,
+        })
+    }
+}
+
+/// Longest firmware version string in [`DeviceInfo`], bytes.
+pub const MAX_FIRMWARE_VERSION: usize = 32;
+
+/// Identity of the unit (message type 0x03): sent at start and in reply to `version`.
+/// Body length [`DeviceInfo::FIXED_LEN`] + length of the version string.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct DeviceInfo {
+    /// Protocol version the unit speaks ([`super::PROTOCOL_VERSION`]).
+    pub protocol_version: u8,
+    /// Where the settings in use came from.
+    pub settings_source: SettingsSource,
+    /// CRC-32/ISO-HDLC of the settings in use, serialised (see `settings::Settings::checksum`).
+    pub settings_checksum: u32,
+    /// The MCU's 96-bit unique device ID (all zero if unknown).
+    pub uid: [u8; 12],
+    /// Firmware version, UTF-8 (e.g. `"0.1.0"`), at most [`MAX_FIRMWARE_VERSION`] bytes.
+    pub firmware_version: String<MAX_FIRMWARE_VERSION>,
+}
+
+impl DeviceInfo {
+    /// Length of the fixed part of the body, bytes.
+    pub const FIXED_LEN: usize = 21;
+
+    /// Writes the body into `out`; returns its length.
+    pub fn write_body(&self, out: &mut [u8]) -> Result<usize, EncodeError> {
+        let mut w = Writer::new(out);
+        (|| {
+            w.u8(self.protocol_version)?;
+            w.u8(self.settings_source.code())?;
+            w.u16(0)?;
+            w.u32(self.settings_checksum)?;
+            w.bytes(&self.uid)?;
+            w.u8(self.firmware_version.len() as u8)?;
+            w.bytes(self.firmware_version.as_bytes())
+        })()
+        .map_err(|_| EncodeError::BufferTooSmall)?;
+        Ok(w.pos())
+    }
+
+    /// Reads a body.
+    pub fn read_body(body: &[u8]) -> Result<Self, DecodeError> {
+        let short = |_| DecodeError::BodyTooShort(MsgType::DeviceInfo as u8);
+        let mut r = Reader::new(body);
+        let protocol_version = r.u8().map_err(short)?;
+        let settings_source = SettingsSource::from_code(r.u8().map_err(short)?)?;
+        r.u16().map_err(short)?;
+        let settings_checksum = r.u32().map_err(short)?;
+        let mut uid = [0u8; 12];
+        uid.copy_from_slice(r.bytes(12).map_err(short)?);
+        let n = r.u8().map_err(short)? as usize;
+        if n > MAX_FIRMWARE_VERSION {
+            return Err(DecodeError::BadField("firmware version length"));
+        }
+        let text = core::str::from_utf8(r.bytes(n).map_err(short)?)
+            .map_err(|_| DecodeError::BadField("firmware version utf-8"))?;
+        let mut firmware_version = String::new();
+        firmware_version
+            .push_str(text)
+            .map_err(|_| DecodeError::BadField("firmware version length"))?;
+        Ok(Self {
+            protocol_version,
+            settings_source,
+            settings_checksum,
+            uid,
+            firmware_version,
+        })
+    }
+}
+
+/// Longest text of one [`CommandReply`] frame, bytes. Longer replies are split into several
+/// frames at line boundaries (see [`CommandReply::chunks`]).
+pub const MAX_REPLY_TEXT: usize = 256;
+
+/// Reply to one command line (message type 0x04). Body length [`CommandReply::FIXED_LEN`] +
+/// text length.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct CommandReply {
+    /// The command succeeded (`ok`) or was rejected and changed nothing (`error`).
+    pub ok: bool,
+    /// More reply frames for the same command follow; the host concatenates the texts.
+    pub more: bool,
+    /// Reply text, UTF-8, lines separated by `\n`. The first frame of a reply starts with
+    /// `ok` or `error: <what was wrong>`.
+    pub text: String<MAX_REPLY_TEXT>,
+}
+
+impl CommandReply {
+    /// Length of the fixed part of the body, bytes.
+    pub const FIXED_LEN: usize = 4;
+
+    /// Writes the body into `out`; returns its length.
+    pub fn write_body(&self, out: &mut [u8]) -> Result<usize, EncodeError> {
+        let mut w = Writer::new(out);
+        (|| {
+            w.u8(if self.ok { 0 } else { 1 })?;
+            w.u8(self.more as u8)?;
+            w.u16(self.text.len() as u16)?;
+            w.bytes(self.text.as_bytes())
+        })()
+        .map_err(|_| EncodeError::BufferTooSmall)?;
+        Ok(w.pos())
+    }
+
+    /// Reads a body.
+    pub fn read_body(body: &[u8]) -> Result<Self, DecodeError> {
+        let short = |_| DecodeError::BodyTooShort(MsgType::CommandReply as u8);
+        let mut r = Reader::new(body);
+        let ok = match r.u8().map_err(short)? {
+            0 => true,
+            1 => false,
+            _ => return Err(DecodeError::BadField("reply status")),
+        };
+        let more = r.u8().map_err(short)? & 1 != 0;
+        let n = r.u16().map_err(short)? as usize;
+        if n > MAX_REPLY_TEXT {
+            return Err(DecodeError::BadField("reply text length"));
+        }
+        let text = core::str::from_utf8(r.bytes(n).map_err(short)?)
+            .map_err(|_| DecodeError::BadField("reply text utf-8"))?;
+        let mut s = String::new();
+        s.push_str(text)
+            .map_err(|_| DecodeError::BadField("reply text length"))?;
+        Ok(Self { ok, more, text: s })
+    }
+
+    /// Splits a reply text of any length into frames of at most [`MAX_REPLY_TEXT`] bytes,
+    /// cutting after a `\n` where possible (else at a UTF-8 character boundary). All frames
+    /// carry `ok`; all but the last have `more` set. An empty text gives one empty frame.
+    pub fn chunks(ok: bool, text: &str) -> ReplyChunks<'_> {
+        ReplyChunks {
+            ok,
+            rest: text,
+            first: true,
+        }
+    }
+}
+
+/// Iterator returned by [`CommandReply::chunks`].
+#[derive(Debug, Clone)]
+pub struct ReplyChunks<'a> {
+    ok: bool,
+    rest: &'a str,
+    first: bool,
+}
+
+impl Iterator for ReplyChunks<'_> {
+    type Item = CommandReply;
+
+    fn next(&mut self) -> Option<CommandReply> {
+        if self.rest.is_empty() && !self.first {
+            return None;
+        }
+        self.first = false;
+        let cut = if self.rest.len() <= MAX_REPLY_TEXT {
+            self.rest.len()
+        } else {
+            let window = &self.rest.as_bytes()[..MAX_REPLY_TEXT];
+            match window.iter().rposition(|&b| b == b'\n') {
+                Some(i) => i + 1,
+                None => {
+                    let mut i = MAX_REPLY_TEXT;
+                    while !self.rest.is_char_boundary(i) {
+                        i -= 1;
+                    }
+                    i
+                }
+            }
+        };
+        let (head, tail) = self.rest.split_at(cut);
+        self.rest = tail;
+        let mut text = String::new();
+        // `head` is at most MAX_REPLY_TEXT bytes by construction.
+        let _ = text.push_str(head);
+        Some(CommandReply {
+            ok: self.ok,
+            more: !tail.is_empty(),
+            text,
+        })
+    }
+}
