@@ -1,0 +1,949 @@
+//! Host tests of the odometry core against an f64 implementation of the paper's equations.
+//!
+//! The reference below is written straight from Jilek, Burian, Kriz: eqs (1)-(15) for the
+//! pose, eqs (19)-(28) for the uncertainty, eqs (3)-(5) for the per-angle wheel function, in
+//! f64 with `libm`-free std trigonometry. The firmware's integrator (fixed point, f32 and an
+//! integer sin/cos kernel) must agree with it.
+
+use odo_core::odometry::trig;
+use odo_core::odometry::uncertainty::{StepGeometry, StepJacobian};
+use odo_core::odometry::{
+    ChassisParams, CounterExtender, IndexRefs, Integrator, Pose, UncertaintyModel, WheelCounts,
+    WheelHarmonics,
+};
+use proptest::prelude::*;
+use std::f64::consts::{PI, TAU};
+
+/// The paper's odometry and uncertainty in f64.
+#[derive(Debug, Clone)]
+struct Reference {
+    c: [f64; 2],
+    w: f64,
+    delta: [f64; 2],
+    diameter: [f64; 2],
+    harmonics: [WheelHarmonics; 2],
+    ticks: f64,
+    counts: [i64; 2],
+    x: f64,
+    y: f64,
+    alpha: f64,
+    sigma_x: f64,
+    sigma_y: f64,
+    sigma_alpha: f64,
+}
+
+impl Reference {
+    fn new(p: &ChassisParams, counts: [i64; 2], pose: Pose) -> Self {
+        let ticks = f64::from(p.ticks_per_rev);
+        Self {
+            c: [PI * p.left_diameter / ticks, PI * p.right_diameter / ticks],
+            w: p.track_width,
+            delta: [f64::from(p.delta_left), f64::from(p.delta_right)],
+            diameter: [p.left_diameter, p.right_diameter],
+            harmonics: [p.left_wheel, p.right_wheel],
+            ticks,
+            counts,
+            x: pose.x,
+            y: pose.y,
+            alpha: pose.heading,
+            sigma_x: 0.0,
+            sigma_y: 0.0,
+            sigma_alpha: 0.0,
+        }
+    }
+
+    /// Eq (4)'s sum F_w of wheel i at absolute count g, with the index latched at `index`.
+    fn summed_wheel_function(&self, i: usize, g: i64, index: Option<i64>) -> f64 {
+        let linear = self.c[i] * g as f64;
+        let Some(index) = index else { return linear };
+        let theta = TAU * ((g - index).rem_euclid(self.ticks as i64)) as f64 / self.ticks;
+        let h = &self.harmonics[i];
+        let mut r = 0.0;
+        for k in 0..3 {
+            let n = (k + 1) as f64;
+            r += self.diameter[i] / 2.0
+                * (f64::from(h.cos[k]) / n * (n * theta).sin()
+                    - f64::from(h.sin[k]) / n * (n * theta).cos());
+        }
+        linear + r
+    }
+
+    fn step(&mut self, counts: [i64; 2], index: [Option<i64>; 2]) {
+        // Eq (1) and eq (5).
+        let dg = [counts[0] - self.counts[0], counts[1] - self.counts[1]];
+        let s = [
+            self.summed_wheel_function(0, counts[0], index[0])
+                - self.summed_wheel_function(0, self.counts[0], index[0]),
+            self.summed_wheel_function(1, counts[1], index[1])
+                - self.summed_wheel_function(1, self.counts[1], index[1]),
+        ];
+        self.counts = counts;
+        // Eqs (7)-(15).
+        let (ds, da) = ((s[0] + s[1]) / 2.0, (s[0] - s[1]) / self.w);
+        let dd = chord(ds, da);
+        let theta = self.alpha + da / 2.0;
+        let (dx, dy) = (dd * theta.sin(), dd * theta.cos());
+        // Eqs (19)-(28) with analytic f64 derivatives w.r.t. the wheel distances.
+        let sig = [
+            self.delta[0] * dg[0].abs() as f64,
+            self.delta[1] * dg[1].abs() as f64,
+        ];
+        let j = jacobian_f64(s, self.alpha, self.w);
+        let quad = |d: [f64; 2]| ((d[0] * sig[0]).powi(2) + (d[1] * sig[1]).powi(2)).sqrt();
+        let s_da = quad(j[0]);
+        let s_dx = quad(j[1]) + (dd * theta.cos() * self.sigma_alpha).abs();
+        let s_dy = quad(j[2]) + (dd * theta.sin() * self.sigma_alpha).abs();
+        self.sigma_alpha += s_da;
+        self.sigma_x += s_dx;
+        self.sigma_y += s_dy;
+        self.x += dx;
+        self.y += dy;
+        self.alpha += da;
+    }
+}
+
+/// Eqs (9)-(10).
+fn chord(ds: f64, da: f64) -> f64 {
+    if da == 0.0 {
+        ds
+    } else {
+        ds * 2.0 / da * (da / 2.0).sin()
+    }
+}
+
+/// (dalpha, dx, dy) of eqs (7)-(12) as functions of the wheel distances.
+fn increments(s: [f64; 2], alpha: f64, w: f64) -> [f64; 3] {
+    let (ds, da) = ((s[0] + s[1]) / 2.0, (s[0] - s[1]) / w);
+    let dd = chord(ds, da);
+    [
+        da,
+        dd * (alpha + da / 2.0).sin(),
+        dd * (alpha + da / 2.0).cos(),
+    ]
+}
+
+/// Analytic partial derivatives of `increments` w.r.t. s_1, s_2 (rows dalpha, dx, dy).
+fn jacobian_f64(s: [f64; 2], alpha: f64, w: f64) -> [[f64; 2]; 3] {
+    let (ds, da) = ((s[0] + s[1]) / 2.0, (s[0] - s[1]) / w);
+    let x = da / 2.0;
+    let (sinc, dsinc) = if x.abs() < 1e-4 {
+        (1.0 - x * x / 6.0, -x / 3.0)
+    } else {
+        (x.sin() / x, (x * x.cos() - x.sin()) / (x * x))
+    };
+    let dd = ds * sinc;
+    let theta = alpha + x;
+    let ddd = [
+        0.5 * sinc + ds * dsinc * 0.5 / w,
+        0.5 * sinc - ds * dsinc * 0.5 / w,
+    ];
+    let dth = [0.5 / w, -0.5 / w];
+    let mut j = [[0.0; 2]; 3];
+    for i in 0..2 {
+        j[0][i] = if i == 0 { 1.0 / w } else { -1.0 / w };
+        j[1][i] = ddd[i] * theta.sin() + dd * theta.cos() * dth[i];
+        j[2][i] = ddd[i] * theta.cos() - dd * theta.sin() * dth[i];
+    }
+    j
+}
+
+fn counts(c: [i64; 2]) -> WheelCounts {
+    WheelCounts {
+        left: c[0],
+        right: c[1],
+    }
+}
+
+fn refs(r: [Option<i64>; 2]) -> IndexRefs {
+    IndexRefs {
+        left: r[0],
+        right: r[1],
+    }
+}
+
+/// A deterministic pseudo-random generator (xorshift64*), so long drives need no data files.
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+    fn uniform(&mut self) -> f64 {
+        (self.next() >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// Per-sample increments of a varied drive: straights, arcs of both senses, pivots,
+/// stops and reversing, at `rate` samples per second and about 1 m/s.
+fn drive_increments(
+    rng: &mut Rng,
+    samples: usize,
+    counts_per_metre: f64,
+    rate: f64,
+) -> Vec<[i64; 2]> {
+    let mut out = Vec::with_capacity(samples);
+    let mut remaining = 0usize;
+    let mut speed = [0.0f64; 2];
+    let mut acc = [0.0f64; 2];
+    while out.len() < samples {
+        if remaining == 0 {
+            remaining = 50 + (rng.next() % 1500) as usize;
+            let v = 0.3 + 1.2 * rng.uniform();
+            let v = if rng.uniform() < 0.1 { -v } else { v };
+            speed = match rng.next() % 6 {
+                0 | 1 => [v, v],
+                2 => [v, v * (0.2 + 0.7 * rng.uniform())],
+                3 => [v * (0.2 + 0.7 * rng.uniform()), v],
+                4 => [0.3 * v, -0.3 * v],
+                _ => [0.0, 0.0],
+            };
+        }
+        remaining -= 1;
+        let mut d = [0i64; 2];
+        for i in 0..2 {
+            acc[i] += speed[i] * counts_per_metre / rate;
+            d[i] = acc[i].round() as i64;
+            acc[i] -= d[i] as f64;
+        }
+        out.push(d);
+    }
+    out
+}
+
+fn run_both(p: &ChassisParams, steps: &[[i64; 2]]) -> (Integrator, Reference) {
+    let mut integ = Integrator::new(p, counts([0, 0]), Pose::default()).unwrap();
+    let mut reference = Reference::new(p, [0, 0], Pose::default());
+    let mut g = [0i64; 2];
+    for d in steps {
+        g = [g[0] + d[0], g[1] + d[1]];
+        integ.step(counts(g), IndexRefs::default());
+        reference.step(g, [None, None]);
+    }
+    (integ, reference)
+}
+
+fn heading_error(a: f64, b: f64) -> f64 {
+    (a - b).abs()
+}
+
+// ---------------------------------------------------------------------------------------
+// Encoder arithmetic, eq (1).
+
+#[test]
+fn counter_wraps_at_every_boundary_of_16_and_32_bits() {
+    for bits in [16u32, 32] {
+        let modulus: u64 = 1 << bits;
+        let half = (modulus / 2) as i64;
+        let mask = (modulus - 1) as u32;
+        // Starting raw values at and around every wrap boundary; steps forward and backward
+        // up to just under half the range.
+        let starts = [
+            0u64,
+            1,
+            modulus - 1,
+            modulus - 2,
+            modulus / 2,
+            modulus / 2 - 1,
+            modulus / 2 + 1,
+        ];
+        let deltas = [
+            0i64,
+            1,
+            -1,
+            2,
+            -2,
+            1000,
+            -1000,
+            half - 1,
+            -(half - 1),
+            -half,
+        ];
+        for &start in &starts {
+            for &delta in &deltas {
+                let start = start as u32 & mask;
+                let mut ext = CounterExtender::new(bits, start);
+                let base = ext.absolute();
+                let raw = ((i64::from(start) + delta).rem_euclid(modulus as i64)) as u32;
+                assert_eq!(
+                    i64::from(ext.update(raw)),
+                    delta,
+                    "bits {bits} start {start} delta {delta}"
+                );
+                assert_eq!(ext.absolute(), base + delta);
+            }
+        }
+    }
+}
+
+#[test]
+fn counter_starts_signed_and_extends_far_beyond_its_width() {
+    let mut ext = CounterExtender::new(16, 0xFFFF);
+    assert_eq!(ext.absolute(), -1);
+    // Five million increments forward in steps of 30,000, through 16-bit wraps.
+    let mut raw = 0xFFFFu32;
+    for _ in 0..(5_000_000 / 30_000) {
+        raw = (raw + 30_000) & 0xFFFF;
+        assert_eq!(ext.update(raw), 30_000);
+    }
+    assert_eq!(ext.absolute(), -1 + 30_000 * (5_000_000 / 30_000));
+    assert_eq!(ext.bits(), 16);
+    // A latched index count just after the last read maps onto the absolute count.
+    assert_eq!(ext.absolute_of((raw + 5) & 0xFFFF), ext.absolute() + 5);
+    assert_eq!(
+        ext.absolute_of(raw.wrapping_sub(7) & 0xFFFF),
+        ext.absolute() - 7
+    );
+}
+
+proptest! {
+    #[test]
+    fn counter_extension_matches_true_count(bits in 2u32..=32, start in any::<i64>(), moves in prop::collection::vec(any::<i64>(), 1..200)) {
+        let modulus = 1i128 << bits;
+        let max = (1i64 << (bits - 1)) - 1;
+        let raw_of = |g: i64| (i128::from(g).rem_euclid(modulus)) as u32;
+        let start = start >> 2;
+        let mut ext = CounterExtender::new(bits, raw_of(start));
+        let offset = i128::from(start) - i128::from(ext.absolute());
+        let mut truth = start;
+        for m in moves {
+            let step = if max == 0 { 0 } else { m % (max + 1) };
+            truth = truth.wrapping_add(step);
+            prop_assert_eq!(i64::from(ext.update(raw_of(truth))), step);
+        }
+        prop_assert_eq!(i128::from(ext.absolute()) + offset, i128::from(truth));
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Trigonometry kernels.
+
+#[test]
+fn integer_sin_cos_is_within_its_bound_over_the_whole_circle() {
+    let mut worst = 0.0f64;
+    let n = 1u64 << 20;
+    for k in 0..n {
+        // Dense grid plus an irrational offset so the reduction boundaries are all exercised.
+        let angle = k
+            .wrapping_mul(u64::MAX / n)
+            .wrapping_add(k.wrapping_mul(0x9E37_79B9));
+        let (s, c) = trig::sin_cos(angle);
+        let rad = angle as f64 * trig::RAD_PER_BINARY;
+        worst = worst.max((f64::from(s) / f64::from(trig::Q30_ONE) - rad.sin()).abs());
+        worst = worst.max((f64::from(c) / f64::from(trig::Q30_ONE) - rad.cos()).abs());
+    }
+    assert!(worst < trig::SIN_COS_MAX_ERROR, "worst error {worst:e}");
+    // Exact at the cardinal directions, with the paper's orientation (0 = +y, clockwise).
+    assert_eq!(trig::sin_cos(0), (0, trig::Q30_ONE));
+    assert_eq!(trig::sin_cos(1 << 62), (trig::Q30_ONE, 0)); // quarter turn: east
+    assert_eq!(trig::sin_cos(1 << 63), (0, -trig::Q30_ONE));
+    assert_eq!(trig::sin_cos(3 << 62), (-trig::Q30_ONE, 0));
+}
+
+#[test]
+fn chord_series_matches_sinc_and_is_smooth_at_zero() {
+    let mut x = -PI / 2.0;
+    while x <= PI / 2.0 {
+        let exact = if x == 0.0 { 0.0 } else { 1.0 - x.sin() / x };
+        let got = f64::from(trig::chord_defect(x as f32));
+        assert!(
+            (got - exact).abs() < 1e-7,
+            "chord_defect({x}) = {got}, want {exact}"
+        );
+        let dexact = if x.abs() < 1e-6 {
+            -x / 3.0
+        } else {
+            (x * x.cos() - x.sin()) / (x * x)
+        };
+        let dgot = f64::from(trig::sinc_derivative(x as f32));
+        assert!(
+            (dgot - dexact).abs() < 1e-7,
+            "sinc'({x}) = {dgot}, want {dexact}"
+        );
+        x += 1e-3;
+    }
+    assert_eq!(trig::chord_defect(0.0), 0.0);
+    assert_eq!(trig::sinc_derivative(0.0), 0.0);
+}
+
+#[test]
+fn square_root_is_accurate_over_the_f32_range() {
+    assert_eq!(trig::sqrt(0.0), 0.0);
+    assert_eq!(trig::sqrt(-1.0), 0.0);
+    assert_eq!(trig::sqrt(f32::NAN), 0.0);
+    let mut x = 1e-30f32;
+    while x < 1e30 {
+        let got = f64::from(trig::sqrt(x));
+        let want = f64::from(x).sqrt();
+        assert!(
+            ((got - want) / want).abs() < 3e-7,
+            "sqrt({x}) = {got}, want {want}"
+        );
+        x *= 1.0371;
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Pose: boundary cases.
+
+#[test]
+fn straight_line_along_each_axis() {
+    // Heading 0 drives north (+y); heading pi/2 drives east (+x): clockwise from +y.
+    let p = ChassisParams::DESIGNED;
+    for (heading, dir) in [
+        (0.0, (0.0, 1.0)),
+        (PI / 2.0, (1.0, 0.0)),
+        (PI, (0.0, -1.0)),
+        (-PI / 2.0, (-1.0, 0.0)),
+    ] {
+        let mut integ = Integrator::new(
+            &p,
+            counts([0, 0]),
+            Pose {
+                x: 0.0,
+                y: 0.0,
+                heading,
+            },
+        )
+        .unwrap();
+        let per_step = 500;
+        for k in 1..=1000 {
+            integ.step(counts([k * per_step, k * per_step]), IndexRefs::default());
+        }
+        let d = PI * 0.26 / 20_000.0 * 500_000.0;
+        let pose = integ.pose();
+        assert!(
+            (pose.x - d * dir.0).abs() < 1e-6 && (pose.y - d * dir.1).abs() < 1e-6,
+            "{pose:?}"
+        );
+        assert!((pose.heading - heading).abs() < 1e-12);
+    }
+}
+
+#[test]
+fn pure_rotation_in_place_keeps_position_and_turns_clockwise() {
+    let p = ChassisParams::DESIGNED;
+    let mut integ = Integrator::new(
+        &p,
+        counts([0, 0]),
+        Pose {
+            x: 3.0,
+            y: -2.0,
+            heading: 0.0,
+        },
+    )
+    .unwrap();
+    // Left forward, right backward: the chassis turns clockwise (alpha grows).
+    for k in 1..=2000 {
+        integ.step(counts([k * 37, -k * 37]), IndexRefs::default());
+    }
+    let c = PI * 0.26 / 20_000.0;
+    let pose = integ.pose();
+    assert_eq!(pose.x, 3.0);
+    assert_eq!(pose.y, -2.0);
+    assert!((pose.heading - 2.0 * c * 74_000.0 / 0.563).abs() < 1e-9);
+    assert!(
+        pose.heading > TAU,
+        "more than a turn, unwrapped: {}",
+        pose.heading
+    );
+}
+
+#[test]
+fn full_circle_of_known_radius_closes() {
+    // Constant wheel ratio: every sample is an arc of the same circle, so the chord formula
+    // puts each sample exactly on it. Radius R of the centre point, turning clockwise (left
+    // wheel outside), starting north: centre at (R, 0).
+    let p = ChassisParams::DESIGNED;
+    let c = PI * 0.26 / 20_000.0;
+    let w = 0.563;
+    for r in [0.5f64, 2.0, 10.0] {
+        let (ratio_l, ratio_r) = (r + w / 2.0, r - w / 2.0);
+        // Samples of 200 (outer) increments; enough of them for one whole turn.
+        let per_turn_outer = TAU * ratio_l / c;
+        let steps = (per_turn_outer / 200.0).round() as i64;
+        let inner = (200.0 * ratio_r / ratio_l).round() as i64;
+        let mut integ = Integrator::new(&p, counts([0, 0]), Pose::default()).unwrap();
+        for k in 1..=steps {
+            integ.step(counts([k * 200, k * inner]), IndexRefs::default());
+        }
+        // The circle actually driven, from the integer counts.
+        let (s1, s2) = (c * (steps * 200) as f64, c * (steps * inner) as f64);
+        let alpha = (s1 - s2) / w;
+        let radius = (s1 + s2) / 2.0 / alpha;
+        let pose = integ.pose();
+        assert!((pose.heading - alpha).abs() < 1e-9);
+        assert!(
+            (pose.x - radius * (1.0 - alpha.cos())).abs() < 1e-6,
+            "R {r}: {pose:?}"
+        );
+        assert!(
+            (pose.y - radius * alpha.sin()).abs() < 1e-6,
+            "R {r}: {pose:?}"
+        );
+        // About one whole turn: the chassis is back near its start.
+        assert!((alpha - TAU).abs() < 0.05, "R {r}: turned {alpha} rad");
+        assert!(pose.x.hypot(pose.y) < 2.0 * radius * (alpha / 2.0).sin().abs() + 1e-6);
+    }
+}
+
+#[test]
+fn reversing_retraces_exactly() {
+    let p = ChassisParams::DESIGNED;
+    let mut integ = Integrator::new(&p, counts([0, 0]), Pose::default()).unwrap();
+    let mut rng = Rng(7);
+    let path = drive_increments(&mut rng, 5000, 1.0 / (PI * 0.26 / 20_000.0), 50.0);
+    let mut g = [0i64; 2];
+    for d in &path {
+        g = [g[0] + d[0], g[1] + d[1]];
+        integ.step(counts(g), IndexRefs::default());
+    }
+    let far = integ.pose();
+    assert!(far.x.hypot(far.y) > 1.0);
+    for d in path.iter().rev() {
+        g = [g[0] - d[0], g[1] - d[1]];
+        integ.step(counts(g), IndexRefs::default());
+    }
+    let pose = integ.pose();
+    assert!(pose.x.abs() < 1e-8 && pose.y.abs() < 1e-8, "{pose:?}");
+    assert!(pose.heading.abs() < 1e-15);
+    // Uncertainty only grows: backing up does not undo it.
+    assert!(integ.sigma().horizontal() > 0.0);
+}
+
+#[test]
+fn zero_length_samples_change_nothing() {
+    let p = ChassisParams::DESIGNED;
+    let mut integ = Integrator::new(
+        &p,
+        counts([100, 200]),
+        Pose {
+            x: 1.0,
+            y: 2.0,
+            heading: 0.3,
+        },
+    )
+    .unwrap();
+    integ.step(counts([5100, 4200]), IndexRefs::default());
+    let (pose, sigma) = (integ.pose(), integ.sigma());
+    for _ in 0..1000 {
+        let st = integ.step(counts([5100, 4200]), IndexRefs::default());
+        assert!(!st.overrange);
+    }
+    assert_eq!(integ.pose(), pose);
+    assert_eq!(integ.sigma(), sigma);
+}
+
+#[test]
+fn overrange_sample_is_flagged_and_not_integrated() {
+    let p = ChassisParams::DESIGNED;
+    let mut integ = Integrator::new(&p, counts([0, 0]), Pose::default()).unwrap();
+    let st = integ.step(counts([1 << 19, 0]), IndexRefs::default());
+    assert!(st.overrange);
+    assert_eq!(integ.pose(), Pose::default());
+    // The counts are the new starting point.
+    let st = integ.step(counts([(1 << 19) + 100, 100]), IndexRefs::default());
+    assert!(!st.overrange);
+    assert!(integ.pose().y > 0.0 && integ.pose().heading.abs() < 1e-12);
+    // A sample whose heading change would exceed pi/2.
+    let st = integ.step(
+        counts([(1 << 19) + 100 + 120_000, 100 - 120_000]),
+        IndexRefs::default(),
+    );
+    assert!(st.overrange);
+}
+
+#[test]
+fn bad_parameters_are_refused_and_change_nothing() {
+    let mut p = ChassisParams::DESIGNED;
+    p.track_width = f64::NAN;
+    assert!(Integrator::new(&p, counts([0, 0]), Pose::default()).is_err());
+    let mut integ =
+        Integrator::new(&ChassisParams::DESIGNED, counts([0, 0]), Pose::default()).unwrap();
+    integ.step(counts([1000, 900]), IndexRefs::default());
+    let before = (integ.pose(), integ.sigma(), *integ.params());
+    for bad in [
+        ChassisParams {
+            left_diameter: -0.26,
+            ..ChassisParams::DESIGNED
+        },
+        ChassisParams {
+            ticks_per_rev: 0,
+            ..ChassisParams::DESIGNED
+        },
+        ChassisParams {
+            ticks_per_rev: 8,
+            ..ChassisParams::DESIGNED
+        },
+        ChassisParams {
+            delta_left: f32::INFINITY,
+            ..ChassisParams::DESIGNED
+        },
+        ChassisParams {
+            track_width: 1e9,
+            ..ChassisParams::DESIGNED
+        },
+    ] {
+        assert!(integ.set_params(&bad).is_err(), "{bad:?}");
+        assert_eq!((integ.pose(), integ.sigma(), *integ.params()), before);
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Per-angle wheel function, eqs (3)-(5), referenced by the index line.
+
+fn wobbly() -> ChassisParams {
+    ChassisParams {
+        left_wheel: WheelHarmonics {
+            cos: [0.002, -0.0005, 0.0001],
+            sin: [0.001, 0.0003, 0.0],
+        },
+        right_wheel: WheelHarmonics {
+            cos: [-0.001, 0.0, 0.0002],
+            sin: [0.0015, -0.0002, 0.0001],
+        },
+        ..ChassisParams::DESIGNED
+    }
+}
+
+#[test]
+fn wheel_function_needs_the_index_and_matches_eq_5() {
+    let p = wobbly();
+    let mut integ = Integrator::new(&p, counts([0, 0]), Pose::default()).unwrap();
+    let mut reference = Reference::new(&p, [0, 0], Pose::default());
+    let mut g = [0i64; 2];
+    // Before any index pulse: eq (6), and the status says the function is not in use.
+    for _ in 0..50 {
+        g = [g[0] + 313, g[1] + 297];
+        let st = integ.step(counts(g), IndexRefs::default());
+        assert!(!st.left_referenced && !st.right_referenced);
+        reference.step(g, [None, None]);
+    }
+    assert!((integ.pose().y - reference.y).abs() < 1e-9);
+    // Index pulses latched at these counts; re-latched every turn as the wheel passes them.
+    let mut idx = [4_321i64, 17_000];
+    for _ in 0..3000 {
+        g = [g[0] + 313, g[1] + 297];
+        while g[0] - idx[0] >= 20_000 {
+            idx[0] += 20_000;
+        }
+        while g[1] - idx[1] >= 20_000 {
+            idx[1] += 20_000;
+        }
+        let st = integ.step(counts(g), refs([Some(idx[0]), Some(idx[1])]));
+        assert!(st.left_referenced && st.right_referenced);
+        reference.step(g, [Some(idx[0]), Some(idx[1])]);
+    }
+    let (a, b) = (integ.pose(), reference);
+    assert!(
+        (a.x - b.x).abs() < 1e-6 && (a.y - b.y).abs() < 1e-6,
+        "{a:?} vs ({}, {})",
+        b.x,
+        b.y
+    );
+    assert!((a.heading - b.alpha).abs() < 1e-8);
+}
+
+#[test]
+fn wheel_function_cancels_over_whole_turns_and_differs_within_one() {
+    let p = wobbly();
+    // Straight-ish: both wheels exactly one turn, from a referenced phase.
+    let start = [1_234i64, 5_678];
+    let index = refs([Some(0), Some(0)]);
+    let mut integ = Integrator::new(&p, counts(start), Pose::default()).unwrap();
+    for k in 1..=100 {
+        integ.step(counts([start[0] + 200 * k, start[1] + 200 * k]), index);
+    }
+    let round =
+        Integrator::new(&ChassisParams::DESIGNED, counts(start), Pose::default()).map(|mut r| {
+            for k in 1..=100 {
+                r.step(counts([start[0] + 200 * k, start[1] + 200 * k]), index);
+            }
+            r.pose()
+        });
+    let round = round.unwrap();
+    // Same total distance per wheel over a whole turn: nearly the same end point.
+    assert!((integ.pose().heading - round.heading).abs() < 1e-9);
+    // But half a turn differs by the periodic part.
+    let mut half = Integrator::new(&p, counts(start), Pose::default()).unwrap();
+    half.step(counts([start[0] + 10_000, start[1]]), index);
+    let mut half_round =
+        Integrator::new(&ChassisParams::DESIGNED, counts(start), Pose::default()).unwrap();
+    half_round.step(counts([start[0] + 10_000, start[1]]), index);
+    assert!((half.pose().heading - half_round.pose().heading).abs() > 1e-6);
+}
+
+#[test]
+fn index_changing_by_non_whole_turns_is_followed() {
+    // A re-latched index that moved by counts that are not a whole turn (a fault the firmware
+    // flags): the integrator follows the newest latch without a jump beyond the periodic term.
+    let p = wobbly();
+    let mut integ = Integrator::new(&p, counts([0, 0]), Pose::default()).unwrap();
+    let mut g = 0i64;
+    for k in 0..400 {
+        g += 250;
+        let idx = if k < 200 { 0 } else { 137 };
+        integ.step(counts([g, g]), refs([Some(idx), Some(idx)]));
+    }
+    let pose = integ.pose();
+    let straight = PI * 0.26 / 20_000.0 * g as f64;
+    assert!((pose.y.hypot(pose.x) - straight).abs() < 0.01, "{pose:?}");
+}
+
+// ---------------------------------------------------------------------------------------
+// Uncertainty, eqs (19)-(28).
+
+#[test]
+fn jacobian_matches_finite_differences() {
+    let w = 0.563f64;
+    let mut rng = Rng(42);
+    for _ in 0..2000 {
+        let s = [(rng.uniform() - 0.5) * 0.2, (rng.uniform() - 0.5) * 0.2];
+        let alpha = rng.uniform() * TAU * 3.0 - TAU;
+        let inc = increments(s, alpha, w);
+        let theta = alpha + inc[0] / 2.0;
+        let ds = (s[0] + s[1]) / 2.0;
+        let chord_len = chord(ds, inc[0]);
+        let g = StepGeometry {
+            abs_counts: [0.0; 2],
+            abs_count_difference: 0.0,
+            wheel_distance: [s[0] as f32, s[1] as f32],
+            ds: ds as f32,
+            dalpha: inc[0] as f32,
+            chord: chord_len as f32,
+            sin: theta.sin() as f32,
+            cos: theta.cos() as f32,
+            inv_track: (1.0 / w) as f32,
+        };
+        let j = StepJacobian::of(&g);
+        let h = 1e-7;
+        for i in 0..2 {
+            let (mut up, mut down) = (s, s);
+            up[i] += h;
+            down[i] -= h;
+            let (fu, fd) = (increments(up, alpha, w), increments(down, alpha, w));
+            let fd_row: Vec<f64> = (0..3).map(|r| (fu[r] - fd[r]) / (2.0 * h)).collect();
+            let got = [j.dalpha[i], j.dx[i], j.dy[i]];
+            for r in 0..3 {
+                assert!(
+                    (f64::from(got[r]) - fd_row[r]).abs() < 2e-6,
+                    "d{r}/ds{i}: {} vs {}",
+                    got[r],
+                    fd_row[r]
+                );
+            }
+        }
+        // With respect to the previous heading.
+        let fu = increments(s, alpha + 1e-7, w);
+        let fd = increments(s, alpha - 1e-7, w);
+        assert!((f64::from(j.dx_dalpha) - (fu[1] - fd[1]) / 2e-7).abs() < 1e-6);
+        assert!((f64::from(j.dy_dalpha) - (fu[2] - fd[2]) / 2e-7).abs() < 1e-6);
+    }
+}
+
+#[test]
+fn paper_uncertainty_matches_f64_reference_and_table_3_scale() {
+    let p = ChassisParams::DESIGNED;
+    let mut rng = Rng(3);
+    let steps = drive_increments(&mut rng, 200_000, 1.0 / (PI * 0.26 / 20_000.0), 50.0);
+    let (integ, reference) = run_both(&p, &steps);
+    let sigma = integ.sigma();
+    for (got, want) in [
+        (sigma.x, reference.sigma_x),
+        (sigma.y, reference.sigma_y),
+        (sigma.heading, reference.sigma_alpha),
+    ] {
+        assert!(
+            ((f64::from(got) - want) / want).abs() < 1e-4,
+            "{got} vs {want}"
+        );
+    }
+    assert_eq!(sigma.xy, 0.0);
+    // Straight north only, 100 m at delta = 3.9e-8 m/increment: closed forms of the paper's
+    // sums. Per step sigma_dy = sqrt(2)/2 * delta * n; sigma_dalpha = sqrt(2) * delta * n / w;
+    // sigma_dx = sqrt(2) * dd/(2w) * delta * n + dd * sigma_alpha(before), which is where
+    // the paper's linear sums make x (across the track) grow quadratically.
+    let mut straight = Integrator::new(&p, counts([0, 0]), Pose::default()).unwrap();
+    let per_step = 400i64;
+    let n = (100.0 / (PI * 0.26 / 20_000.0) / per_step as f64) as i64;
+    for k in 1..=n {
+        straight.step(counts([k * per_step, k * per_step]), IndexRefs::default());
+    }
+    let sn = 3.9e-8 * per_step as f64;
+    let dd = PI * 0.26 / 20_000.0 * per_step as f64;
+    let (w, r2) = (0.563, 2.0f64.sqrt());
+    let (mut want_x, mut want_a) = (0.0, 0.0);
+    for _ in 0..n {
+        want_x += r2 * dd / (2.0 * w) * sn + dd * want_a;
+        want_a += r2 * sn / w;
+    }
+    let want_y = n as f64 * 0.5 * r2 * sn;
+    let got = straight.sigma();
+    for (got, want) in [(got.y, want_y), (got.x, want_x), (got.heading, want_a)] {
+        assert!(
+            ((f64::from(got) - want) / want).abs() < 1e-5,
+            "{got} vs {want}"
+        );
+    }
+}
+
+#[test]
+fn delta_diff_adds_heading_uncertainty_only_when_turning() {
+    let base = ChassisParams::DESIGNED;
+    let with = ChassisParams {
+        delta_diff: 2e-8,
+        ..base
+    };
+    let straight: Vec<[i64; 2]> = (0..1000).map(|_| [300, 300]).collect();
+    let turning: Vec<[i64; 2]> = (0..1000).map(|_| [300, 100]).collect();
+    let (a, _) = run_both(&base, &straight);
+    let (b, _) = run_both(&with, &straight);
+    assert_eq!(a.sigma(), b.sigma());
+    let (a, _) = run_both(&base, &turning);
+    let (b, _) = run_both(&with, &turning);
+    assert!(b.sigma().heading > a.sigma().heading * 1.1);
+}
+
+#[test]
+fn covariance_model_is_independent_of_the_sampling_rate() {
+    let p = ChassisParams {
+        uncertainty_model: UncertaintyModel::Covariance,
+        ..ChassisParams::DESIGNED
+    };
+    let counts_per_metre = 1.0 / (PI * 0.26 / 20_000.0);
+    let mut sigmas = vec![];
+    for rate in [50.0, 1000.0] {
+        let mut rng = Rng(11);
+        // The same path at two rates: one sample per 20 ms, or 20 per 20 ms.
+        let coarse = drive_increments(&mut rng, 20_000, counts_per_metre, 50.0);
+        let factor = (rate / 50.0) as i64;
+        let mut steps = vec![];
+        for d in coarse {
+            let mut done = [0i64; 2];
+            for k in 1..=factor {
+                let part = [d[0] * k / factor - done[0], d[1] * k / factor - done[1]];
+                done = [done[0] + part[0], done[1] + part[1]];
+                steps.push(part);
+            }
+        }
+        let (integ, _) = run_both(&p, &steps);
+        sigmas.push(integ.sigma());
+    }
+    let (a, b) = (sigmas[0], sigmas[1]);
+    assert!(a.x > 0.0 && a.heading > 0.0);
+    for (u, v) in [(a.x, b.x), (a.y, b.y), (a.heading, b.heading)] {
+        assert!(((u - v) / u).abs() < 0.01, "{a:?} vs {b:?}");
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Long drives against the f64 reference.
+
+#[test]
+fn ten_kilometre_drive_at_50_hz_matches_f64_reference() {
+    let p = ChassisParams {
+        left_diameter: 0.2608,
+        right_diameter: 0.2607,
+        track_width: 0.5656,
+        ..ChassisParams::DESIGNED
+    };
+    let counts_per_metre = 20_000.0 / (PI * 0.2608);
+    let mut rng = Rng(2024);
+    // About 1 m/s for 10 km of path: count the path as we go.
+    let mut steps = vec![];
+    let mut path = 0.0;
+    while path < 10_000.0 {
+        let chunk = drive_increments(&mut rng, 10_000, counts_per_metre, 50.0);
+        for d in chunk {
+            path += (d[0].abs() + d[1].abs()) as f64 / 2.0 / counts_per_metre;
+            steps.push(d);
+        }
+    }
+    // Read the counts through 16-bit counters, as the hardware does.
+    let mut ext = [CounterExtender::new(16, 0), CounterExtender::new(16, 0)];
+    let mut integ = Integrator::new(&p, counts([0, 0]), Pose::default()).unwrap();
+    let mut reference = Reference::new(&p, [0, 0], Pose::default());
+    let mut g = [0i64; 2];
+    for d in &steps {
+        g = [g[0] + d[0], g[1] + d[1]];
+        let raw = [(g[0] as u64 & 0xFFFF) as u32, (g[1] as u64 & 0xFFFF) as u32];
+        ext[0].update(raw[0]);
+        ext[1].update(raw[1]);
+        assert_eq!([ext[0].absolute(), ext[1].absolute()], g);
+        integ.step(counts(g), IndexRefs::default());
+        reference.step(g, [None, None]);
+    }
+    let pose = integ.pose();
+    let (ex, ey) = (pose.x - reference.x, pose.y - reference.y);
+    let ea = heading_error(pose.heading, reference.alpha);
+    println!(
+        "10 km, {} samples: position error {:.3e} m, heading error {:.3e} rad; far from origin: {:.0} m",
+        steps.len(),
+        ex.hypot(ey),
+        ea,
+        reference.x.hypot(reference.y)
+    );
+    assert!(ex.hypot(ey) < 1e-3, "position error {ex} {ey}");
+    assert!(ea < 1e-6, "heading error {ea}");
+    assert!(reference.alpha.abs() > 1.0, "the drive turned");
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    /// Random chassis, random starting pose, random sample sequences: the integrator follows
+    /// the f64 reference within a bound that scales with the path.
+    #[test]
+    fn integrator_follows_f64_reference(
+        dl in 0.1f64..0.6,
+        dr in 0.1f64..0.6,
+        w in 0.3f64..1.5,
+        ticks in prop::sample::select(vec![2048u32, 4096, 10_000, 20_000, 40_000]),
+        x0 in -1000.0f64..1000.0,
+        y0 in -1000.0f64..1000.0,
+        a0 in -10.0f64..10.0,
+        steps in prop::collection::vec((-3000i64..3000, -3000i64..3000), 1..400),
+    ) {
+        let p = ChassisParams { left_diameter: dl, right_diameter: dr, track_width: w, ticks_per_rev: ticks, ..ChassisParams::DESIGNED };
+        prop_assume!(p.validate().is_ok());
+        let start = Pose { x: x0, y: y0, heading: a0 };
+        let mut integ = Integrator::new(&p, counts([0, 0]), start).unwrap();
+        let mut reference = Reference::new(&p, [0, 0], start);
+        let mut g = [0i64; 2];
+        let mut path = 0.0;
+        for (a, b) in steps {
+            g = [g[0] + a, g[1] + b];
+            let st = integ.step(counts(g), IndexRefs::default());
+            if st.overrange {
+                return Ok(());
+            }
+            reference.step(g, [None, None]);
+            path += (a.abs() as f64 * dl + b.abs() as f64 * dr) * PI / f64::from(ticks);
+        }
+        let pose = integ.pose();
+        let tol = 1e-8 + 1e-8 * path;
+        prop_assert!((pose.x - reference.x).abs() < tol, "x {} vs {}", pose.x, reference.x);
+        prop_assert!((pose.y - reference.y).abs() < tol, "y {} vs {}", pose.y, reference.y);
+        prop_assert!((pose.heading - reference.alpha).abs() < 1e-9 + 1e-12 * path / w);
+        let sigma = integ.sigma();
+        for (got, want) in [(sigma.x, reference.sigma_x), (sigma.y, reference.sigma_y), (sigma.heading, reference.sigma_alpha)] {
+            prop_assert!((f64::from(got) - want).abs() <= 1e-5 * want + 1e-12, "{} vs {}", got, want);
+        }
+    }
+
+    /// The pose depends only on the counts, not on how a motion is split into samples, when
+    /// the motion is straight.
+    #[test]
+    fn straight_motion_is_independent_of_sampling(n in 1i64..5000, parts in 1i64..50) {
+        let p = ChassisParams::DESIGNED;
+        let mut one = Integrator::new(&p, counts([0, 0]), Pose { heading: 0.7, ..Pose::default() }).unwrap();
+        one.step(counts([n * parts, n * parts]), IndexRefs::default());
+        let mut many = Integrator::new(&p, counts([0, 0]), Pose { heading: 0.7, ..Pose::default() }).unwrap();
+        for k in 1..=parts {
+            many.step(counts([n * k, n * k]), IndexRefs::default());
+        }
+        prop_assert!((one.pose().x - many.pose().x).abs() < 1e-9 * parts as f64);
+        prop_assert!((one.pose().y - many.pose().y).abs() < 1e-9 * parts as f64);
+    }
+}
