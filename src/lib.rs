@@ -16,3 +16,5 @@
 
 pub mod odometry;
 pub mod protocol;
+pub mod settings;
+pub mod timing;

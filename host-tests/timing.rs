@@ -1,0 +1,986 @@
+//! Host tests of `odo_core::timing`: the PPS discipline against simulated crystals, jitter,
+//! lost and spurious pulses; the NMEA parser; the time tag; the index tracker.
+
+use std::collections::VecDeque;
+
+use odo_core::timing::nmea::{civil_from_days, days_from_civil, parse_sentence, MAX_SENTENCE};
+use odo_core::timing::*;
+use proptest::prelude::*;
+
+const HZ: u32 = 84_000_000;
+
+// ---------------------------------------------------------------- PPS simulation
+
+/// A deterministic xorshift generator for jitter and spurious edges.
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        self.0
+    }
+    /// Uniform in `-j..=j`.
+    fn jitter(&mut self, j: i64) -> i64 {
+        if j == 0 {
+            0
+        } else {
+            (self.next() % (2 * j as u64 + 1)) as i64 - j
+        }
+    }
+}
+
+/// An MCU crystal `ppm` off nominal: true seconds to timer ticks.
+#[derive(Clone, Copy)]
+struct Crystal {
+    ppm: f64,
+    origin: u64,
+}
+impl Crystal {
+    fn tick(&self, t: f64) -> u64 {
+        self.origin + (t * f64::from(HZ) * (1.0 + self.ppm * 1e-6)).round() as u64
+    }
+    fn time(&self, tick: u64) -> f64 {
+        (tick - self.origin) as f64 / (f64::from(HZ) * (1.0 + self.ppm * 1e-6))
+    }
+}
+
+/// One PPS edge of the simulation: tick and the true second it marks (`None`: spurious).
+#[derive(Clone, Copy, Debug)]
+struct Edge {
+    tick: u64,
+    second: Option<u32>,
+}
+
+struct Scenario {
+    crystal: Crystal,
+    jitter: i64,
+    seconds: u32,
+    lost: Vec<u32>,
+    spurious: Vec<f64>,
+    seed: u64,
+}
+
+impl Scenario {
+    fn new(ppm: f64, jitter: i64, seconds: u32) -> Self {
+        Self {
+            crystal: Crystal { ppm, origin: 1_000 },
+            jitter,
+            seconds,
+            lost: Vec::new(),
+            spurious: Vec::new(),
+            seed: 0x2545_f491_4f6c_dd1d,
+        }
+    }
+
+    fn edges(&self) -> Vec<Edge> {
+        let mut rng = Rng(self.seed);
+        let mut edges: Vec<Edge> = (1..self.seconds)
+            .filter(|s| !self.lost.contains(s))
+            .map(|s| Edge {
+                tick: (self.crystal.tick(f64::from(s)) as i64 + rng.jitter(self.jitter)) as u64,
+                second: Some(s),
+            })
+            .collect();
+        edges.extend(self.spurious.iter().map(|t| Edge {
+            tick: self.crystal.tick(*t),
+            second: None,
+        }));
+        edges.sort_by_key(|e| e.tick);
+        edges
+    }
+}
+
+/// What a run produced: the samples in order, with the events delivered before each.
+struct Run {
+    samples: Vec<Sample>,
+    events: Vec<(Edge, PpsEvent)>,
+}
+
+/// Runs the discipline the way the board does: two samples committed ahead of the timer,
+/// PPS edges delivered as they happen, until the true time `seconds`.
+fn run(disc: &mut Discipline, edges: &[Edge], crystal: Crystal, seconds: u32) -> Run {
+    let end = crystal.tick(f64::from(seconds));
+    let mut now = crystal.origin;
+    let mut ahead: VecDeque<Sample> = VecDeque::new();
+    ahead.push_back(disc.next_sample(now));
+    ahead.push_back(disc.next_sample(now));
+    let mut pending = edges.iter().peekable();
+    let mut out = Run {
+        samples: Vec::new(),
+        events: Vec::new(),
+    };
+    while let Some(sample) = ahead.pop_front() {
+        if sample.tick > end {
+            break;
+        }
+        while let Some(edge) = pending.next_if(|e| e.tick <= sample.tick) {
+            out.events.push((*edge, disc.on_pps(edge.tick)));
+        }
+        now = now.max(sample.tick);
+        out.samples.push(sample);
+        ahead.push_back(disc.next_sample(now));
+    }
+    out
+}
+
+fn pps_disc() -> Discipline {
+    Discipline::new(DisciplineConfig::new(HZ), 1_000).expect("valid config")
+}
+
+/// The true second of label `label` (from the events), checking the offset is unique.
+fn label_offset(run: &Run) -> Option<i64> {
+    let mut offset = None;
+    for (edge, event) in &run.events {
+        let second = match event {
+            PpsEvent::Locked { second }
+            | PpsEvent::Accepted { second, .. }
+            | PpsEvent::Reacquired { second, .. } => *second,
+            _ => continue,
+        };
+        let truth = edge.second.expect("a spurious edge was accepted") as i64;
+        let o = truth - i64::from(second);
+        if let Some(prev) = offset {
+            assert_eq!(prev, o, "labels must count true seconds while locked");
+        }
+        offset = Some(o);
+    }
+    offset
+}
+
+/// Structural invariants of any run: ticks increasing with gaps of at least half a sample
+/// period, labels (second, index) increasing, index below the rate.
+fn check_structure(run: &Run) {
+    for pair in run.samples.windows(2) {
+        let (a, b) = (pair[0], pair[1]);
+        let half = u64::from(HZ) / (2 * u64::from(a.rate)) * 999 / 1000;
+        assert!(b.tick >= a.tick + half, "gap too short: {a:?} -> {b:?}");
+        assert!(
+            (b.second, b.index) > (a.second, a.index),
+            "labels must increase: {a:?} -> {b:?}"
+        );
+        assert!(b.index < b.rate);
+    }
+}
+
+/// Largest error (seconds) of locked samples against the true GNSS grid.
+fn locked_error(run: &Run, crystal: Crystal) -> f64 {
+    let Some(offset) = label_offset(run) else {
+        return 0.0;
+    };
+    run.samples
+        .iter()
+        .filter(|s| s.state == SyncState::Locked)
+        .map(|s| {
+            let truth =
+                (i64::from(s.second) + offset) as f64 + f64::from(s.index) / f64::from(s.rate);
+            (crystal.time(s.tick) - truth).abs()
+        })
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn locks_and_follows_the_pps_with_crystal_offsets() {
+    for ppm in [-100.0, -37.5, 0.0, 12.0, 100.0] {
+        let sc = Scenario::new(ppm, 8, 120);
+        let mut disc = pps_disc();
+        let r = run(&mut disc, &sc.edges(), sc.crystal, sc.seconds);
+        check_structure(&r);
+        assert_eq!(disc.state(), SyncState::Locked, "ppm {ppm}");
+        assert_eq!(disc.stats().locks, 1);
+        assert_eq!(disc.stats().glitches, 0);
+        // Locks at the second edge (t = 2 s), 50 samples per second from then.
+        let locked = r
+            .samples
+            .iter()
+            .filter(|s| s.state == SyncState::Locked)
+            .count();
+        assert!((116 * 50..=118 * 50 + 2).contains(&locked), "{locked}");
+        // Bound: two jitters in the period measurement, one in the anchor, rounding.
+        let err = locked_error(&r, sc.crystal);
+        assert!(
+            err < (3.0 * 8.0 + 3.0) / f64::from(HZ),
+            "ppm {ppm}: error {err}"
+        );
+        let measured = disc.period() as f64;
+        let expected = f64::from(HZ) * (1.0 + ppm * 1e-6);
+        assert!(
+            (measured - expected).abs() <= 2.0 * 8.0 + 1.0,
+            "{measured} vs {expected}"
+        );
+    }
+}
+
+#[test]
+fn no_cumulative_drift_over_an_hour() {
+    let sc = Scenario::new(100.0, 0, 3_600);
+    let mut disc = pps_disc();
+    let r = run(&mut disc, &sc.edges(), sc.crystal, sc.seconds);
+    check_structure(&r);
+    // Without jitter the grid is exact to the rounding of one tick.
+    let err = locked_error(&r, sc.crystal);
+    assert!(err <= 1.5 / f64::from(HZ), "{err}");
+    assert_eq!(
+        r.samples
+            .iter()
+            .filter(|s| s.state == SyncState::Locked)
+            .count(),
+        3_598 * 50 - 3 + 1
+    );
+}
+
+#[test]
+fn locked_sample_k_is_at_edge_plus_k_period_over_rate() {
+    let sc = Scenario::new(-63.0, 5, 20);
+    let mut disc = pps_disc();
+    let edges = sc.edges();
+    let r = run(&mut disc, &edges, sc.crystal, sc.seconds);
+    // In every locked second after the first, samples k >= 3 (committed after the edge was
+    // captured: two samples are committed ahead, and the edge may come just after sample 0)
+    // sit exactly at edge + floor(k * P / 50), with P the edge-to-edge period.
+    let offset = label_offset(&r).expect("locked");
+    for s in r
+        .samples
+        .iter()
+        .filter(|s| s.state == SyncState::Locked && s.index >= 3)
+    {
+        let truth = (i64::from(s.second) + offset) as u32;
+        let i = edges
+            .iter()
+            .position(|e| e.second == Some(truth))
+            .expect("edge");
+        if i == 0 {
+            continue;
+        }
+        let period = edges[i].tick - edges[i - 1].tick;
+        assert_eq!(
+            s.tick,
+            edges[i].tick + u64::from(s.index) * period / 50,
+            "{s:?}"
+        );
+    }
+}
+
+#[test]
+fn lost_pulses_give_holdover_then_reacquisition() {
+    let mut sc = Scenario::new(80.0, 10, 60);
+    sc.lost = (20..26).collect(); // six seconds without PPS (holdover_s = 10)
+    let mut disc = pps_disc();
+    let r = run(&mut disc, &sc.edges(), sc.crystal, sc.seconds);
+    check_structure(&r);
+    let holdover: Vec<_> = r
+        .samples
+        .iter()
+        .filter(|s| s.state == SyncState::Holdover)
+        .collect();
+    assert!(!holdover.is_empty());
+    let reacquired: Vec<_> = r
+        .events
+        .iter()
+        .filter_map(|(_, e)| match e {
+            PpsEvent::Reacquired { missed, .. } => Some(*missed),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(reacquired, vec![6]);
+    assert_eq!(disc.stats().missed, 6);
+    assert_eq!(disc.stats().locks, 1, "holdover must not need a new lock");
+    assert_eq!(disc.state(), SyncState::Locked);
+    // Holdover samples stay on the grid within the period error times the seconds held.
+    let offset = label_offset(&r).expect("locked");
+    for s in &holdover {
+        let truth = (i64::from(s.second) + offset) as f64 + f64::from(s.index) / 50.0;
+        let err = (sc.crystal.time(s.tick) - truth).abs();
+        assert!(err < 7.0 * 25.0 / f64::from(HZ), "{s:?}: {err}");
+    }
+    assert!(locked_error(&r, sc.crystal) < 35.0 / f64::from(HZ));
+}
+
+#[test]
+fn long_loss_falls_back_to_free_running_and_relocks() {
+    let mut sc = Scenario::new(-100.0, 10, 60);
+    sc.lost = (15..35).collect(); // 20 s > holdover_s
+    let mut disc = pps_disc();
+    let r = run(&mut disc, &sc.edges(), sc.crystal, sc.seconds);
+    check_structure(&r);
+    let states: Vec<SyncState> = r.samples.iter().map(|s| s.state).collect();
+    let mut transitions = states.clone();
+    transitions.dedup();
+    use SyncState::*;
+    assert_eq!(
+        transitions,
+        vec![FreeRunning, Locked, Holdover, FreeRunning, Locked]
+    );
+    let holdover = states.iter().filter(|s| **s == Holdover).count();
+    // Holdover from the first missed edge (t = 15 s) to the eleventh (t = 25 s).
+    assert!(
+        (10 * 50 - 2..=10 * 50 + 2).contains(&holdover),
+        "{holdover}"
+    );
+    assert_eq!(disc.stats().locks, 2);
+    assert_eq!(disc.state(), Locked);
+    // After the relock the grid is again on the true seconds (new labels, new offset).
+    let relock = r
+        .events
+        .iter()
+        .rposition(|(_, e)| matches!(e, PpsEvent::Locked { .. }))
+        .expect("relock");
+    let tail = Run {
+        samples: r
+            .samples
+            .iter()
+            .copied()
+            .filter(|s| s.tick > r.events[relock].0.tick)
+            .collect(),
+        events: r.events[relock..].to_vec(),
+    };
+    assert!(locked_error(&tail, sc.crystal) < 35.0 / f64::from(HZ));
+}
+
+#[test]
+fn spurious_pulses_are_rejected_as_glitches() {
+    let mut sc = Scenario::new(42.0, 10, 40);
+    sc.spurious = vec![10.3, 10.7, 17.000_5, 22.999_7, 30.5];
+    let mut disc = pps_disc();
+    let r = run(&mut disc, &sc.edges(), sc.crystal, sc.seconds);
+    check_structure(&r);
+    assert_eq!(disc.stats().glitches, 5);
+    assert_eq!(disc.stats().locks, 1);
+    assert!(r
+        .samples
+        .iter()
+        .skip(200)
+        .all(|s| s.state == SyncState::Locked));
+    assert!(locked_error(&r, sc.crystal) < 35.0 / f64::from(HZ));
+}
+
+#[test]
+fn spurious_pulses_before_lock_delay_it_but_do_not_mislock() {
+    let mut sc = Scenario::new(0.0, 0, 10);
+    sc.spurious = vec![0.4, 1.25, 2.9];
+    let mut disc = pps_disc();
+    let r = run(&mut disc, &sc.edges(), sc.crystal, sc.seconds);
+    check_structure(&r);
+    assert_eq!(disc.state(), SyncState::Locked);
+    label_offset(&r); // panics if a spurious edge was accepted
+    assert!(locked_error(&r, sc.crystal) < 2.0 / f64::from(HZ));
+}
+
+#[test]
+fn glitch_window_boundaries() {
+    // Edges at 1 s and 2 s lock; the third edge is moved by d ticks from its prediction.
+    let w = i64::from(DisciplineConfig::new(HZ).glitch_window_ticks);
+    for (d, accepted) in [
+        (0, true),
+        (w, true),
+        (-w, true),
+        (w + 1, false),
+        (-w - 1, false),
+        (HZ as i64 / 2, false),
+    ] {
+        let mut disc = pps_disc();
+        let p = u64::from(HZ);
+        assert_eq!(disc.on_pps(p), PpsEvent::Candidate);
+        assert!(matches!(disc.on_pps(2 * p), PpsEvent::Locked { .. }));
+        let e = disc.on_pps((3 * p as i64 + d) as u64);
+        assert_eq!(
+            matches!(e, PpsEvent::Accepted { .. }),
+            accepted,
+            "d = {d}: {e:?}"
+        );
+        if let PpsEvent::Accepted { phase_error, .. } = e {
+            assert_eq!(phase_error, d);
+        }
+    }
+}
+
+#[test]
+fn acquisition_period_boundaries() {
+    // Two edges lock only when their interval is within max_offset_ppm (+ window) of 1 s.
+    let cfg = DisciplineConfig::new(HZ);
+    let limit = u64::from(HZ) * u64::from(cfg.max_offset_ppm) / 1_000_000
+        + u64::from(cfg.glitch_window_ticks);
+    for (interval, locks) in [
+        (u64::from(HZ), true),
+        (u64::from(HZ) + limit, true),
+        (u64::from(HZ) - limit, true),
+        (u64::from(HZ) + limit + 1, false),
+        (u64::from(HZ) - limit - 1, false),
+        (u64::from(HZ) / 2, false),
+    ] {
+        let mut disc = pps_disc();
+        disc.on_pps(5_000);
+        let e = disc.on_pps(5_000 + interval);
+        assert_eq!(
+            matches!(e, PpsEvent::Locked { .. }),
+            locks,
+            "{interval}: {e:?}"
+        );
+    }
+}
+
+#[test]
+fn duplicate_and_backwards_edges_are_glitches() {
+    let mut disc = pps_disc();
+    let p = u64::from(HZ);
+    disc.on_pps(p);
+    disc.on_pps(2 * p);
+    assert!(matches!(disc.on_pps(3 * p), PpsEvent::Accepted { .. }));
+    assert_eq!(disc.on_pps(3 * p + 10), PpsEvent::Glitch);
+    assert_eq!(disc.on_pps(3 * p), PpsEvent::Glitch);
+    assert_eq!(disc.on_pps(p), PpsEvent::Glitch);
+    assert_eq!(disc.stats().glitches, 3);
+}
+
+#[test]
+fn free_mode_ignores_pps_and_schedules_exactly() {
+    for rate in [1, 7, 10, 13, 50, 333, 999, 1000] {
+        let mut cfg = DisciplineConfig::new(HZ);
+        cfg.mode = SyncMode::Free;
+        cfg.rate_hz = rate;
+        let mut disc = Discipline::new(cfg, 0).expect("valid");
+        assert_eq!(disc.on_pps(u64::from(HZ)), PpsEvent::Ignored);
+        let mut prev: Option<Sample> = None;
+        for n in 0..(3 * rate) {
+            let s = disc.next_sample(prev.map_or(0, |p| p.tick));
+            assert_eq!(s.state, SyncState::FreeRunning);
+            assert_eq!((s.second, s.index), (n / rate, n % rate));
+            let k = u64::from(s.index);
+            assert_eq!(
+                s.tick,
+                u64::from(s.second) * u64::from(HZ) + k * u64::from(HZ) / u64::from(rate)
+            );
+            if let Some(p) = prev {
+                let gap = s.tick - p.tick;
+                let floor = u64::from(HZ) / u64::from(rate);
+                assert!(gap == floor || gap == floor + 1, "rate {rate}: gap {gap}");
+            }
+            prev = Some(s);
+        }
+    }
+}
+
+#[test]
+fn rate_change_applies_at_the_next_second() {
+    let mut cfg = DisciplineConfig::new(HZ);
+    cfg.mode = SyncMode::Free;
+    let mut disc = Discipline::new(cfg, 0).expect("valid");
+    for _ in 0..10 {
+        disc.next_sample(0);
+    }
+    cfg.rate_hz = 100;
+    disc.set_config(cfg).expect("valid");
+    let rest: Vec<Sample> = (0..45).map(|_| disc.next_sample(0)).collect();
+    assert!(rest[..40].iter().all(|s| s.rate == 50 && s.second == 0));
+    assert_eq!(
+        (rest[40].second, rest[40].index, rest[40].rate),
+        (1, 0, 100)
+    );
+    assert_eq!(rest[41].tick - rest[40].tick, u64::from(HZ) / 100);
+}
+
+type ConfigEdit = fn(&mut DisciplineConfig);
+
+#[test]
+fn config_validation_boundaries() {
+    let ok = DisciplineConfig::new(HZ);
+    assert_eq!(ok.validate(), Ok(()));
+    let table: [(ConfigEdit, Result<(), ConfigError>); 9] = [
+        (|c| c.rate_hz = 0, Err(ConfigError::Rate)),
+        (|c| c.rate_hz = 1, Ok(())),
+        (|c| c.rate_hz = 1000, Ok(())),
+        (|c| c.rate_hz = 1001, Err(ConfigError::Rate)),
+        (|c| c.timer_hz = 999, Err(ConfigError::TimerHz)),
+        (|c| c.glitch_window_ticks = 0, Err(ConfigError::Window)),
+        (
+            |c| c.glitch_window_ticks = HZ / 4000,
+            Err(ConfigError::Window),
+        ),
+        (|c| c.max_offset_ppm = 0, Err(ConfigError::Offset)),
+        (|c| c.holdover_s = 0, Err(ConfigError::Holdover)),
+    ];
+    for (edit, expected) in table {
+        let mut c = ok;
+        edit(&mut c);
+        assert_eq!(c.validate(), expected, "{c:?}");
+    }
+}
+
+#[test]
+fn switching_to_free_mode_drops_the_lock() {
+    let sc = Scenario::new(20.0, 0, 5);
+    let mut disc = pps_disc();
+    run(&mut disc, &sc.edges(), sc.crystal, sc.seconds);
+    assert_eq!(disc.state(), SyncState::Locked);
+    let mut cfg = *disc.config();
+    cfg.mode = SyncMode::Free;
+    disc.set_config(cfg).expect("valid");
+    assert_eq!(disc.state(), SyncState::FreeRunning);
+    assert_eq!(disc.period(), u64::from(HZ));
+}
+
+#[test]
+fn capture_resolution_table() {
+    // (period start, length, ccr, update pending) -> tick
+    for (start, len, ccr, pending, tick) in [
+        (1_000u64, 1_680_000u64, 10u32, false, 1_010u64),
+        (1_000, 1_680_000, 1_679_999, false, 1_681_000 - 1),
+        (1_000, 1_680_000, 1_679_999, true, 1_681_000 - 1),
+        (1_000, 1_680_000, 5, true, 1_681_005),
+        (1_000, 1_680_000, 839_999, true, 1_681_000 + 839_999),
+        (1_000, 1_680_000, 840_000, true, 841_000),
+    ] {
+        assert_eq!(
+            resolve_capture(start, len, ccr, pending),
+            tick,
+            "{start} {len} {ccr} {pending}"
+        );
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    /// Random crystals, jitter, losses and spurious edges: the structure always holds, no
+    /// spurious edge is ever accepted, and locked samples are on the true grid.
+    #[test]
+    fn discipline_invariants(
+        ppm in -100.0f64..100.0,
+        jitter in 0i64..40,
+        lost in proptest::collection::vec(2u32..60, 0..12),
+        spurious in proptest::collection::vec(0.5f64..59.0, 0..6),
+        seed in 1u64..u64::MAX,
+    ) {
+        let mut sc = Scenario::new(ppm, jitter, 60);
+        sc.lost = lost;
+        sc.seed = seed;
+        // A spurious edge within the glitch window of a real one cannot be told apart.
+        sc.spurious = spurious
+            .into_iter()
+            .filter(|t| (t - t.round()).abs() > 1e-4)
+            .collect();
+        let mut disc = pps_disc();
+        let r = run(&mut disc, &sc.edges(), sc.crystal, sc.seconds);
+        check_structure(&r);
+        let err = locked_error(&r, sc.crystal);
+        // Worst case: a relock after holdover with a period measured over several seconds.
+        prop_assert!(err < (3.0 * jitter as f64 + 3.0) / f64::from(HZ), "error {}", err);
+    }
+}
+
+// ---------------------------------------------------------------- NMEA
+
+fn with_checksum(body: &str) -> String {
+    let sum = body.bytes().fold(0u8, |a, b| a ^ b);
+    format!("${body}*{sum:02X}")
+}
+
+fn feed(buf: &mut LineBuffer, bytes: &[u8]) -> Vec<Result<TimeMessage, NmeaError>> {
+    bytes.iter().filter_map(|b| buf.push(*b)).collect()
+}
+
+#[test]
+fn parses_the_classic_examples() {
+    let rmc =
+        parse_sentence(b"$GPRMC,123519,A,4807.038,N,01131.000,E,022.4,084.4,230394,003.1,W*6A");
+    assert_eq!(
+        rmc,
+        Ok(TimeMessage::Rmc {
+            time: UtcDateTime {
+                year: 1994,
+                month: 3,
+                day: 23,
+                hour: 12,
+                minute: 35,
+                second: 19,
+                millis: 0
+            },
+            valid: true,
+        })
+    );
+    let zda = parse_sentence(b"$GPZDA,201530.00,04,07,2002,00,00*60\r");
+    assert_eq!(
+        zda,
+        Ok(TimeMessage::Zda(UtcDateTime {
+            year: 2002,
+            month: 7,
+            day: 4,
+            hour: 20,
+            minute: 15,
+            second: 30,
+            millis: 0
+        }))
+    );
+}
+
+#[test]
+fn nmea_error_table() {
+    let cases: Vec<(String, NmeaError)> = vec![
+        (
+            "$GPZDA,201530.00,04,07,2002,00,00*61".into(),
+            NmeaError::BadChecksum {
+                computed: 0x60,
+                received: 0x61,
+            },
+        ),
+        (
+            "$GPZDA,201530.00,04,07,2002,00,00".into(),
+            NmeaError::NoChecksum,
+        ),
+        (
+            "$GPZDA,201530.00,04,07,2002,00,00*6".into(),
+            NmeaError::NoChecksum,
+        ),
+        (
+            "$GPZDA,201530.00,04,07,2002,00,00*6G".into(),
+            NmeaError::NoChecksum,
+        ),
+        (
+            with_checksum("GPZDA,201530.00,04,07,2002,00,00").replace('$', ""),
+            NmeaError::NoStart,
+        ),
+        (
+            with_checksum("GPGGA,123519,4807.038,N"),
+            NmeaError::Unsupported,
+        ),
+        (with_checksum("PUBX,04,073731.00"), NmeaError::Unsupported),
+        (with_checksum("GP-ZDA,1"), NmeaError::Field("address")),
+        (with_checksum("GPZDA,,,,,,"), NmeaError::Field("time")),
+        (
+            with_checksum("GPZDA,2015.00,04,07,2002,00,00"),
+            NmeaError::Field("time"),
+        ),
+        (
+            with_checksum("GPZDA,201530.x0,04,07,2002,00,00"),
+            NmeaError::Field("time"),
+        ),
+        (
+            with_checksum("GPZDA,241530.00,04,07,2002,00,00"),
+            NmeaError::BadDate,
+        ),
+        (
+            with_checksum("GPZDA,206030.00,04,07,2002,00,00"),
+            NmeaError::BadDate,
+        ),
+        (
+            with_checksum("GPZDA,201561.00,04,07,2002,00,00"),
+            NmeaError::BadDate,
+        ),
+        (
+            with_checksum("GPZDA,201530.00,30,02,2024,00,00"),
+            NmeaError::BadDate,
+        ),
+        (
+            with_checksum("GPZDA,201530.00,29,02,2023,00,00"),
+            NmeaError::BadDate,
+        ),
+        (
+            with_checksum("GPZDA,201530.00,01,13,2023,00,00"),
+            NmeaError::BadDate,
+        ),
+        (
+            with_checksum("GPZDA,201530.00,01,01,1979,00,00"),
+            NmeaError::BadDate,
+        ),
+        (
+            with_checksum("GPZDA,201530.00,01,01"),
+            NmeaError::Field("year"),
+        ),
+        (
+            with_checksum("GPZDA,201530.00,0a,01,2020,00,00"),
+            NmeaError::Field("day"),
+        ),
+        (
+            with_checksum("GPRMC,123519,X,4807.038,N,01131.000,E,022.4,084.4,230394,,"),
+            NmeaError::Field("status"),
+        ),
+        (
+            with_checksum("GPRMC,123519,A,4807.038,N,01131.000,E,022.4,084.4"),
+            NmeaError::Field("date"),
+        ),
+        (
+            with_checksum("GPRMC,123519,A,4807.038,N,01131.000,E,022.4,084.4,2303945,,"),
+            NmeaError::Field("date"),
+        ),
+        (
+            with_checksum("GPRMC,123519,A,,,,,,,320394,,"),
+            NmeaError::BadDate,
+        ),
+    ];
+    for (line, err) in cases {
+        assert_eq!(parse_sentence(line.as_bytes()), Err(err), "{line}");
+    }
+}
+
+#[test]
+fn rmc_void_status_years_and_fractions() {
+    let m = parse_sentence(with_checksum("GNRMC,000000.250,V,,,,,,,010180,,,N").as_bytes())
+        .expect("parses");
+    assert!(!m.valid());
+    assert_eq!(
+        m.time(),
+        UtcDateTime {
+            year: 1980,
+            month: 1,
+            day: 1,
+            hour: 0,
+            minute: 0,
+            second: 0,
+            millis: 250
+        }
+    );
+    let m = parse_sentence(with_checksum("GNRMC,235959.999,A,,,,,,,311279,,,A").as_bytes())
+        .expect("parses");
+    assert_eq!(m.time().year, 2079);
+    assert_eq!(m.time().millis, 999);
+}
+
+#[test]
+fn line_buffer_splits_lines_and_bounds_length() {
+    let mut buf = LineBuffer::new();
+    let zda = "$GPZDA,201530.00,04,07,2002,00,00*60\r\n";
+    let mut stream = Vec::new();
+    stream.extend_from_slice(b"garbage before\r\n");
+    stream.extend_from_slice(zda.as_bytes());
+    stream.extend_from_slice(b"$GPZDA,2015"); // truncated line, restarted by the next '$'
+    stream.extend_from_slice(zda.as_bytes());
+    stream.extend(std::iter::repeat_n(b'A', 300));
+    stream.extend_from_slice(b"\n");
+    stream.extend_from_slice(zda.as_bytes());
+    let out = feed(&mut buf, &stream);
+    assert_eq!(out.len(), 5, "{out:?}");
+    assert_eq!(out[0], Err(NmeaError::NoStart));
+    assert!(out[1].is_ok() && out[2].is_ok() && out[4].is_ok());
+    assert_eq!(out[3], Err(NmeaError::Overflow));
+}
+
+#[test]
+fn gps_time_table() {
+    // (UTC, GPS seconds, week, tow), with GPS - UTC = 18 s.
+    let t = |y, mo, d, h, mi, s| UtcDateTime {
+        year: y,
+        month: mo,
+        day: d,
+        hour: h,
+        minute: mi,
+        second: s,
+        millis: 0,
+    };
+    for (utc, secs, week, tow) in [
+        (t(1980, 1, 6, 0, 0, 0), 18, 0, 18),
+        (t(2000, 2, 29, 0, 0, 0), 635_817_618, 1051, 172_818),
+        (t(2017, 1, 1, 0, 0, 0), 1_167_264_018, 1930, 18),
+        (t(2024, 1, 1, 12, 30, 15), 1_388_147_433, 2295, 131_433),
+        (t(2026, 11, 21, 23, 59, 59), 1_479_340_817, 2446, 17),
+    ] {
+        assert_eq!(utc.gps_seconds(), Ok(secs), "{utc:?}");
+        assert_eq!(utc.gps_time(), Ok(GpsTime { week, tow }));
+        assert_eq!(GpsTime { week, tow }.seconds(), secs);
+        assert_eq!(UtcDateTime::from_gps_seconds(secs), Some(utc));
+    }
+    assert_eq!(
+        t(1980, 1, 5, 23, 59, 0).gps_seconds(),
+        Err(NmeaError::BadDate)
+    );
+    assert_eq!(UtcDateTime::from_gps_seconds(17), None);
+    // A leap second maps onto the following second.
+    assert_eq!(
+        t(2016, 12, 31, 23, 59, 60).gps_seconds(),
+        t(2017, 1, 1, 0, 0, 0).gps_seconds()
+    );
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(2000))]
+
+    /// Any bytes: no panic, and every line longer than the bound is an overflow.
+    #[test]
+    fn nmea_never_panics(bytes in proptest::collection::vec(any::<u8>(), 0..400)) {
+        let mut buf = LineBuffer::new();
+        for r in feed(&mut buf, &bytes) {
+            let _ = r;
+        }
+        let _ = parse_sentence(&bytes);
+    }
+
+    /// Mutating one byte of a good sentence never panics and is almost always caught.
+    #[test]
+    fn nmea_single_byte_corruption(pos in 0usize..36, byte in any::<u8>()) {
+        let mut line = b"$GPZDA,201530.00,04,07,2002,00,00*60".to_vec();
+        let original = line[pos];
+        line[pos] = byte;
+        let r = parse_sentence(&line);
+        if byte != original && pos > 0 && pos < 33 {
+            prop_assert!(r.is_err());
+        }
+    }
+
+    /// Formatted valid dates parse back to themselves and round-trip through GPS seconds.
+    #[test]
+    fn zda_round_trip(days in 0i64..40_000, sod in 0u32..86_400, millis in 0u16..1000) {
+        let (y, m, d) = civil_from_days(days + days_from_civil(1980, 1, 6));
+        let (h, mi, s) = (sod / 3600, sod / 60 % 60, sod % 60);
+        let line = with_checksum(&format!("GNZDA,{h:02}{mi:02}{s:02}.{millis:03},{d:02},{m:02},{y},00,00"));
+        prop_assert!(line.len() <= MAX_SENTENCE);
+        let utc = parse_sentence(line.as_bytes()).expect("valid").time();
+        prop_assert_eq!(
+            (i64::from(utc.year), u32::from(utc.month), u32::from(utc.day)),
+            (y, m, d)
+        );
+        prop_assert_eq!(utc.millis, millis);
+        let gps = utc.gps_seconds().expect("after epoch");
+        let back = UtcDateTime::from_gps_seconds(gps).expect("after epoch");
+        prop_assert_eq!(back, UtcDateTime { millis: 0, ..utc });
+    }
+}
+
+// ---------------------------------------------------------------- time tag
+
+#[test]
+fn time_tag_previous_and_next() {
+    let p = u64::from(HZ);
+    // Previous: the message after edge 7 names it.
+    let mut tag = TimeTagger::new(TimeTagPps::Previous, p);
+    tag.on_edge(7 * p, 7);
+    assert!(tag.on_message(1_000_000, 7 * p + p / 10));
+    assert_eq!(tag.gps_second(7), Some(1_000_000));
+    assert_eq!(tag.gps_second(9), Some(1_000_002));
+    assert_eq!(tag.gps_second(6), Some(999_999));
+    assert_eq!(tag.gps_time(7), Some(GpsTime::from_seconds(1_000_000)));
+    // A message more than a second after the last edge is not associated.
+    assert!(!tag.on_message(1_000_005, 8 * p + 1));
+    assert_eq!(tag.gps_second(7), Some(1_000_000));
+    // A disagreeing message replaces the mapping and is counted.
+    tag.on_edge(8 * p, 8);
+    assert!(tag.on_message(2_000_000, 8 * p + 5));
+    assert_eq!(tag.mismatches(), 1);
+    assert_eq!(tag.gps_second(8), Some(2_000_000));
+
+    // Next: the message before edge 7 announces it.
+    let mut tag = TimeTagger::new(TimeTagPps::Next, p);
+    tag.on_edge(6 * p, 6);
+    assert!(tag.on_message(1_000_000, 6 * p + p / 2));
+    assert_eq!(tag.gps_second(6), None);
+    tag.on_edge(7 * p, 7);
+    assert_eq!(tag.gps_second(7), Some(1_000_000));
+    // A message more than a second before its edge is dropped.
+    tag.on_message(5, 8 * p - p - 1);
+    tag.on_edge(8 * p, 8);
+    assert_eq!(tag.gps_second(8), Some(1_000_001));
+    tag.invalidate();
+    assert_eq!(tag.gps_second(8), None);
+}
+
+#[test]
+fn time_tag_follows_the_discipline_through_holdover() {
+    // Labels from the discipline count seconds in holdover, so the mapping survives it.
+    let mut sc = Scenario::new(30.0, 5, 30);
+    sc.lost = vec![10, 11, 12];
+    let mut disc = pps_disc();
+    let r = run(&mut disc, &sc.edges(), sc.crystal, sc.seconds);
+    let mut tag = TimeTagger::new(TimeTagPps::Previous, u64::from(HZ));
+    let gps0 = 1_400_000_000u32;
+    let mut checked = 0;
+    for (edge, event) in &r.events {
+        if let PpsEvent::Locked { second }
+        | PpsEvent::Accepted { second, .. }
+        | PpsEvent::Reacquired { second, .. } = event
+        {
+            tag.on_edge(edge.tick, *second);
+            let truth = edge.second.expect("real edge");
+            if truth < 5 {
+                tag.on_message(gps0 + truth, edge.tick + 1000);
+            }
+            assert_eq!(tag.gps_second(*second), Some(gps0 + truth));
+            checked += 1;
+        }
+    }
+    assert!(checked > 20);
+    assert_eq!(tag.mismatches(), 0);
+}
+
+// ---------------------------------------------------------------- index pulses
+
+#[test]
+fn index_boundary_table() {
+    let tpr = 20_000i64;
+    for (diff, expected) in [
+        (0, IndexCheck::Whole { turns: 0 }),
+        (tpr, IndexCheck::Whole { turns: 1 }),
+        (-tpr, IndexCheck::Whole { turns: -1 }),
+        (tpr + 4, IndexCheck::Whole { turns: 1 }),
+        (tpr - 4, IndexCheck::Whole { turns: 1 }),
+        (-tpr - 4, IndexCheck::Whole { turns: -1 }),
+        (tpr + 5, IndexCheck::Mismatch { error: 5 }),
+        (tpr - 5, IndexCheck::Mismatch { error: -5 }),
+        (3 * tpr + 1_000, IndexCheck::Mismatch { error: 1_000 }),
+        (tpr / 2, IndexCheck::Mismatch { error: tpr / 2 }),
+        (
+            tpr / 2 + 1,
+            IndexCheck::Mismatch {
+                error: -tpr / 2 + 1,
+            },
+        ),
+        (-7 * tpr + 3, IndexCheck::Whole { turns: -7 }),
+    ] {
+        let mut t = IndexTracker::new(20_000, index::DEFAULT_TOLERANCE);
+        assert_eq!(t.on_index(123_456), IndexCheck::First);
+        assert_eq!(t.on_index(123_456 + diff), expected, "diff {diff}");
+        assert_eq!(t.reference(), Some(123_456 + diff));
+        assert_eq!(
+            t.take_mismatch(),
+            matches!(expected, IndexCheck::Mismatch { .. })
+        );
+        assert!(!t.take_mismatch());
+    }
+}
+
+#[test]
+fn extend_near_table() {
+    for (bits, ref_raw, ref_abs, raw, abs) in [
+        (16, 65_530u32, 100i64, 5u32, 111i64),
+        (16, 5, 100, 65_530, 89),
+        (16, 0, 0, 32_767, 32_767),
+        (16, 0, 0, 32_768, -32_768),
+        (32, u32::MAX, -1, 0, 0),
+        (32, 0, 1 << 40, u32::MAX, (1 << 40) - 1),
+        (32, 0, 0, 0x7fff_ffff, 0x7fff_ffff),
+    ] {
+        assert_eq!(
+            extend_near(bits, ref_raw, ref_abs, raw),
+            abs,
+            "{bits} {ref_raw} {raw}"
+        );
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(1000))]
+
+    /// Whole turns plus an error: flagged exactly when the error exceeds the tolerance.
+    #[test]
+    fn index_whole_turns(
+        tpr in 4u32..1_048_576,
+        turns in -1000i64..1000,
+        err in -20i64..20,
+        start in -1_000_000_000i64..1_000_000_000,
+    ) {
+        let mut t = IndexTracker::new(tpr, index::DEFAULT_TOLERANCE);
+        t.on_index(start);
+        let err = if tpr < 64 { 0 } else { err };
+        let r = t.on_index(start + turns * i64::from(tpr) + err);
+        if err.unsigned_abs() <= u64::from(index::DEFAULT_TOLERANCE) {
+            prop_assert_eq!(r, IndexCheck::Whole { turns });
+        } else {
+            prop_assert_eq!(r, IndexCheck::Mismatch { error: err });
+        }
+    }
+
+    /// Extending a raw reading near a reference gives back the true absolute count.
+    #[test]
+    fn extend_near_recovers(bits in prop::sample::select(vec![16u32, 32]), abs in -(1i64 << 50)..(1i64 << 50), step in -30_000i64..30_000) {
+        let mask = if bits == 32 { u64::from(u32::MAX) } else { (1u64 << bits) - 1 };
+        let raw_of = |a: i64| (a as u64 & mask) as u32;
+        prop_assert_eq!(extend_near(bits, raw_of(abs), abs, raw_of(abs + step)), abs + step);
+    }
+}

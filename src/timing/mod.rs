@@ -1,0 +1,24 @@
+//! Timing: when samples are taken and what GNSS time they carry.
+//!
+//! - [`pps`]: the PPS discipline and sample scheduler (locked, holdover, free-running;
+//!   glitch rejection; exact integer grid).
+//! - [`nmea`]: ZDA/RMC parsing with checksum, UTC to GPS week and time of week.
+//! - [`tag`]: which PPS edge a time message names (`time_tag_pps`), and the GNSS second of
+//!   each grid second.
+//! - [`index`]: index-pulse tracking and the whole-turn check of the counts between pulses.
+//!
+//! All of it is pure and host-tested (`host-tests/timing.rs`); the firmware feeds it timer
+//! captures and bytes.
+
+pub mod index;
+pub mod nmea;
+pub mod pps;
+pub mod tag;
+
+pub use index::{extend_near, IndexCheck, IndexTracker};
+pub use nmea::{GpsTime, LineBuffer, NmeaError, TimeMessage, UtcDateTime, GPS_UTC_LEAP_SECONDS};
+pub use pps::{
+    resolve_capture, ConfigError, Discipline, DisciplineConfig, PpsEvent, PpsStats, Sample,
+    SyncMode, SyncState, RATE_RANGE,
+};
+pub use tag::{TimeTagPps, TimeTagger};

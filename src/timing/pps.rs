@@ -1,0 +1,456 @@
+//! PPS discipline: the sample schedule, phase-locked to the GNSS 1-PPS or free-running.
+//!
+//! Time is counted in ticks of one MCU timer (84 MHz on the board, 1 GHz in QEMU), extended
+//! by the driver to 64 bits. The discipline is pure: the driver feeds it PPS capture
+//! timestamps ([`Discipline::on_pps`]) and asks it for the instant of each sample
+//! ([`Discipline::next_sample`]); it programs the timer to fire there.
+//!
+//! # The grid
+//! Samples are grouped in *seconds*, numbered by a `u32` label. Second `s` starts at its
+//! anchor `A(s)`; sample `k` of it (`0 <= k < rate`) falls at `A(s) + floor(k * P / rate)`,
+//! where `P` is the length of the second in ticks. The arithmetic is exact integer
+//! arithmetic re-anchored every second, so nothing drifts however long the unit runs.
+//!
+//! - [`SyncState::Locked`]: `A(s)` is the captured PPS edge of second `s` and `P` the last
+//!   measured PPS period (edge to edge), so the MCU crystal's error is removed and the
+//!   samples fall on the 20 ms grid (at 50 Hz) of the GNSS second. Second `s + 1` is first
+//!   predicted at `A(s) + P`; samples already committed to the hardware keep that
+//!   prediction and the following ones move to the real edge once it is captured (the
+//!   difference is the edge's jitter plus the crystal's drift over one second: nanoseconds).
+//! - [`SyncState::Holdover`]: the PPS was lost. The grid goes on with the last measured
+//!   period from the last real edge, flagged. An edge found again within the window of its
+//!   predicted time re-locks (`Reacquired`).
+//! - [`SyncState::FreeRunning`]: `mode = free`, or the holdover lasted longer than
+//!   `holdover_s`, or no PPS was ever seen. `P` is the nominal timer frequency: the grid
+//!   runs off the MCU clock alone. In `mode = pps` two edges one second apart (within
+//!   `max_offset_ppm`) lock it again.
+//!
+//! # Glitches
+//! While locked (or in holdover) an edge farther than `glitch_window_ticks` from its
+//! predicted time, or one giving a period outside `max_offset_ppm` of nominal, or a second
+//! edge in the same second, is rejected and counted; it changes nothing.
+
+use core::ops::RangeInclusive;
+
+/// Accepted sample rates, samples per second (both modes).
+pub const RATE_RANGE: RangeInclusive<u32> = 1..=1000;
+
+/// Where the samples' timing comes from (the `mode` setting).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SyncMode {
+    /// Calibration mode: phase-locked to the GNSS 1-PPS (holdover, then free-running, when
+    /// the PPS is lost).
+    Pps,
+    /// Indoor mode: free-running off the MCU clock.
+    Free,
+}
+
+/// The state of the sample schedule, reported in every record.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SyncState {
+    /// Off the MCU clock alone (nominal timer frequency).
+    FreeRunning,
+    /// On the PPS: grid anchored at the last captured edge, period measured.
+    Locked,
+    /// PPS lost for at most `holdover_s` seconds: last measured period, predicted edges.
+    Holdover,
+}
+
+/// Parameters of the discipline.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DisciplineConfig {
+    /// Nominal frequency of the timer ticks, Hz.
+    pub timer_hz: u32,
+    /// Samples per second ([`RATE_RANGE`]); changes take effect at the next second.
+    pub rate_hz: u32,
+    /// PPS-locked or free-running.
+    pub mode: SyncMode,
+    /// Largest accepted difference of a measured PPS period from `timer_hz`, ppm.
+    pub max_offset_ppm: u32,
+    /// Largest accepted distance of a PPS edge from its predicted time, ticks.
+    pub glitch_window_ticks: u32,
+    /// Seconds of holdover before the schedule falls back to free-running.
+    pub holdover_s: u32,
+}
+
+/// A [`DisciplineConfig`] that cannot be used.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ConfigError {
+    /// `timer_hz` below 1 kHz.
+    TimerHz,
+    /// `rate_hz` outside [`RATE_RANGE`].
+    Rate,
+    /// `max_offset_ppm` zero or above 10,000.
+    Offset,
+    /// `glitch_window_ticks` zero or not below a quarter of the sample period.
+    Window,
+    /// `holdover_s` zero or above one day.
+    Holdover,
+}
+
+impl DisciplineConfig {
+    /// The defaults for a timer at `timer_hz`: 50 Hz, PPS mode, +-500 ppm (a +-100 ppm
+    /// crystal with a wide margin), a 50 us glitch window, 10 s of holdover.
+    pub const fn new(timer_hz: u32) -> Self {
+        Self {
+            timer_hz,
+            rate_hz: 50,
+            mode: SyncMode::Pps,
+            max_offset_ppm: 500,
+            glitch_window_ticks: timer_hz / 20_000,
+            holdover_s: 10,
+        }
+    }
+
+    /// Checks the ranges documented on each field.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        if self.timer_hz < 1_000 {
+            return Err(ConfigError::TimerHz);
+        }
+        if !RATE_RANGE.contains(&self.rate_hz) {
+            return Err(ConfigError::Rate);
+        }
+        if self.max_offset_ppm == 0 || self.max_offset_ppm > 10_000 {
+            return Err(ConfigError::Offset);
+        }
+        let quarter_sample = u64::from(self.timer_hz) / (4 * u64::from(*RATE_RANGE.end()));
+        if self.glitch_window_ticks == 0 || u64::from(self.glitch_window_ticks) >= quarter_sample {
+            return Err(ConfigError::Window);
+        }
+        if self.holdover_s == 0 || self.holdover_s > 86_400 {
+            return Err(ConfigError::Holdover);
+        }
+        Ok(())
+    }
+
+    /// Largest accepted deviation of a measured period from nominal, ticks.
+    fn max_offset_ticks(&self) -> u64 {
+        u64::from(self.timer_hz) * u64::from(self.max_offset_ppm) / 1_000_000
+    }
+}
+
+/// One scheduled sample.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Sample {
+    /// Timer tick at which the sample is taken.
+    pub tick: u64,
+    /// Label of the second it belongs to (the PPS edge's label when locked).
+    pub second: u32,
+    /// Index of the sample in its second, `0..rate`.
+    pub index: u32,
+    /// Samples per second of that second.
+    pub rate: u32,
+    /// Schedule state when it was committed.
+    pub state: SyncState,
+}
+
+/// What one PPS edge did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PpsEvent {
+    /// `mode = free`: edges are not used.
+    Ignored,
+    /// Free-running: kept as a candidate, waiting for a second edge one second later.
+    Candidate,
+    /// Lock acquired from free-running; the edge starts second `second`.
+    Locked {
+        /// Label of the second the edge starts.
+        second: u32,
+    },
+    /// Locked and the edge came within the window of its prediction.
+    Accepted {
+        /// Label of the second the edge starts.
+        second: u32,
+        /// Edge minus its predicted time, ticks.
+        phase_error: i64,
+    },
+    /// Holdover ended: the edge came within the window after `missed` lost seconds.
+    Reacquired {
+        /// Label of the second the edge starts.
+        second: u32,
+        /// Edge minus its predicted time, ticks.
+        phase_error: i64,
+        /// Seconds without an edge before this one.
+        missed: u32,
+    },
+    /// Rejected as a glitch (counted).
+    Glitch,
+}
+
+/// Counters of the discipline since start.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct PpsStats {
+    /// Edges accepted (locked, accepted, reacquired).
+    pub accepted: u32,
+    /// Edges rejected as glitches.
+    pub glitches: u32,
+    /// Seconds whose edge never came while locked or in holdover.
+    pub missed: u32,
+    /// Times the schedule went from free-running to locked.
+    pub locks: u32,
+    /// Grid points skipped to keep samples at least half a sample period apart (at lock).
+    pub skipped: u32,
+}
+
+/// The PPS discipline and sample scheduler (see the module documentation).
+#[derive(Debug, Clone)]
+pub struct Discipline {
+    cfg: DisciplineConfig,
+    state: SyncState,
+    /// Anchor of the grid: tick at which second `anchor_second` starts.
+    anchor: u64,
+    anchor_second: u32,
+    /// Length of a second in use, ticks.
+    period: u64,
+    /// Rate of the second the cursor is in.
+    rate: u32,
+    /// The next sample to commit.
+    cursor_second: u32,
+    cursor_index: u32,
+    /// Tick of the last committed sample.
+    last_tick: Option<u64>,
+    /// Last accepted edge: tick and label.
+    last_edge: Option<(u64, u32)>,
+    /// Seconds lost since `last_edge` (holdover).
+    missed: u32,
+    /// Free-running in PPS mode: the last unpaired edge.
+    candidate: Option<u64>,
+    stats: PpsStats,
+}
+
+impl Discipline {
+    /// A schedule that starts free-running with its first second at tick `start`.
+    pub fn new(cfg: DisciplineConfig, start: u64) -> Result<Self, ConfigError> {
+        cfg.validate()?;
+        Ok(Self {
+            cfg,
+            state: SyncState::FreeRunning,
+            anchor: start,
+            anchor_second: 0,
+            period: u64::from(cfg.timer_hz),
+            rate: cfg.rate_hz,
+            cursor_second: 0,
+            cursor_index: 0,
+            last_tick: None,
+            last_edge: None,
+            missed: 0,
+            candidate: None,
+            stats: PpsStats::default(),
+        })
+    }
+
+    /// The configuration in use (a new rate applies from the next second).
+    pub fn config(&self) -> &DisciplineConfig {
+        &self.cfg
+    }
+
+    /// Changes the configuration. A mode change applies at once (to `free`: free-running;
+    /// to `pps`: acquisition starts from free-running); a rate change at the next second.
+    pub fn set_config(&mut self, cfg: DisciplineConfig) -> Result<(), ConfigError> {
+        cfg.validate()?;
+        let mode_changed = cfg.mode != self.cfg.mode || cfg.timer_hz != self.cfg.timer_hz;
+        self.cfg = cfg;
+        if mode_changed {
+            self.free_run();
+        }
+        Ok(())
+    }
+
+    /// State of the schedule.
+    pub fn state(&self) -> SyncState {
+        self.state
+    }
+
+    /// Length of a second in use, ticks (the measured PPS period when locked or in holdover).
+    pub fn period(&self) -> u64 {
+        self.period
+    }
+
+    /// Counters since start.
+    pub fn stats(&self) -> PpsStats {
+        self.stats
+    }
+
+    /// The last accepted PPS edge: tick and second label.
+    pub fn last_edge(&self) -> Option<(u64, u32)> {
+        self.last_edge
+    }
+
+    /// Start tick of second `second` on the current grid.
+    fn second_start(&self, second: u32) -> u64 {
+        let d = i64::from(second.wrapping_sub(self.anchor_second) as i32);
+        (self.anchor as i64 + d * self.period as i64) as u64
+    }
+
+    /// Re-anchors the grid at the start of the cursor's second and changes the period
+    /// from there, so committed samples stay where they are.
+    fn change_period(&mut self, period: u64) {
+        self.anchor = self.second_start(self.cursor_second);
+        self.anchor_second = self.cursor_second;
+        self.period = period;
+    }
+
+    /// Falls back to free-running (nominal period), forgetting all edges.
+    fn free_run(&mut self) {
+        self.change_period(u64::from(self.cfg.timer_hz));
+        self.state = SyncState::FreeRunning;
+        self.last_edge = None;
+        self.candidate = None;
+        self.missed = 0;
+    }
+
+    /// Declares lost the edges whose window has passed by `now`.
+    fn check_deadline(&mut self, now: u64) {
+        let Some((edge, _)) = self.last_edge else {
+            return;
+        };
+        if self.state == SyncState::FreeRunning {
+            return;
+        }
+        let window = u64::from(self.cfg.glitch_window_ticks);
+        while now > edge + u64::from(self.missed + 1) * self.period + window {
+            self.missed += 1;
+            self.stats.missed += 1;
+            if self.missed > self.cfg.holdover_s {
+                self.free_run();
+                return;
+            }
+            self.state = SyncState::Holdover;
+        }
+    }
+
+    /// Commits the next sample. `now` is the current tick (the driver's view of time; it
+    /// must not decrease), used to notice lost PPS edges. Grid points closer than half a
+    /// sample period after the previous committed sample are skipped (only ever at lock).
+    pub fn next_sample(&mut self, now: u64) -> Sample {
+        self.check_deadline(now);
+        loop {
+            let second = self.cursor_second;
+            let index = self.cursor_index;
+            let rate = self.rate;
+            let tick = self.second_start(second) + u64::from(index) * self.period / u64::from(rate);
+            self.cursor_index += 1;
+            if self.cursor_index >= self.rate {
+                self.cursor_index = 0;
+                self.cursor_second = self.cursor_second.wrapping_add(1);
+                self.rate = self.cfg.rate_hz;
+            }
+            let min_gap = self.period / (2 * u64::from(rate));
+            match self.last_tick {
+                Some(last) if tick < last + min_gap => {
+                    self.stats.skipped += 1;
+                    continue;
+                }
+                _ => {}
+            }
+            self.last_tick = Some(tick);
+            return Sample {
+                tick,
+                second,
+                index,
+                rate,
+                state: self.state,
+            };
+        }
+    }
+
+    /// Feeds one PPS capture timestamp (ticks, on the same timeline as the samples).
+    pub fn on_pps(&mut self, edge: u64) -> PpsEvent {
+        if self.cfg.mode == SyncMode::Free {
+            return PpsEvent::Ignored;
+        }
+        let nominal = u64::from(self.cfg.timer_hz);
+        let max_offset = self.cfg.max_offset_ticks();
+        let window = u64::from(self.cfg.glitch_window_ticks);
+        match (self.state, self.last_edge) {
+            (SyncState::FreeRunning, _) | (_, None) => {
+                let Some(candidate) = self.candidate.replace(edge) else {
+                    return PpsEvent::Candidate;
+                };
+                let interval = edge.wrapping_sub(candidate);
+                if edge <= candidate || interval.abs_diff(nominal) > max_offset + window {
+                    return PpsEvent::Candidate;
+                }
+                // Lock: the edge starts a new second after the ones already committed.
+                let second = if self.cursor_index == 0 {
+                    self.cursor_second
+                } else {
+                    self.cursor_second.wrapping_add(1)
+                };
+                self.cursor_second = second;
+                self.cursor_index = 0;
+                self.rate = self.cfg.rate_hz;
+                self.anchor = edge;
+                self.anchor_second = second;
+                self.period = interval;
+                self.last_edge = Some((edge, second));
+                self.candidate = None;
+                self.missed = 0;
+                self.state = SyncState::Locked;
+                self.stats.accepted += 1;
+                self.stats.locks += 1;
+                PpsEvent::Locked { second }
+            }
+            (_, Some((last, last_second))) => {
+                if edge <= last {
+                    self.stats.glitches += 1;
+                    return PpsEvent::Glitch;
+                }
+                let elapsed = edge - last;
+                // Whole seconds since the last edge, rounded to nearest.
+                let n = (elapsed + self.period / 2) / self.period;
+                if n == 0 || n > u64::from(self.cfg.holdover_s) + 1 {
+                    self.stats.glitches += 1;
+                    return PpsEvent::Glitch;
+                }
+                let predicted = last + n * self.period;
+                let phase_error = edge as i64 - predicted as i64;
+                let measured = (elapsed + n / 2) / n;
+                if phase_error.unsigned_abs() > window || measured.abs_diff(nominal) > max_offset {
+                    self.stats.glitches += 1;
+                    return PpsEvent::Glitch;
+                }
+                let second = last_second.wrapping_add(n as u32);
+                let missed = n as u32 - 1;
+                if missed > self.missed {
+                    self.stats.missed += missed - self.missed;
+                }
+                self.anchor = edge;
+                self.anchor_second = second;
+                self.period = measured;
+                self.last_edge = Some((edge, second));
+                self.missed = 0;
+                self.stats.accepted += 1;
+                if self.state == SyncState::Holdover || missed > 0 {
+                    self.state = SyncState::Locked;
+                    PpsEvent::Reacquired {
+                        second,
+                        phase_error,
+                        missed,
+                    }
+                } else {
+                    PpsEvent::Accepted {
+                        second,
+                        phase_error,
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Timestamp of an input capture on a timer that restarts from 0 at every sample (update
+/// event), as the board's sample timer does.
+///
+/// `period_start` is the tick of the update event the software has processed last and
+/// `period_len` the length of that period (ARR + 1); `ccr` is the captured counter value and
+/// `update_pending` tells whether the next update event's flag was already set when the
+/// capture was read. In that case a small `ccr` (below half the period) was captured after
+/// the counter restarted, so it belongs to the next period.
+pub fn resolve_capture(period_start: u64, period_len: u64, ccr: u32, update_pending: bool) -> u64 {
+    let ccr = u64::from(ccr);
+    if update_pending && ccr < period_len / 2 {
+        period_start + period_len + ccr
+    } else {
+        period_start + ccr
+    }
+}
