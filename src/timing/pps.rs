@@ -33,7 +33,7 @@
 use core::ops::RangeInclusive;
 
 /// Accepted sample rates, samples per second (both modes).
-pub const RATE_RANGE: RangeInclusive<u32> = 1..=1000;
+pub const RATE_RANGE: RangeInclusive<u32> = 1..=10_000;
 
 /// Where the samples' timing comes from (the `mode` setting).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -82,7 +82,7 @@ pub enum ConfigError {
     Rate,
     /// `max_offset_ppm` zero or above 10,000.
     Offset,
-    /// `glitch_window_ticks` zero or not below a quarter of the sample period.
+    /// `glitch_window_ticks` zero or not below a quarter of a second.
     Window,
     /// `holdover_s` zero or above one day.
     Holdover,
@@ -113,8 +113,7 @@ impl DisciplineConfig {
         if self.max_offset_ppm == 0 || self.max_offset_ppm > 10_000 {
             return Err(ConfigError::Offset);
         }
-        let quarter_sample = u64::from(self.timer_hz) / (4 * u64::from(*RATE_RANGE.end()));
-        if self.glitch_window_ticks == 0 || u64::from(self.glitch_window_ticks) >= quarter_sample {
+        if self.glitch_window_ticks == 0 || self.glitch_window_ticks >= self.timer_hz / 4 {
             return Err(ConfigError::Window);
         }
         if self.holdover_s == 0 || self.holdover_s > 86_400 {
