@@ -9,7 +9,7 @@
 //! Host -> unit: plain text command lines (see [`command`]); each line is answered by one or
 //! more [`CommandReply`] frames.
 
-mod bytes;
+pub(crate) mod bytes;
 pub mod cobs;
 pub mod command;
 pub mod crc;

@@ -1,0 +1,260 @@
+//! Power-cut-safe settings store on two flash sectors used alternately.
+//!
+//! Each sector is a log of fixed [`SLOT_LEN`]-byte slots. A save appends one record to the
+//! sector that holds the newest usable record; when that sector is full, the *other* sector
+//! is erased and the record goes to its first slot. A record carries a generation number
+//! (+1 per save) and a CRC-32; loading takes the usable record with the highest generation.
+//! The sector holding the newest usable record is never erased and a record is never
+//! overwritten, so a power cut at any moment of a save (during the erase, or after any
+//! programmed word) leaves the previous settings loadable; the new ones are loadable once
+//! the record's last word is programmed.
+//!
+//! Record layout (little-endian, [`RECORD_LEN`] bytes at the start of a slot; the rest of
+//! the slot stays erased):
+//!
+//! | offset | size | field |
+//! |---|---|---|
+//! | 0 | 4 | magic `0x534F444F` (bytes `4F 44 4F 53`, "ODOS") |
+//! | 4 | 2 | settings format version ([`super::SETTINGS_FORMAT_VERSION`]) |
+//! | 6 | 2 | payload length ([`Settings::SERIALIZED_LEN`]) |
+//! | 8 | 4 | generation, 1 for the first save |
+//! | 12 | 112 | payload ([`Settings::to_bytes`]) |
+//! | 124 | 4 | CRC-32/ISO-HDLC of bytes 0..124 |
+
+use super::{Settings, SettingsSource, SETTINGS_FORMAT_VERSION};
+use crate::protocol::crc::crc32;
+
+/// Record magic ("ODOS" in memory order).
+pub const MAGIC: u32 = 0x534F_444F;
+/// Bytes programmed per save.
+pub const RECORD_LEN: usize = 128;
+/// Bytes reserved per record in a sector (room for a larger future layout).
+pub const SLOT_LEN: usize = 256;
+/// Bytes per flash program unit: offsets and lengths passed to [`Flash::program`] are
+/// multiples of this.
+pub const WORD: usize = 4;
+
+const CRC_AT: usize = 12 + Settings::SERIALIZED_LEN;
+
+/// The two settings sectors as the store sees them. Erased flash reads 0xFF; programming
+/// can only clear bits.
+///
+/// On the STM32F401RE, sector index 0 is flash sector 6 (0x0804_0000) and index 1 is
+/// sector 7 (0x0806_0000), 128 KiB each.
+pub trait Flash {
+    /// The driver's error.
+    type Error: core::fmt::Debug;
+    /// Bytes per sector (both sectors have this size; a multiple of [`SLOT_LEN`]).
+    fn sector_size(&self) -> usize;
+    /// Erases sector `sector` (0 or 1) to all 0xFF.
+    fn erase(&mut self, sector: usize) -> Result<(), Self::Error>;
+    /// Programs `data` at byte `offset` of `sector`, in ascending address order; `offset`
+    /// and `data.len()` are multiples of [`WORD`] and the range was erased.
+    fn program(&mut self, sector: usize, offset: usize, data: &[u8]) -> Result<(), Self::Error>;
+    /// Reads `buf.len()` bytes at `offset` of `sector`.
+    fn read(&mut self, sector: usize, offset: usize, buf: &mut [u8]) -> Result<(), Self::Error>;
+}
+
+/// Why a load or save failed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StoreError<E> {
+    /// The flash driver failed.
+    Flash(E),
+    /// The record read back differs from the one written (worn or faulty flash).
+    Verify,
+    /// The settings do not validate; nothing was written.
+    Invalid,
+    /// The sector size is not a non-zero multiple of [`SLOT_LEN`].
+    Geometry,
+}
+
+impl<E: core::fmt::Debug> core::fmt::Display for StoreError<E> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Flash(e) => write!(f, "flash error {e:?}"),
+            Self::Verify => f.write_str("flash verify failed"),
+            Self::Invalid => f.write_str("settings invalid, not saved"),
+            Self::Geometry => f.write_str("bad flash geometry"),
+        }
+    }
+}
+
+/// What [`SettingsStore::load`] found.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Loaded {
+    /// The settings to use.
+    pub settings: Settings,
+    /// `Flash` when they came from a stored record, `Defaults` otherwise.
+    pub source: SettingsSource,
+    /// Generation of the record used (0 for defaults).
+    pub generation: u32,
+}
+
+#[derive(Debug, Clone, Copy, Default)]
+struct Scan {
+    /// Highest generation of any record with a valid CRC (usable or not).
+    max_generation: u32,
+    /// Newest usable record: (generation, sector, settings).
+    best: Option<(u32, usize, Settings)>,
+    /// Per sector: first slot after the last non-erased slot, if inside the sector.
+    next_free: [Option<usize>; 2],
+}
+
+/// The settings store over a [`Flash`].
+#[derive(Debug)]
+pub struct SettingsStore<F> {
+    flash: F,
+}
+
+impl<F: Flash> SettingsStore<F> {
+    /// A store over `flash` (nothing is read until [`Self::load`]).
+    pub fn new(flash: F) -> Self {
+        Self { flash }
+    }
+
+    /// The flash driver.
+    pub fn flash(&self) -> &F {
+        &self.flash
+    }
+
+    /// The flash driver, mutably.
+    pub fn flash_mut(&mut self) -> &mut F {
+        &mut self.flash
+    }
+
+    /// Gives the flash driver back.
+    pub fn into_inner(self) -> F {
+        self.flash
+    }
+
+    fn slots(&self) -> Result<usize, StoreError<F::Error>> {
+        let size = self.flash.sector_size();
+        if size == 0 || size % SLOT_LEN != 0 {
+            return Err(StoreError::Geometry);
+        }
+        Ok(size / SLOT_LEN)
+    }
+
+    fn scan(&mut self) -> Result<Scan, StoreError<F::Error>> {
+        let slots = self.slots()?;
+        let mut scan = Scan::default();
+        let mut buf = [0u8; SLOT_LEN];
+        for sector in 0..2 {
+            let mut used_end = 0;
+            for slot in 0..slots {
+                self.flash
+                    .read(sector, slot * SLOT_LEN, &mut buf)
+                    .map_err(StoreError::Flash)?;
+                if buf.iter().all(|&b| b == 0xFF) {
+                    continue;
+                }
+                used_end = slot + 1;
+                let Some(generation) = record_generation(&buf) else {
+                    continue;
+                };
+                scan.max_generation = scan.max_generation.max(generation);
+                if let Some(settings) = record_settings(&buf) {
+                    if scan.best.is_none_or(|(g, _, _)| generation > g) {
+                        scan.best = Some((generation, sector, settings));
+                    }
+                }
+            }
+            scan.next_free[sector] = (used_end < slots).then_some(used_end);
+        }
+        Ok(scan)
+    }
+
+    /// Loads the newest usable settings record; without one, the defaults with source
+    /// [`SettingsSource::Defaults`]. Fails only when the flash cannot be read.
+    pub fn load(&mut self) -> Result<Loaded, StoreError<F::Error>> {
+        let scan = self.scan()?;
+        Ok(match scan.best {
+            Some((generation, _, settings)) => Loaded {
+                settings,
+                source: SettingsSource::Flash,
+                generation,
+            },
+            None => Loaded {
+                settings: Settings::DEFAULT,
+                source: SettingsSource::Defaults,
+                generation: 0,
+            },
+        })
+    }
+
+    /// [`Self::load`], falling back to the defaults if the flash cannot be read.
+    pub fn load_or_defaults(&mut self) -> Loaded {
+        self.load().unwrap_or(Loaded {
+            settings: Settings::DEFAULT,
+            source: SettingsSource::Defaults,
+            generation: 0,
+        })
+    }
+
+    /// Saves `settings` (validated first); returns the new record's generation. At most one
+    /// sector erase and one record program; safe against a power cut at any point.
+    pub fn save(&mut self, settings: &Settings) -> Result<u32, StoreError<F::Error>> {
+        settings.validate().map_err(|_| StoreError::Invalid)?;
+        let scan = self.scan()?;
+        let generation = scan.max_generation.wrapping_add(1).max(1);
+        let target = scan.best.map_or(0, |(_, sector, _)| sector);
+        let (sector, slot) = match scan.next_free[target] {
+            Some(slot) => (target, slot),
+            None => {
+                let other = 1 - target;
+                self.flash.erase(other).map_err(StoreError::Flash)?;
+                (other, 0)
+            }
+        };
+        let record = encode_record(settings, generation);
+        self.flash
+            .program(sector, slot * SLOT_LEN, &record)
+            .map_err(StoreError::Flash)?;
+        let mut back = [0u8; RECORD_LEN];
+        self.flash
+            .read(sector, slot * SLOT_LEN, &mut back)
+            .map_err(StoreError::Flash)?;
+        if back != record {
+            return Err(StoreError::Verify);
+        }
+        Ok(generation)
+    }
+}
+
+/// The bytes of one record.
+pub fn encode_record(settings: &Settings, generation: u32) -> [u8; RECORD_LEN] {
+    let mut r = [0xFFu8; RECORD_LEN];
+    r[0..4].copy_from_slice(&MAGIC.to_le_bytes());
+    r[4..6].copy_from_slice(&SETTINGS_FORMAT_VERSION.to_le_bytes());
+    r[6..8].copy_from_slice(&(Settings::SERIALIZED_LEN as u16).to_le_bytes());
+    r[8..12].copy_from_slice(&generation.to_le_bytes());
+    r[12..CRC_AT].copy_from_slice(&settings.to_bytes());
+    let crc = crc32(&r[..CRC_AT]);
+    r[CRC_AT..CRC_AT + 4].copy_from_slice(&crc.to_le_bytes());
+    r
+}
+
+/// Generation of a record whose magic, version, length and CRC are right.
+fn record_generation(r: &[u8]) -> Option<u32> {
+    let word = |i: usize| {
+        r.get(i..i + 4)
+            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    };
+    if word(0)? != MAGIC {
+        return None;
+    }
+    let version = u16::from_le_bytes([r[4], r[5]]);
+    let len = u16::from_le_bytes([r[6], r[7]]) as usize;
+    if version != SETTINGS_FORMAT_VERSION || len != Settings::SERIALIZED_LEN {
+        return None;
+    }
+    if crc32(r.get(..CRC_AT)?) != word(CRC_AT)? {
+        return None;
+    }
+    word(8)
+}
+
+/// Settings of a CRC-valid record, if they decode and validate.
+fn record_settings(r: &[u8]) -> Option<Settings> {
+    Settings::from_bytes(r.get(12..CRC_AT)?).ok()
+}
