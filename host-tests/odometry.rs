@@ -947,3 +947,13 @@ proptest! {
         prop_assert!((one.pose().y - many.pose().y).abs() < 1e-9 * parts as f64);
     }
 }
+
+proptest! {
+    /// The integer f32-to-i64 conversion equals Rust's `as` over the range it serves.
+    #[test]
+    fn fast_f32_to_i64_matches_cast(bits in any::<u32>()) {
+        let v = f32::from_bits(bits);
+        prop_assume!(v.is_finite() && v.abs() < 9.2e18);
+        prop_assert_eq!(trig::f32_to_i64(v), v as i64);
+    }
+}

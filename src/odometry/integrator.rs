@@ -138,7 +138,7 @@ pub struct Integrator {
     /// Transfer constants in f32, metres per increment.
     c: [f32; 2],
     inv_track: f32,
-    /// Radians per binary-angle unit, f32.
+    /// Radians per 2^32 binary-angle units (2^-32 turn), f32.
     rad_per_binary: f32,
     coefficients: UncertaintyCoefficients,
     counts: WheelCounts,
@@ -178,7 +178,7 @@ impl Integrator {
             heading_per_metre: 0.0,
             c: [0.0; 2],
             inv_track: 0.0,
-            rad_per_binary: trig::RAD_PER_BINARY as f32,
+            rad_per_binary: (trig::RAD_PER_BINARY * 4_294_967_296.0) as f32,
             coefficients: UncertaintyCoefficients::default(),
             counts,
             x: 0,
@@ -355,10 +355,11 @@ impl Integrator {
         if r[0].is_some() || r[1].is_some() {
             let r = [r[0].unwrap_or(0.0), r[1].unwrap_or(0.0)];
             for i in 0..2 {
-                s[i] += (r[i] * DISTANCE_SCALE as f32) as i64;
+                s[i] += trig::f32_to_i64(r[i] * DISTANCE_SCALE as f32);
                 s_f[i] += r[i];
             }
-            heading_inc = heading_inc.wrapping_add(((r[0] - r[1]) * self.heading_per_metre) as i64);
+            heading_inc =
+                heading_inc.wrapping_add(trig::f32_to_i64((r[0] - r[1]) * self.heading_per_metre));
         }
 
         // Heading change, eq (8), checked against the wrap-safe range of the binary angle.
@@ -367,12 +368,13 @@ impl Integrator {
             self.periodic = [None; 2];
             return status;
         }
-        let dalpha = heading_inc as f32 * self.rad_per_binary;
+        // |dalpha| < pi/2: the top 32 bits of the increment fit an i32 (2^-32 turn units).
+        let dalpha = (heading_inc >> 32) as i32 as f32 * self.rad_per_binary;
 
         // Centre distance and chord, eqs (7), (9), (10).
         let ds_f = 0.5 * (s_f[0] + s_f[1]);
         let defect = trig::chord_defect(0.5 * dalpha);
-        let correction = (ds_f * defect * DISTANCE_SCALE as f32) as i64;
+        let correction = trig::f32_to_i64(ds_f * defect * DISTANCE_SCALE as f32);
         let chord = ((s[0] + s[1]) >> 1) - correction;
 
         // Direction of the chord and position update, eqs (11)-(14).
@@ -393,7 +395,7 @@ impl Integrator {
         // Uncertainty, eqs (19)-(28), or the covariance model.
         let geometry = StepGeometry {
             abs_counts: [d[0].unsigned_abs() as f32, d[1].unsigned_abs() as f32],
-            abs_count_difference: (i64::from(d[0]) - i64::from(d[1])).unsigned_abs() as f32,
+            abs_count_difference: (d[0] - d[1]).unsigned_abs() as f32,
             wheel_distance: s_f,
             ds: ds_f,
             dalpha,

@@ -115,13 +115,13 @@ pub fn sqrt(x: f32) -> f32 {
     if x.partial_cmp(&0.0) != Some(core::cmp::Ordering::Greater) {
         return 0.0;
     }
-    // Reciprocal square root: the classic initial estimate, three Newton steps.
+    // Reciprocal square root: the classic initial estimate (3.4 % error), two Newton steps
+    // (error 5e-6).
     let mut y = f32::from_bits(0x5f37_5a86 - (x.to_bits() >> 1));
     let half = 0.5 * x;
     y *= 1.5 - half * y * y;
     y *= 1.5 - half * y * y;
-    y *= 1.5 - half * y * y;
-    // One Newton step on the square root itself removes most of the remaining error.
+    // One Newton step on the square root itself squares that error away.
     let r = x * y;
     r + 0.5 * y * (x - r * r)
 }
@@ -130,4 +130,31 @@ pub fn sqrt(x: f32) -> f32 {
 #[inline]
 pub fn hypot(a: f32, b: f32) -> f32 {
     sqrt(a * a + b * b)
+}
+
+/// `v` truncated toward zero to an integer, for finite `|v| < 2^63`, like `v as i64` but
+/// in a few integer instructions: the Cortex-M4F has no f32-to-i64 conversion, and the
+/// compiler's `__aeabi_f2lz` routine costs several times more. Saturates beyond the range.
+#[inline]
+pub fn f32_to_i64(v: f32) -> i64 {
+    let bits = v.to_bits();
+    let exponent = ((bits >> 23) & 0xff) as i32 - 127;
+    if exponent < 0 {
+        return 0;
+    }
+    let magnitude = if exponent > 62 {
+        i64::MAX
+    } else {
+        let mantissa = i64::from((bits & 0x007f_ffff) | 0x0080_0000);
+        if exponent >= 23 {
+            mantissa << (exponent - 23)
+        } else {
+            mantissa >> (23 - exponent)
+        }
+    };
+    if bits >> 31 != 0 {
+        -magnitude
+    } else {
+        magnitude
+    }
 }

@@ -1,0 +1,266 @@
+//! Instruction counts on the Cortex-M4F, under QEMU `-icount shift=0,sleep=off`.
+
+use core::hint::black_box;
+use core::sync::atomic::{compiler_fence, Ordering};
+use cortex_m_rt::entry;
+use cortex_m_semihosting::{debug, hprintln};
+use odo_core::odometry::uncertainty::{
+    CovarianceUncertainty, PaperUncertainty, StepGeometry, StepJacobian, UncertaintyCoefficients,
+};
+use odo_core::odometry::{
+    ChassisParams, IndexRefs, Integrator, Pose, UncertaintyModel, WheelCounts, WheelHarmonics,
+};
+
+use crate::inputs::{increments, SAMPLES};
+use crate::naive::NaiveIntegrator;
+use stm32f4xx_hal as _;
+
+/// TIM2 control register 1.
+const TIM2_CR1: *mut u32 = 0x4000_0000 as *mut u32;
+/// TIM2 counter.
+const TIM2_CNT: *const u32 = 0x4000_0024 as *const u32;
+
+#[inline(always)]
+fn now() -> u32 {
+    compiler_fence(Ordering::SeqCst);
+    // Note(unsafe): a volatile read of TIM2's counter register, which exists on the
+    // STM32F4 and on QEMU's netduinoplus2; reading it has no side effects.
+    let t = unsafe { core::ptr::read_volatile(TIM2_CNT) };
+    compiler_fence(Ordering::SeqCst);
+    t
+}
+
+/// Instructions spent in `f`, less the cost of the two counter reads.
+#[inline(always)]
+fn count(overhead: u32, f: impl FnOnce()) -> u32 {
+    let a = now();
+    f();
+    let b = now();
+    b.wrapping_sub(a).saturating_sub(overhead)
+}
+
+/// Median and maximum of a set of counts (sorts it).
+fn stats(v: &mut [u32]) -> (u32, u32) {
+    v.sort_unstable();
+    (v[v.len() / 2], v[v.len() - 1])
+}
+
+fn report(name: &str, v: &mut [u32]) -> u32 {
+    let (median, worst) = stats(v);
+    hprintln!(
+        "bench {:<34} median {:>6} worst {:>6} instructions",
+        name,
+        median,
+        worst
+    );
+    median
+}
+
+/// Runs the integrator over the input set, counting each step.
+fn integrator_steps(params: &ChassisParams, index: bool, overhead: u32, out: &mut [u32; SAMPLES]) {
+    let mut integ = match Integrator::new(params, WheelCounts::default(), Pose::default()) {
+        Ok(i) => i,
+        Err(_) => return,
+    };
+    let refs = if index {
+        IndexRefs {
+            left: Some(1234),
+            right: Some(-777),
+        }
+    } else {
+        IndexRefs::default()
+    };
+    let mut g = [0i64; 2];
+    for (k, d) in increments().iter().enumerate() {
+        g = [g[0] + i64::from(d[0]), g[1] + i64::from(d[1])];
+        let counts = WheelCounts {
+            left: g[0],
+            right: g[1],
+        };
+        out[k] = count(overhead, || {
+            black_box(integ.step(black_box(counts), black_box(refs)));
+        });
+    }
+    black_box(integ.pose());
+}
+
+/// A plausible geometry for the uncertainty-only measurement of sample `d`.
+fn geometry(d: [i32; 2], heading: f32) -> StepGeometry {
+    let c = 4.084e-5f32;
+    let s = [c * d[0] as f32, c * d[1] as f32];
+    let ds = 0.5 * (s[0] + s[1]);
+    let dalpha = (s[0] - s[1]) / 0.563;
+    let theta = heading + 0.5 * dalpha;
+    StepGeometry {
+        abs_counts: [d[0].unsigned_abs() as f32, d[1].unsigned_abs() as f32],
+        abs_count_difference: (d[0] - d[1]).unsigned_abs() as f32,
+        wheel_distance: s,
+        ds,
+        dalpha,
+        chord: ds,
+        sin: libm::sinf(theta),
+        cos: libm::cosf(theta),
+        inv_track: 1.0 / 0.563,
+    }
+}
+
+#[entry]
+fn main() -> ! {
+    // Note(unsafe): enables TIM2's counter (CEN); TIM2 is used by nothing else in this
+    // program. Under QEMU the counter then advances one per executed instruction.
+    unsafe { core::ptr::write_volatile(TIM2_CR1, 1) };
+    let mut empty = [0u32; 16];
+    for e in empty.iter_mut() {
+        *e = count(0, || {});
+    }
+    let (overhead, _) = stats(&mut empty);
+    hprintln!(
+        "bench counter overhead {} instructions (subtracted)",
+        overhead
+    );
+
+    let mut full = [0u32; SAMPLES];
+    let designed = ChassisParams::DESIGNED;
+    integrator_steps(&designed, false, overhead, &mut full);
+    let full_median = report("step, paper model (odometry+unc.)", &mut full);
+
+    // Uncertainty alone: Jacobian plus the paper's propagation.
+    let coefficients = UncertaintyCoefficients {
+        delta: [3.9e-8; 2],
+        delta_diff: 0.0,
+        kappa: [1e-7; 2],
+    };
+    let mut paper = PaperUncertainty::default();
+    let mut unc = [0u32; SAMPLES];
+    for (k, d) in increments().iter().enumerate() {
+        let g = geometry(*d, k as f32 * 0.01);
+        unc[k] = count(overhead, || {
+            let j = StepJacobian::of(black_box(&g));
+            paper.step(&coefficients, &g, &j);
+            black_box(&paper);
+        });
+    }
+    let unc_median = report("  of which uncertainty (paper)", &mut unc);
+    hprintln!(
+        "bench   of which odometry (median difference) {} instructions",
+        full_median.saturating_sub(unc_median)
+    );
+
+    let mut cov = CovarianceUncertainty::default();
+    for (k, d) in increments().iter().enumerate() {
+        let g = geometry(*d, k as f32 * 0.01);
+        unc[k] = count(overhead, || {
+            let j = StepJacobian::of(black_box(&g));
+            cov.step(&coefficients, &g, &j);
+            black_box(&cov);
+        });
+    }
+    report("  uncertainty (covariance model)", &mut unc);
+
+    let covariance = ChassisParams {
+        uncertainty_model: UncertaintyModel::Covariance,
+        ..designed
+    };
+    integrator_steps(&covariance, false, overhead, &mut full);
+    report("step, covariance model", &mut full);
+
+    let with_diff = ChassisParams {
+        delta_diff: 2.0e-8,
+        ..designed
+    };
+    integrator_steps(&with_diff, false, overhead, &mut full);
+    report("step, paper model + delta_diff", &mut full);
+
+    let wobbly = ChassisParams {
+        left_wheel: WheelHarmonics {
+            cos: [0.002, -0.0005, 0.0001],
+            sin: [0.001, 0.0003, 0.0],
+        },
+        right_wheel: WheelHarmonics {
+            cos: [-0.001, 0.0, 0.0002],
+            sin: [0.0015, -0.0002, 0.0001],
+        },
+        ..designed
+    };
+    integrator_steps(&wobbly, true, overhead, &mut full);
+    report("step, per-angle wheel functions", &mut full);
+
+    let mut naive = NaiveIntegrator::new([0.26, 0.26], 0.563, 20_000, 3.9e-8);
+    for (k, d) in increments().iter().enumerate() {
+        full[k] = count(overhead, || {
+            naive.step(black_box(*d));
+            black_box(&naive);
+        });
+    }
+    let naive_median = report("naive f32 step (libm sinf/cosf)", &mut full);
+    hprintln!(
+        "bench ratio naive/fixed-point step (medians) {}.{:02}",
+        naive_median / full_median.max(1),
+        (naive_median % full_median.max(1)) * 100 / full_median.max(1)
+    );
+
+    crate::target_protocol::run(overhead);
+
+    // Stack used by one step: paint the stack below the current frame, step, find the
+    // deepest overwritten word.
+    let used = stack_of_step(&designed);
+    hprintln!("bench stack of one integrator step {} bytes", used);
+
+    debug::exit(debug::EXIT_SUCCESS);
+    loop {
+        cortex_m::asm::nop();
+    }
+}
+
+/// Bytes of stack below the caller's frame used by one integrator step.
+#[inline(never)]
+fn stack_of_step(params: &ChassisParams) -> usize {
+    const PAINT: usize = 1024;
+    const PATTERN: u32 = 0xC0FF_EE11;
+    let mut integ = match Integrator::new(params, WheelCounts::default(), Pose::default()) {
+        Ok(i) => i,
+        Err(_) => return 0,
+    };
+    let sp = cortex_m::register::msp::read() as usize;
+    let base = (sp - 64 - PAINT * 4) & !3;
+    for k in 0..PAINT {
+        // Note(unsafe): writes the pattern into free stack below the current frame (64 bytes
+        // of margin for this function's own calls); nothing lives there.
+        unsafe { core::ptr::write_volatile((base + k * 4) as *mut u32, PATTERN) };
+    }
+    // Inputs generated on the fly: an input array would itself sit in the painted region.
+    let mut rng = crate::inputs::Rng(99);
+    let mut g = [0i64; 2];
+    for _ in 0..SAMPLES {
+        g[0] += (rng.next() % 2000) as i64 - 500;
+        g[1] += (rng.next() % 2000) as i64 - 500;
+        black_box(integ.step(
+            WheelCounts {
+                left: g[0],
+                right: g[1],
+            },
+            IndexRefs {
+                left: Some(5),
+                right: Some(9),
+            },
+        ));
+    }
+    let mut deepest = PAINT;
+    for k in 0..PAINT {
+        // Note(unsafe): reads back the painted region written above.
+        if unsafe { core::ptr::read_volatile((base + k * 4) as *const u32) } != PATTERN {
+            deepest = k;
+            break;
+        }
+    }
+    (PAINT - deepest) * 4 + 64
+}
+
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    hprintln!("bench panicked: {}", info);
+    debug::exit(debug::EXIT_FAILURE);
+    loop {
+        cortex_m::asm::nop();
+    }
+}
