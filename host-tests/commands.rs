@@ -1,1 +1,317 @@
-//! Command parser tests (in progress).
+//! Text commands: line assembly, parsing, execution against the settings (atomic, errors
+//! change nothing), and fuzz-style proptests of both.
+
+use odo_core::protocol::command::*;
+use odo_core::protocol::{CommandReply, MAX_REPLY_TEXT};
+use odo_core::settings::{Key, Settings};
+use proptest::prelude::*;
+
+fn lines(bytes: &[u8]) -> Vec<Result<String, LineError>> {
+    let mut a = LineAssembler::new();
+    let mut out = Vec::new();
+    for &b in bytes {
+        if let Some(r) = a.push(b) {
+            out.push(r.map(str::to_owned));
+        }
+    }
+    out
+}
+
+#[test]
+fn line_assembler_terminators_and_editing() {
+    assert_eq!(
+        lines(b"get\r\nset rate 10\nstatus\r\r\n\n"),
+        vec![
+            Ok("get".into()),
+            Ok("set rate 10".into()),
+            Ok("status".into())
+        ]
+    );
+    assert_eq!(lines(b"gxx\x08\x08et\r"), vec![Ok("get".into())]);
+    assert_eq!(lines(b"\x7f\x08a\tb\x01\x00c\n"), vec![Ok("a bc".into())]);
+    assert_eq!(lines(b"no terminator"), vec![]);
+    assert_eq!(lines(b"\xff\xfe\n"), vec![Err(LineError::BadEncoding)]);
+}
+
+#[test]
+fn line_assembler_overflow_keeps_sync() {
+    let mut input = vec![b'x'; MAX_LINE];
+    input.extend_from_slice(b"\nversion\n"); // exactly MAX_LINE: accepted
+    input.extend(std::iter::repeat_n(b'y', MAX_LINE + 1));
+    input.extend_from_slice(b"\x08\x08\r\nhelp\r\n"); // over by one: dropped, even after backspace
+    let got = lines(&input);
+    assert_eq!(got.len(), 4);
+    assert_eq!(got[0].as_ref().unwrap().len(), MAX_LINE);
+    assert_eq!(got[1], Ok("version".into()));
+    assert_eq!(got[2], Err(LineError::TooLong));
+    assert_eq!(got[3], Ok("help".into()));
+}
+
+fn run(line: &str, s: &mut Settings) -> (Reply, Action) {
+    let before = *s;
+    let (r, a) = execute(line, s);
+    assert!(
+        r.text.starts_with(if r.ok { "ok" } else { "error: " }),
+        "{line:?}: {}",
+        r.text
+    );
+    if !r.ok {
+        assert_eq!(*s, before, "{line:?} failed but changed the settings");
+        assert_eq!(a, Action::None);
+    }
+    (r, a)
+}
+
+/// (line, ok?, text the reply contains)
+#[test]
+fn command_table() {
+    let table: &[(&str, bool, &str)] = &[
+        ("help", true, "reset_pose"),
+        ("help me", false, "too many arguments"),
+        ("version", true, "ok"),
+        ("status", true, "ok"),
+        ("status now", false, "too many arguments"),
+        ("get", true, "track_width = 0.563"),
+        ("get left_diameter", true, "left_diameter = 0.26"),
+        ("get ticks_per_rev", true, "ticks_per_rev = 20000"),
+        ("get delta_left", true, "delta_left = 0.000000039"),
+        ("get foo", false, "unknown key 'foo'"),
+        ("get rate mode", false, "too many arguments"),
+        ("set", false, "missing argument"),
+        ("set rate", false, "missing argument"),
+        ("set bogus", false, "unknown key 'bogus'"),
+        ("set rate 20", true, "rate = 20"),
+        ("set bogus 1", false, "unknown key 'bogus'"),
+        ("set rate 20 bogus 1", false, "unknown key 'bogus'"),
+        ("set rate abc", false, "rate: bad number"),
+        ("set rate 0", false, "rate: out of range, 1..=10000"),
+        ("set rate 2000", false, "baud"),
+        ("set track_width nan", false, "NaN/inf"),
+        ("set track_width -inf", false, "NaN/inf"),
+        (
+            "set track_width 0.6 left_diameter 0.25",
+            true,
+            "left_diameter = 0.25",
+        ),
+        ("mode pps", true, "mode = pps"),
+        ("mode gnss", false, "expected pps|free"),
+        ("mode", false, "missing argument, usage: mode pps|free"),
+        ("mode pps free", false, "too many arguments"),
+        ("rate 100", true, "rate = 100"),
+        ("rate", false, "missing argument"),
+        ("save", true, "ok"),
+        ("save now", false, "too many arguments"),
+        ("defaults", true, "defaults loaded"),
+        ("reset_pose", true, "ok"),
+        ("reset_pose 1 2", false, "missing argument"),
+        ("reset_pose 1 2 3 4", false, "too many arguments"),
+        ("reset_pose 1 x 3", false, "bad number 'x'"),
+        ("reset_pose 1 NaN 3", false, "NaN/inf not allowed"),
+        ("reset_pose 1 2 1e999", false, "NaN/inf not allowed"),
+        ("frobnicate", false, "unknown command 'frobnicate'"),
+        ("GET", false, "unknown command"),
+        ("   get   rate   ", true, "rate = 50"),
+    ];
+    for &(line, ok, needle) in table {
+        let mut s = Settings::DEFAULT;
+        let (r, _) = run(line, &mut s);
+        assert_eq!(r.ok, ok, "{line:?}: {}", r.text);
+        assert!(
+            r.text.contains(needle),
+            "{line:?}: {:?} lacks {needle:?}",
+            r.text
+        );
+    }
+}
+
+#[test]
+fn actions() {
+    let mut s = Settings::DEFAULT;
+    assert_eq!(run("save", &mut s).1, Action::Save);
+    assert_eq!(run("status", &mut s).1, Action::Status);
+    assert_eq!(run("version", &mut s).1, Action::Version);
+    assert_eq!(
+        run("reset_pose 1.5 -2 3.14", &mut s).1,
+        Action::ResetPose {
+            x: 1.5,
+            y: -2.0,
+            heading: 3.14
+        }
+    );
+    assert_eq!(
+        run("reset_pose", &mut s).1,
+        Action::ResetPose {
+            x: 0.0,
+            y: 0.0,
+            heading: 0.0
+        }
+    );
+    assert_eq!(run("rate 50", &mut s).1, Action::None, "unchanged value");
+    assert_eq!(run("rate 100", &mut s).1, Action::SettingsChanged);
+    assert_eq!(run("defaults", &mut s).1, Action::SettingsChanged);
+    assert_eq!(s, Settings::DEFAULT);
+}
+
+#[test]
+fn too_many_words() {
+    let mut line = String::from("set");
+    for _ in 0..=MAX_SET_PAIRS {
+        line.push_str(" rate 10");
+    }
+    let mut s = Settings::DEFAULT;
+    let (r, _) = run(&line, &mut s);
+    assert!(!r.ok && r.text.contains("too many arguments"), "{}", r.text);
+    // Exactly MAX_SET_PAIRS pairs is fine.
+    let line: String = std::iter::once("set".to_string())
+        .chain((0..MAX_SET_PAIRS).map(|_| " rate 10".to_string()))
+        .collect();
+    assert!(run(&line, &mut s).0.ok);
+}
+
+#[test]
+fn atomic_multi_key_set() {
+    let mut s = Settings::DEFAULT;
+    let (r, _) = run(
+        "set left_diameter 0.3 right_diameter 0.3 track_width 20",
+        &mut s,
+    );
+    assert!(!r.ok);
+    assert!(
+        r.text.contains("track_width") && r.text.contains("nothing changed"),
+        "{}",
+        r.text
+    );
+    assert!(!run("rate 1000", &mut s).0.ok);
+    assert!(run("set rate 1000 output_divider 20", &mut s).0.ok);
+    assert_eq!((s.rate, s.output_divider), (1000, 20));
+}
+
+/// `get` prints every key so that feeding its lines back through `set` reproduces the
+/// settings exactly.
+#[test]
+fn get_output_round_trips_through_set() {
+    let mut a = Settings::DEFAULT;
+    assert!(run(
+        "set left_diameter 0.2612345678901234 delta_left 3.123e-8 left_cos2 -0.0123456 kappa_right 1.234567e-9",
+        &mut a
+    )
+    .0
+    .ok);
+    let (r, _) = run("get", &mut a);
+    let body: Vec<&str> = r.text.lines().skip(1).collect();
+    assert_eq!(body.len(), Key::COUNT);
+    let mut b = Settings::DEFAULT;
+    let mut line = String::from("set");
+    for l in &body {
+        let (k, v) = l.split_once(" = ").unwrap();
+        line.push_str(&format!(" {k} {v}"));
+        if line.split(' ').count() >= 1 + 2 * MAX_SET_PAIRS - 1 {
+            assert!(run(&line, &mut b).0.ok, "{line}");
+            line = String::from("set");
+        }
+    }
+    if line != "set" {
+        assert!(run(&line, &mut b).0.ok, "{line}");
+    }
+    assert_eq!(format!("{a:?}"), format!("{b:?}"));
+    assert_eq!(a.to_bytes(), b.to_bytes());
+}
+
+#[test]
+fn long_replies_fit_and_split_into_frames() {
+    let mut s = Settings::DEFAULT;
+    for line in ["help", "get"] {
+        let (r, _) = run(line, &mut s);
+        assert!(!r.text.ends_with("..."), "{line} reply truncated");
+        let parts: Vec<_> = CommandReply::chunks(r.ok, &r.text).collect();
+        assert!(parts.iter().all(|p| p.text.len() <= MAX_REPLY_TEXT));
+        let joined: String = parts.iter().map(|p| p.text.as_str()).collect();
+        assert_eq!(joined, r.text.as_str());
+        println!("{line}: {} bytes, {} frames", r.text.len(), parts.len());
+    }
+}
+
+fn token() -> impl Strategy<Value = String> {
+    let words: Vec<String> = [
+        "help",
+        "version",
+        "status",
+        "get",
+        "set",
+        "save",
+        "defaults",
+        "reset_pose",
+        "mode",
+        "rate",
+        "pps",
+        "free",
+        "paper",
+        "covariance",
+        "next",
+        "previous",
+        "nan",
+        "inf",
+        "-inf",
+        "1e999",
+        "0",
+        "-1",
+        "1",
+        "50",
+        "1000",
+        "115200",
+        "9600",
+        "0.26",
+        "0.563",
+        "3.9e-8",
+        "0.05",
+        "-0.05",
+        "20000",
+        "x",
+        "",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .chain(Key::ALL.iter().map(|k| k.name().to_string()))
+    .collect();
+    prop_oneof![
+        4 => proptest::sample::select(words),
+        1 => any::<f64>().prop_map(|v| v.to_string()),
+        1 => any::<i64>().prop_map(|v| v.to_string()),
+        1 => "[ -~]{0,12}",
+    ]
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(10_000))]
+
+    /// Arbitrary bytes through the line assembler and the executor: no panic, lines never
+    /// exceed MAX_LINE, settings always valid, failed commands change nothing.
+    #[test]
+    fn fuzz_bytes(bytes in proptest::collection::vec(any::<u8>(), 0..600)) {
+        let mut a = LineAssembler::new();
+        let mut s = Settings::DEFAULT;
+        for b in bytes {
+            if let Some(Ok(line)) = a.push(b) {
+                prop_assert!(line.len() <= MAX_LINE);
+                let line = line.to_owned();
+                let before = s;
+                let (r, _) = execute(&line, &mut s);
+                if !r.ok { prop_assert_eq!(s, before); }
+                prop_assert!(s.validate().is_ok());
+            }
+        }
+    }
+
+    /// Lines of command-like tokens: the parser reaches deep paths; same invariants.
+    #[test]
+    fn fuzz_command_lines(tokens in proptest::collection::vec(token(), 0..12)) {
+        let line = tokens.join(" ");
+        let mut s = Settings::DEFAULT;
+        let before = s;
+        let (r, _) = execute(&line, &mut s);
+        let prefix = if r.ok { "ok" } else { "error: " };
+        prop_assert!(r.text.starts_with(prefix), "{}", r.text.as_str());
+        if !r.ok { prop_assert_eq!(s, before); }
+        prop_assert!(s.validate().is_ok());
+    }
+}

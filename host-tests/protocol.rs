@@ -3,6 +3,7 @@
 
 use odo_core::odometry::UncertaintyModel;
 use odo_core::protocol::*;
+use proptest::prelude::*;
 
 fn sample_pose() -> PoseRecord {
     PoseRecord {
@@ -133,4 +134,409 @@ fn command_reply_round_trip_and_chunks() {
     }
     assert_eq!(joined, long);
     assert_eq!(CommandReply::chunks(true, "").count(), 1);
+}
+
+fn hex(bytes: &[u8]) -> String {
+    bytes
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+fn encode(msg: &Message, seq: u32) -> Vec<u8> {
+    let mut out = [0u8; MAX_ENCODED_FRAME];
+    let n = encode_frame(msg, seq, &mut out).unwrap();
+    out[..n].to_vec()
+}
+
+fn example_reply() -> Message {
+    Message::Reply(CommandReply::chunks(true, "ok\nrate = 50").next().unwrap())
+}
+
+fn example_pose() -> Message {
+    Message::Pose(PoseRecord {
+        sequence: 1000,
+        flags: StatusFlags {
+            sync: SyncMode::PpsLocked,
+            time_valid: true,
+            left: WheelStatus {
+                index_seen: true,
+                ..Default::default()
+            },
+            right: WheelStatus {
+                index_seen: true,
+                ..Default::default()
+            },
+            model: UncertaintyModel::Paper,
+        },
+        mcu_time_us: 20_000_000,
+        gnss: GnssTime {
+            week: 2300,
+            tow_ms: 302_400_000,
+            sample_in_second: 0,
+        },
+        x: 1.5,
+        y: -2.25,
+        heading: 0.5,
+        sigma_x: 0.001,
+        sigma_y: 0.002,
+        sigma_heading: 0.0001,
+        sigma_xy: 0.0,
+        gamma_left: 123_456,
+        gamma_right: -654_321,
+        index_left: 120_000,
+        index_right: -640_000,
+        dropped: 0,
+    })
+}
+
+/// Hex bytes of the code block after `<!-- example-frame:NAME -->` in docs/PROTOCOL.md.
+fn doc_frame(name: &str) -> Vec<u8> {
+    let doc = include_str!("../docs/PROTOCOL.md");
+    let marker = format!("<!-- example-frame:{name} -->");
+    let at = doc.find(&marker).expect("marker in PROTOCOL.md") + marker.len();
+    let block = doc[at..].split("```").nth(1).expect("code block");
+    block
+        .split_whitespace()
+        .map(|h| u8::from_str_radix(h, 16).expect("hex byte"))
+        .collect()
+}
+
+#[test]
+fn doc_example_frames_decode() {
+    for (name, msg, seq) in [
+        ("reply", example_reply(), 7u32),
+        ("pose", example_pose(), 1000),
+    ] {
+        let bytes = doc_frame(name);
+        let mut dec = FrameDecoder::new();
+        let mut got = Vec::new();
+        dec.feed(&bytes, |r| got.push(r));
+        assert_eq!(got.len(), 1, "{name}");
+        let f = got.pop().unwrap().expect(name);
+        assert_eq!(
+            f,
+            Frame {
+                seq,
+                message: msg.clone()
+            },
+            "{name}"
+        );
+        // And the encoder produces exactly the documented bytes.
+        assert_eq!(hex(&encode(&msg, seq)), hex(&bytes), "{name}");
+    }
+    match example_reply() {
+        Message::Reply(r) => assert_eq!(r.text.as_str(), "ok\nrate = 50"),
+        _ => unreachable!(),
+    }
+}
+
+fn all_kinds() -> Vec<(Message, u32)> {
+    let mut info = DeviceInfo {
+        protocol_version: PROTOCOL_VERSION,
+        settings_source: SettingsSource::Flash,
+        settings_checksum: 0x1234_5678,
+        uid: [0xA5; 12],
+        ..Default::default()
+    };
+    info.firmware_version.push_str("0.1.0").unwrap();
+    vec![
+        (Message::Pose(sample_pose()), 0x0102_0304),
+        (example_pose(), 1000),
+        (example_reply(), 7),
+        (
+            Message::Status(Status {
+                uptime_us: 123_456_789,
+                rate_hz: 50,
+                ..Default::default()
+            }),
+            0,
+        ),
+        (Message::DeviceInfo(info), u32::MAX),
+    ]
+}
+
+/// Flip every bit of every encoded frame (delimiter included), followed by an intact frame:
+/// the corrupted frame is never accepted, and the next frame always is.
+#[test]
+fn every_single_bit_error_is_detected() {
+    let follower = example_reply();
+    let follow_bytes = encode(&follower, 8);
+    let mut flips = 0;
+    for (msg, seq) in all_kinds() {
+        let good = encode(&msg, seq);
+        for i in 0..good.len() {
+            for bit in 0..8 {
+                let mut bad = good.clone();
+                bad[i] ^= 1 << bit;
+                let mut dec = FrameDecoder::new();
+                let mut oks = Vec::new();
+                let mut errs = 0;
+                dec.feed(&bad, |r| match r {
+                    Ok(f) => oks.push(f),
+                    Err(_) => errs += 1,
+                });
+                dec.feed(&follow_bytes, |r| match r {
+                    Ok(f) => oks.push(f),
+                    Err(_) => errs += 1,
+                });
+                let last_is_delimiter = i == good.len() - 1;
+                if last_is_delimiter {
+                    // The corrupted frame runs into the next one: one rejected merged frame.
+                    assert!(oks.is_empty(), "byte {i} bit {bit}");
+                } else {
+                    assert_eq!(oks.len(), 1, "byte {i} bit {bit}: {oks:?}");
+                    assert_eq!(oks[0].message, follower);
+                }
+                assert!(errs >= 1, "byte {i} bit {bit} not reported");
+                flips += 1;
+            }
+        }
+    }
+    assert!(flips > 2000, "{flips}");
+}
+
+#[test]
+fn sequence_gaps_and_loss_are_counted() {
+    let mut dec = FrameDecoder::new();
+    let m = example_reply();
+    for seq in [10u32, 11, 12, 15, 16, 0 /* restart */, 1] {
+        dec.feed(&encode(&m, seq), |r| assert!(r.is_ok()));
+    }
+    let s = dec.stats();
+    assert_eq!(s.frames, 7);
+    assert_eq!(s.seq_gaps, 2);
+    assert_eq!(s.frames_lost, 2);
+    // Wrap-around is not a gap.
+    let mut dec = FrameDecoder::new();
+    for seq in [u32::MAX - 1, u32::MAX, 0, 1] {
+        dec.feed(&encode(&m, seq), |r| assert!(r.is_ok()));
+    }
+    assert_eq!(dec.stats().seq_gaps, 0);
+}
+
+#[test]
+fn resynchronises_after_garbage_oversize_and_mid_stream_join() {
+    let frames: Vec<u8> = (0..3).flat_map(|s| encode(&example_pose(), s)).collect();
+    // Join in the middle of the first frame.
+    let mut dec = FrameDecoder::new();
+    let mut ok = 0;
+    dec.feed(&frames[40..], |r| ok += r.is_ok() as u32);
+    assert_eq!(ok, 2);
+    assert_eq!(dec.stats().crc_errors + dec.stats().malformed, 1);
+    // A long run without delimiter, then frames.
+    let mut dec = FrameDecoder::new();
+    let mut stream = vec![0x55u8; 3 * MAX_WIRE_FRAME];
+    stream.push(0);
+    stream.extend_from_slice(&frames);
+    let mut ok = 0;
+    dec.feed(&stream, |r| ok += r.is_ok() as u32);
+    assert_eq!(ok, 3);
+    assert_eq!(dec.stats().oversize, 1);
+    // Leading and repeated delimiters are harmless.
+    let mut dec = FrameDecoder::new();
+    let mut stream = vec![0u8; 5];
+    for f in frames.chunks(1) {
+        stream.extend_from_slice(f);
+        if f == [0] {
+            stream.extend_from_slice(&[0, 0]);
+        }
+    }
+    let mut ok = 0;
+    dec.feed(&stream, |r| ok += r.unwrap().seq as u32 + 1);
+    assert_eq!(ok, 1 + 2 + 3);
+}
+
+/// Builds a frame by hand from raw parts (for version and extension tests).
+fn raw_frame(version: u8, ty: u8, seq: u32, body: &[u8]) -> Vec<u8> {
+    let mut raw = vec![version, ty];
+    raw.extend_from_slice(&(body.len() as u16).to_le_bytes());
+    raw.extend_from_slice(&seq.to_le_bytes());
+    raw.extend_from_slice(body);
+    let crc = crc::crc32(&raw);
+    raw.extend_from_slice(&crc.to_le_bytes());
+    let mut out = vec![0u8; cobs::max_encoded_len(raw.len()) + 1];
+    let n = cobs::encode(&raw, &mut out).unwrap();
+    out.truncate(n);
+    out.push(0);
+    out
+}
+
+#[test]
+fn versioning_rules() {
+    let mut body = [0u8; PoseRecord::BODY_LEN + 8];
+    let n = sample_pose().write_body(&mut body).unwrap();
+    assert_eq!(n, PoseRecord::BODY_LEN);
+    body[n..].copy_from_slice(&[0xEE; 8]); // fields appended by a later revision
+    let mut dec = FrameDecoder::new();
+    let mut got = Vec::new();
+    dec.feed(&raw_frame(1, 0x01, 0, &body), |r| got.push(r));
+    dec.feed(&raw_frame(2, 0x01, 1, &body), |r| got.push(r));
+    dec.feed(&raw_frame(1, 0x7F, 2, &[1, 2, 3]), |r| got.push(r));
+    dec.feed(&raw_frame(1, 0x01, 3, &body[..99]), |r| got.push(r));
+    dec.feed(&raw_frame(1, 0x01, 4, &body[..100]), |r| got.push(r));
+    assert_eq!(
+        got[0].as_ref().unwrap().message,
+        Message::Pose(sample_pose())
+    );
+    assert_eq!(got[1], Err(DecodeError::Version(2)));
+    assert_eq!(got[2], Err(DecodeError::UnknownType(0x7F)));
+    assert_eq!(got[3], Err(DecodeError::BodyTooShort(0x01)));
+    assert!(got[4].is_ok());
+    let s = dec.stats();
+    assert_eq!(
+        (s.frames, s.version_errors, s.unknown_type, s.malformed),
+        (2, 1, 1, 1)
+    );
+    // The unknown type and short body still advanced the sequence: only seq 1 is missing.
+    assert_eq!((s.seq_gaps, s.frames_lost), (1, 1));
+    // Reserved status bits are ignored; sync code 3 is malformed.
+    assert!(StatusFlags::from_bits(0xFFFF_F000).is_ok());
+    assert!(StatusFlags::from_bits(3).is_err());
+}
+
+#[test]
+fn flag_bits_positions() {
+    let mut f = StatusFlags::default();
+    assert_eq!(f.to_bits(), 0);
+    f.sync = SyncMode::Holdover;
+    assert_eq!(f.to_bits(), 2);
+    f.time_valid = true;
+    f.left.fault = true;
+    f.right.calibrated = true;
+    f.model = UncertaintyModel::Covariance;
+    assert_eq!(f.to_bits(), 2 | 1 << 2 | 1 << 3 | 1 << 10 | 1 << 11);
+    assert_eq!(StatusFlags::from_bits(f.to_bits()).unwrap(), f);
+    for bit in 2..12 {
+        let g = StatusFlags::from_bits(1 << bit).unwrap();
+        assert_eq!(g.to_bits(), 1 << bit);
+    }
+}
+
+#[test]
+fn encoder_numbers_frames_and_buffer_limits() {
+    let mut enc = FrameEncoder::new();
+    let mut out = [0u8; MAX_ENCODED_FRAME];
+    let mut dec = FrameDecoder::new();
+    for i in 0..5u32 {
+        let n = enc.encode(&example_pose(), &mut out).unwrap();
+        dec.feed(&out[..n], |r| assert_eq!(r.unwrap().seq, i));
+    }
+    assert_eq!(enc.next_seq(), 5);
+    let mut small = [0u8; 50];
+    assert_eq!(
+        enc.encode(&example_pose(), &mut small),
+        Err(EncodeError::BufferTooSmall)
+    );
+    assert_eq!(
+        enc.next_seq(),
+        5,
+        "failed encode does not consume a sequence number"
+    );
+    // The largest message fits MAX_ENCODED_FRAME.
+    let full = "é".repeat(MAX_REPLY_TEXT / 2);
+    let r = CommandReply::chunks(false, &full).next().unwrap();
+    assert_eq!(r.text.len(), MAX_REPLY_TEXT);
+    let n = enc.encode(&Message::Reply(r), &mut out).unwrap();
+    assert!(n <= MAX_ENCODED_FRAME);
+    // A pose frame is 114 bytes on the wire (settings' bandwidth rule uses it).
+    assert_eq!(
+        encode(&example_pose(), 0).len() * 10,
+        odo_core::settings::POSE_FRAME_BITS as usize
+    );
+}
+
+fn arb_pose() -> impl Strategy<Value = PoseRecord> {
+    (
+        (
+            any::<u32>(),
+            0u32..0x1000,
+            any::<u64>(),
+            any::<u16>(),
+            any::<u32>(),
+            any::<u16>(),
+        ),
+        (any::<f64>(), any::<f64>(), any::<f64>()),
+        (any::<f32>(), any::<f32>(), any::<f32>(), any::<f32>()),
+        (
+            any::<i64>(),
+            any::<i64>(),
+            any::<i64>(),
+            any::<i64>(),
+            any::<u32>(),
+        ),
+    )
+        .prop_filter_map("sync code 3", |(a, b, c, d)| {
+            let flags = StatusFlags::from_bits(a.1).ok()?;
+            Some(PoseRecord {
+                sequence: a.0,
+                flags,
+                mcu_time_us: a.2,
+                gnss: GnssTime {
+                    week: a.3,
+                    tow_ms: a.4,
+                    sample_in_second: a.5,
+                },
+                x: b.0,
+                y: b.1,
+                heading: b.2,
+                sigma_x: c.0,
+                sigma_y: c.1,
+                sigma_heading: c.2,
+                sigma_xy: c.3,
+                gamma_left: d.0,
+                gamma_right: d.1,
+                index_left: d.2,
+                index_right: d.3,
+                dropped: d.4,
+            })
+        })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(10_000))]
+
+    /// Any pose record (any bit patterns, NaN included) round-trips bit for bit.
+    #[test]
+    fn pose_round_trip_any_bits(p in arb_pose(), seq in any::<u32>()) {
+        let bytes = encode(&Message::Pose(p), seq);
+        let mut dec = FrameDecoder::new();
+        let mut got = None;
+        dec.feed(&bytes, |r| got = Some(r));
+        let f = got.unwrap().unwrap();
+        prop_assert_eq!(f.seq, seq);
+        let Message::Pose(q) = f.message else { panic!("type") };
+        let mut a = [0u8; PoseRecord::BODY_LEN];
+        let mut b = [0u8; PoseRecord::BODY_LEN];
+        p.write_body(&mut a).unwrap();
+        q.write_body(&mut b).unwrap();
+        prop_assert_eq!(a, b);
+    }
+
+    /// Arbitrary bytes, with valid frames spliced in after a delimiter: no panic, every
+    /// spliced frame is recovered, nothing else is accepted unless it is a valid frame.
+    #[test]
+    fn fuzz_decoder(chunks in proptest::collection::vec(
+        (proptest::collection::vec(any::<u8>(), 0..300), any::<bool>()), 0..6)) {
+        let good = encode(&example_reply(), 7);
+        let mut stream = Vec::new();
+        let mut spliced = 0;
+        for (junk, splice) in &chunks {
+            stream.extend_from_slice(junk);
+            if *splice {
+                stream.push(0);
+                stream.extend_from_slice(&good);
+                spliced += 1;
+            }
+        }
+        let mut dec = FrameDecoder::new();
+        let mut ok = 0;
+        dec.feed(&stream, |r| if let Ok(f) = r {
+            if f.message == example_reply() { ok += 1; }
+        });
+        prop_assert!(ok >= spliced);
+        let s = dec.stats();
+        prop_assert!(s.frames >= spliced);
+    }
 }
