@@ -131,11 +131,11 @@ fn actions() {
     assert_eq!(run("status", &mut s).1, Action::Status);
     assert_eq!(run("version", &mut s).1, Action::Version);
     assert_eq!(
-        run("reset_pose 1.5 -2 3.14", &mut s).1,
+        run("reset_pose 1.5 -2 2.5", &mut s).1,
         Action::ResetPose {
             x: 1.5,
             y: -2.0,
-            heading: 3.14
+            heading: 2.5
         }
     );
     assert_eq!(

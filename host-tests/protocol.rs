@@ -344,7 +344,7 @@ fn resynchronises_after_garbage_oversize_and_mid_stream_join() {
         }
     }
     let mut ok = 0;
-    dec.feed(&stream, |r| ok += r.unwrap().seq as u32 + 1);
+    dec.feed(&stream, |r| ok += r.unwrap().seq + 1);
     assert_eq!(ok, 1 + 2 + 3);
 }
 

@@ -103,6 +103,8 @@ impl LineAssembler {
 }
 
 /// A parsed command line.
+// No allocator: the pairs of `Set` live inline; a `Command` only lives briefly on the stack.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq)]
 pub enum Command<'a> {
     /// `help`: list commands and keys.
