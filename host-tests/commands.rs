@@ -78,7 +78,7 @@ fn command_table() {
         ("get foo", false, "unknown key 'foo'"),
         ("get rate mode", false, "too many arguments"),
         ("set", false, "missing argument"),
-        ("set rate", false, "missing argument"),
+        ("set rate", false, "missing value for 'rate'"),
         ("set bogus", false, "unknown key 'bogus'"),
         ("set rate 20", true, "rate = 20"),
         ("set bogus 1", false, "unknown key 'bogus'"),

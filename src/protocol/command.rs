@@ -143,6 +143,8 @@ pub enum CommandError<'a> {
     UnknownKey(&'a str),
     /// Too few arguments; the usage of the command.
     MissingArgument(&'static str),
+    /// `set` names a key without a value (the key).
+    MissingValue(&'a str),
     /// Too many arguments; the usage of the command.
     TooManyArguments(&'static str),
     /// Not a number (the word).
@@ -160,6 +162,7 @@ impl core::fmt::Display for CommandError<'_> {
             Self::UnknownCommand(c) => write!(f, "unknown command '{c}' (try help)"),
             Self::UnknownKey(k) => write!(f, "unknown key '{k}' (try help)"),
             Self::MissingArgument(u) => write!(f, "missing argument, usage: {u}"),
+            Self::MissingValue(k) => write!(f, "missing value for '{k}', usage: {USAGE_SET}"),
             Self::TooManyArguments(u) => write!(f, "too many arguments, usage: {u}"),
             Self::BadNumber(w) => write!(f, "bad number '{w}'"),
             Self::NotFinite(w) => write!(f, "NaN/inf not allowed: '{w}'"),
@@ -213,7 +216,7 @@ pub fn parse(line: &str) -> Result<Command<'_>, CommandError<'_>> {
                 // A key without its value: name the key if it is one.
                 let last = words[words.len() - 1];
                 return Err(match Key::from_name(last) {
-                    Some(_) => CommandError::MissingArgument(USAGE_SET),
+                    Some(_) => CommandError::MissingValue(last),
                     None => CommandError::UnknownKey(last),
                 });
             }
