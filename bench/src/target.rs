@@ -32,7 +32,7 @@ fn now() -> u32 {
 
 /// Instructions spent in `f`, less the cost of the two counter reads.
 #[inline(always)]
-fn count(overhead: u32, f: impl FnOnce()) -> u32 {
+pub fn count(overhead: u32, f: impl FnOnce()) -> u32 {
     let a = now();
     f();
     let b = now();
@@ -45,7 +45,7 @@ fn stats(v: &mut [u32]) -> (u32, u32) {
     (v[v.len() / 2], v[v.len() - 1])
 }
 
-fn report(name: &str, v: &mut [u32]) -> u32 {
+pub fn report(name: &str, v: &mut [u32]) -> u32 {
     let (median, worst) = stats(v);
     hprintln!(
         "bench {:<34} median {:>6} worst {:>6} instructions",
