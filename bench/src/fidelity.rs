@@ -84,7 +84,7 @@ pub fn run() {
             if left == 0 {
                 left = 50 + (rng.next() % 1500) as u32;
                 let v = 0.3 + 1.2 * ((rng.next() >> 11) as f64 / (1u64 << 53) as f64);
-                let v = if rng.next() % 10 == 0 { -v } else { v };
+                let v = if rng.next().is_multiple_of(10) { -v } else { v };
                 speed = match rng.next() % 6 {
                     0 | 1 => [v, v],
                     2 => [v, 0.6 * v],
