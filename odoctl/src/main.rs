@@ -1,2 +1,399 @@
-//! `odoctl`: the host tool of the odometry unit (work in progress, issue 5).
-fn main() {}
+//! `odoctl`: the host tool of the odometry unit. See `odoctl --help` and `odoctl/README.md`.
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Args, Parser, Subcommand};
+
+use odoctl::calib::{DeltaMode, WindowStart};
+use odoctl::simulate::PathKind;
+
+#[derive(Parser)]
+#[command(
+    name = "odoctl",
+    version,
+    about = "Host tool of the odometry unit: stream, configure, replay, simulate, calibrate"
+)]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Args, Clone)]
+struct PortArgs {
+    /// Serial port (`/dev/ttyUSB0`) or TCP socket of the QEMU image (`tcp:127.0.0.1:PORT`).
+    #[arg(long, short)]
+    port: String,
+    /// Baud rate of a serial port.
+    #[arg(long, default_value_t = 115_200)]
+    baud: u32,
+}
+
+#[derive(Args, Clone)]
+struct ParamArgs {
+    /// Parameter file (TOML, shared key names); the designed values when absent.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Set a parameter, `KEY=VALUE` (repeatable; after `--config`).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    sets: Vec<String>,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Show the live pose stream as a table; report CRC errors, sequence gaps, dropped records.
+    Monitor {
+        #[command(flatten)]
+        port: PortArgs,
+        /// Stop after this many seconds.
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Stop after this many pose records.
+        #[arg(long)]
+        count: Option<u64>,
+        /// Print every N-th record only.
+        #[arg(long, default_value_t = 1)]
+        every: u64,
+    },
+    /// Record the live pose stream to a SAMPLES CSV (with the unit's pose columns).
+    Record {
+        #[command(flatten)]
+        port: PortArgs,
+        /// Output SAMPLES CSV.
+        #[arg(long, short)]
+        out: PathBuf,
+        /// Also keep the raw byte stream (for `decode`).
+        #[arg(long)]
+        raw: Option<PathBuf>,
+        /// Stop after this many seconds.
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Stop after this many pose records.
+        #[arg(long)]
+        count: Option<u64>,
+        /// Send `reset_pose` first, so the recording starts at zero pose and zero sigmas and
+        /// `replay --check` can reproduce it bit for bit.
+        #[arg(long)]
+        reset_pose: bool,
+    },
+    /// Decode a captured raw byte stream to a SAMPLES CSV.
+    Decode {
+        /// Raw capture.
+        file: PathBuf,
+        /// Output CSV (stdout when absent).
+        #[arg(long, short)]
+        out: Option<PathBuf>,
+    },
+    /// Read and change the unit's settings.
+    Config {
+        #[command(flatten)]
+        port: PortArgs,
+        #[command(subcommand)]
+        action: ConfigAction,
+    },
+    /// Run the core integrator over recorded counts; CSV `t,x,y,heading,sigma_x,sigma_y,sigma_heading` to stdout.
+    Replay {
+        /// SAMPLES CSV.
+        samples: PathBuf,
+        #[command(flatten)]
+        params: ParamArgs,
+        /// Initial x (m).
+        #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+        x: f64,
+        /// Initial y (m).
+        #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+        y: f64,
+        /// Initial heading (rad, clockwise from +y).
+        #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+        heading: f64,
+        /// Compare with the unit's own pose columns of the file, bit for bit; exit non-zero
+        /// on any difference.
+        #[arg(long)]
+        check: bool,
+        /// Write the CSV here instead of stdout.
+        #[arg(long, short)]
+        out: Option<PathBuf>,
+    },
+    /// Estimate the chassis parameters from a run and its RTK GNSS reference (eq 16).
+    Calibrate(CalibrateArgs),
+    /// Errors of calibrated parameters on another run, against their predicted uncertainty.
+    Validate {
+        /// SAMPLES CSV.
+        #[arg(long)]
+        samples: PathBuf,
+        /// REFERENCE CSV.
+        #[arg(long)]
+        reference: PathBuf,
+        #[command(flatten)]
+        params: ParamArgs,
+        /// Initial heading (rad); when absent, the heading minimising eq (16) on this run.
+        #[arg(long, allow_negative_numbers = true)]
+        heading: Option<f64>,
+        /// Per-point errors and sigmas to this CSV.
+        #[arg(long)]
+        errors: Option<PathBuf>,
+        /// Write PNG figures (trajectory, horizontal and heading error with bands) here.
+        #[arg(long)]
+        plots: Option<PathBuf>,
+    },
+    /// Write a synthetic run (SAMPLES and REFERENCE CSVs) with known true parameters.
+    Simulate(SimulateArgs),
+}
+
+#[derive(Subcommand, Clone)]
+enum ConfigAction {
+    /// Print one setting, or all.
+    Get {
+        /// Key (all settings when absent).
+        key: Option<String>,
+    },
+    /// Change a setting (in RAM; `save` makes it permanent).
+    Set {
+        /// Key.
+        key: String,
+        /// Value.
+        #[arg(allow_negative_numbers = true)]
+        value: String,
+    },
+    /// Store the settings in flash.
+    Save,
+    /// Send a parameter file (a calibration result) in one atomic `set`, then `save` unless
+    /// `--no-save`.
+    Push {
+        /// TOML file with the shared key names.
+        file: PathBuf,
+        /// Do not save to flash.
+        #[arg(long)]
+        no_save: bool,
+    },
+    /// Send any command line and print the reply.
+    Raw {
+        /// The command line, e.g. `status`.
+        line: Vec<String>,
+    },
+}
+
+#[derive(Args)]
+struct CalibrateArgs {
+    /// SAMPLES CSV of the estimation run.
+    #[arg(long)]
+    samples: PathBuf,
+    /// REFERENCE CSV (RTK GNSS) of the same run.
+    #[arg(long)]
+    reference: PathBuf,
+    /// First estimate (TOML, shared keys); the designed values when absent.
+    #[arg(long)]
+    initial: Option<PathBuf>,
+    /// Override a key of the first estimate, `KEY=VALUE` (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    sets: Vec<String>,
+    /// Write the result here (TOML: shared keys at top level, the fit's figures in `[fit]`).
+    #[arg(long, short)]
+    out: Option<PathBuf>,
+    /// Sub-trajectory length for the uncertainty fit (m of reference path; 0 = whole run).
+    #[arg(long, default_value_t = 10.0)]
+    delta_window: f64,
+    /// Horizontal RMS noise of the reference (m), added to sigma_h in the coverage criterion.
+    #[arg(long, default_value_t = 0.008)]
+    reference_sigma: f64,
+    /// How the left and right uncertainty coefficients relate.
+    #[arg(long, value_enum, default_value_t = DeltaMode::Equal)]
+    delta_mode: DeltaMode,
+    /// Skip the uncertainty fit (keep the initial coefficients).
+    #[arg(long)]
+    no_delta: bool,
+    /// Skip the Nelder-Mead polish of eq (16) after the Levenberg-Marquardt fits.
+    #[arg(long)]
+    no_polish: bool,
+    /// Stability study: sub-trajectory lengths in metres, e.g. `1,2,4,8`.
+    #[arg(long, value_delimiter = ',')]
+    windows: Vec<f64>,
+    /// Where the stability study's fits start.
+    #[arg(long, value_enum, default_value_t = WindowStart::Initial)]
+    window_start: WindowStart,
+    /// Per-sub-trajectory estimates of the stability study to this CSV.
+    #[arg(long)]
+    windows_out: Option<PathBuf>,
+    /// Write PNG figures here (Figs. 4-6 of the paper; 7-8 with `--windows`).
+    #[arg(long)]
+    plots: Option<PathBuf>,
+    /// No progress bars.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
+#[derive(Args)]
+struct SimulateArgs {
+    /// Output SAMPLES CSV.
+    #[arg(long)]
+    samples: PathBuf,
+    /// Output REFERENCE CSV.
+    #[arg(long)]
+    reference: PathBuf,
+    /// True parameters (TOML); the paper's final estimates (0.2608, 0.2607, 0.5656 m) when absent.
+    #[arg(long = "true")]
+    truth: Option<PathBuf>,
+    /// Override a true parameter, `KEY=VALUE` (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    sets: Vec<String>,
+    /// Write the true parameters to this TOML.
+    #[arg(long)]
+    truth_out: Option<PathBuf>,
+    /// Path shape.
+    #[arg(long, value_enum, default_value_t = PathKind::Estimation)]
+    path: PathKind,
+    /// Path length (m; the shape is scaled to it).
+    #[arg(long, default_value_t = 70.0)]
+    length: f64,
+    /// Sample rate (Hz).
+    #[arg(long, default_value_t = 50.0)]
+    rate: f64,
+    /// Speed (m/s).
+    #[arg(long, default_value_t = 0.5)]
+    speed: f64,
+    /// Slip: standard deviation of each wheel's relative turn error.
+    #[arg(long, default_value_t = 0.001)]
+    slip: f64,
+    /// Correlation length of the slip (m of wheel travel).
+    #[arg(long, default_value_t = 0.1)]
+    slip_corr: f64,
+    /// Horizontal RMS noise of the reference position (m); the BD982's RTK figure.
+    #[arg(long, default_value_t = 0.008)]
+    rtk_sigma: f64,
+    /// Noise of the reference heading (degrees).
+    #[arg(long, default_value_t = 0.5)]
+    heading_sigma_deg: f64,
+    /// Write no heading column in the reference.
+    #[arg(long)]
+    no_heading: bool,
+    /// Initial x (m).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    x0: f64,
+    /// Initial y (m).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    y0: f64,
+    /// Initial heading (rad).
+    #[arg(long, default_value_t = 0.3, allow_negative_numbers = true)]
+    heading0: f64,
+    /// Seed of the noise generator.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(code) => code,
+        Err(e) => {
+            let _ = std::io::stdout().flush();
+            eprintln!("odoctl: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: Cli) -> anyhow::Result<ExitCode> {
+    use odoctl::commands as c;
+    match cli.cmd {
+        Cmd::Monitor {
+            port,
+            duration,
+            count,
+            every,
+        } => c::monitor(&port.port, port.baud, duration, count, every),
+        Cmd::Record {
+            port,
+            out,
+            raw,
+            duration,
+            count,
+            reset_pose,
+        } => c::record(
+            &port.port,
+            port.baud,
+            &out,
+            raw.as_deref(),
+            duration,
+            count,
+            reset_pose,
+        ),
+        Cmd::Decode { file, out } => c::decode(&file, out.as_deref()),
+        Cmd::Config { port, action } => {
+            let action = match action {
+                ConfigAction::Get { key } => c::ConfigAction::Get(key),
+                ConfigAction::Set { key, value } => c::ConfigAction::Set(key, value),
+                ConfigAction::Save => c::ConfigAction::Save,
+                ConfigAction::Push { file, no_save } => c::ConfigAction::Push(file, !no_save),
+                ConfigAction::Raw { line } => c::ConfigAction::Raw(line.join(" ")),
+            };
+            c::config(&port.port, port.baud, action)
+        }
+        Cmd::Replay {
+            samples,
+            params,
+            x,
+            y,
+            heading,
+            check,
+            out,
+        } => c::replay(
+            &samples,
+            params.config.as_deref(),
+            &params.sets,
+            (x, y, heading),
+            check,
+            out.as_deref(),
+        ),
+        Cmd::Calibrate(a) => c::calibrate(&c::CalibrateOptions {
+            samples: a.samples,
+            reference: a.reference,
+            initial: a.initial,
+            sets: a.sets,
+            out: a.out,
+            delta_window: a.delta_window,
+            reference_sigma: a.reference_sigma,
+            delta_mode: a.delta_mode,
+            fit_delta: !a.no_delta,
+            polish: !a.no_polish,
+            windows: a.windows,
+            window_start: a.window_start,
+            windows_out: a.windows_out,
+            plots: a.plots,
+            quiet: a.quiet,
+        }),
+        Cmd::Validate {
+            samples,
+            reference,
+            params,
+            heading,
+            errors,
+            plots,
+        } => c::validate(
+            &samples,
+            &reference,
+            params.config.as_deref(),
+            &params.sets,
+            heading,
+            errors.as_deref(),
+            plots.as_deref(),
+        ),
+        Cmd::Simulate(a) => c::simulate(&c::SimulateOptions {
+            samples: a.samples,
+            reference: a.reference,
+            truth: a.truth,
+            sets: a.sets,
+            truth_out: a.truth_out,
+            path: a.path,
+            length: a.length,
+            rate: a.rate,
+            speed: a.speed,
+            slip: a.slip,
+            slip_corr: a.slip_corr,
+            rtk_sigma: a.rtk_sigma,
+            heading_sigma: (!a.no_heading).then(|| a.heading_sigma_deg.to_radians()),
+            start: (a.x0, a.y0, a.heading0),
+            seed: a.seed,
+        }),
+    }
+}

@@ -1,0 +1,687 @@
+//! The subcommands behind the command line (`main.rs` only parses arguments).
+
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::{anyhow, bail, Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+
+pub use crate::link::{config, decode, monitor, record, ConfigAction};
+
+use crate::calib::{self, DeltaMode, Run, WindowStart};
+use crate::config::{self as cfg, FitValue};
+use crate::core_api::{ChassisParams, Pose};
+use crate::csvio;
+use crate::replay as rp;
+use crate::simulate::{self, PathKind};
+use crate::stats::{coverage, summarize};
+
+fn create(path: &Path) -> Result<BufWriter<File>> {
+    Ok(BufWriter::new(File::create(path).with_context(|| {
+        format!("{}: cannot create", path.display())
+    })?))
+}
+
+/// `odoctl replay`.
+pub fn replay(
+    samples: &Path,
+    config: Option<&Path>,
+    sets: &[String],
+    start: (f64, f64, f64),
+    check: bool,
+    out: Option<&Path>,
+) -> Result<ExitCode> {
+    let params = cfg::load(config, sets)?;
+    let s = csvio::read_samples(samples)?;
+    let rows = rp::replay(
+        &params,
+        &s,
+        Pose {
+            x: start.0,
+            y: start.1,
+            heading: start.2,
+        },
+    )?;
+    match out {
+        Some(p) => {
+            let mut w = create(p)?;
+            rp::write_replay(&mut w, &rows)?;
+            w.flush()?;
+        }
+        None => {
+            let stdout = std::io::stdout();
+            let mut w = BufWriter::new(stdout.lock());
+            rp::write_replay(&mut w, &rows)?;
+            w.flush()?;
+        }
+    }
+    if check {
+        let c = rp::check_against_unit(&s, &rows);
+        if c.compared == 0 {
+            bail!("{}: --check: the file carries no unit pose columns (x, y, heading, sigma_x, sigma_y, sigma_heading)", samples.display());
+        }
+        if c.mismatches > 0 {
+            eprintln!(
+                "replay --check: {} of {} rows differ from the unit's records; first: {}",
+                c.mismatches,
+                c.compared,
+                c.first.unwrap_or_default()
+            );
+            return Ok(ExitCode::FAILURE);
+        }
+        eprintln!(
+            "replay --check: all {} rows match the unit's records bit for bit",
+            c.compared
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Options of `odoctl simulate`.
+pub struct SimulateOptions {
+    /// Output SAMPLES CSV.
+    pub samples: PathBuf,
+    /// Output REFERENCE CSV.
+    pub reference: PathBuf,
+    /// True parameters file.
+    pub truth: Option<PathBuf>,
+    /// `KEY=VALUE` overrides of the truth.
+    pub sets: Vec<String>,
+    /// Where to write the truth.
+    pub truth_out: Option<PathBuf>,
+    /// Path shape.
+    pub path: PathKind,
+    /// Path length (m).
+    pub length: f64,
+    /// Sample rate (Hz).
+    pub rate: f64,
+    /// Speed (m/s).
+    pub speed: f64,
+    /// Slip standard deviation.
+    pub slip: f64,
+    /// Slip correlation length (m).
+    pub slip_corr: f64,
+    /// Reference horizontal RMS noise (m).
+    pub rtk_sigma: f64,
+    /// Reference heading noise (rad), or no heading column.
+    pub heading_sigma: Option<f64>,
+    /// Initial pose.
+    pub start: (f64, f64, f64),
+    /// Seed.
+    pub seed: u64,
+}
+
+/// The default true chassis of `simulate`: the paper's final estimates (Table 2) with its
+/// designed encoder and uncertainty (Table 3).
+pub fn default_truth() -> ChassisParams {
+    ChassisParams {
+        left_diameter: 0.2608,
+        right_diameter: 0.2607,
+        track_width: 0.5656,
+        ..ChassisParams::DESIGNED
+    }
+}
+
+/// `odoctl simulate`.
+pub fn simulate(o: &SimulateOptions) -> Result<ExitCode> {
+    let mut truth = match &o.truth {
+        Some(p) => cfg::read_params(p, default_truth())?,
+        None => default_truth(),
+    };
+    cfg::apply_sets(&mut truth, &o.sets)?;
+    let truth = cfg::validated(truth, "true parameters")?;
+    if !(o.rate > 0.0 && o.rate <= 10_000.0) {
+        bail!("--rate {}: must be in (0, 10000] Hz", o.rate);
+    }
+    if !(o.speed > 0.0 && o.speed <= 10.0) {
+        bail!("--speed {}: must be in (0, 10] m/s", o.speed);
+    }
+    if o.length.is_nan() || o.length <= 0.0 || o.slip < 0.0 || o.rtk_sigma < 0.0 {
+        bail!("--length must be positive, --slip and --rtk-sigma non-negative");
+    }
+    let mut rng = simulate::Rng::new(o.seed ^ 0x5EED);
+    let segments = simulate::path(o.path, o.length, &mut rng);
+    let sim = simulate::simulate(&simulate::SimOptions {
+        truth,
+        segments,
+        rate: o.rate,
+        speed: o.speed,
+        slip: o.slip,
+        slip_corr: o.slip_corr,
+        rtk_sigma: o.rtk_sigma,
+        heading_sigma: o.heading_sigma,
+        start: o.start,
+        seed: o.seed,
+    });
+    let mut w = create(&o.samples)?;
+    csvio::write_samples(&mut w, &sim.samples, false)?;
+    w.flush()?;
+    let mut w = create(&o.reference)?;
+    csvio::write_reference(&mut w, &sim.reference)?;
+    w.flush()?;
+    if let Some(p) = &o.truth_out {
+        let text = cfg::render_params(
+            &truth,
+            "odoctl simulate: the true parameters of the synthetic run",
+            &[],
+        );
+        std::fs::write(p, text).with_context(|| format!("{}: cannot write", p.display()))?;
+    }
+    let travelled: f64 = sim
+        .truth
+        .windows(2)
+        .map(|w| (w[1].0 - w[0].0).hypot(w[1].1 - w[0].1))
+        .sum();
+    let turned: f64 = sim.truth.windows(2).map(|w| (w[1].2 - w[0].2).abs()).sum();
+    println!(
+        "simulated {} samples over {:.1} s: {:.1} m travelled, {:.0} deg turned; true left_diameter {}, right_diameter {}, track_width {}",
+        sim.samples.len(),
+        sim.samples.last().map_or(0.0, |s| s.t),
+        travelled,
+        turned.to_degrees(),
+        truth.left_diameter,
+        truth.right_diameter,
+        truth.track_width
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Options of `odoctl calibrate`.
+pub struct CalibrateOptions {
+    /// SAMPLES CSV.
+    pub samples: PathBuf,
+    /// REFERENCE CSV.
+    pub reference: PathBuf,
+    /// First-estimate file.
+    pub initial: Option<PathBuf>,
+    /// `KEY=VALUE` overrides of the first estimate.
+    pub sets: Vec<String>,
+    /// Result file.
+    pub out: Option<PathBuf>,
+    /// Sub-trajectory length of the uncertainty fit (m).
+    pub delta_window: f64,
+    /// Reference noise (m).
+    pub reference_sigma: f64,
+    /// Left/right relation of the coefficients.
+    pub delta_mode: DeltaMode,
+    /// Fit the uncertainty coefficients.
+    pub fit_delta: bool,
+    /// Nelder-Mead polish of eq (16).
+    pub polish: bool,
+    /// Stability study lengths (m).
+    pub windows: Vec<f64>,
+    /// Where the study's fits start.
+    pub window_start: WindowStart,
+    /// Study CSV.
+    pub windows_out: Option<PathBuf>,
+    /// Figure directory.
+    pub plots: Option<PathBuf>,
+    /// No progress bars.
+    pub quiet: bool,
+}
+
+fn bar(quiet: bool, what: &str) -> ProgressBar {
+    if quiet {
+        return ProgressBar::hidden();
+    }
+    let pb = ProgressBar::new(1);
+    pb.set_style(
+        ProgressStyle::with_template("{prefix:>22} [{bar:40}] {pos}/{len} {elapsed}")
+            .expect("valid template")
+            .progress_chars("=> "),
+    );
+    pb.set_prefix(what.to_string());
+    pb
+}
+
+/// The outcome of a calibration (also used by the tests).
+pub struct Calibration {
+    /// Final parameters.
+    pub params: ChassisParams,
+    /// The eq (16) fit.
+    pub geometry: calib::GeomFit,
+    /// The uncertainty fit, when run.
+    pub uncertainty: Option<calib::UncertaintyFit>,
+    /// Evaluation of the whole run with the final parameters.
+    pub evaluation: calib::Evaluation,
+    /// The stability study.
+    pub windows: Vec<calib::WindowEstimate>,
+}
+
+/// Runs the calibration in memory (the work of `odoctl calibrate` without the printing).
+#[allow(clippy::too_many_arguments)]
+pub fn calibrate_run(
+    samples: &[csvio::Sample],
+    reference: &[csvio::RefPoint],
+    names: (&str, &str),
+    initial: &ChassisParams,
+    o: &CalibrateOptions,
+) -> Result<Calibration> {
+    let matches = csvio::match_or_fail(samples, names.0, reference, names.1, 10)?;
+    let run = Run::new(samples, reference, matches);
+    let h0 = run.heading_guess(0);
+    let pb = bar(o.quiet, "eq (16) fit");
+    let geometry = calib::fit_geometry(
+        &run,
+        initial,
+        h0,
+        0,
+        run.len() - 1,
+        calib::GeomOptions {
+            polish: o.polish,
+            ..Default::default()
+        },
+        &pb,
+    )?;
+    pb.finish_and_clear();
+    let (params, uncertainty) = if o.fit_delta {
+        let pb = bar(o.quiet, "uncertainty fit");
+        let u = calib::fit_uncertainty(
+            &run,
+            &geometry.params,
+            geometry.heading0,
+            initial,
+            o.delta_window,
+            o.reference_sigma,
+            o.delta_mode,
+            &pb,
+        )?;
+        pb.finish_and_clear();
+        (u.params, Some(u))
+    } else {
+        (geometry.params, None)
+    };
+    let evaluation = calib::evaluate(&run, &params, geometry.heading0)?;
+    let windows = if o.windows.is_empty() {
+        Vec::new()
+    } else {
+        if o.windows.iter().any(|l| l.is_nan() || *l <= 0.0) {
+            bail!("--windows: lengths must be positive metres");
+        }
+        let pb = bar(o.quiet, "sub-trajectories");
+        let w = calib::windows_study(&run, &geometry, initial, &o.windows, o.window_start, &pb)?;
+        pb.finish_and_clear();
+        w
+    };
+    Ok(Calibration {
+        params,
+        geometry,
+        uncertainty,
+        evaluation,
+        windows,
+    })
+}
+
+/// `odoctl calibrate`.
+pub fn calibrate(o: &CalibrateOptions) -> Result<ExitCode> {
+    let started = Instant::now();
+    let samples = csvio::read_samples(&o.samples)?;
+    let reference = csvio::read_reference(&o.reference)?;
+    let mut initial = match &o.initial {
+        Some(p) => cfg::read_params(p, ChassisParams::DESIGNED)?,
+        None => ChassisParams::DESIGNED,
+    };
+    cfg::apply_sets(&mut initial, &o.sets)?;
+    let initial = cfg::validated(initial, "initial estimate")?;
+    let names = (
+        o.samples.display().to_string(),
+        o.reference.display().to_string(),
+    );
+    let c = calibrate_run(&samples, &reference, (&names.0, &names.1), &initial, o)?;
+    let g = &c.geometry;
+    let ev = &c.evaluation;
+    let h = summarize(&ev.horizontal[1..]);
+    let (he, hs) = ev.heading_pairs();
+    let head = summarize(&he.iter().map(|e| e.abs()).collect::<Vec<_>>());
+    let cov1 = coverage(&ev.horizontal[1..], &ev.sigma_h[1..], 1.0);
+    let cov3 = coverage(&ev.horizontal[1..], &ev.sigma_h[1..], 3.0);
+
+    println!(
+        "calibration: {} common times, {:.1} m of reference path",
+        g.points + 1,
+        ev.dist.last().unwrap_or(&0.0)
+    );
+    println!("  {:<16} {:>14} {:>14}", "parameter", "initial", "estimate");
+    for (k, a, b) in [
+        (
+            "left_diameter",
+            initial.left_diameter,
+            c.params.left_diameter,
+        ),
+        (
+            "right_diameter",
+            initial.right_diameter,
+            c.params.right_diameter,
+        ),
+        ("track_width", initial.track_width, c.params.track_width),
+    ] {
+        println!("  {k:<16} {a:>14.6} {b:>14.6}");
+    }
+    println!(
+        "  {:<16} {:>14} {:>14.6}",
+        "initial heading", "", g.heading0
+    );
+    if let Some(u) = &c.uncertainty {
+        let (a, b) = match c.params.uncertainty_model {
+            crate::core_api::UncertaintyModel::Paper => (
+                (initial.delta_left, initial.delta_right),
+                (c.params.delta_left, c.params.delta_right),
+            ),
+            crate::core_api::UncertaintyModel::Covariance => (
+                (initial.kappa_left, initial.kappa_right),
+                (c.params.kappa_left, c.params.kappa_right),
+            ),
+        };
+        println!("  {:<16} {:>14.4e} {:>14.4e}", u.keys.0, a.0, b.0);
+        println!("  {:<16} {:>14.4e} {:>14.4e}", u.keys.1, a.1, b.1);
+        println!(
+            "uncertainty fit: {} sub-trajectories of {} m, {} points; 1-sigma band covers {:.1} % (target 68.3 %), 3-sigma {:.1} %",
+            u.windows,
+            o.delta_window,
+            u.points,
+            100.0 * u.coverage1,
+            100.0 * u.coverage3
+        );
+        if let Some(w) = &u.warning {
+            eprintln!("warning: uncertainty fit: {w}");
+        }
+    }
+    println!(
+        "eq (16): {:.6} m over {} points (mean {:.4} m); {} stages, {} iterations, {} integrator runs",
+        g.cost,
+        g.points,
+        g.cost / g.points as f64,
+        g.stages,
+        g.iterations,
+        g.evaluations
+    );
+    println!(
+        "horizontal error: mean {:.4} m, rms {:.4} m, p95 {:.4} m, max {:.4} m; within 1 sigma {:.1} %, 3 sigma {:.1} %",
+        h.mean,
+        h.rms,
+        h.p95,
+        h.max,
+        100.0 * cov1,
+        100.0 * cov3
+    );
+    if !he.is_empty() {
+        println!(
+            "heading error: mean |e| {:.3} deg, rms {:.3} deg, max {:.3} deg; within 1 sigma {:.1} %, 3 sigma {:.1} %",
+            head.mean.to_degrees(),
+            head.rms.to_degrees(),
+            head.max.to_degrees(),
+            100.0 * coverage(&he, &hs, 1.0),
+            100.0 * coverage(&he, &hs, 3.0)
+        );
+    }
+    if !c.windows.is_empty() {
+        print_window_stats(&c.windows);
+        if let Some(p) = &o.windows_out {
+            write_windows_csv(p, &c.windows)?;
+        }
+    }
+    if let Some(p) = &o.out {
+        let mut fit = vec![
+            ("samples", FitValue::Text(o.samples.display().to_string())),
+            (
+                "reference",
+                FitValue::Text(o.reference.display().to_string()),
+            ),
+            ("initial_x", FitValue::Num(ev.reference[0].0)),
+            ("initial_y", FitValue::Num(ev.reference[0].1)),
+            ("initial_heading", FitValue::Num(g.heading0)),
+            ("eq16_cost", FitValue::Num(g.cost)),
+            ("points", FitValue::Int(g.points as i64)),
+            (
+                "path_length",
+                FitValue::Num(*ev.dist.last().unwrap_or(&0.0)),
+            ),
+            ("horizontal_error_mean", FitValue::Num(h.mean)),
+            ("horizontal_error_rms", FitValue::Num(h.rms)),
+            ("horizontal_error_p95", FitValue::Num(h.p95)),
+            ("horizontal_error_max", FitValue::Num(h.max)),
+            ("coverage_1sigma", FitValue::Num(cov1)),
+            ("coverage_3sigma", FitValue::Num(cov3)),
+        ];
+        if !he.is_empty() {
+            fit.push(("heading_error_rms", FitValue::Num(head.rms)));
+            fit.push(("heading_error_max", FitValue::Num(head.max)));
+        }
+        if let Some(u) = &c.uncertainty {
+            fit.push((
+                "uncertainty_criterion",
+                FitValue::Text(format!(
+                    "1-sigma band sqrt(sigma_h^2 + reference_sigma^2) covers 68.27 % of horizontal errors on sub-trajectories restarted from the reference ({} mode)",
+                    match o.delta_mode {
+                        DeltaMode::Equal => "equal",
+                        DeltaMode::KeepRatio => "keep-ratio",
+                    }
+                )),
+            ));
+            fit.push(("uncertainty_window", FitValue::Num(o.delta_window)));
+            fit.push(("reference_sigma", FitValue::Num(o.reference_sigma)));
+            fit.push(("uncertainty_points", FitValue::Int(u.points as i64)));
+            fit.push(("uncertainty_coverage_1sigma", FitValue::Num(u.coverage1)));
+            fit.push(("uncertainty_coverage_3sigma", FitValue::Num(u.coverage3)));
+        }
+        let text = cfg::render_params(
+            &c.params,
+            "odoctl calibrate: chassis parameters estimated by eq (16) of Jilek, Burian, Kriz",
+            &fit,
+        );
+        std::fs::write(p, text).with_context(|| format!("{}: cannot write", p.display()))?;
+        println!("wrote {}", p.display());
+    }
+    if let Some(dir) = &o.plots {
+        let mut files = crate::plots::run_figures(dir, "calibrate", "Estimation run", ev)?;
+        if !c.windows.is_empty() {
+            let full = [
+                g.params.left_diameter,
+                g.params.right_diameter,
+                g.params.track_width,
+            ];
+            files.extend(crate::plots::window_figures(dir, &c.windows, full)?);
+        }
+        for f in files {
+            println!("wrote {}", f.display());
+        }
+    }
+    println!("done in {:.2} s", started.elapsed().as_secs_f64());
+    Ok(ExitCode::SUCCESS)
+}
+
+fn print_window_stats(est: &[calib::WindowEstimate]) {
+    let mut lengths: Vec<f64> = est.iter().map(|e| e.length).collect();
+    lengths.sort_by(f64::total_cmp);
+    lengths.dedup();
+    println!("stability study (estimates on consecutive sub-trajectories):");
+    println!(
+        "  {:>6} {:>5} {:>5}  {:<15} {:>10} {:>10} {:>10} {:>10} {:>10}",
+        "length", "fits", "fail", "parameter", "mean", "std", "median", "min", "max"
+    );
+    for l in lengths {
+        let all: Vec<&calib::WindowEstimate> = est.iter().filter(|e| e.length == l).collect();
+        let ok: Vec<[f64; 4]> = all
+            .iter()
+            .filter_map(|e| e.estimate.as_ref().ok().copied())
+            .collect();
+        for (p, name) in ["left_diameter", "right_diameter", "track_width"]
+            .iter()
+            .enumerate()
+        {
+            let s = summarize(&ok.iter().map(|v| v[p]).collect::<Vec<_>>());
+            let head = if p == 0 {
+                format!("{:>5} m {:>5} {:>5}", l, ok.len(), all.len() - ok.len())
+            } else {
+                format!("{:>7} {:>5} {:>5}", "", "", "")
+            };
+            println!(
+                "  {head}  {name:<15} {:>10.5} {:>10.5} {:>10.5} {:>10.5} {:>10.5}",
+                s.mean, s.std, s.median, s.min, s.max
+            );
+        }
+    }
+}
+
+fn write_windows_csv(path: &Path, est: &[calib::WindowEstimate]) -> Result<()> {
+    let mut w = create(path)?;
+    writeln!(
+        w,
+        "length,start_dist,t_start,t_end,points,turning,left_diameter,right_diameter,track_width,initial_heading,mean_error,error"
+    )?;
+    for e in est {
+        let (v, err) = match &e.estimate {
+            Ok(v) => (v.map(|x| format!("{x:?}")).join(","), String::new()),
+            Err(s) => (",,,".to_string(), s.replace(',', ";")),
+        };
+        writeln!(
+            w,
+            "{},{:.3},{},{},{},{:.6},{},{:?},{}",
+            e.length,
+            e.start_dist,
+            csvio::fmt_t(e.t.0),
+            csvio::fmt_t(e.t.1),
+            e.points,
+            e.turning,
+            v,
+            e.mean_error,
+            err
+        )?;
+    }
+    w.flush()?;
+    Ok(())
+}
+
+/// `odoctl validate`.
+pub fn validate(
+    samples_path: &Path,
+    reference_path: &Path,
+    config: Option<&Path>,
+    sets: &[String],
+    heading: Option<f64>,
+    errors: Option<&Path>,
+    plots: Option<&Path>,
+) -> Result<ExitCode> {
+    let params = cfg::load(config, sets)?;
+    let samples = csvio::read_samples(samples_path)?;
+    let reference = csvio::read_reference(reference_path)?;
+    let matches = csvio::match_or_fail(
+        &samples,
+        &samples_path.display().to_string(),
+        &reference,
+        &reference_path.display().to_string(),
+        2,
+    )?;
+    let run = Run::new(&samples, &reference, matches);
+    let last = run.len() - 1;
+    let h0 = match heading {
+        Some(h) => h,
+        None => calib::fit_heading(&run, &params, 0, last, run.heading_guess(0))?,
+    };
+    let ev = calib::evaluate(&run, &params, h0)?;
+    let report = validation_report(&ev);
+    println!(
+        "validation: {} common times, {:.1} m of reference path, initial heading {:.6} rad ({})",
+        run.len(),
+        ev.dist.last().unwrap_or(&0.0),
+        h0,
+        if heading.is_some() {
+            "given"
+        } else {
+            "fitted by eq (16)"
+        }
+    );
+    print!("{report}");
+    if let Some(p) = errors {
+        let mut w = create(p)?;
+        writeln!(
+            w,
+            "t,dist,x,y,x_ref,y_ref,horizontal_error,sigma_h,heading,heading_error,sigma_heading"
+        )?;
+        for i in 0..ev.t.len() {
+            writeln!(
+                w,
+                "{},{:.4},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{},{:?}",
+                csvio::fmt_t(ev.t[i]),
+                ev.dist[i],
+                ev.odo[i].0,
+                ev.odo[i].1,
+                ev.reference[i].0,
+                ev.reference[i].1,
+                ev.horizontal[i],
+                ev.sigma_h[i],
+                ev.heading[i],
+                ev.heading_err[i]
+                    .map(|e| format!("{e:?}"))
+                    .unwrap_or_default(),
+                ev.sigma_heading[i]
+            )?;
+        }
+        w.flush()?;
+    }
+    if let Some(dir) = plots {
+        for f in crate::plots::run_figures(dir, "validate", "Validation run", &ev)? {
+            println!("wrote {}", f.display());
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The text table of `validate`: error statistics and band coverage.
+pub fn validation_report(ev: &calib::Evaluation) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::new();
+    let e = &ev.horizontal[1..];
+    let sh = &ev.sigma_h[1..];
+    let h = summarize(e);
+    let _ = writeln!(
+        s,
+        "  {:<22} {:>10} {:>10} {:>10} {:>10} {:>10} {:>9} {:>9}",
+        "", "mean", "rms", "median", "p95", "max", "in 1sig", "in 3sig"
+    );
+    let _ = writeln!(
+        s,
+        "  {:<22} {:>10.4} {:>10.4} {:>10.4} {:>10.4} {:>10.4} {:>8.1}% {:>8.1}%",
+        "horizontal error [m]",
+        h.mean,
+        h.rms,
+        h.median,
+        h.p95,
+        h.max,
+        100.0 * coverage(e, sh, 1.0),
+        100.0 * coverage(e, sh, 3.0)
+    );
+    let (he, hs) = ev.heading_pairs();
+    if he.len() > 1 {
+        let abs: Vec<f64> = he[1..].iter().map(|v| v.abs().to_degrees()).collect();
+        let a = summarize(&abs);
+        let _ = writeln!(
+            s,
+            "  {:<22} {:>10.4} {:>10.4} {:>10.4} {:>10.4} {:>10.4} {:>8.1}% {:>8.1}%",
+            "|heading error| [deg]",
+            a.mean,
+            a.rms,
+            a.median,
+            a.p95,
+            a.max,
+            100.0 * coverage(&he[1..], &hs[1..], 1.0),
+            100.0 * coverage(&he[1..], &hs[1..], 3.0)
+        );
+    }
+    let fin = e.last().copied().unwrap_or(f64::NAN);
+    let _ = writeln!(
+        s,
+        "  final horizontal error {:.4} m with sigma_h {:.4} m; nominal coverage of a normal error: 68.3 % (1 sigma), 99.7 % (3 sigma)",
+        fin,
+        sh.last().copied().unwrap_or(f64::NAN)
+    );
+    s
+}
+
+/// Helper for errors about files.
+pub fn file_err(path: &Path, e: impl std::fmt::Display) -> anyhow::Error {
+    anyhow!("{}: {e}", path.display())
+}

@@ -1,0 +1,535 @@
+//! The SAMPLES and REFERENCE CSV files (formats fixed by issue 5; other tools depend on them).
+//!
+//! * SAMPLES: header row; columns `t` (s), `left`, `right` (absolute increment counts of wheel
+//!   1 and 2, integers); optional `left_index`, `right_index` (counts latched at each wheel's
+//!   last index pulse, empty when unknown) and the unit's own record (`seq`, `x`, `y`,
+//!   `heading`, `sigma_x`, `sigma_y`, `sigma_heading`, `sigma_xy`, `flags`); other columns are
+//!   ignored. The first row is the starting point; each later row integrates the counts since
+//!   the previous row.
+//! * REFERENCE: header row; `t`, `x`, `y` (m, x east, y north), optional `heading` (rad,
+//!   clockwise from +y). Rows are matched to samples by equal `t` within [`MATCH_TOLERANCE`].
+//!
+//! Columns are found by their header name, in any order. Blank lines and lines starting with
+//! `#` are skipped. Time must increase strictly from row to row. Every error names the file and
+//! the line.
+
+use std::fmt::Write as _;
+use std::io::Write;
+use std::path::Path;
+
+use anyhow::{anyhow, bail, Context, Result};
+
+/// Samples and reference points are matched when their times differ by at most this (s).
+pub const MATCH_TOLERANCE: f64 = 1.0e-3;
+
+/// The unit's own pose record carried in a SAMPLES row (as `record` writes it).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct UnitPose {
+    /// Sequence number of the record, when known.
+    pub seq: Option<u64>,
+    /// x (m, east).
+    pub x: f64,
+    /// y (m, north).
+    pub y: f64,
+    /// Heading (rad, clockwise from +y, cumulative).
+    pub heading: f64,
+    /// sigma of x (m).
+    pub sigma_x: f32,
+    /// sigma of y (m).
+    pub sigma_y: f32,
+    /// sigma of the heading (rad).
+    pub sigma_heading: f32,
+    /// Signed x-y covariance term as the unit sends it (m), 0 when absent.
+    pub sigma_xy: f32,
+}
+
+/// One SAMPLES row.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Sample {
+    /// Sample time (s).
+    pub t: f64,
+    /// Absolute increment count of wheel 1 (left).
+    pub left: i64,
+    /// Absolute increment count of wheel 2 (right).
+    pub right: i64,
+    /// Count latched at the left wheel's last index pulse.
+    pub left_index: Option<i64>,
+    /// Count latched at the right wheel's last index pulse.
+    pub right_index: Option<i64>,
+    /// Status flags of the record, when present.
+    pub flags: Option<u64>,
+    /// The unit's own pose, when the file carries it.
+    pub unit: Option<UnitPose>,
+}
+
+/// One REFERENCE row.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct RefPoint {
+    /// Time (s).
+    pub t: f64,
+    /// x (m, east).
+    pub x: f64,
+    /// y (m, north).
+    pub y: f64,
+    /// Heading (rad, clockwise from +y), when the reference has one.
+    pub heading: Option<f64>,
+}
+
+/// A parsed CSV table: header and rows with their 1-based line numbers.
+struct Table<'a> {
+    file: &'a str,
+    header_line: usize,
+    columns: Vec<String>,
+    rows: Vec<(usize, Vec<&'a str>)>,
+}
+
+impl<'a> Table<'a> {
+    fn parse(file: &'a str, text: &'a str) -> Result<Self> {
+        let mut header: Option<(usize, Vec<String>)> = None;
+        let mut rows = Vec::new();
+        for (i, line) in text.lines().enumerate() {
+            let lineno = i + 1;
+            let line = line.trim_end_matches('\r');
+            if line.trim().is_empty() || line.trim_start().starts_with('#') {
+                continue;
+            }
+            let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+            match &header {
+                None => {
+                    let cols: Vec<String> = fields
+                        .iter()
+                        .map(|f| f.trim_matches('"').to_string())
+                        .collect();
+                    header = Some((lineno, cols));
+                }
+                Some((_, cols)) => {
+                    if fields.len() != cols.len() {
+                        bail!(
+                            "{file}:{lineno}: {} fields, but the header has {} columns",
+                            fields.len(),
+                            cols.len()
+                        );
+                    }
+                    rows.push((lineno, fields));
+                }
+            }
+        }
+        let (header_line, columns) =
+            header.ok_or_else(|| anyhow!("{file}: empty file (no header row)"))?;
+        if rows.is_empty() {
+            bail!("{file}:{header_line}: no data rows after the header");
+        }
+        Ok(Self {
+            file,
+            header_line,
+            columns,
+            rows,
+        })
+    }
+
+    fn column(&self, name: &str) -> Option<usize> {
+        self.columns.iter().position(|c| c == name)
+    }
+
+    fn required(&self, name: &str) -> Result<usize> {
+        self.column(name).ok_or_else(|| {
+            anyhow!(
+                "{}:{}: missing column `{name}` (header has: {})",
+                self.file,
+                self.header_line,
+                self.columns.join(",")
+            )
+        })
+    }
+}
+
+fn field_err(file: &str, line: usize, col: &str, value: &str, what: &str) -> anyhow::Error {
+    anyhow!("{file}:{line}: column `{col}`: `{value}` is not {what}")
+}
+
+fn parse_f64(file: &str, line: usize, col: &str, v: &str) -> Result<f64> {
+    let x: f64 = v
+        .parse()
+        .map_err(|_| field_err(file, line, col, v, "a number"))?;
+    if !x.is_finite() {
+        return Err(field_err(file, line, col, v, "a finite number"));
+    }
+    Ok(x)
+}
+
+fn parse_f32(file: &str, line: usize, col: &str, v: &str) -> Result<f32> {
+    let x: f32 = v
+        .parse()
+        .map_err(|_| field_err(file, line, col, v, "a number"))?;
+    if !x.is_finite() {
+        return Err(field_err(file, line, col, v, "a finite number"));
+    }
+    Ok(x)
+}
+
+fn parse_i64(file: &str, line: usize, col: &str, v: &str) -> Result<i64> {
+    v.parse()
+        .map_err(|_| field_err(file, line, col, v, "an integer"))
+}
+
+fn parse_u64(file: &str, line: usize, col: &str, v: &str) -> Result<u64> {
+    let v2 = v.trim_start_matches("0x");
+    if v2.len() != v.len() {
+        return u64::from_str_radix(v2, 16)
+            .map_err(|_| field_err(file, line, col, v, "a hexadecimal integer"));
+    }
+    v.parse()
+        .map_err(|_| field_err(file, line, col, v, "a non-negative integer"))
+}
+
+fn opt<T>(v: &str, f: impl FnOnce(&str) -> Result<T>) -> Result<Option<T>> {
+    if v.is_empty() {
+        Ok(None)
+    } else {
+        f(v).map(Some)
+    }
+}
+
+fn check_time(file: &str, line: usize, t: f64, prev: Option<f64>) -> Result<()> {
+    if let Some(p) = prev {
+        if t <= p {
+            bail!("{file}:{line}: time {t} is not after the previous row's time {p} (time must increase)");
+        }
+    }
+    Ok(())
+}
+
+fn read_text(path: &Path) -> Result<String> {
+    std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))
+}
+
+/// Parses a SAMPLES CSV text; `file` names it in errors.
+pub fn parse_samples(file: &str, text: &str) -> Result<Vec<Sample>> {
+    let table = Table::parse(file, text)?;
+    let ct = table.required("t")?;
+    let cl = table.required("left")?;
+    let cr = table.required("right")?;
+    let cli = table.column("left_index");
+    let cri = table.column("right_index");
+    let cflags = table.column("flags");
+    let cseq = table.column("seq");
+    let pose_cols =
+        ["x", "y", "heading", "sigma_x", "sigma_y", "sigma_heading"].map(|c| table.column(c));
+    let has_pose = pose_cols.iter().all(Option::is_some);
+    let cxy = table.column("sigma_xy");
+    let mut out = Vec::with_capacity(table.rows.len());
+    let mut prev = None;
+    for (line, f) in &table.rows {
+        let line = *line;
+        let t = parse_f64(file, line, "t", f[ct])?;
+        check_time(file, line, t, prev)?;
+        prev = Some(t);
+        let mut s = Sample {
+            t,
+            left: parse_i64(file, line, "left", f[cl])?,
+            right: parse_i64(file, line, "right", f[cr])?,
+            ..Sample::default()
+        };
+        if let Some(c) = cli {
+            s.left_index = opt(f[c], |v| parse_i64(file, line, "left_index", v))?;
+        }
+        if let Some(c) = cri {
+            s.right_index = opt(f[c], |v| parse_i64(file, line, "right_index", v))?;
+        }
+        if let Some(c) = cflags {
+            s.flags = opt(f[c], |v| parse_u64(file, line, "flags", v))?;
+        }
+        if has_pose {
+            let g = |i: usize| f[pose_cols[i].expect("checked")];
+            if !g(0).is_empty() {
+                s.unit = Some(UnitPose {
+                    seq: match cseq {
+                        Some(c) => opt(f[c], |v| parse_u64(file, line, "seq", v))?,
+                        None => None,
+                    },
+                    x: parse_f64(file, line, "x", g(0))?,
+                    y: parse_f64(file, line, "y", g(1))?,
+                    heading: parse_f64(file, line, "heading", g(2))?,
+                    sigma_x: parse_f32(file, line, "sigma_x", g(3))?,
+                    sigma_y: parse_f32(file, line, "sigma_y", g(4))?,
+                    sigma_heading: parse_f32(file, line, "sigma_heading", g(5))?,
+                    sigma_xy: match cxy {
+                        Some(c) => {
+                            opt(f[c], |v| parse_f32(file, line, "sigma_xy", v))?.unwrap_or(0.0)
+                        }
+                        None => 0.0,
+                    },
+                });
+            }
+        }
+        out.push(s);
+    }
+    Ok(out)
+}
+
+/// Reads a SAMPLES CSV file.
+pub fn read_samples(path: &Path) -> Result<Vec<Sample>> {
+    parse_samples(&path.display().to_string(), &read_text(path)?)
+}
+
+/// Parses a REFERENCE CSV text; `file` names it in errors.
+pub fn parse_reference(file: &str, text: &str) -> Result<Vec<RefPoint>> {
+    let table = Table::parse(file, text)?;
+    let ct = table.required("t")?;
+    let cx = table.required("x")?;
+    let cy = table.required("y")?;
+    let ch = table.column("heading");
+    let mut out = Vec::with_capacity(table.rows.len());
+    let mut prev = None;
+    for (line, f) in &table.rows {
+        let line = *line;
+        let t = parse_f64(file, line, "t", f[ct])?;
+        check_time(file, line, t, prev)?;
+        prev = Some(t);
+        out.push(RefPoint {
+            t,
+            x: parse_f64(file, line, "x", f[cx])?,
+            y: parse_f64(file, line, "y", f[cy])?,
+            heading: match ch {
+                Some(c) => opt(f[c], |v| parse_f64(file, line, "heading", v))?,
+                None => None,
+            },
+        });
+    }
+    Ok(out)
+}
+
+/// Reads a REFERENCE CSV file.
+pub fn read_reference(path: &Path) -> Result<Vec<RefPoint>> {
+    parse_reference(&path.display().to_string(), &read_text(path)?)
+}
+
+/// Pairs of (sample index, reference index) with equal times (within [`MATCH_TOLERANCE`]),
+/// in increasing order; each sample is paired with its nearest reference point.
+pub fn match_times(samples: &[Sample], reference: &[RefPoint]) -> Vec<(usize, usize)> {
+    let mut out = Vec::new();
+    let mut j = 0;
+    for (i, s) in samples.iter().enumerate() {
+        while j + 1 < reference.len() && reference[j + 1].t <= s.t {
+            j += 1;
+        }
+        let mut best: Option<usize> = None;
+        for k in [j, j + 1] {
+            if k < reference.len() && (reference[k].t - s.t).abs() <= MATCH_TOLERANCE {
+                best = match best {
+                    Some(b) if (reference[b].t - s.t).abs() <= (reference[k].t - s.t).abs() => {
+                        Some(b)
+                    }
+                    _ => Some(k),
+                };
+            }
+        }
+        if let Some(b) = best {
+            out.push((i, b));
+        }
+    }
+    out
+}
+
+/// Like [`match_times`], but fails with a message naming both files when fewer than `min`
+/// pairs exist.
+pub fn match_or_fail(
+    samples: &[Sample],
+    samples_file: &str,
+    reference: &[RefPoint],
+    reference_file: &str,
+    min: usize,
+) -> Result<Vec<(usize, usize)>> {
+    let m = match_times(samples, reference);
+    if m.len() < min {
+        bail!(
+            "{samples_file} and {reference_file}: {} common times (within {} ms) but at least {min} are needed \
+             (samples span {:.3}..{:.3} s, reference {:.3}..{:.3} s)",
+            m.len(),
+            MATCH_TOLERANCE * 1e3,
+            samples.first().map_or(f64::NAN, |s| s.t),
+            samples.last().map_or(f64::NAN, |s| s.t),
+            reference.first().map_or(f64::NAN, |s| s.t),
+            reference.last().map_or(f64::NAN, |s| s.t),
+        );
+    }
+    Ok(m)
+}
+
+/// Formats a time stamp: fixed 6 decimals (microseconds).
+pub fn fmt_t(t: f64) -> String {
+    format!("{t:.6}")
+}
+
+/// Writes SAMPLES CSV (with index columns, and the unit's pose columns when `with_pose`).
+pub fn write_samples(w: &mut dyn Write, samples: &[Sample], with_pose: bool) -> Result<()> {
+    let mut buf = String::from("t,left,right,left_index,right_index");
+    if with_pose {
+        buf.push_str(",seq,x,y,heading,sigma_x,sigma_y,sigma_heading,sigma_xy,flags");
+    }
+    buf.push('\n');
+    for s in samples {
+        buf.clear_if_large(w)?;
+        let o = |v: Option<i64>| v.map(|v| v.to_string()).unwrap_or_default();
+        let _ = write!(
+            buf,
+            "{},{},{},{},{}",
+            fmt_t(s.t),
+            s.left,
+            s.right,
+            o(s.left_index),
+            o(s.right_index)
+        );
+        if with_pose {
+            match &s.unit {
+                Some(u) => {
+                    let _ = write!(
+                        buf,
+                        ",{},{},{},{},{},{},{},{},{}",
+                        u.seq.map(|v| v.to_string()).unwrap_or_default(),
+                        u.x,
+                        u.y,
+                        u.heading,
+                        u.sigma_x,
+                        u.sigma_y,
+                        u.sigma_heading,
+                        u.sigma_xy,
+                        s.flags.map(|v| v.to_string()).unwrap_or_default()
+                    );
+                }
+                None => buf.push_str(",,,,,,,,,"),
+            }
+        }
+        buf.push('\n');
+    }
+    w.write_all(buf.as_bytes())?;
+    Ok(())
+}
+
+/// Writes REFERENCE CSV (`t,x,y[,heading]`).
+pub fn write_reference(w: &mut dyn Write, reference: &[RefPoint]) -> Result<()> {
+    let with_heading = reference.iter().any(|r| r.heading.is_some());
+    let mut buf = String::from(if with_heading {
+        "t,x,y,heading\n"
+    } else {
+        "t,x,y\n"
+    });
+    for r in reference {
+        buf.clear_if_large(w)?;
+        let _ = write!(buf, "{},{},{}", fmt_t(r.t), r.x, r.y);
+        if with_heading {
+            let _ = write!(
+                buf,
+                ",{}",
+                r.heading.map(|h| h.to_string()).unwrap_or_default()
+            );
+        }
+        buf.push('\n');
+    }
+    w.write_all(buf.as_bytes())?;
+    Ok(())
+}
+
+/// Flushes a text buffer to a writer when it grows large.
+trait Flush {
+    fn clear_if_large(&mut self, w: &mut dyn Write) -> Result<()>;
+}
+
+impl Flush for String {
+    fn clear_if_large(&mut self, w: &mut dyn Write) -> Result<()> {
+        if self.len() > 1 << 16 {
+            w.write_all(self.as_bytes())?;
+            self.clear();
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn samples_parse_and_errors() {
+        let ok = "t,left,right,left_index\n0.0,0,0,\n0.02,10,-3,5\n";
+        let s = parse_samples("s.csv", ok).unwrap();
+        assert_eq!(s.len(), 2);
+        assert_eq!(s[1].right, -3);
+        assert_eq!(s[1].left_index, Some(5));
+        assert_eq!(s[0].left_index, None);
+
+        let e = parse_samples("s.csv", "t,left\n0,0\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("s.csv:1") && e.contains("`right`"), "{e}");
+        let e = parse_samples("s.csv", "t,left,right\n0,0,0\n0.02,x,0\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("s.csv:3") && e.contains("`left`"), "{e}");
+        let e = parse_samples("s.csv", "t,left,right\n0,0,0\n# c\n\n0,1,1\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("s.csv:5") && e.contains("increase"), "{e}");
+        let e = parse_samples("s.csv", "t,left,right\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("no data rows"), "{e}");
+        let e = parse_samples("s.csv", "t,left,right\n0,1\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("s.csv:2"), "{e}");
+    }
+
+    #[test]
+    fn reference_and_matching() {
+        let r = parse_reference(
+            "r.csv",
+            "t,x,y,heading\n0.0005,1,2,0.1\n0.02,1,2,\n0.1,0,0,0\n",
+        )
+        .unwrap();
+        assert_eq!(r[1].heading, None);
+        let s = parse_samples(
+            "s.csv",
+            "t,left,right\n0,0,0\n0.02,0,0\n0.04,0,0\n0.1009,0,0\n",
+        )
+        .unwrap();
+        assert_eq!(match_times(&s, &r), vec![(0, 0), (1, 1), (3, 2)]);
+        let e = parse_reference("r.csv", "t,x,y\n0,1,nan\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("r.csv:2") && e.contains("`y`"), "{e}");
+    }
+
+    #[test]
+    fn roundtrip() {
+        let s = vec![
+            Sample {
+                t: 0.0,
+                left: 1,
+                right: 2,
+                ..Default::default()
+            },
+            Sample {
+                t: 0.02,
+                left: 3,
+                right: 4,
+                left_index: Some(7),
+                flags: Some(3),
+                unit: Some(UnitPose {
+                    seq: Some(9),
+                    x: 0.1,
+                    y: -1.0 / 3.0,
+                    heading: 1e-300,
+                    sigma_x: 1.5e-7,
+                    ..Default::default()
+                }),
+                ..Default::default()
+            },
+        ];
+        let mut out = Vec::new();
+        write_samples(&mut out, &s, true).unwrap();
+        let back = parse_samples("x", std::str::from_utf8(&out).unwrap()).unwrap();
+        assert_eq!(back[1], s[1]);
+        assert_eq!(back[0].unit, None);
+    }
+}

@@ -1,0 +1,20 @@
+//! `odoctl`, the host tool of the odometry unit: live stream and configuration over a serial
+//! port or TCP (QEMU), replay of recorded counts through the core integrator, simulation, and
+//! the paper's calibration against an RTK GNSS reference (Jilek, Burian, Kriz).
+//!
+//! The library holds everything the binary does, so the tests can reach it; the odometry
+//! itself is always `odo_core`'s integrator, never a copy.
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod calib;
+pub mod commands;
+pub mod config;
+pub mod core_api;
+pub mod csvio;
+pub mod link;
+pub mod optim;
+pub mod plots;
+pub mod replay;
+pub mod simulate;
+pub mod stats;

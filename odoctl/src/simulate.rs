@@ -1,0 +1,332 @@
+//! A synthetic run with known true parameters, for demos and tests.
+//!
+//! The plant (not the integrator): the chassis centre follows a path of straights, arcs and
+//! turns on the spot at a constant speed; its true motion is integrated exactly (constant
+//! curvature per 1 ms sub-step) in f64. Each wheel's contact point travels
+//! `ds = v dt +- omega w/2 dt` (left = wheel 1 is the outer wheel of a clockwise turn), and the
+//! wheel *turns* by `ds (1 + eps) / (pi D)`, where `eps` is that wheel's slip: a Gauss-Markov
+//! process over the distance the wheel rolls (standard deviation `slip`, correlation length
+//! `slip_corr` metres), independent between the wheels. The encoder counts are the floor of the
+//! accumulated turn times `ticks_per_rev`, from an arbitrary offset; the index count is the
+//! count at the last whole turn past an arbitrary index phase. SAMPLES rows are taken at
+//! `rate` Hz; REFERENCE rows at the same times carry the true centre position plus normal
+//! noise of `rtk_sigma / sqrt 2` per axis (so `rtk_sigma` is the horizontal RMS, 8 mm for the
+//! BD982) and the true heading plus normal noise of `heading_sigma`, wrapped to (-pi, pi].
+//!
+//! Deterministic: a seeded xoshiro256** generator (Box-Muller normals), no dependency.
+
+use std::f64::consts::PI;
+
+use crate::core_api::ChassisParams;
+use crate::csvio::{RefPoint, Sample};
+
+/// A piece of the path.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Segment {
+    /// Stand still for this many seconds.
+    Stop(f64),
+    /// Straight ahead for this many metres.
+    Straight(f64),
+    /// Arc of this radius (m) through this heading change (rad, positive clockwise).
+    Arc(f64, f64),
+    /// Turn on the spot by this heading change (rad, positive clockwise).
+    Spin(f64),
+}
+
+/// Built-in paths.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum PathKind {
+    /// About 70 m: long straights, arcs of 1.5-4 m radius both ways, one turn on the spot
+    /// (like the paper's estimation trajectory, Fig. 4).
+    Estimation,
+    /// About 40 m with a higher heading change per metre: slaloms and tight loops (like the
+    /// paper's validation trajectory, Fig. 10).
+    Validation,
+    /// Random straights and arcs (seeded).
+    Random,
+}
+
+/// The segments of a built-in path, scaled so the centre travels about `length` metres (the
+/// turning angles are kept).
+pub fn path(kind: PathKind, length: f64, rng: &mut Rng) -> Vec<Segment> {
+    use Segment::*;
+    let d = PI / 180.0;
+    let base: Vec<Segment> = match kind {
+        PathKind::Estimation => vec![
+            Straight(8.0),
+            Arc(3.0, 90.0 * d),
+            Straight(6.0),
+            Arc(2.0, -120.0 * d),
+            Straight(5.0),
+            Arc(1.5, 150.0 * d),
+            Straight(7.0),
+            Spin(-90.0 * d),
+            Straight(4.0),
+            Arc(4.0, -60.0 * d),
+            Straight(6.0),
+            Arc(2.5, 200.0 * d),
+            Straight(5.0),
+        ],
+        PathKind::Validation => vec![
+            Straight(3.0),
+            Arc(1.0, 180.0 * d),
+            Arc(1.0, -180.0 * d),
+            Straight(2.0),
+            Arc(0.8, 270.0 * d),
+            Straight(3.0),
+            Arc(1.2, -360.0 * d),
+            Straight(2.0),
+            Spin(135.0 * d),
+            Arc(1.5, -90.0 * d),
+            Straight(4.0),
+            Arc(0.7, 180.0 * d),
+            Arc(0.7, -180.0 * d),
+            Straight(3.0),
+        ],
+        PathKind::Random => {
+            let mut v = Vec::new();
+            let mut total = 0.0;
+            while total < length {
+                let l = 1.0 + 5.0 * rng.uniform();
+                v.push(Straight(l));
+                let r = 0.7 + 3.0 * rng.uniform();
+                let a = (rng.uniform() * 2.0 - 1.0) * PI;
+                v.push(Arc(r, a));
+                total += l + r * a.abs();
+            }
+            return v;
+        }
+    };
+    let natural: f64 = base.iter().map(seg_length).sum();
+    let k = if length > 0.0 { length / natural } else { 1.0 };
+    base.into_iter()
+        .map(|s| match s {
+            Straight(l) => Straight(l * k),
+            Arc(r, a) => Arc(r * k, a),
+            other => other,
+        })
+        .collect()
+}
+
+fn seg_length(s: &Segment) -> f64 {
+    match *s {
+        Segment::Straight(l) => l,
+        Segment::Arc(r, a) => r * a.abs(),
+        _ => 0.0,
+    }
+}
+
+/// Options of [`simulate`].
+#[derive(Debug, Clone)]
+pub struct SimOptions {
+    /// True chassis parameters.
+    pub truth: ChassisParams,
+    /// The path.
+    pub segments: Vec<Segment>,
+    /// Sample rate (Hz).
+    pub rate: f64,
+    /// Centre speed on straights and arcs; wheel speed on spins (m/s).
+    pub speed: f64,
+    /// Slip: standard deviation of the relative wheel-turn error.
+    pub slip: f64,
+    /// Correlation length of the slip (m of wheel travel).
+    pub slip_corr: f64,
+    /// Horizontal RMS noise of the reference position (m).
+    pub rtk_sigma: f64,
+    /// Noise of the reference heading (rad); `None` writes no heading column.
+    pub heading_sigma: Option<f64>,
+    /// Initial pose (x, y, heading).
+    pub start: (f64, f64, f64),
+    /// Seed of the generator.
+    pub seed: u64,
+}
+
+/// The simulated run.
+#[derive(Debug, Clone)]
+pub struct SimRun {
+    /// SAMPLES rows.
+    pub samples: Vec<Sample>,
+    /// REFERENCE rows (noisy).
+    pub reference: Vec<RefPoint>,
+    /// True centre pose at each sample (x, y, cumulative heading).
+    pub truth: Vec<(f64, f64, f64)>,
+}
+
+/// Runs the plant. Stand-stills of 1 s open and close the run.
+pub fn simulate(o: &SimOptions) -> SimRun {
+    let mut rng = Rng::new(o.seed);
+    let sub: u32 = 20; // sub-steps per sample
+    let dt = 1.0 / (o.rate * f64::from(sub));
+    let w = o.truth.track_width;
+    let p = f64::from(o.truth.ticks_per_rev);
+    let (mut x, mut y, mut h) = o.start;
+    // Wheel turns in increments, from arbitrary offsets; index phases arbitrary.
+    let mut turn = [1234.25, -777.5];
+    let index_phase = [(rng.uniform() * p).floor(), (rng.uniform() * p).floor()];
+    let mut index: [Option<i64>; 2] = [None, None];
+    let diam = [o.truth.left_diameter, o.truth.right_diameter];
+    let mut eps = [rng.normal() * o.slip, rng.normal() * o.slip];
+    let mut samples = Vec::new();
+    let mut reference = Vec::new();
+    let mut truth = Vec::new();
+    let mut n: u64 = 0;
+    let mut plan: Vec<Segment> = vec![Segment::Stop(1.0)];
+    plan.extend(o.segments.iter().copied());
+    plan.push(Segment::Stop(1.0));
+    // Per segment: duration and the constant (v, omega).
+    let mut motions: Vec<(f64, f64, f64)> = Vec::new();
+    for s in &plan {
+        match *s {
+            Segment::Stop(t) => motions.push((t, 0.0, 0.0)),
+            Segment::Straight(l) => motions.push((l.abs() / o.speed, o.speed * l.signum(), 0.0)),
+            Segment::Arc(r, a) => {
+                let t = r * a.abs() / o.speed;
+                motions.push((t, o.speed, a / t));
+            }
+            Segment::Spin(a) => {
+                let t = (a.abs() * w / 2.0) / o.speed;
+                motions.push((t, 0.0, a / t));
+            }
+        }
+    }
+    let total: f64 = motions.iter().map(|m| m.0).sum();
+    let steps = (total / dt).ceil() as u64;
+    let mut seg = 0;
+    let mut seg_end = motions[0].0;
+    let mut record = |n: u64,
+                      x: f64,
+                      y: f64,
+                      h: f64,
+                      turn: &[f64; 2],
+                      index: &[Option<i64>; 2],
+                      rng: &mut Rng| {
+        let t = n as f64 / o.rate;
+        let c = [turn[0].floor() as i64, turn[1].floor() as i64];
+        samples.push(Sample {
+            t,
+            left: c[0],
+            right: c[1],
+            left_index: index[0],
+            right_index: index[1],
+            ..Sample::default()
+        });
+        let s = o.rtk_sigma / 2f64.sqrt();
+        reference.push(RefPoint {
+            t,
+            x: x + s * rng.normal(),
+            y: y + s * rng.normal(),
+            heading: o
+                .heading_sigma
+                .map(|hs| crate::stats::wrap_angle(h + hs * rng.normal())),
+        });
+        truth.push((x, y, h));
+    };
+    record(n, x, y, h, &turn, &index, &mut rng);
+    for i in 0..steps {
+        let t = i as f64 * dt;
+        while t >= seg_end && seg + 1 < motions.len() {
+            seg += 1;
+            seg_end += motions[seg].0;
+        }
+        let (_, v, om) = motions[seg];
+        let ds = v * dt;
+        let da = om * dt;
+        // Exact constant-curvature motion of the centre.
+        let chord = if da.abs() > 1e-12 {
+            ds * 2.0 / da * (da / 2.0).sin()
+        } else {
+            ds
+        };
+        let mid = h + da / 2.0;
+        x += chord * mid.sin();
+        y += chord * mid.cos();
+        h += da;
+        let wheel = [ds + da * w / 2.0, ds - da * w / 2.0];
+        for j in 0..2 {
+            let rolled = wheel[j].abs();
+            if o.slip > 0.0 && rolled > 0.0 {
+                let rho = if o.slip_corr > 0.0 {
+                    (-rolled / o.slip_corr).exp()
+                } else {
+                    0.0
+                };
+                eps[j] = rho * eps[j] + (1.0 - rho * rho).sqrt() * o.slip * rng.normal();
+            }
+            let before = turn[j];
+            turn[j] += wheel[j] * (1.0 + eps[j]) / (PI * diam[j]) * p;
+            // The index line fires where the turn passes index_phase + k P; the counter
+            // latched there reads exactly that count.
+            let (k0, k1) = (
+                ((before - index_phase[j]) / p).floor(),
+                ((turn[j] - index_phase[j]) / p).floor(),
+            );
+            if k0 != k1 {
+                index[j] = Some((index_phase[j] + k0.max(k1) * p) as i64);
+            }
+        }
+        if (i + 1) % u64::from(sub) == 0 {
+            n += 1;
+            record(n, x, y, h, &turn, &index, &mut rng);
+        }
+    }
+    SimRun {
+        samples,
+        reference,
+        truth,
+    }
+}
+
+/// xoshiro256** seeded by SplitMix64, with Box-Muller normals.
+#[derive(Debug, Clone)]
+pub struct Rng {
+    s: [u64; 4],
+    spare: Option<f64>,
+}
+
+impl Rng {
+    /// A generator from a seed.
+    pub fn new(seed: u64) -> Self {
+        let mut z = seed;
+        let mut next = || {
+            z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut r = z;
+            r = (r ^ (r >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            r = (r ^ (r >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            r ^ (r >> 31)
+        };
+        Self {
+            s: [next(), next(), next(), next()],
+            spare: None,
+        }
+    }
+
+    /// The next 64 random bits.
+    pub fn next_u64(&mut self) -> u64 {
+        let r = self.s[1].wrapping_mul(5).rotate_left(7).wrapping_mul(9);
+        let t = self.s[1] << 17;
+        self.s[2] ^= self.s[0];
+        self.s[3] ^= self.s[1];
+        self.s[1] ^= self.s[2];
+        self.s[0] ^= self.s[3];
+        self.s[2] ^= t;
+        self.s[3] = self.s[3].rotate_left(45);
+        r
+    }
+
+    /// Uniform in [0, 1).
+    pub fn uniform(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+    }
+
+    /// Standard normal.
+    pub fn normal(&mut self) -> f64 {
+        if let Some(v) = self.spare.take() {
+            return v;
+        }
+        let u1 = 1.0 - self.uniform();
+        let u2 = self.uniform();
+        let r = (-2.0 * u1.ln()).sqrt();
+        self.spare = Some(r * (2.0 * PI * u2).sin());
+        r * (2.0 * PI * u2).cos()
+    }
+}
