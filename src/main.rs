@@ -1,5 +1,19 @@
 //! The RTIC application of the odometry unit (STM32F401): thin wiring around `odo_core`.
+//!
+//! Data path of one sample: the TIM5 update event is the sample instant (its period comes
+//! from the PPS discipline, `odo_core::timing::pps`); the TIM5 interrupt (priority 4)
+//! snapshots both encoder counters and the fault lines and hands a [`app::RawSample`] to the
+//! processing task through a lock-free queue. The processing task (priority 2) extends the
+//! counters to 64 bits, applies index pulses, integrates, tags GNSS time, builds the pose
+//! record and queues its frame for the host link whole, or drops it and counts it. The
+//! USART2 interrupt (priority 3) moves queued bytes to the UART and received bytes to the
+//! command task (priority 1), which parses and executes command lines, saves settings to
+//! flash and queues the replies. Index (EXTI, priority 4) and NMEA (USART1, priority 3)
+//! interrupts only latch and queue.
+//!
+//! Pins, peripherals and clocks: `src/board/mod.rs` and `docs/HARDWARE.md`.
 #![cfg_attr(target_os = "none", no_std, no_main)]
+#![cfg_attr(target_os = "none", deny(clippy::unwrap_used, clippy::expect_used))]
 
 #[cfg(not(target_os = "none"))]
 fn main() {
@@ -10,32 +24,873 @@ fn main() {
 }
 
 #[cfg(target_os = "none")]
+mod board;
+
+#[cfg(all(target_os = "none", not(feature = "qemu")))]
 use defmt_rtt as _;
+#[cfg(all(target_os = "none", feature = "qemu"))]
+use defmt_semihosting as _;
 #[cfg(target_os = "none")]
 use panic_probe as _;
 
 #[cfg(target_os = "none")]
-#[rtic::app(device = stm32f4xx_hal::pac, dispatchers = [SPI1])]
+#[rtic::app(device = stm32f4xx_hal::pac, peripherals = true)]
 mod app {
-    use stm32f4xx_hal::{prelude::*, rcc::Config};
+    use crate::board::{
+        self,
+        encoders::{Snapshot, LEFT_BITS, RIGHT_BITS},
+        flash::SettingsFlash,
+        sampler::Sampler,
+        serial::{GnssUart, HostUart, RxErrors, TxRing},
+        Acquisition, IndexPin, Led,
+    };
+    use heapless::spsc::{Consumer, Producer, Queue};
+    use odo_core::odometry::{
+        ChassisParams, CounterExtender, IndexRefs, Integrator, Pose, WheelCounts,
+    };
+    use odo_core::protocol::command::{self, Action, LineAssembler, Reply};
+    use odo_core::protocol::{
+        self, CommandReply, DeviceInfo, GnssTime, Message, PoseRecord, SettingsSource, StatusFlags,
+        WheelStatus, PROTOCOL_VERSION,
+    };
+    use odo_core::settings::{store::SettingsStore, SampleMode, Settings, TimeTagRef};
+    use odo_core::timing::index::DEFAULT_TOLERANCE;
+    use odo_core::timing::{
+        Discipline, DisciplineConfig, IndexCheck, IndexTracker, LineBuffer, NmeaError, PpsEvent,
+        PpsStats, Sample, SyncMode, SyncState, TimeTagPps, TimeTagger,
+    };
+    use rtic::Mutex;
+    use stm32f4xx_hal::gpio::ExtiPin;
+    use stm32f4xx_hal::pac::Interrupt;
+    use stm32f4xx_hal::prelude::*;
+    use stm32f4xx_hal::watchdog::IndependentWatchdog;
+
+    /// Host link transmit buffer, bytes.
+    const TX_BUF: usize = 4096;
+    /// Transmit space a pose record leaves free for command replies, bytes.
+    const RECORD_RESERVE: usize = 1024;
+
+    /// One sample, from the TIM5 interrupt to the processing task.
+    #[derive(Clone, Copy)]
+    pub struct RawSample {
+        /// The schedule's sample.
+        sample: Sample,
+        /// Raw counters.
+        counts: Snapshot,
+        /// Fault lines (left, right).
+        faults: (bool, bool),
+        /// A PPS edge seen in this interrupt.
+        pps: Option<(u64, PpsEvent)>,
+        /// Discipline state and counters after this interrupt.
+        state: SyncState,
+        stats: PpsStats,
+        /// Length of a second in use, ticks.
+        period: u64,
+        /// Index pulses of the simulated drive (QEMU build only; EXTI on the board).
+        sim_index: [Option<u32>; 2],
+    }
+
+    /// The host link's transmit side: the byte ring and the frame sequence number.
+    pub struct Link {
+        ring: TxRing<TX_BUF>,
+        next_seq: u32,
+    }
+
+    /// Changes the command task asks the processing task to apply at the next sample.
+    #[derive(Default)]
+    pub struct Requests {
+        settings: Option<Settings>,
+        reset: Option<Pose>,
+    }
+
+    /// What the processing task last knew, for `status`.
+    #[derive(Clone, Copy, Default)]
+    pub struct Live {
+        samples: u32,
+        dropped_total: u32,
+        flags: StatusFlags,
+        stats: PpsStats,
+        period: u64,
+        index_mismatches: [u32; 2],
+        nmea_errors: u32,
+        time_messages: u32,
+        mcu_time_us: u64,
+    }
 
     #[shared]
-    struct Shared {}
+    struct Shared {
+        acq: Acquisition,
+        link: Link,
+        requests: Requests,
+        live: Live,
+        host_errors: RxErrors,
+    }
 
     #[local]
-    struct Local {}
+    struct Local {
+        sampler: Sampler,
+        samples_in: Producer<'static, RawSample>,
+        samples_out: Consumer<'static, RawSample>,
+        index_pin_left: IndexPin<'B', 0>,
+        index_pin_right: IndexPin<'B', 1>,
+        index_in_left: Producer<'static, u32>,
+        index_in_right: Producer<'static, u32>,
+        index_out_left: Consumer<'static, u32>,
+        index_out_right: Consumer<'static, u32>,
+        host: HostUart,
+        host_rx_in: Producer<'static, u8>,
+        host_rx_out: Consumer<'static, u8>,
+        gnss: GnssUart,
+        gnss_in: Producer<'static, u8>,
+        gnss_out: Consumer<'static, u8>,
+        cfg_in: Producer<'static, DisciplineConfig>,
+        cfg_out: Consumer<'static, DisciplineConfig>,
+        processor: Processor,
+        commands: Commands,
+        led: Led,
+        watchdog: IndependentWatchdog,
+    }
 
-    #[init]
+    /// The discipline configuration that `settings` ask for.
+    fn discipline_config(settings: &Settings, timer_hz: u32) -> DisciplineConfig {
+        let mut cfg = DisciplineConfig::new(timer_hz);
+        cfg.rate_hz = settings.rate;
+        cfg.mode = match settings.mode {
+            SampleMode::Pps => SyncMode::Pps,
+            SampleMode::Free => SyncMode::Free,
+        };
+        cfg
+    }
+
+    fn time_tag(settings: &Settings) -> TimeTagPps {
+        match settings.time_tag_pps {
+            TimeTagRef::Previous => TimeTagPps::Previous,
+            TimeTagRef::Next => TimeTagPps::Next,
+        }
+    }
+
+    fn state_name(s: SyncState) -> &'static str {
+        match s {
+            SyncState::FreeRunning => "free-running",
+            SyncState::Locked => "pps-locked",
+            SyncState::Holdover => "holdover",
+        }
+    }
+
+    #[init(local = [
+        samples_q: Queue<RawSample, 32> = Queue::new(),
+        index_left_q: Queue<u32, 16> = Queue::new(),
+        index_right_q: Queue<u32, 16> = Queue::new(),
+        host_rx_q: Queue<u8, 512> = Queue::new(),
+        gnss_q: Queue<u8, 512> = Queue::new(),
+        cfg_q: Queue<DisciplineConfig, 4> = Queue::new(),
+    ])]
     fn init(cx: init::Context) -> (Shared, Local) {
-        let _rcc = cx.device.RCC.freeze(Config::hsi().sysclk(84.MHz()));
-        defmt::info!("odo-unit {} booted", env!("CARGO_PKG_VERSION"));
-        (Shared {}, Local {})
+        let dp = cx.device;
+        let mut rcc = dp.RCC.freeze(board::clock_config());
+        let clocks = rcc.clocks;
+        let timer_hz = board::timer_hz(&clocks);
+
+        let mut watchdog = IndependentWatchdog::new(dp.IWDG);
+        watchdog.stop_on_debug(&dp.DBGMCU, true);
+        watchdog.start(board::WATCHDOG_MS.millis());
+
+        let mut exti = dp.EXTI;
+        let pins = board::pins(dp.GPIOA, dp.GPIOB, dp.GPIOC, dp.SYSCFG, &mut exti, &mut rcc);
+
+        // Settings: the newest valid record in flash, else the defaults.
+        #[cfg(not(feature = "qemu"))]
+        let flash = SettingsFlash::new(dp.FLASH);
+        #[cfg(feature = "qemu")]
+        let flash = SettingsFlash::new();
+        let mut store = SettingsStore::new(flash);
+        let loaded = store.load_or_defaults();
+        let mut settings = loaded.settings;
+        let mut cfg = discipline_config(&settings, timer_hz);
+        if cfg.validate().is_err() {
+            defmt::error!("settings: rate/mode unusable by the sampler, using the defaults");
+            settings = Settings::DEFAULT;
+            cfg = discipline_config(&settings, timer_hz);
+        }
+        match loaded.source {
+            SettingsSource::Flash => defmt::info!(
+                "settings loaded from flash, generation {}",
+                loaded.generation
+            ),
+            SettingsSource::Defaults => {
+                defmt::info!("settings: defaults (flash empty or unreadable)")
+            }
+        }
+
+        #[cfg(not(feature = "qemu"))]
+        let mut acq = Acquisition::new(
+            board::encoders::Encoders::new(dp.TIM2, dp.TIM3, &mut rcc),
+            pins.faults,
+        );
+        #[cfg(feature = "qemu")]
+        let mut acq = Acquisition::new(pins.faults);
+
+        let host = HostUart::new(dp.USART2, &mut rcc, clocks.pclk1().raw(), settings.baud);
+        let gnss = GnssUart::new(dp.USART1, &mut rcc, clocks.pclk2().raw(), board::GNSS_BAUD);
+
+        let (samples_in, samples_out) = cx.local.samples_q.split();
+        let (index_in_left, index_out_left) = cx.local.index_left_q.split();
+        let (index_in_right, index_out_right) = cx.local.index_right_q.split();
+        let (host_rx_in, host_rx_out) = cx.local.host_rx_q.split();
+        let (gnss_in, gnss_out) = cx.local.gnss_q.split();
+        let (cfg_in, cfg_out) = cx.local.cfg_q.split();
+
+        let disc = match Discipline::new(cfg, 0) {
+            Ok(d) => d,
+            Err(_) => {
+                defmt::error!("sampler configuration invalid: free-running at 50 Hz");
+                let mut c = DisciplineConfig::new(timer_hz);
+                c.mode = SyncMode::Free;
+                c.rate_hz = 50;
+                cfg = c;
+                match Discipline::new(c, 0) {
+                    Ok(d) => d,
+                    Err(_) => panic!("default sampler configuration rejected"),
+                }
+            }
+        };
+        let (sampler, s0) = Sampler::start(dp.TIM5, &mut rcc, disc);
+        // Sample 0 is now: snapshot it as the starting point of the integration.
+        let first = RawSample {
+            sample: s0,
+            counts: acq.snapshot(s0.tick),
+            faults: acq.faults(s0.tick),
+            pps: None,
+            state: sampler.discipline().state(),
+            stats: sampler.discipline().stats(),
+            period: sampler.discipline().period(),
+            sim_index: [None, None],
+        };
+        let mut samples_in = samples_in;
+        let _ = samples_in.enqueue(first);
+        rtic::pend(Interrupt::SPI2);
+
+        defmt::info!(
+            "odo-unit {} booted: timer {} Hz, {} Hz {}",
+            env!("CARGO_PKG_VERSION"),
+            timer_hz,
+            cfg.rate_hz,
+            if cfg.mode == SyncMode::Pps {
+                "pps"
+            } else {
+                "free"
+            }
+        );
+
+        let processor = Processor::new(&settings, timer_hz);
+        let commands = Commands {
+            assembler: LineAssembler::new(),
+            settings,
+            store,
+            source: loaded.source,
+            dirty: false,
+            timer_hz,
+        };
+        (
+            Shared {
+                acq,
+                link: Link {
+                    ring: TxRing::new(),
+                    next_seq: 0,
+                },
+                requests: Requests::default(),
+                live: Live::default(),
+                host_errors: RxErrors::default(),
+            },
+            Local {
+                sampler,
+                samples_in,
+                samples_out,
+                index_pin_left: pins.index_left,
+                index_pin_right: pins.index_right,
+                index_in_left,
+                index_in_right,
+                index_out_left,
+                index_out_right,
+                host,
+                host_rx_in,
+                host_rx_out,
+                gnss,
+                gnss_in,
+                gnss_out,
+                cfg_in,
+                cfg_out,
+                processor,
+                commands,
+                led: pins.led,
+                watchdog,
+            },
+        )
     }
 
     #[idle]
     fn idle(_: idle::Context) -> ! {
         loop {
             cortex_m::asm::wfi();
+        }
+    }
+
+    /// The sample instant (TIM5 update) and the PPS capture (TIM5 CH1): snapshot and hand on.
+    #[task(binds = TIM5, priority = 4, local = [sampler, samples_in, cfg_out, lost: u32 = 0], shared = [acq])]
+    fn sample(mut cx: sample::Context) {
+        let sampler = cx.local.sampler;
+        let event = sampler.on_interrupt();
+        let Some(sample) = event.sample else {
+            if let Some((_, e)) = event.pps {
+                // A PPS edge between samples: reported with the next sample.
+                defmt::trace!("pps {}", matches!(e, PpsEvent::Glitch));
+            }
+            return;
+        };
+        let (counts, faults, sim_index) = cx.shared.acq.lock(|acq| {
+            let counts = acq.snapshot(sample.tick);
+            (counts, acq.faults(sample.tick), acq.simulated_index())
+        });
+        while let Some(cfg) = cx.local.cfg_out.dequeue() {
+            if sampler.set_config(cfg).is_err() {
+                defmt::error!("sampler configuration rejected");
+            }
+        }
+        let raw = RawSample {
+            sample,
+            counts,
+            faults,
+            pps: event.pps,
+            state: sampler.discipline().state(),
+            stats: sampler.discipline().stats(),
+            period: sampler.discipline().period(),
+            sim_index,
+        };
+        if cx.local.samples_in.enqueue(raw).is_err() {
+            *cx.local.lost += 1;
+        }
+        rtic::pend(Interrupt::SPI2);
+    }
+
+    /// Left index pulse: latch the left counter.
+    #[task(binds = EXTI0, priority = 4, local = [index_pin_left, index_in_left], shared = [acq])]
+    fn index_left(mut cx: index_left::Context) {
+        let raw = cx.shared.acq.lock(|acq| acq.latch(0));
+        cx.local.index_pin_left.clear_interrupt_pending_bit();
+        let _ = cx.local.index_in_left.enqueue(raw);
+    }
+
+    /// Right index pulse: latch the right counter.
+    #[task(binds = EXTI1, priority = 4, local = [index_pin_right, index_in_right], shared = [acq])]
+    fn index_right(mut cx: index_right::Context) {
+        let raw = cx.shared.acq.lock(|acq| acq.latch(1));
+        cx.local.index_pin_right.clear_interrupt_pending_bit();
+        let _ = cx.local.index_in_right.enqueue(raw);
+    }
+
+    /// NMEA bytes from the GNSS receiver.
+    #[task(binds = USART1, priority = 3, local = [gnss, gnss_in, errors: RxErrors = RxErrors { lost: 0 }])]
+    fn gnss_rx(cx: gnss_rx::Context) {
+        if let Some(byte) = cx.local.gnss.on_interrupt(cx.local.errors) {
+            if cx.local.gnss_in.enqueue(byte).is_err() {
+                cx.local.errors.lost = cx.local.errors.lost.wrapping_add(1);
+            }
+            if byte == b'\n' {
+                rtic::pend(Interrupt::SPI2);
+            }
+        }
+    }
+
+    /// The host link: bytes out of the transmit ring, command bytes in.
+    #[task(binds = USART2, priority = 3, local = [host, host_rx_in], shared = [link, host_errors])]
+    fn host_uart(cx: host_uart::Context) {
+        let host = cx.local.host;
+        let rx = cx.local.host_rx_in;
+        let received = (cx.shared.link, cx.shared.host_errors)
+            .lock(|link, errors| host.on_interrupt(&mut link.ring, rx, errors));
+        if received {
+            rtic::pend(Interrupt::SPI3);
+        }
+    }
+
+    /// Encodes `msg` as the next frame and queues it whole if it fits with `reserve` bytes to
+    /// spare; false when it did not fit (nothing queued, sequence number unchanged). The
+    /// frame is encoded outside the lock; if another task sent a frame meanwhile, it is
+    /// encoded again with the new sequence number.
+    fn send(link: &mut impl Mutex<T = Link>, msg: &Message, reserve: usize) -> bool {
+        let mut buf = [0u8; protocol::MAX_ENCODED_FRAME];
+        loop {
+            let seq = link.lock(|l| l.next_seq);
+            let Ok(n) = protocol::encode_frame(msg, seq, &mut buf) else {
+                return false;
+            };
+            let queued = link.lock(|l| {
+                if l.next_seq != seq {
+                    None
+                } else if l.ring.push_frame(&buf[..n], reserve) {
+                    l.next_seq = seq.wrapping_add(1);
+                    Some(true)
+                } else {
+                    Some(false)
+                }
+            });
+            match queued {
+                Some(true) => {
+                    rtic::pend(Interrupt::USART2);
+                    return true;
+                }
+                Some(false) => return false,
+                None => continue,
+            }
+        }
+    }
+
+    /// Processing: counts to pose, records to the link (SPI2 vector, pended by the sampler).
+    #[task(
+        binds = SPI2,
+        priority = 2,
+        local = [samples_out, index_out_left, index_out_right, gnss_out, processor, led, watchdog],
+        shared = [link, requests, live]
+    )]
+    fn process(mut cx: process::Context) {
+        let p = cx.local.processor;
+        while let Some(byte) = cx.local.gnss_out.dequeue() {
+            p.on_nmea_byte(byte);
+        }
+        while let Some(raw) = cx.local.samples_out.dequeue() {
+            while let Some(l) = cx.local.index_out_left.dequeue() {
+                p.on_index(0, l);
+            }
+            while let Some(r) = cx.local.index_out_right.dequeue() {
+                p.on_index(1, r);
+            }
+            let requests = cx.shared.requests.lock(core::mem::take);
+            p.apply(requests);
+            let Some(record) = p.on_sample(&raw) else {
+                continue;
+            };
+            cx.local.watchdog.feed();
+            cx.local.led.set(raw.state == SyncState::Locked);
+            if let Some(record) = record {
+                let sent = send(&mut cx.shared.link, &Message::Pose(record), RECORD_RESERVE);
+                p.sent(sent);
+            }
+            let live = p.live(&raw);
+            cx.shared.live.lock(|l| *l = live);
+        }
+    }
+
+    /// Commands from the host (SPI3 vector, pended by the USART2 interrupt).
+    #[task(binds = SPI3, priority = 1, local = [host_rx_out, commands, cfg_in], shared = [link, requests, live, host_errors])]
+    fn commands_task(mut cx: commands_task::Context) {
+        let c = cx.local.commands;
+        while let Some(byte) = cx.local.host_rx_out.dequeue() {
+            let (mut reply, action) = match c.assembler.push(byte) {
+                None => continue,
+                Some(Ok(line)) => command::execute(line, &mut c.settings),
+                Some(Err(e)) => (Reply::error(e), Action::None),
+            };
+            match action {
+                Action::None => {}
+                Action::SettingsChanged => {
+                    c.dirty = true;
+                    let cfg = discipline_config(&c.settings, c.timer_hz);
+                    if cx.local.cfg_in.enqueue(cfg).is_err() {
+                        defmt::warn!("sampler configuration queue full");
+                    }
+                    let settings = c.settings;
+                    cx.shared.requests.lock(|r| r.settings = Some(settings));
+                }
+                Action::Save => match c.store.save(&c.settings) {
+                    Ok(generation) => {
+                        c.dirty = false;
+                        c.source = SettingsSource::Flash;
+                        defmt::info!("settings saved, generation {}", generation);
+                        reply.push_line(format_args!("saved (generation {generation})"));
+                    }
+                    Err(e) => {
+                        defmt::error!("settings save failed");
+                        reply = Reply::error(format_args!("save failed: {e}"));
+                    }
+                },
+                Action::ResetPose { x, y, heading } => {
+                    cx.shared
+                        .requests
+                        .lock(|r| r.reset = Some(Pose { x, y, heading }));
+                }
+                Action::Status => {
+                    let live = cx.shared.live.lock(|l| *l);
+                    let rx_lost = cx.shared.host_errors.lock(|e| e.lost);
+                    c.status(&mut reply, &live, rx_lost);
+                }
+                Action::Version => {
+                    reply.push_line(format_args!(
+                        "firmware = odo-unit {}",
+                        env!("CARGO_PKG_VERSION")
+                    ));
+                    reply.push_line(format_args!("protocol = {PROTOCOL_VERSION}"));
+                    let mut info = DeviceInfo {
+                        protocol_version: PROTOCOL_VERSION,
+                        settings_source: c.source,
+                        settings_checksum: c.settings.checksum(),
+                        uid: board::unique_id(),
+                        firmware_version: heapless::String::new(),
+                    };
+                    let _ = info.firmware_version.push_str(env!("CARGO_PKG_VERSION"));
+                    send_blocking(&mut cx.shared.link, &Message::DeviceInfo(info));
+                }
+            }
+            for chunk in CommandReply::chunks(reply.ok, &reply.text) {
+                send_blocking(&mut cx.shared.link, &Message::Reply(chunk));
+            }
+        }
+    }
+
+    /// Sends a reply frame, waiting for room (only the command task, the lowest priority,
+    /// waits; the ring drains in the USART2 interrupt meanwhile).
+    fn send_blocking(link: &mut impl Mutex<T = Link>, msg: &Message) {
+        while !send(link, msg, 0) {
+            cortex_m::asm::nop();
+        }
+    }
+
+    /// State of the command task.
+    pub struct Commands {
+        assembler: LineAssembler,
+        settings: Settings,
+        store: SettingsStore<SettingsFlash>,
+        source: SettingsSource,
+        dirty: bool,
+        timer_hz: u32,
+    }
+
+    impl Commands {
+        fn status(&self, reply: &mut Reply, live: &Live, rx_lost: u32) {
+            let sync = match live.flags.sync {
+                protocol::SyncMode::FreeRunning => "free",
+                protocol::SyncMode::PpsLocked => "locked",
+                protocol::SyncMode::Holdover => "holdover",
+            };
+            let on = |b: bool| if b { "yes" } else { "no" };
+            reply.push_line(format_args!("sync = {sync}"));
+            reply.push_line(format_args!("time_valid = {}", on(live.flags.time_valid)));
+            reply.push_line(format_args!("samples = {}", live.samples));
+            reply.push_line(format_args!("mcu_time_us = {}", live.mcu_time_us));
+            reply.push_line(format_args!("records_dropped = {}", live.dropped_total));
+            reply.push_line(format_args!("second_ticks = {}", live.period));
+            reply.push_line(format_args!(
+                "pps_accepted = {}, pps_glitches = {}, pps_missed = {}, pps_locks = {}",
+                live.stats.accepted, live.stats.glitches, live.stats.missed, live.stats.locks
+            ));
+            reply.push_line(format_args!(
+                "nmea_time_messages = {}, nmea_errors = {}",
+                live.time_messages, live.nmea_errors
+            ));
+            for (name, w, m) in [
+                ("left", live.flags.left, live.index_mismatches[0]),
+                ("right", live.flags.right, live.index_mismatches[1]),
+            ] {
+                reply.push_line(format_args!(
+                    "{name}: fault = {}, index_seen = {}, index_mismatches = {m}",
+                    on(w.fault),
+                    on(w.index_seen)
+                ));
+            }
+            reply.push_line(format_args!("host_rx_lost = {rx_lost}"));
+            let source = match self.source {
+                SettingsSource::Flash => "flash",
+                SettingsSource::Defaults => "defaults",
+            };
+            reply.push_line(format_args!(
+                "settings = {source}, unsaved_changes = {}",
+                on(self.dirty)
+            ));
+        }
+    }
+
+    /// State of the processing task: counts to records.
+    pub struct Processor {
+        timer_hz: u32,
+        settings: Settings,
+        extenders: Option<[CounterExtender; 2]>,
+        integrator: Option<Integrator>,
+        trackers: [IndexTracker; 2],
+        /// Index mismatch not yet reported in a sent record.
+        mismatch: [bool; 2],
+        tagger: TimeTagger,
+        nmea: LineBuffer,
+        nmea_errors: u32,
+        time_messages: u32,
+        last_tick: u64,
+        sequence: u32,
+        dropped_since: u32,
+        dropped_total: u32,
+        last_state: SyncState,
+        last_faults: (bool, bool),
+        reset: Option<Pose>,
+        flags: StatusFlags,
+        mcu_time_us: u64,
+    }
+
+    impl Processor {
+        fn new(settings: &Settings, timer_hz: u32) -> Self {
+            let tpr = settings.chassis.ticks_per_rev;
+            Self {
+                timer_hz,
+                settings: *settings,
+                extenders: None,
+                integrator: None,
+                trackers: [IndexTracker::new(tpr, DEFAULT_TOLERANCE); 2],
+                mismatch: [false; 2],
+                tagger: TimeTagger::new(time_tag(settings), u64::from(timer_hz)),
+                nmea: LineBuffer::new(),
+                nmea_errors: 0,
+                time_messages: 0,
+                last_tick: 0,
+                sequence: 0,
+                dropped_since: 0,
+                dropped_total: 0,
+                last_state: SyncState::FreeRunning,
+                last_faults: (false, false),
+                reset: None,
+                flags: StatusFlags::default(),
+                mcu_time_us: 0,
+            }
+        }
+
+        fn on_nmea_byte(&mut self, byte: u8) {
+            match self.nmea.push(byte) {
+                None | Some(Err(NmeaError::Unsupported)) => {}
+                Some(Err(_)) => self.nmea_errors = self.nmea_errors.wrapping_add(1),
+                Some(Ok(msg)) if msg.valid() => match msg.time().gps_seconds() {
+                    Ok(gps) => {
+                        self.time_messages = self.time_messages.wrapping_add(1);
+                        self.tagger.on_message(gps, self.last_tick);
+                    }
+                    Err(_) => self.nmea_errors = self.nmea_errors.wrapping_add(1),
+                },
+                Some(Ok(_)) => {}
+            }
+        }
+
+        fn on_index(&mut self, wheel: usize, raw: u32) {
+            let Some(ext) = &self.extenders else {
+                return;
+            };
+            let count = ext[wheel].absolute_of(raw);
+            match self.trackers[wheel].on_index(count) {
+                IndexCheck::Mismatch { error } => {
+                    self.mismatch[wheel] = true;
+                    defmt::warn!(
+                        "wheel {}: index count mismatch of {} increments",
+                        wheel,
+                        error
+                    );
+                }
+                IndexCheck::First => defmt::info!("wheel {}: first index pulse", wheel),
+                IndexCheck::Whole { .. } => {}
+            }
+        }
+
+        fn apply(&mut self, requests: Requests) {
+            if let Some(settings) = requests.settings {
+                if let Some(integrator) = &mut self.integrator {
+                    if integrator.set_params(&settings.chassis).is_err() {
+                        defmt::error!("chassis parameters rejected by the integrator");
+                    }
+                }
+                for t in &mut self.trackers {
+                    t.set_ticks_per_rev(settings.chassis.ticks_per_rev);
+                }
+                self.tagger.set_assoc(time_tag(&settings));
+                self.settings = settings;
+            }
+            if requests.reset.is_some() {
+                self.reset = requests.reset;
+            }
+        }
+
+        fn mcu_time_us(&self, tick: u64) -> u64 {
+            let hz = u64::from(self.timer_hz);
+            tick / hz * 1_000_000 + tick % hz * 1_000_000 / hz
+        }
+
+        /// Integrates one sample. `None` when nothing was integrated (never, today);
+        /// `Some(None)` when the record is not sent (`output_divider`).
+        fn on_sample(&mut self, raw: &RawSample) -> Option<Option<PoseRecord>> {
+            let counts = match &mut self.extenders {
+                Some(ext) => {
+                    ext[0].update(raw.counts.left);
+                    ext[1].update(raw.counts.right);
+                    WheelCounts {
+                        left: ext[0].absolute(),
+                        right: ext[1].absolute(),
+                    }
+                }
+                None => {
+                    let ext = [
+                        CounterExtender::new(LEFT_BITS, raw.counts.left),
+                        CounterExtender::new(RIGHT_BITS, raw.counts.right),
+                    ];
+                    let counts = WheelCounts {
+                        left: ext[0].absolute(),
+                        right: ext[1].absolute(),
+                    };
+                    self.extenders = Some(ext);
+                    counts
+                }
+            };
+            for (wheel, pulse) in raw.sim_index.iter().enumerate() {
+                if let Some(r) = pulse {
+                    self.on_index(wheel, *r);
+                }
+            }
+            let refs = IndexRefs {
+                left: self.trackers[0].reference(),
+                right: self.trackers[1].reference(),
+            };
+            let mut step = Default::default();
+            match &mut self.integrator {
+                None => {
+                    let pose = self.reset.take().unwrap_or_default();
+                    let integrator = Integrator::new(&self.settings.chassis, counts, pose)
+                        .or_else(|_| Integrator::new(&ChassisParams::DESIGNED, counts, pose));
+                    match integrator {
+                        Ok(i) => self.integrator = Some(i),
+                        Err(_) => defmt::error!("integrator rejected the designed parameters"),
+                    }
+                }
+                Some(integrator) => {
+                    if let Some(pose) = self.reset.take() {
+                        integrator.rebase_counts(counts);
+                        integrator.reset_pose(pose);
+                        defmt::info!("pose reset");
+                    } else {
+                        step = integrator.step(counts, refs);
+                    }
+                }
+            }
+            if step.overrange {
+                defmt::warn!(
+                    "sample {}: motion beyond one sample's limits, not integrated",
+                    self.sequence
+                );
+            }
+
+            // Timing: PPS edges, state changes, GNSS time of the sample.
+            if let Some((tick, event)) = raw.pps {
+                match event {
+                    PpsEvent::Locked { second } => {
+                        defmt::info!("PPS: locked");
+                        self.tagger.on_edge(tick, second);
+                    }
+                    PpsEvent::Accepted { second, .. } => self.tagger.on_edge(tick, second),
+                    PpsEvent::Reacquired { second, missed, .. } => {
+                        defmt::info!("PPS: reacquired after {} lost pulses", missed);
+                        self.tagger.on_edge(tick, second);
+                    }
+                    PpsEvent::Glitch => defmt::warn!("PPS: glitch rejected"),
+                    PpsEvent::Ignored | PpsEvent::Candidate => {}
+                }
+            }
+            if raw.state != self.last_state {
+                defmt::info!(
+                    "sampling: {} -> {}",
+                    state_name(self.last_state),
+                    state_name(raw.state)
+                );
+                if raw.state == SyncState::FreeRunning {
+                    self.tagger.invalidate();
+                }
+                self.last_state = raw.state;
+            }
+            if raw.faults != self.last_faults {
+                defmt::warn!(
+                    "encoder fault lines: left {}, right {}",
+                    raw.faults.0,
+                    raw.faults.1
+                );
+                self.last_faults = raw.faults;
+            }
+            self.last_tick = raw.sample.tick;
+            let gps = match raw.state {
+                SyncState::FreeRunning => None,
+                _ => self.tagger.gps_time(raw.sample.second),
+            };
+
+            let sequence = self.sequence;
+            self.sequence = self.sequence.wrapping_add(1);
+            let status = |wheel: usize, fault: bool, calibrated: bool| WheelStatus {
+                fault,
+                index_seen: self.trackers[wheel].seen(),
+                index_mismatch: self.mismatch[wheel],
+                calibrated,
+            };
+            self.flags = StatusFlags {
+                sync: match raw.state {
+                    SyncState::FreeRunning => protocol::SyncMode::FreeRunning,
+                    SyncState::Locked => protocol::SyncMode::PpsLocked,
+                    SyncState::Holdover => protocol::SyncMode::Holdover,
+                },
+                time_valid: gps.is_some(),
+                left: status(0, raw.faults.0, step.left_referenced),
+                right: status(1, raw.faults.1, step.right_referenced),
+                model: self.settings.chassis.uncertainty_model,
+            };
+            self.mcu_time_us = self.mcu_time_us(raw.sample.tick);
+            if sequence % self.settings.output_divider.max(1) != 0 {
+                return Some(None);
+            }
+            let integrator = self.integrator.as_ref()?;
+            let pose = integrator.pose();
+            let sigma = integrator.sigma();
+            Some(Some(PoseRecord {
+                sequence,
+                flags: self.flags,
+                mcu_time_us: self.mcu_time_us,
+                gnss: gps.map_or(GnssTime::default(), |g| GnssTime {
+                    week: g.week,
+                    tow_ms: g.tow * 1000,
+                    sample_in_second: raw.sample.index as u16,
+                }),
+                x: pose.x,
+                y: pose.y,
+                heading: pose.heading,
+                sigma_x: sigma.x,
+                sigma_y: sigma.y,
+                sigma_heading: sigma.heading,
+                sigma_xy: sigma.xy,
+                gamma_left: counts.left,
+                gamma_right: counts.right,
+                index_left: refs.left.unwrap_or(0),
+                index_right: refs.right.unwrap_or(0),
+                dropped: self.dropped_since,
+            }))
+        }
+
+        /// The record was queued (true) or dropped for lack of room (false).
+        fn sent(&mut self, sent: bool) {
+            if sent {
+                self.dropped_since = 0;
+                self.mismatch = [false; 2];
+            } else {
+                self.dropped_since = self.dropped_since.saturating_add(1);
+                self.dropped_total = self.dropped_total.saturating_add(1);
+            }
+        }
+
+        fn live(&self, raw: &RawSample) -> Live {
+            Live {
+                samples: self.sequence,
+                dropped_total: self.dropped_total,
+                flags: self.flags,
+                stats: raw.stats,
+                period: raw.period,
+                index_mismatches: [self.trackers[0].mismatches(), self.trackers[1].mismatches()],
+                nmea_errors: self.nmea_errors,
+                time_messages: self.time_messages,
+                mcu_time_us: self.mcu_time_us,
+            }
         }
     }
 }

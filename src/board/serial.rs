@@ -1,0 +1,192 @@
+//! The UARTs: the host link on USART2 (commands in, frames out) and the GNSS NMEA input on
+//! USART1 (receive only).
+//!
+//! Transmission is interrupt-driven from [`TxRing`], a byte ring that producers fill with
+//! whole frames only ([`TxRing::push_frame`] refuses a frame that does not fit, so a record
+//! the link cannot carry is dropped whole and counted by the caller). The USART2 interrupt
+//! moves bytes to the data register while TXE is set and the ring is not empty; TXEIE is on
+//! only while bytes wait. Nothing here ever waits for the UART, so sampling is never
+//! blocked. Reception puts each byte into a lock-free queue for the command task.
+//!
+//! In QEMU the USART sends synchronously and TXE is always set: one interrupt drains the
+//! ring.
+
+use heapless::spsc::Producer;
+use stm32f4xx_hal::pac;
+use stm32f4xx_hal::rcc::Enable;
+
+const SR_ORE: u16 = 1 << 3;
+const SR_RXNE: u16 = 1 << 5;
+const SR_TXE: u16 = 1 << 7;
+const CR1_RE: u16 = 1 << 2;
+const CR1_TE: u16 = 1 << 3;
+const CR1_RXNEIE: u16 = 1 << 5;
+const CR1_TXEIE: u16 = 1 << 7;
+const CR1_UE: u16 = 1 << 13;
+
+/// A byte ring of `N` bytes.
+pub struct TxRing<const N: usize> {
+    buf: [u8; N],
+    head: usize,
+    len: usize,
+}
+
+impl<const N: usize> Default for TxRing<N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const N: usize> TxRing<N> {
+    /// An empty ring.
+    pub const fn new() -> Self {
+        Self {
+            buf: [0; N],
+            head: 0,
+            len: 0,
+        }
+    }
+
+    /// Free bytes.
+    pub fn free(&self) -> usize {
+        N - self.len
+    }
+
+    /// Appends `frame` whole if it fits in the free space less `reserve`; false otherwise
+    /// (nothing is written).
+    pub fn push_frame(&mut self, frame: &[u8], reserve: usize) -> bool {
+        if frame.len() + reserve > self.free() {
+            return false;
+        }
+        let tail = (self.head + self.len) % N;
+        let first = frame.len().min(N - tail);
+        self.buf[tail..tail + first].copy_from_slice(&frame[..first]);
+        self.buf[..frame.len() - first].copy_from_slice(&frame[first..]);
+        self.len += frame.len();
+        true
+    }
+
+    /// Takes the oldest byte.
+    pub fn pop(&mut self) -> Option<u8> {
+        if self.len == 0 {
+            return None;
+        }
+        let b = self.buf[self.head];
+        self.head = (self.head + 1) % N;
+        self.len -= 1;
+        Some(b)
+    }
+
+    /// True when no byte waits.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+}
+
+/// USARTDIV for 16x oversampling (the BRR value), rounded.
+fn brr(pclk: u32, baud: u32) -> u16 {
+    ((pclk + baud / 2) / baud.max(1)).min(0xFFFF) as u16
+}
+
+/// The host link, USART2.
+pub struct HostUart {
+    usart: pac::USART2,
+}
+
+/// Receive errors counted by the UART interrupts.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct RxErrors {
+    /// Bytes lost to overrun or a full queue.
+    pub lost: u32,
+}
+
+impl HostUart {
+    /// Enables USART2 at `baud` (8N1) with the receive interrupt.
+    pub fn new(usart: pac::USART2, rcc: &mut pac::RCC, pclk1: u32, baud: u32) -> Self {
+        pac::USART2::enable(rcc);
+        // Note(unsafe): raw BRR and CR1 values (RM0368 sec. 19.6).
+        unsafe {
+            usart.brr().write(|w| w.bits(brr(pclk1, baud)));
+            usart
+                .cr1()
+                .write(|w| w.bits(CR1_UE | CR1_TE | CR1_RE | CR1_RXNEIE));
+        }
+        Self { usart }
+    }
+
+    /// The USART2 interrupt: received bytes to `rx`, ring bytes to the transmitter. True
+    /// when a byte was received.
+    pub fn on_interrupt<const N: usize>(
+        &mut self,
+        ring: &mut TxRing<N>,
+        rx: &mut Producer<'_, u8>,
+        errors: &mut RxErrors,
+    ) -> bool {
+        let sr = self.usart.sr().read().bits();
+        let received = sr & (SR_RXNE | SR_ORE) != 0;
+        if received {
+            // Reading DR after SR clears RXNE and ORE.
+            let byte = self.usart.dr().read().bits() as u8;
+            if sr & SR_ORE != 0 {
+                errors.lost = errors.lost.wrapping_add(1);
+            }
+            if rx.enqueue(byte).is_err() {
+                errors.lost = errors.lost.wrapping_add(1);
+            }
+        }
+        while self.usart.sr().read().bits() & SR_TXE != 0 {
+            let Some(b) = ring.pop() else {
+                break;
+            };
+            // Note(unsafe): DR takes any 8-bit value.
+            unsafe { self.usart.dr().write(|w| w.bits(u16::from(b))) };
+        }
+        self.enable_tx_interrupt(!ring.is_empty());
+        received
+    }
+
+    /// Turns the TXE interrupt on (bytes wait) or off.
+    pub fn enable_tx_interrupt(&mut self, on: bool) {
+        // Note(unsafe): sets or clears TXEIE only.
+        unsafe {
+            self.usart.cr1().modify(|r, w| {
+                w.bits(if on {
+                    r.bits() | CR1_TXEIE
+                } else {
+                    r.bits() & !CR1_TXEIE
+                })
+            });
+        }
+    }
+}
+
+/// The GNSS receiver's NMEA output, USART1 (receive only).
+pub struct GnssUart {
+    usart: pac::USART1,
+}
+
+impl GnssUart {
+    /// Enables USART1 at `baud` (8N1) with the receive interrupt.
+    pub fn new(usart: pac::USART1, rcc: &mut pac::RCC, pclk2: u32, baud: u32) -> Self {
+        pac::USART1::enable(rcc);
+        // Note(unsafe): raw BRR and CR1 values (RM0368 sec. 19.6).
+        unsafe {
+            usart.brr().write(|w| w.bits(brr(pclk2, baud)));
+            usart.cr1().write(|w| w.bits(CR1_UE | CR1_RE | CR1_RXNEIE));
+        }
+        Self { usart }
+    }
+
+    /// The USART1 interrupt: the received byte, if any (overruns counted in `errors`).
+    pub fn on_interrupt(&mut self, errors: &mut RxErrors) -> Option<u8> {
+        let sr = self.usart.sr().read().bits();
+        if sr & (SR_RXNE | SR_ORE) == 0 {
+            return None;
+        }
+        let byte = self.usart.dr().read().bits() as u8;
+        if sr & SR_ORE != 0 {
+            errors.lost = errors.lost.wrapping_add(1);
+        }
+        Some(byte)
+    }
+}
