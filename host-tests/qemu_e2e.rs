@@ -1,0 +1,444 @@
+//! End-to-end test of the firmware in QEMU (`netduinoplus2`), run by `.ci/run` after it has
+//! built the `qemu` image:
+//!
+//! ```text
+//! cargo build --release --features qemu --target-dir target/qemu
+//! cargo test --target x86_64-unknown-linux-gnu --test qemu_e2e -- --nocapture
+//! ```
+//!
+//! It boots the image with `-icount shift=0,sleep=off` (deterministic, faster than real
+//! time), connects to USART2 over a TCP socket on 127.0.0.1, sends configuration commands
+//! and checks the replies (errors included), reads pose records covering more than 10 s of
+//! emulated time after a `reset_pose`, decodes them with the core's frame decoder, checks
+//! the sequence numbers and timing, and replays the raw counts they carry through the core
+//! integrator with the same settings: poses and sigmas must match bit for bit (tolerance 0:
+//! the firmware and this test run the same integer and IEEE-754 arithmetic).
+//!
+//! Without `qemu-system-arm` (or `$QEMU_SYSTEM_ARM`) or without the image
+//! (`target/qemu/thumbv7em-none-eabihf/release/odo-unit`, or `$ODO_QEMU_IMAGE`) the test is
+//! skipped with a message, unless `ODO_QEMU_REQUIRED=1` (as in CI), which makes it fail.
+
+use std::io::{Read, Write};
+use std::net::{TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
+use std::time::{Duration, Instant};
+
+use odo_core::odometry::{IndexRefs, Integrator, Pose, WheelCounts};
+use odo_core::protocol::{DecoderStats, Frame, FrameDecoder, Message, PoseRecord, SyncMode};
+use odo_core::settings::Settings;
+
+/// Emulated time the replay must cover after the pose reset, microseconds.
+const REPLAY_US: u64 = 12_000_000;
+/// Wall-clock limit of the whole test.
+const DEADLINE: Duration = Duration::from_secs(120);
+
+fn image() -> PathBuf {
+    std::env::var_os("ODO_QEMU_IMAGE")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| {
+            Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("target/qemu/thumbv7em-none-eabihf/release/odo-unit")
+        })
+}
+
+fn qemu() -> Option<PathBuf> {
+    if let Some(q) = std::env::var_os("QEMU_SYSTEM_ARM") {
+        return Some(PathBuf::from(q));
+    }
+    std::env::var_os("PATH")?
+        .to_str()?
+        .split(':')
+        .map(|d| Path::new(d).join("qemu-system-arm"))
+        .find(|p| p.is_file())
+}
+
+/// QEMU, killed when dropped.
+struct Qemu(Child);
+
+impl Drop for Qemu {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// Frames and the decoder's counters, as the reader thread sees them.
+enum Event {
+    Frame(Box<Frame>),
+    Closed(DecoderStats),
+}
+
+struct Link {
+    stream: TcpStream,
+    rx: Receiver<Event>,
+    /// Pose records received so far, in order.
+    records: Vec<PoseRecord>,
+    /// Frame sequence numbers of every frame, in order.
+    seqs: Vec<u32>,
+    device_info: usize,
+    start: Instant,
+}
+
+impl Link {
+    fn next_frame(&mut self) -> Frame {
+        loop {
+            let left = DEADLINE.saturating_sub(self.start.elapsed());
+            match self.rx.recv_timeout(left) {
+                Ok(Event::Frame(f)) => {
+                    self.seqs.push(f.seq);
+                    match &f.message {
+                        Message::Pose(r) => self.records.push(*r),
+                        Message::DeviceInfo(_) => self.device_info += 1,
+                        _ => {}
+                    }
+                    return *f;
+                }
+                Ok(Event::Closed(stats)) => panic!("link closed by QEMU ({stats:?})"),
+                Err(RecvTimeoutError::Timeout) => panic!("no frame before the deadline"),
+                Err(RecvTimeoutError::Disconnected) => panic!("reader thread ended"),
+            }
+        }
+    }
+
+    /// Sends a command line and returns (ok, text) of its reply (all chunks joined).
+    fn command(&mut self, line: &str) -> (bool, String) {
+        self.stream
+            .write_all(format!("{line}\r\n").as_bytes())
+            .expect("send command");
+        let mut text = String::new();
+        loop {
+            if let Message::Reply(r) = self.next_frame().message {
+                text.push_str(&r.text);
+                if !r.more {
+                    println!("> {line}\n{text}");
+                    return (r.ok, text);
+                }
+            }
+        }
+    }
+}
+
+fn expect(link: &mut Link, line: &str, ok: bool, contains: &str) -> String {
+    let (got_ok, text) = link.command(line);
+    assert_eq!(got_ok, ok, "`{line}` answered {text:?}");
+    assert_eq!(
+        text.starts_with("ok"),
+        ok,
+        "`{line}`: reply must start with ok/error: {text:?}"
+    );
+    assert!(
+        text.contains(contains),
+        "`{line}`: {text:?} lacks {contains:?}"
+    );
+    text
+}
+
+#[test]
+fn qemu_end_to_end() {
+    let required = std::env::var("ODO_QEMU_REQUIRED").is_ok_and(|v| v == "1");
+    let image = image();
+    let Some(qemu_bin) = qemu() else {
+        assert!(
+            !required,
+            "qemu-system-arm not found and ODO_QEMU_REQUIRED=1"
+        );
+        eprintln!(
+            "SKIPPED qemu_end_to_end: qemu-system-arm not found (apt-get install qemu-system-arm)"
+        );
+        return;
+    };
+    if !image.is_file() {
+        assert!(
+            !required,
+            "{} missing and ODO_QEMU_REQUIRED=1",
+            image.display()
+        );
+        eprintln!(
+            "SKIPPED qemu_end_to_end: no image at {} (cargo build --release --features qemu --target-dir target/qemu)",
+            image.display()
+        );
+        return;
+    }
+
+    // A free local port for QEMU's server socket.
+    let port = TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .expect("free port")
+        .port();
+    let _qemu = Qemu(
+        Command::new(&qemu_bin)
+            .args([
+                "-machine",
+                "netduinoplus2",
+                "-display",
+                "none",
+                "-nodefaults",
+            ])
+            .args(["-icount", "shift=0,sleep=off"])
+            .args(["-semihosting-config", "enable=on,target=native"])
+            .args(["-serial", "null", "-serial"])
+            .arg(format!("tcp:127.0.0.1:{port},server=on,wait=on"))
+            .arg("-kernel")
+            .arg(&image)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null()) // defmt frames over semihosting (binary)
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("start QEMU"),
+    );
+    let start = Instant::now();
+    let stream = loop {
+        match TcpStream::connect(("127.0.0.1", port)) {
+            Ok(s) => break s,
+            Err(e) if start.elapsed() < Duration::from_secs(20) => {
+                let _ = e;
+                std::thread::sleep(Duration::from_millis(50));
+            }
+            Err(e) => panic!("cannot connect to QEMU's USART2 on port {port}: {e}"),
+        }
+    };
+    let (tx, rx) = mpsc::channel();
+    let mut reader = stream.try_clone().expect("clone socket");
+    std::thread::spawn(move || {
+        let mut decoder = FrameDecoder::new();
+        let mut buf = [0u8; 4096];
+        loop {
+            let n = match reader.read(&mut buf) {
+                Ok(0) | Err(_) => 0,
+                Ok(n) => n,
+            };
+            if n == 0 {
+                let _ = tx.send(Event::Closed(decoder.stats()));
+                return;
+            }
+            for &b in &buf[..n] {
+                if let Some(Ok(frame)) = decoder.push(b) {
+                    if tx.send(Event::Frame(Box::new(frame))).is_err() {
+                        return;
+                    }
+                }
+            }
+        }
+    });
+    let mut link = Link {
+        stream,
+        rx,
+        records: Vec::new(),
+        seqs: Vec::new(),
+        device_info: 0,
+        start,
+    };
+
+    // Records flow from boot.
+    while link.records.len() < 5 {
+        link.next_frame();
+    }
+
+    // Configuration commands, the host's copy of the settings follows the accepted ones.
+    let mut settings = Settings::DEFAULT;
+    expect(&mut link, "get track_width", true, "track_width = 0.563");
+    let set = [
+        ("track_width", "0.5512"),
+        ("left_diameter", "0.2605"),
+        ("right_diameter", "0.2597"),
+        ("delta_left", "4.5e-8"),
+        ("delta_right", "3.2e-8"),
+    ];
+    let line = set
+        .iter()
+        .fold(String::from("set"), |l, (k, v)| format!("{l} {k} {v}"));
+    expect(&mut link, &line, true, "track_width = 0.5512");
+    settings
+        .set_many(set)
+        .expect("host accepts the same settings");
+    // Errors change nothing.
+    expect(&mut link, "frobnicate", false, "error");
+    expect(&mut link, "set no_such_key 1", false, "no_such_key");
+    expect(&mut link, "set ticks_per_rev 3", false, "ticks_per_rev");
+    expect(&mut link, "set left_diameter nan", false, "left_diameter");
+    expect(&mut link, "set track_width abc", false, "track_width");
+    expect(&mut link, "rate 0", false, "rate");
+    expect(
+        &mut link,
+        "set track_width 0.6 left_diameter 99",
+        false,
+        "left_diameter",
+    );
+    expect(&mut link, "get track_width", true, "track_width = 0.5512");
+    let long = "x".repeat(400);
+    expect(&mut link, &long, false, "too long");
+    expect(&mut link, "mode free", true, "ok");
+    expect(&mut link, "status", true, "sync = free");
+    expect(&mut link, "version", true, "protocol = 1");
+    assert_eq!(link.device_info, 1, "version sends one DeviceInfo frame");
+    expect(&mut link, "save", true, "saved");
+    let all = expect(&mut link, "get", true, "right_sin3");
+    assert!(all.contains("delta_left = 0.000000045"), "{all}");
+    expect(&mut link, "reset_pose 1.5 -2 0.25", true, "ok");
+    let reset_from = link.records.len();
+
+    // Records until 12 s of emulated time after the reset.
+    let r0 = loop {
+        if let Some(i) = (reset_from..link.records.len()).find(|&i| {
+            let r = &link.records[i];
+            r.x == 1.5 && r.y == -2.0 && (r.heading - 0.25).abs() < 1e-12 && r.sigma_x == 0.0
+        }) {
+            break i;
+        }
+        assert!(
+            link.records.len() < reset_from + 100,
+            "no record carries the reset pose"
+        );
+        link.next_frame();
+    };
+    let t0 = link.records[r0].mcu_time_us;
+    while link
+        .records
+        .last()
+        .is_none_or(|r| r.mcu_time_us < t0 + REPLAY_US)
+    {
+        link.next_frame();
+    }
+    let records = link.records.clone();
+    println!(
+        "{} frames, {} records; replay from record {} (t = {:.3} s) over {:.1} s, {:.1} s wall",
+        link.seqs.len(),
+        records.len(),
+        records[r0].sequence,
+        t0 as f64 * 1e-6,
+        REPLAY_US as f64 * 1e-6,
+        start.elapsed().as_secs_f64()
+    );
+
+    // Sequence numbers: frames and records consecutive, nothing dropped, 50 Hz exactly.
+    for w in link.seqs.windows(2) {
+        assert_eq!(w[1], w[0].wrapping_add(1), "frame sequence gap");
+    }
+    for w in records.windows(2) {
+        assert_eq!(
+            w[1].sequence,
+            w[0].sequence.wrapping_add(1),
+            "record sequence gap"
+        );
+        assert_eq!(
+            w[1].mcu_time_us - w[0].mcu_time_us,
+            20_000,
+            "50 Hz in emulated time"
+        );
+    }
+    assert_eq!(records[0].sequence, 0, "the first record is sample 0");
+    assert!(records.iter().all(|r| r.dropped == 0));
+    assert!(records
+        .iter()
+        .all(|r| r.flags.sync == SyncMode::FreeRunning && !r.flags.time_valid));
+
+    // The simulated drive: reversing, both counters wrapped (left 32-bit near its wrap at
+    // boot, right 16-bit every few seconds), fault line and index mismatch on the right.
+    let dl: Vec<i64> = records
+        .windows(2)
+        .map(|w| w[1].gamma_left - w[0].gamma_left)
+        .collect();
+    assert!(
+        dl.iter().any(|d| *d > 0) && dl.iter().any(|d| *d < 0),
+        "forward and reverse"
+    );
+    assert!(
+        records[0].gamma_left < 0 && records.iter().any(|r| r.gamma_left > 0),
+        "left wrap"
+    );
+    let (rmin, rmax) = records.iter().fold((i64::MAX, i64::MIN), |(a, b), r| {
+        (a.min(r.gamma_right), b.max(r.gamma_right))
+    });
+    assert!(
+        rmax - rmin > 65_536,
+        "right counter range {rmin}..{rmax} crosses a 16-bit wrap"
+    );
+    assert!(
+        records.iter().any(|r| r.flags.right.fault) && records.iter().any(|r| !r.flags.right.fault)
+    );
+    assert!(
+        records.iter().any(|r| r.flags.right.index_mismatch),
+        "right index mismatch"
+    );
+    assert!(!records
+        .iter()
+        .any(|r| r.flags.left.index_mismatch || r.flags.left.fault));
+    assert!(records
+        .last()
+        .is_some_and(|r| r.flags.left.index_seen && r.flags.right.index_seen));
+
+    // Replay the counts through the core integrator: bit-exact poses and sigmas.
+    let start_rec = &records[r0];
+    let mut integrator = Integrator::new(
+        &settings.chassis,
+        WheelCounts {
+            left: start_rec.gamma_left,
+            right: start_rec.gamma_right,
+        },
+        Pose {
+            x: start_rec.x,
+            y: start_rec.y,
+            heading: start_rec.heading,
+        },
+    )
+    .expect("valid parameters");
+    let mut replayed = 0;
+    let mut distance = 0.0f64;
+    for r in &records[r0 + 1..] {
+        let refs = IndexRefs {
+            left: r.flags.left.index_seen.then_some(r.index_left),
+            right: r.flags.right.index_seen.then_some(r.index_right),
+        };
+        let before = integrator.pose();
+        let status = integrator.step(
+            WheelCounts {
+                left: r.gamma_left,
+                right: r.gamma_right,
+            },
+            refs,
+        );
+        assert!(!status.overrange);
+        let pose = integrator.pose();
+        let sigma = integrator.sigma();
+        distance += (pose.x - before.x).hypot(pose.y - before.y);
+        let got = (
+            r.x,
+            r.y,
+            r.heading,
+            r.sigma_x,
+            r.sigma_y,
+            r.sigma_heading,
+            r.sigma_xy,
+        );
+        let want = (
+            pose.x,
+            pose.y,
+            pose.heading,
+            sigma.x,
+            sigma.y,
+            sigma.heading,
+            sigma.xy,
+        );
+        assert!(
+            got.0.to_bits() == want.0.to_bits()
+                && got.1.to_bits() == want.1.to_bits()
+                && got.2.to_bits() == want.2.to_bits()
+                && got.3.to_bits() == want.3.to_bits()
+                && got.4.to_bits() == want.4.to_bits()
+                && got.5.to_bits() == want.5.to_bits()
+                && got.6.to_bits() == want.6.to_bits(),
+            "record {}: firmware {got:?} != replay {want:?}",
+            r.sequence
+        );
+        replayed += 1;
+    }
+    let last = records.last().expect("records");
+    println!(
+        "replayed {replayed} records bit-exact: {distance:.2} m driven, final pose ({:.4}, {:.4}, {:.4} rad), sigma ({:.2e}, {:.2e}, {:.2e})",
+        last.x, last.y, last.heading, last.sigma_x, last.sigma_y, last.sigma_heading
+    );
+    assert!(replayed >= 500, "at least 10 s at 50 Hz");
+    assert!(distance > 1.0, "the drive moved");
+}
