@@ -790,7 +790,8 @@ pub struct WindowEstimate {
     pub turning: f64,
     /// Common times used.
     pub points: usize,
-    /// The estimate (left_diameter, right_diameter, track_width, heading0), or why it failed.
+    /// The estimate (left_diameter, right_diameter, track_width, heading0), or why it failed;
+    /// the track width is NaN where the sub-trajectory turned too little to determine it.
     pub estimate: Result<[f64; 4], String>,
     /// Eq (16) per point at the estimate (m).
     pub mean_error: f64,
@@ -839,7 +840,11 @@ pub fn windows_study(
                 Ok([
                     f.params.left_diameter,
                     f.params.right_diameter,
-                    f.params.track_width,
+                    if f.track_estimated {
+                        f.params.track_width
+                    } else {
+                        f64::NAN
+                    },
                     f.heading0,
                 ]),
                 f.cost / f.points as f64,

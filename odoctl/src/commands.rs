@@ -512,14 +512,24 @@ fn print_window_stats(est: &[calib::WindowEstimate]) {
             .iter()
             .enumerate()
         {
-            let s = summarize(&ok.iter().map(|v| v[p]).collect::<Vec<_>>());
+            let vals: Vec<f64> = ok.iter().map(|v| v[p]).filter(|v| v.is_finite()).collect();
+            let s = summarize(&vals);
+            let note = if vals.len() < ok.len() {
+                format!(
+                    "  ({} of {} turned too little)",
+                    ok.len() - vals.len(),
+                    ok.len()
+                )
+            } else {
+                String::new()
+            };
             let head = if p == 0 {
                 format!("{:>5} m {:>5} {:>5}", l, ok.len(), all.len() - ok.len())
             } else {
                 format!("{:>7} {:>5} {:>5}", "", "", "")
             };
             println!(
-                "  {head}  {name:<15} {:>10.5} {:>10.5} {:>10.5} {:>10.5} {:>10.5}",
+                "  {head}  {name:<15} {:>10.5} {:>10.5} {:>10.5} {:>10.5} {:>10.5}{note}",
                 s.mean, s.std, s.median, s.min, s.max
             );
         }
@@ -534,7 +544,17 @@ fn write_windows_csv(path: &Path, est: &[calib::WindowEstimate]) -> Result<()> {
     )?;
     for e in est {
         let (v, err) = match &e.estimate {
-            Ok(v) => (v.map(|x| format!("{x:?}")).join(","), String::new()),
+            Ok(v) => (
+                v.map(|x| {
+                    if x.is_finite() {
+                        format!("{x:?}")
+                    } else {
+                        String::new()
+                    }
+                })
+                .join(","),
+                String::new(),
+            ),
             Err(s) => (",,,".to_string(), s.replace(',', ";")),
         };
         writeln!(

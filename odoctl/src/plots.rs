@@ -187,66 +187,73 @@ fn error_figure(
     s3: &[f64],
     symmetric: bool,
 ) -> Result<()> {
-    let root = BitMapBackend::new(path, (1100, 600)).into_drawing_area();
+    let root = BitMapBackend::new(path, (1100, 900)).into_drawing_area();
     root.fill(&WHITE).map_err(pe)?;
+    let root = root.titled(caption, (FAMILY, 24)).map_err(pe)?;
     let (t0, t1) = range(t.iter().copied(), 0.0);
-    let ymax = err
-        .iter()
-        .map(|e| e.abs())
-        .chain(s3.iter().copied())
-        .filter(|v| v.is_finite())
-        .fold(1e-9, f64::max)
-        * 1.05;
-    let y0 = if symmetric { -ymax } else { 0.0 };
-    let mut chart = ChartBuilder::on(&root)
-        .caption(caption, (FAMILY, 24))
-        .margin(15)
-        .x_label_area_size(45)
-        .y_label_area_size(80)
-        .build_cartesian_2d(t0..t1, y0..ymax)
-        .map_err(pe)?;
-    chart
-        .configure_mesh()
-        .x_desc("time [s]")
-        .y_desc(ydesc)
-        .label_style((FAMILY, 15))
-        .draw()
-        .map_err(pe)?;
-    chart
-        .draw_series(LineSeries::new(
-            t.iter().copied().zip(err.iter().copied()),
-            ODO.stroke_width(1),
-        ))
-        .map_err(pe)?
-        .label("error")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], ODO.stroke_width(2)));
-    for (band, color, label) in [(s1, BAND1, "1 sigma"), (s3, BAND3, "3 sigma")] {
-        let style = color.stroke_width(2);
+    let fold =
+        |it: &mut dyn Iterator<Item = f64>| it.filter(|v| v.is_finite()).fold(1e-9, f64::max);
+    let emax = fold(&mut err.iter().map(|e| e.abs()));
+    let full = fold(&mut err.iter().map(|e| e.abs()).chain(s3.iter().copied())) * 1.05;
+    // Top: the whole range (the bands of the paper's model can dwarf the errors); bottom: zoom
+    // on the errors, bands clipped.
+    let (top, bottom) = root.split_vertically(450);
+    for (area, ymax, note) in [
+        (&top, full, "full range"),
+        (&bottom, emax * 1.3, "zoom on the errors"),
+    ] {
+        let y0 = if symmetric { -ymax } else { 0.0 };
+        let mut chart = ChartBuilder::on(area)
+            .caption(note, (FAMILY, 16))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(80)
+            .build_cartesian_2d(t0..t1, y0..ymax)
+            .map_err(pe)?;
+        chart
+            .configure_mesh()
+            .x_desc("time [s]")
+            .y_desc(ydesc)
+            .label_style((FAMILY, 14))
+            .draw()
+            .map_err(pe)?;
+        let clip = |v: f64| v.clamp(y0, ymax);
         chart
             .draw_series(LineSeries::new(
-                t.iter().copied().zip(band.iter().copied()),
-                style,
+                t.iter().copied().zip(err.iter().map(|&e| clip(e))),
+                ODO.stroke_width(1),
             ))
             .map_err(pe)?
-            .label(label)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
-        if symmetric {
+            .label("error")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], ODO.stroke_width(2)));
+        for (band, color, label) in [(s1, BAND1, "1 sigma"), (s3, BAND3, "3 sigma")] {
+            let style = color.stroke_width(2);
             chart
                 .draw_series(LineSeries::new(
-                    t.iter().copied().zip(band.iter().map(|v| -v)),
+                    t.iter().copied().zip(band.iter().map(|&v| clip(v))),
                     style,
                 ))
-                .map_err(pe)?;
+                .map_err(pe)?
+                .label(label)
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
+            if symmetric {
+                chart
+                    .draw_series(LineSeries::new(
+                        t.iter().copied().zip(band.iter().map(|&v| clip(-v))),
+                        style,
+                    ))
+                    .map_err(pe)?;
+            }
         }
+        chart
+            .configure_series_labels()
+            .label_font((FAMILY, 15))
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperLeft)
+            .draw()
+            .map_err(pe)?;
     }
-    chart
-        .configure_series_labels()
-        .label_font((FAMILY, 16))
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .position(SeriesLabelPosition::UpperLeft)
-        .draw()
-        .map_err(pe)?;
     root.present().map_err(pe)?;
     Ok(())
 }
@@ -307,7 +314,7 @@ pub fn window_figures(dir: &Path, est: &[WindowEstimate], full: [f64; 3]) -> Res
                 let color = palette(li);
                 let pts: Vec<(f64, f64)> = ok
                     .iter()
-                    .filter(|(e, _)| e.length == l)
+                    .filter(|(e, v)| e.length == l && v[p].is_finite())
                     .map(|(e, v)| (e.start_dist, v[p].clamp(v0, v1)))
                     .collect();
                 chart
@@ -356,7 +363,7 @@ pub fn window_figures(dir: &Path, est: &[WindowEstimate], full: [f64; 3]) -> Res
                 let area: &DrawingArea<BitMapBackend, Shift> = &cells[ri * 3 + p];
                 let vals: Vec<f64> = ok
                     .iter()
-                    .filter(|(e, _)| e.length == l)
+                    .filter(|(e, v)| e.length == l && v[p].is_finite())
                     .map(|(_, v)| v[p])
                     .collect();
                 histogram(

@@ -1,0 +1,213 @@
+//! Calibration on simulated runs with known truth (issue 5's acceptance figures).
+
+mod common;
+
+use std::time::Instant;
+
+use indicatif::ProgressBar;
+use odo_core::odometry::{ChassisParams, Pose};
+use odoctl::calib::{self, DeltaMode, Run, WindowStart};
+use odoctl::commands::{calibrate_run, CalibrateOptions};
+use odoctl::csvio::match_times;
+use odoctl::simulate::PathKind;
+
+fn poor_first_estimate() -> ChassisParams {
+    ChassisParams {
+        left_diameter: 0.300,
+        right_diameter: 0.300,
+        track_width: 0.700,
+        ..ChassisParams::DESIGNED
+    }
+}
+
+fn options() -> CalibrateOptions {
+    CalibrateOptions {
+        samples: "samples.csv".into(),
+        reference: "reference.csv".into(),
+        initial: None,
+        sets: vec![],
+        out: None,
+        delta_window: 10.0,
+        reference_sigma: 0.008,
+        delta_mode: DeltaMode::Equal,
+        fit_delta: true,
+        polish: true,
+        windows: vec![],
+        window_start: WindowStart::Initial,
+        windows_out: None,
+        plots: None,
+        quiet: true,
+    }
+}
+
+#[test]
+fn calibrate_recovers_the_truth_from_the_papers_poor_first_estimate() {
+    let truth = common::truth();
+    for seed in [11, 12] {
+        let sim = common::sim(PathKind::Estimation, 70.0, seed);
+        let started = Instant::now();
+        let c = calibrate_run(
+            &sim.samples,
+            &sim.reference,
+            ("s", "r"),
+            &poor_first_estimate(),
+            &options(),
+        )
+        .unwrap();
+        let e = [
+            c.params.left_diameter - truth.left_diameter,
+            c.params.right_diameter - truth.right_diameter,
+            c.params.track_width - truth.track_width,
+        ];
+        eprintln!(
+            "seed {seed}: errors left {:+.4} mm, right {:+.4} mm, track {:+.4} mm; heading0 {:+.5} rad; delta {:e}; {:.2} s",
+            e[0] * 1e3,
+            e[1] * 1e3,
+            e[2] * 1e3,
+            c.geometry.heading0 - 0.3,
+            c.params.delta_left,
+            started.elapsed().as_secs_f64()
+        );
+        assert!(
+            e[0].abs() < 0.5e-3 && e[1].abs() < 0.5e-3,
+            "diameters off by {e:?}"
+        );
+        assert!(e[2].abs() < 2e-3, "track width off by {e:?}");
+        assert!((c.geometry.heading0 - 0.3).abs() < 0.01);
+        let u = c.uncertainty.unwrap();
+        assert!(
+            (u.coverage1 - calib::ONE_SIGMA_COVERAGE).abs() < 0.01,
+            "coverage {}",
+            u.coverage1
+        );
+        assert_eq!(c.params.delta_left, c.params.delta_right);
+        assert!(c.params.delta_left > 0.0);
+    }
+}
+
+#[test]
+fn eq16_at_the_estimate_is_not_above_eq16_at_the_truth() {
+    // The optimiser reaches the minimum of eq (16): the truth (with its best heading) cannot
+    // do better on the same data.
+    let sim = common::sim(PathKind::Estimation, 30.0, 5);
+    let run = Run::new(
+        &sim.samples,
+        &sim.reference,
+        match_times(&sim.samples, &sim.reference),
+    );
+    let last = run.len() - 1;
+    let fit = calib::fit_geometry(
+        &run,
+        &poor_first_estimate(),
+        run.heading_guess(0),
+        0,
+        last,
+        Default::default(),
+        &ProgressBar::hidden(),
+    )
+    .unwrap();
+    let truth = common::truth();
+    let h = calib::fit_heading(&run, &truth, 0, last, 0.3).unwrap();
+    let at_truth = run.eq16(&truth, 0, last, h).unwrap();
+    assert!(
+        fit.cost <= at_truth * (1.0 + 1e-9),
+        "fit {} truth {}",
+        fit.cost,
+        at_truth
+    );
+    assert!(fit.track_estimated);
+}
+
+#[test]
+fn replay_with_the_true_parameters_follows_the_reference() {
+    let sim = common::sim(PathKind::Estimation, 70.0, 3);
+    let (x0, y0, h0) = sim.truth[0];
+    let rows = odoctl::replay::replay(
+        &common::truth(),
+        &sim.samples,
+        Pose {
+            x: x0,
+            y: y0,
+            heading: h0,
+        },
+    )
+    .unwrap();
+    let err_truth = rows
+        .iter()
+        .zip(&sim.truth)
+        .map(|(r, t)| (r.pose.x - t.0).hypot(r.pose.y - t.1))
+        .fold(0.0, f64::max);
+    let err_ref = rows
+        .iter()
+        .zip(&sim.reference)
+        .map(|(r, t)| (r.pose.x - t.x).hypot(r.pose.y - t.y))
+        .fold(0.0, f64::max);
+    eprintln!("replay with the truth: max error {err_truth:.4} m against the true path, {err_ref:.4} m against the reference");
+    assert!(err_truth < 0.15, "{err_truth}");
+    assert!(err_ref < 0.2, "{err_ref}");
+    // Without slip, only encoder quantisation remains.
+    let mut rng = odoctl::simulate::Rng::new(1);
+    let clean = odoctl::simulate::simulate(&odoctl::simulate::SimOptions {
+        truth: common::truth(),
+        segments: odoctl::simulate::path(PathKind::Validation, 40.0, &mut rng),
+        rate: 50.0,
+        speed: 0.5,
+        slip: 0.0,
+        slip_corr: 0.1,
+        rtk_sigma: 0.0,
+        heading_sigma: None,
+        start: (0.0, 0.0, 0.0),
+        seed: 1,
+    });
+    let rows = odoctl::replay::replay(&common::truth(), &clean.samples, Pose::default()).unwrap();
+    let err = rows
+        .iter()
+        .zip(&clean.truth)
+        .map(|(r, t)| (r.pose.x - t.0).hypot(r.pose.y - t.1))
+        .fold(0.0, f64::max);
+    assert!(err < 1e-3, "{err}");
+}
+
+#[test]
+fn stability_study_reports_every_window() {
+    let sim = common::sim(PathKind::Estimation, 40.0, 4);
+    let run = Run::new(
+        &sim.samples,
+        &sim.reference,
+        match_times(&sim.samples, &sim.reference),
+    );
+    let full = calib::fit_geometry(
+        &run,
+        &poor_first_estimate(),
+        run.heading_guess(0),
+        0,
+        run.len() - 1,
+        calib::GeomOptions {
+            polish: false,
+            ..Default::default()
+        },
+        &ProgressBar::hidden(),
+    )
+    .unwrap();
+    let est = calib::windows_study(
+        &run,
+        &full,
+        &poor_first_estimate(),
+        &[4.0, 8.0],
+        WindowStart::Full,
+        &ProgressBar::hidden(),
+    )
+    .unwrap();
+    let n4 = est.iter().filter(|e| e.length == 4.0).count();
+    let n8 = est.iter().filter(|e| e.length == 8.0).count();
+    assert!((8..=11).contains(&n4) && (4..=5).contains(&n8), "{n4} {n8}");
+    // On 8 m windows the diameters stay within a few millimetres of the truth.
+    let t = common::truth();
+    let good = est
+        .iter()
+        .filter(|e| e.length == 8.0)
+        .filter_map(|e| e.estimate.as_ref().ok())
+        .filter(|v| (v[0] - t.left_diameter).abs() < 3e-3 && (v[1] - t.right_diameter).abs() < 3e-3)
+        .count();
+    assert!(good * 4 >= n8 * 3, "{good} of {n8}");
+}

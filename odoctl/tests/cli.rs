@@ -1,0 +1,257 @@
+//! The command line end to end: simulate, calibrate, validate, replay, plots, bad files.
+
+mod common;
+
+use common::{odoctl, read, scratch};
+
+fn s(p: &std::path::Path) -> &str {
+    p.to_str().unwrap()
+}
+
+#[test]
+fn simulate_calibrate_validate_with_plots() {
+    let d = scratch("cli_calibrate");
+    let (sm, rf, cal, plots) = (
+        d.join("s.csv"),
+        d.join("r.csv"),
+        d.join("cal.toml"),
+        d.join("plots"),
+    );
+    let o = odoctl(&[
+        "simulate",
+        "--samples",
+        s(&sm),
+        "--reference",
+        s(&rf),
+        "--seed",
+        "21",
+        "--truth-out",
+        s(&d.join("truth.toml")),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let initial = d.join("initial.toml");
+    std::fs::write(
+        &initial,
+        "left_diameter = 0.300\nright_diameter = 0.300\ntrack_width = 0.700\n",
+    )
+    .unwrap();
+    let o = odoctl(&[
+        "calibrate",
+        "--samples",
+        s(&sm),
+        "--reference",
+        s(&rf),
+        "--initial",
+        s(&initial),
+        "--out",
+        s(&cal),
+        "--plots",
+        s(&plots),
+        "--windows",
+        "8",
+        "--windows-out",
+        s(&d.join("w.csv")),
+        "--quiet",
+    ]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{out}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(out.contains("stability study"), "{out}");
+    let p = odoctl::config::read_params(&cal, odo_core::odometry::ChassisParams::DESIGNED).unwrap();
+    let t = common::truth();
+    assert!((p.left_diameter - t.left_diameter).abs() < 0.5e-3, "{out}");
+    assert!(
+        (p.right_diameter - t.right_diameter).abs() < 0.5e-3,
+        "{out}"
+    );
+    assert!((p.track_width - t.track_width).abs() < 2e-3, "{out}");
+    let text = read(&cal);
+    for key in [
+        "left_diameter",
+        "right_diameter",
+        "track_width",
+        "ticks_per_rev",
+        "delta_left",
+        "delta_right",
+        "[fit]",
+        "initial_heading",
+        "eq16_cost",
+    ] {
+        assert!(text.contains(key), "{key} missing in\n{text}");
+    }
+    let w = read(&d.join("w.csv"));
+    assert!(w.lines().count() >= 8, "{w}");
+    for f in [
+        "calibrate_trajectory",
+        "calibrate_horizontal_error",
+        "calibrate_heading_error",
+        "windows_history",
+        "windows_histograms",
+    ] {
+        let png = std::fs::read(plots.join(format!("{f}.png"))).unwrap();
+        assert!(
+            png.starts_with(b"\x89PNG\r\n\x1a\n") && png.len() > 10_000,
+            "{f}"
+        );
+    }
+    // Validation on another trajectory with the calibrated parameters.
+    let (vs, vr) = (d.join("vs.csv"), d.join("vr.csv"));
+    let o = odoctl(&[
+        "simulate",
+        "--samples",
+        s(&vs),
+        "--reference",
+        s(&vr),
+        "--path",
+        "validation",
+        "--length",
+        "30",
+        "--seed",
+        "22",
+    ]);
+    assert!(o.status.success());
+    let o = odoctl(&[
+        "validate",
+        "--samples",
+        s(&vs),
+        "--reference",
+        s(&vr),
+        "--config",
+        s(&cal),
+        "--errors",
+        s(&d.join("e.csv")),
+        "--plots",
+        s(&plots),
+    ]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{out}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(
+        out.contains("horizontal error [m]") && out.contains("in 1sig"),
+        "{out}"
+    );
+    assert!(plots.join("validate_heading_error.png").exists());
+}
+
+#[test]
+fn replay_writes_one_row_per_sample() {
+    let d = scratch("cli_replay");
+    let (sm, rf) = (d.join("s.csv"), d.join("r.csv"));
+    assert!(odoctl(&[
+        "simulate",
+        "--samples",
+        s(&sm),
+        "--reference",
+        s(&rf),
+        "--length",
+        "5",
+        "--no-heading"
+    ])
+    .status
+    .success());
+    assert!(read(&rf).starts_with("t,x,y\n"));
+    let o = odoctl(&[
+        "replay",
+        s(&sm),
+        "--set",
+        "left_diameter=0.2608",
+        "--set",
+        "right_diameter=0.2607",
+        "--set",
+        "track_width=0.5656",
+        "--heading",
+        "0.3",
+    ]);
+    assert!(o.status.success());
+    let out = String::from_utf8(o.stdout).unwrap();
+    let mut lines = out.lines();
+    assert_eq!(
+        lines.next(),
+        Some("t,x,y,heading,sigma_x,sigma_y,sigma_heading")
+    );
+    assert_eq!(out.lines().count(), read(&sm).lines().count());
+    // Final pose near the reference's last point.
+    let last: Vec<f64> = out
+        .lines()
+        .last()
+        .unwrap()
+        .split(',')
+        .map(|v| v.parse().unwrap())
+        .collect();
+    let rlast: Vec<f64> = read(&rf)
+        .lines()
+        .last()
+        .unwrap()
+        .split(',')
+        .map(|v| v.parse().unwrap())
+        .collect();
+    assert!(
+        (last[1] - rlast[1]).hypot(last[2] - rlast[2]) < 0.05,
+        "{last:?} {rlast:?}"
+    );
+    let o = odoctl(&["replay", s(&sm), "--set", "track_width=-1"]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("track_width"));
+    let o = odoctl(&["replay", s(&sm), "--set", "wheel=1"]);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("unknown key"));
+}
+
+#[test]
+fn bad_files_name_the_file_and_line() {
+    let d = scratch("cli_bad");
+    let good_s = d.join("s.csv");
+    let good_r = d.join("r.csv");
+    std::fs::write(&good_s, "t,left,right\n0,0,0\n0.02,10,10\n").unwrap();
+    std::fs::write(&good_r, "t,x,y\n0,0,0\n0.02,0,0.001\n").unwrap();
+    let cases: &[(&str, &str, &str, &str)] = &[
+        ("s", "t,left\n0,0\n", ":1:", "missing column `right`"),
+        ("s", "t,left,right\n0,0,0\n0.02,abc,0\n", ":3:", "`left`"),
+        (
+            "s",
+            "t,left,right\n0,0,0\n0.02,1.5,0\n",
+            ":3:",
+            "not an integer",
+        ),
+        ("s", "t,left,right\n0,0,0\n0,1,1\n", ":3:", "increase"),
+        ("r", "t,x,y\n0,0,0\n-1,0,0\n", ":3:", "increase"),
+        ("r", "t,x,y\n0,0,zero\n", ":2:", "`y`"),
+        ("r", "t,x,y\n100,0,0\n100.02,0,1\n", "common times", "r.csv"),
+    ];
+    for (which, text, at, what) in cases {
+        let bad = d.join(format!("bad_{which}.csv"));
+        std::fs::write(&bad, text).unwrap();
+        let (sm, rf) = if *which == "s" {
+            (&bad, &good_r)
+        } else {
+            (&good_s, &bad)
+        };
+        let o = odoctl(&[
+            "calibrate",
+            "--samples",
+            s(sm),
+            "--reference",
+            s(rf),
+            "--quiet",
+        ]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{text}");
+        assert!(
+            err.contains(at) && err.contains(what) && err.contains(&format!("bad_{which}.csv")),
+            "{text}: {err}"
+        );
+    }
+    let toml = d.join("bad.toml");
+    std::fs::write(&toml, "left_diameter = 0.26\n\nright_diameter = \"big\"\n").unwrap();
+    let o = odoctl(&["replay", s(&good_s), "--config", s(&toml)]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("bad.toml:3") && err.contains("right_diameter"),
+        "{err}"
+    );
+}

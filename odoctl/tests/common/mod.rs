@@ -1,0 +1,235 @@
+//! Helpers shared by the integration tests: simulated runs, and a fake unit that speaks the
+//! core's protocol (pose records from the core integrator, replies from the core's command
+//! executor) over TCP, as the QEMU image does.
+#![allow(dead_code)]
+
+use std::io::{Read, Write};
+use std::net::TcpListener;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use odo_core::odometry::{ChassisParams, IndexRefs, Integrator, Pose, WheelCounts};
+use odo_core::protocol::command::{execute, Action, LineAssembler};
+use odo_core::protocol::{
+    CommandReply, FrameEncoder, Message, PoseRecord, StatusFlags, WheelStatus, MAX_ENCODED_FRAME,
+};
+use odo_core::settings::Settings;
+use odoctl::csvio::Sample;
+use odoctl::simulate::{self, PathKind, SimOptions, SimRun};
+
+/// The odoctl binary.
+pub fn bin() -> &'static str {
+    env!("CARGO_BIN_EXE_odoctl")
+}
+
+/// Runs odoctl with `args`.
+pub fn odoctl(args: &[&str]) -> Output {
+    Command::new(bin())
+        .args(args)
+        .output()
+        .expect("odoctl runs")
+}
+
+/// A fresh scratch directory under the target dir.
+pub fn scratch(name: &str) -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// The default true chassis of `simulate`.
+pub fn truth() -> ChassisParams {
+    odoctl::commands::default_truth()
+}
+
+/// A simulated run with the tool's default noise.
+pub fn sim(kind: PathKind, length: f64, seed: u64) -> SimRun {
+    let mut rng = simulate::Rng::new(seed ^ 0x5EED);
+    simulate::simulate(&SimOptions {
+        truth: truth(),
+        segments: simulate::path(kind, length, &mut rng),
+        rate: 50.0,
+        speed: 0.5,
+        slip: 0.001,
+        slip_corr: 0.1,
+        rtk_sigma: 0.008,
+        heading_sigma: Some(0.5f64.to_radians()),
+        start: (3.0, -2.0, 0.3),
+        seed,
+    })
+}
+
+/// Pose records as the firmware makes them: the first at the integrator's creation (pose 0,
+/// zero sigmas), then one per sample after `step`.
+pub fn records(params: &ChassisParams, samples: &[Sample]) -> Vec<PoseRecord> {
+    let c = |s: &Sample| WheelCounts {
+        left: s.left,
+        right: s.right,
+    };
+    let refs = |s: &Sample| IndexRefs {
+        left: s.left_index,
+        right: s.right_index,
+    };
+    let mut integ = Integrator::new(params, c(&samples[0]), Pose::default()).unwrap();
+    let mut out = Vec::new();
+    for (i, s) in samples.iter().enumerate() {
+        if i > 0 {
+            integ.step(c(s), refs(s));
+        }
+        out.push(record(i as u32, s, &integ));
+    }
+    out
+}
+
+fn record(seq: u32, s: &Sample, integ: &Integrator) -> PoseRecord {
+    let p = integ.pose();
+    let sg = integ.sigma();
+    PoseRecord {
+        sequence: seq,
+        flags: StatusFlags {
+            left: WheelStatus {
+                index_seen: s.left_index.is_some(),
+                ..Default::default()
+            },
+            right: WheelStatus {
+                index_seen: s.right_index.is_some(),
+                ..Default::default()
+            },
+            ..Default::default()
+        },
+        mcu_time_us: (s.t * 1e6).round() as u64,
+        x: p.x,
+        y: p.y,
+        heading: p.heading,
+        sigma_x: sg.x,
+        sigma_y: sg.y,
+        sigma_heading: sg.heading,
+        sigma_xy: sg.xy,
+        gamma_left: s.left,
+        gamma_right: s.right,
+        index_left: s.left_index.unwrap_or(0),
+        index_right: s.right_index.unwrap_or(0),
+        ..Default::default()
+    }
+}
+
+/// Encodes messages as a byte stream.
+pub fn encode(msgs: impl IntoIterator<Item = Message>) -> Vec<u8> {
+    let mut enc = FrameEncoder::new();
+    let mut out = Vec::new();
+    let mut buf = [0u8; MAX_ENCODED_FRAME];
+    for m in msgs {
+        let n = enc.encode(&m, &mut buf).unwrap();
+        out.extend_from_slice(&buf[..n]);
+    }
+    out
+}
+
+/// A fake unit on 127.0.0.1: answers command lines with the core's executor and streams the
+/// pose records of `samples` (integrated by the core with its working settings), one every
+/// `period`. Serves one connection, and stops when the client closes it or after 30 s.
+pub fn fake_unit(samples: Vec<Sample>, period: Duration) -> (u16, JoinHandle<Settings>) {
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = listener.local_addr().unwrap().port();
+    let handle = std::thread::spawn(move || {
+        let (mut sock, _) = listener.accept().unwrap();
+        sock.set_read_timeout(Some(Duration::from_millis(1)))
+            .unwrap();
+        let mut settings = Settings::DEFAULT;
+        let mut lines = LineAssembler::new();
+        let mut enc = FrameEncoder::new();
+        let mut buf = [0u8; MAX_ENCODED_FRAME];
+        let c = |s: &Sample| WheelCounts {
+            left: s.left,
+            right: s.right,
+        };
+        let mut integ: Option<Integrator> = None;
+        let mut reset: Option<Pose> = None;
+        let mut next = 0usize;
+        let started = Instant::now();
+        let mut last = Instant::now();
+        let mut send = |sock: &mut std::net::TcpStream, m: Message| -> bool {
+            let n = enc.encode(&m, &mut buf).unwrap();
+            sock.write_all(&buf[..n]).is_ok()
+        };
+        'serve: while started.elapsed() < Duration::from_secs(30) {
+            let mut rx = [0u8; 256];
+            match sock.read(&mut rx) {
+                Ok(0) => break,
+                Ok(n) => {
+                    for &b in &rx[..n] {
+                        let Some(Ok(line)) = lines.push(b) else {
+                            continue;
+                        };
+                        let line = line.to_string();
+                        let (reply, action) = execute(&line, &mut settings);
+                        if let Action::ResetPose { x, y, heading } = action {
+                            reset = Some(Pose { x, y, heading });
+                        }
+                        if matches!(action, Action::SettingsChanged) {
+                            if let Some(i) = &mut integ {
+                                i.set_params(&settings.chassis).unwrap();
+                            }
+                        }
+                        for chunk in CommandReply::chunks(reply.ok, &reply.text) {
+                            if !send(&mut sock, chunk.into()) {
+                                break 'serve;
+                            }
+                        }
+                    }
+                }
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                    ) => {}
+                Err(_) => break,
+            }
+            if next < samples.len() && last.elapsed() >= period {
+                last = Instant::now();
+                let s = &samples[next];
+                match &mut integ {
+                    None => {
+                        integ = Some(
+                            Integrator::new(
+                                &settings.chassis,
+                                c(s),
+                                reset.take().unwrap_or_default(),
+                            )
+                            .unwrap(),
+                        )
+                    }
+                    Some(i) => {
+                        if let Some(p) = reset.take() {
+                            i.rebase_counts(c(s));
+                            i.reset_pose(p);
+                        } else {
+                            i.step(
+                                c(s),
+                                IndexRefs {
+                                    left: s.left_index,
+                                    right: s.right_index,
+                                },
+                            );
+                        }
+                    }
+                }
+                let r = record(next as u32, s, integ.as_ref().unwrap());
+                if !send(&mut sock, r.into()) {
+                    break;
+                }
+                next += 1;
+            }
+        }
+        settings
+    });
+    (port, handle)
+}
+
+/// Reads a whole file to a string.
+pub fn read(p: &Path) -> String {
+    std::fs::read_to_string(p).unwrap()
+}
