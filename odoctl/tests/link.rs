@@ -1,0 +1,213 @@
+//! The link subcommands against a fake unit speaking the core's protocol over TCP, and the
+//! bit-for-bit replay of pose records made by the core integrator.
+
+mod common;
+
+use std::time::Duration;
+
+use common::{odoctl, read, scratch};
+use odo_core::protocol::Message;
+use odoctl::simulate::PathKind;
+
+fn s(p: &std::path::Path) -> &str {
+    p.to_str().unwrap()
+}
+
+#[test]
+fn decode_then_replay_matches_the_cores_records_bit_for_bit() {
+    let d = scratch("link_decode");
+    let sim = common::sim(PathKind::Validation, 15.0, 8);
+    // The unit's parameters differ from the designed ones, and one wheel has harmonics
+    // (its index count is in the records, so the per-angle function is exercised).
+    let mut params = common::truth();
+    params.left_wheel.cos[0] = 0.002;
+    params.right_wheel.sin[1] = -0.001;
+    let recs = common::records(&params, &sim.samples);
+    let raw = d.join("capture.bin");
+    std::fs::write(&raw, common::encode(recs.iter().map(|r| Message::Pose(*r)))).unwrap();
+    let csv = d.join("rec.csv");
+    let o = odoctl(&["decode", s(&raw), "--out", s(&csv)]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let cfg = d.join("unit.toml");
+    std::fs::write(&cfg, odoctl::config::render_params(&params, "unit", &[])).unwrap();
+    let out = d.join("replay.csv");
+    let o = odoctl(&[
+        "replay",
+        s(&csv),
+        "--config",
+        s(&cfg),
+        "--check",
+        "--out",
+        s(&out),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        o.status.success() && err.contains("match the unit's records bit for bit"),
+        "{err}"
+    );
+    // And the CSV itself carries the exact values.
+    for (line, r) in read(&out).lines().skip(1).zip(&recs) {
+        let v: Vec<&str> = line.split(',').collect();
+        assert_eq!(v[1].parse::<f64>().unwrap().to_bits(), r.x.to_bits());
+        assert_eq!(v[3].parse::<f64>().unwrap().to_bits(), r.heading.to_bits());
+        assert_eq!(
+            v[6].parse::<f32>().unwrap().to_bits(),
+            r.sigma_heading.to_bits()
+        );
+    }
+    // With other parameters the check fails.
+    let o = odoctl(&["replay", s(&csv), "--check", "--out", s(&out)]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("differ"));
+}
+
+#[test]
+fn decode_counts_corrupted_frames_and_resynchronises() {
+    let d = scratch("link_corrupt");
+    let sim = common::sim(PathKind::Estimation, 3.0, 9);
+    let recs = common::records(&common::truth(), &sim.samples[..100]);
+    let mut bytes = common::encode(recs.iter().map(|r| Message::Pose(*r)));
+    let frame = bytes.len() / recs.len();
+    // Flip a bit inside the 11th frame where it leaves the COBS framing intact, so that only
+    // the CRC can catch it.
+    let at = (frame * 10 + 5..frame * 11)
+        .find(|&i| {
+            let mut b = bytes.clone();
+            b[i] ^= 0x40;
+            let mut dec = odo_core::protocol::FrameDecoder::new();
+            dec.feed(&b, |_| {});
+            dec.stats().crc_errors == 1
+        })
+        .unwrap();
+    bytes[at] ^= 0x40;
+    let raw = d.join("capture.bin");
+    std::fs::write(&raw, &bytes).unwrap();
+    let o = odoctl(&["decode", s(&raw), "--out", s(&d.join("rec.csv"))]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("99 pose records")
+            && err.contains("CRC errors 1")
+            && err.contains("record sequence gaps 1"),
+        "{err}"
+    );
+    let o = odoctl(&["decode", s(&d.join("nothing.bin"))]);
+    assert!(!o.status.success());
+}
+
+#[test]
+fn config_against_a_unit_on_tcp() {
+    let (port, unit) = common::fake_unit(Vec::new(), Duration::from_millis(5));
+    let d = scratch("link_config");
+    let push = d.join("cal.toml");
+    std::fs::write(&push, "left_diameter = 0.2611\nright_diameter = 0.2605\ntrack_width = 0.5650\ndelta_left = 2.0e-8\n\n[fit]\neq16_cost = 1.0\n").unwrap();
+    let addr = format!("tcp:127.0.0.1:{port}");
+    // One connection serves the whole test: use the raw command, then push on a second unit.
+    let o = odoctl(&["config", "--port", &addr, "push", s(&push), "--no-save"]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{out} {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(
+        out.contains(
+            "> set left_diameter 0.2611 right_diameter 0.2605 track_width 0.565 delta_left 2e-8"
+        ),
+        "{out}"
+    );
+    let settings = unit.join().unwrap();
+    assert_eq!(settings.chassis.left_diameter, 0.2611);
+    assert_eq!(settings.chassis.delta_left, 2.0e-8);
+
+    let (port, unit) = common::fake_unit(Vec::new(), Duration::from_millis(5));
+    let o = odoctl(&[
+        "config",
+        "--port",
+        &format!("tcp:127.0.0.1:{port}"),
+        "set",
+        "track_width",
+        "99",
+    ]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(!o.status.success(), "{out}");
+    assert!(out.contains("error"), "{out}");
+    assert_eq!(unit.join().unwrap().chassis.track_width, 0.563);
+
+    let (port, unit) = common::fake_unit(Vec::new(), Duration::from_millis(5));
+    let o = odoctl(&[
+        "config",
+        "--port",
+        &format!("tcp:127.0.0.1:{port}"),
+        "get",
+        "ticks_per_rev",
+    ]);
+    assert!(o.status.success());
+    assert!(String::from_utf8_lossy(&o.stdout).contains("ticks_per_rev = 20000"));
+    unit.join().unwrap();
+
+    let o = odoctl(&["config", "--port", "tcp:127.0.0.1:1", "get"]);
+    assert!(!o.status.success());
+}
+
+#[test]
+fn record_and_monitor_against_a_unit_on_tcp() {
+    let sim = common::sim(PathKind::Validation, 10.0, 10);
+    let samples: Vec<_> = sim.samples[..400].to_vec();
+    let d = scratch("link_record");
+    let (port, unit) = common::fake_unit(samples.clone(), Duration::from_millis(1));
+    let csv = d.join("rec.csv");
+    let raw = d.join("rec.bin");
+    let o = odoctl(&[
+        "record",
+        "--port",
+        &format!("tcp:127.0.0.1:{port}"),
+        "--out",
+        s(&csv),
+        "--raw",
+        s(&raw),
+        "--count",
+        "200",
+        "--reset-pose",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("recorded 200 records") && err.contains("CRC errors 0"),
+        "{err}"
+    );
+    unit.join().unwrap();
+    // The recording starts at the reset and replays bit for bit with the unit's parameters.
+    let o = odoctl(&[
+        "replay",
+        s(&csv),
+        "--check",
+        "--out",
+        s(&d.join("replay.csv")),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // The raw capture decodes to at least the same records.
+    let o = odoctl(&["decode", s(&raw), "--out", s(&d.join("dec.csv"))]);
+    assert!(o.status.success());
+    assert!(read(&d.join("dec.csv")).lines().count() >= 201);
+
+    let (port, unit) = common::fake_unit(samples, Duration::from_millis(1));
+    let o = odoctl(&[
+        "monitor",
+        "--port",
+        &format!("tcp:127.0.0.1:{port}"),
+        "--count",
+        "20",
+    ]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{out}");
+    assert!(
+        out.lines().filter(|l| !l.starts_with('#')).count() == 21,
+        "{out}"
+    );
+    assert!(
+        out.contains("# link: frames") && out.contains("records 20"),
+        "{out}"
+    );
+    unit.join().unwrap();
+}
