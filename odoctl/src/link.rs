@@ -23,6 +23,9 @@ use crate::csvio::fmt_t;
 pub trait Link: Read + Write + Send {}
 impl<T: Read + Write + Send> Link for T {}
 
+/// How long the first command of a session waits for the unit's first frame.
+pub const ALIVE_WAIT: Duration = Duration::from_secs(3);
+
 /// Read timeout of one poll.
 const POLL: Duration = Duration::from_millis(50);
 
@@ -98,6 +101,7 @@ pub struct Session {
     pending: VecDeque<Frame>,
     raw: Option<BufWriter<File>>,
     eof: bool,
+    alive: bool,
     /// Record-level counters (updated as frames are taken with [`Session::next_frame`]).
     pub stats: StreamStats,
 }
@@ -119,6 +123,7 @@ impl Session {
             pending: VecDeque::new(),
             raw,
             eof: false,
+            alive: false,
             stats: StreamStats::default(),
         })
     }
@@ -185,12 +190,23 @@ impl Session {
 
     /// Sends `line` and collects its reply (all frames until one without `more`); other
     /// frames arriving meanwhile are passed to `other`. Returns (ok, text).
+    ///
+    /// Before the first command of a session it waits (up to [`ALIVE_WAIT`]) for the unit's
+    /// first frame, so a unit that is still booting (the QEMU image starts when the socket
+    /// connects) does not miss the line.
     pub fn command_with(
         &mut self,
         line: &str,
         timeout: Duration,
         mut other: impl FnMut(&Frame),
     ) -> Result<(bool, String)> {
+        if !self.alive {
+            self.alive = true;
+            let deadline = Instant::now() + ALIVE_WAIT;
+            while self.pending.is_empty() && !self.eof && Instant::now() < deadline {
+                self.pump()?;
+            }
+        }
         self.send_line(line)?;
         let deadline = Instant::now() + timeout;
         let mut text = String::new();

@@ -155,6 +155,12 @@ pub fn fake_unit(samples: Vec<Sample>, period: Duration) -> (u16, JoinHandle<Set
             let n = enc.encode(&m, &mut buf).unwrap();
             sock.write_all(&buf[..n]).is_ok()
         };
+        // A heartbeat first, as a unit that is up sends them.
+        let status = odo_core::protocol::Status {
+            rate_hz: 50,
+            ..Default::default()
+        };
+        send(&mut sock, status.into());
         'serve: while started.elapsed() < Duration::from_secs(30) {
             let mut rx = [0u8; 256];
             match sock.read(&mut rx) {
