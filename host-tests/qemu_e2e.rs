@@ -83,22 +83,20 @@ struct Link {
 
 impl Link {
     fn next_frame(&mut self) -> Frame {
-        loop {
-            let left = DEADLINE.saturating_sub(self.start.elapsed());
-            match self.rx.recv_timeout(left) {
-                Ok(Event::Frame(f)) => {
-                    self.seqs.push(f.seq);
-                    match &f.message {
-                        Message::Pose(r) => self.records.push(*r),
-                        Message::DeviceInfo(_) => self.device_info += 1,
-                        _ => {}
-                    }
-                    return *f;
+        let left = DEADLINE.saturating_sub(self.start.elapsed());
+        match self.rx.recv_timeout(left) {
+            Ok(Event::Frame(f)) => {
+                self.seqs.push(f.seq);
+                match &f.message {
+                    Message::Pose(r) => self.records.push(*r),
+                    Message::DeviceInfo(_) => self.device_info += 1,
+                    _ => {}
                 }
-                Ok(Event::Closed(stats)) => panic!("link closed by QEMU ({stats:?})"),
-                Err(RecvTimeoutError::Timeout) => panic!("no frame before the deadline"),
-                Err(RecvTimeoutError::Disconnected) => panic!("reader thread ended"),
+                *f
             }
+            Ok(Event::Closed(stats)) => panic!("link closed by QEMU ({stats:?})"),
+            Err(RecvTimeoutError::Timeout) => panic!("no frame before the deadline"),
+            Err(RecvTimeoutError::Disconnected) => panic!("reader thread ended"),
         }
     }
 

@@ -492,10 +492,7 @@ fn config_validation_boundaries() {
         (|c| c.rate_hz = 10_001, Err(ConfigError::Rate)),
         (|c| c.timer_hz = 999, Err(ConfigError::TimerHz)),
         (|c| c.glitch_window_ticks = 0, Err(ConfigError::Window)),
-        (
-            |c| c.glitch_window_ticks = HZ / 4,
-            Err(ConfigError::Window),
-        ),
+        (|c| c.glitch_window_ticks = HZ / 4, Err(ConfigError::Window)),
         (|c| c.max_offset_ppm = 0, Err(ConfigError::Offset)),
         (|c| c.holdover_s = 0, Err(ConfigError::Holdover)),
     ];
