@@ -336,15 +336,27 @@ mod app {
     }
 
     /// The sample instant (TIM5 update) and the PPS capture (TIM5 CH1): snapshot and hand on.
-    #[task(binds = TIM5, priority = 4, local = [sampler, samples_in, cfg_out, lost: u32 = 0], shared = [acq])]
+    #[task(
+        binds = TIM5,
+        priority = 4,
+        local = [sampler, samples_in, cfg_out, lost: u32 = 0, pps: Option<(u64, PpsEvent)> = None],
+        shared = [acq]
+    )]
     fn sample(mut cx: sample::Context) {
         let sampler = cx.local.sampler;
         let event = sampler.on_interrupt();
-        let Some(sample) = event.sample else {
-            if let Some((_, e)) = event.pps {
-                // A PPS edge between samples: reported with the next sample.
-                defmt::trace!("pps {}", matches!(e, PpsEvent::Glitch));
+        if let Some(pps) = event.pps {
+            // Reported with the next sample; a glitch does not hide an accepted edge.
+            let keep = matches!(cx.local.pps, Some((_, e)) if *e != PpsEvent::Glitch)
+                && pps.1 == PpsEvent::Glitch;
+            if !keep {
+                *cx.local.pps = Some(pps);
             }
+        }
+        if event.overcapture {
+            defmt::warn!("PPS: over-capture (two edges in one interrupt)");
+        }
+        let Some(sample) = event.sample else {
             return;
         };
         let (counts, faults, sim_index) = cx.shared.acq.lock(|acq| {
@@ -360,7 +372,7 @@ mod app {
             sample,
             counts,
             faults,
-            pps: event.pps,
+            pps: cx.local.pps.take(),
             state: sampler.discipline().state(),
             stats: sampler.discipline().stats(),
             period: sampler.discipline().period(),
