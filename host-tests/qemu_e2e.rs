@@ -438,5 +438,8 @@ fn qemu_end_to_end() {
         last.x, last.y, last.heading, last.sigma_x, last.sigma_y, last.sigma_heading
     );
     assert!(replayed >= 500, "at least 10 s at 50 Hz");
+    // The unit's own measurement of its per-sample cost (instructions under -icount).
+    let status = expect(&mut link, "status", true, "sample_isr_max");
+    assert!(status.contains("records_dropped = 0"), "{status}");
     assert!(distance > 1.0, "the drive moved");
 }

@@ -88,6 +88,8 @@ mod app {
         period: u64,
         /// Index pulses of the simulated drive (QEMU build only; EXTI on the board).
         sim_index: [Option<u32>; 2],
+        /// Cycles (instructions in QEMU) the sample interrupt took up to the hand-over.
+        isr_cycles: u32,
     }
 
     /// The host link's transmit side: the byte ring and the frame sequence number.
@@ -115,6 +117,9 @@ mod app {
         nmea_errors: u32,
         time_messages: u32,
         mcu_time_us: u64,
+        /// Most cycles of one sample interrupt, and of processing one sample.
+        isr_cycles_max: u32,
+        process_cycles_max: u32,
     }
 
     #[shared]
@@ -187,6 +192,8 @@ mod app {
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
         let dp = cx.device;
+        let mut core = cx.core;
+        board::start_cycle_counter(&mut core);
         let mut rcc = dp.RCC.freeze(board::clock_config());
         let clocks = rcc.clocks;
         let timer_hz = board::timer_hz(&clocks);
@@ -265,6 +272,7 @@ mod app {
             stats: sampler.discipline().stats(),
             period: sampler.discipline().period(),
             sim_index: [None, None],
+            isr_cycles: 0,
         };
         let mut samples_in = samples_in;
         let _ = samples_in.enqueue(first);
@@ -343,6 +351,7 @@ mod app {
         shared = [acq]
     )]
     fn sample(mut cx: sample::Context) {
+        let entry = board::cycles();
         let sampler = cx.local.sampler;
         let event = sampler.on_interrupt();
         if let Some(pps) = event.pps {
@@ -377,6 +386,7 @@ mod app {
             stats: sampler.discipline().stats(),
             period: sampler.discipline().period(),
             sim_index,
+            isr_cycles: board::cycles().wrapping_sub(entry),
         };
         if cx.local.samples_in.enqueue(raw).is_err() {
             *cx.local.lost += 1;
@@ -470,6 +480,7 @@ mod app {
             p.on_nmea_byte(byte);
         }
         while let Some(raw) = cx.local.samples_out.dequeue() {
+            let start = board::cycles();
             while let Some(l) = cx.local.index_out_left.dequeue() {
                 p.on_index(0, l);
             }
@@ -487,7 +498,8 @@ mod app {
                 let sent = send(&mut cx.shared.link, &Message::Pose(record), RECORD_RESERVE);
                 p.sent(sent);
             }
-            let live = p.live(&raw);
+            let spent = board::cycles().wrapping_sub(start);
+            let live = p.live(&raw, spent);
             cx.shared.live.lock(|l| *l = live);
         }
     }
@@ -609,6 +621,15 @@ mod app {
                 ));
             }
             reply.push_line(format_args!("host_rx_lost = {rx_lost}"));
+            let unit = if cfg!(feature = "qemu") {
+                "instructions (QEMU)"
+            } else {
+                "cycles"
+            };
+            reply.push_line(format_args!(
+                "sample_isr_max = {} {unit}, process_max = {} {unit}",
+                live.isr_cycles_max, live.process_cycles_max
+            ));
             let source = match self.source {
                 SettingsSource::Flash => "flash",
                 SettingsSource::Defaults => "defaults",
@@ -642,6 +663,8 @@ mod app {
         reset: Option<Pose>,
         flags: StatusFlags,
         mcu_time_us: u64,
+        isr_cycles_max: u32,
+        process_cycles_max: u32,
     }
 
     impl Processor {
@@ -667,6 +690,8 @@ mod app {
                 reset: None,
                 flags: StatusFlags::default(),
                 mcu_time_us: 0,
+                isr_cycles_max: 0,
+                process_cycles_max: 0,
             }
         }
 
@@ -891,8 +916,12 @@ mod app {
             }
         }
 
-        fn live(&self, raw: &RawSample) -> Live {
+        fn live(&mut self, raw: &RawSample, process_cycles: u32) -> Live {
+            self.isr_cycles_max = self.isr_cycles_max.max(raw.isr_cycles);
+            self.process_cycles_max = self.process_cycles_max.max(process_cycles);
             Live {
+                isr_cycles_max: self.isr_cycles_max,
+                process_cycles_max: self.process_cycles_max,
                 samples: self.sequence,
                 dropped_total: self.dropped_total,
                 flags: self.flags,

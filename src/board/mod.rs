@@ -274,3 +274,35 @@ impl Acquisition {
         }
     }
 }
+
+/// A free-running cycle count for measuring code: the DWT cycle counter on the board (CPU
+/// cycles at 84 MHz); in QEMU, TIM2's counter, which the `qemu` build leaves untouched and
+/// which under `-icount shift=0` counts executed instructions.
+#[inline(always)]
+pub fn cycles() -> u32 {
+    #[cfg(not(feature = "qemu"))]
+    {
+        cortex_m::peripheral::DWT::cycle_count()
+    }
+    #[cfg(feature = "qemu")]
+    {
+        // Note(unsafe): a read of TIM2 CNT, a register no other code of the qemu build uses
+        // (the encoders are simulated); reads have no side effect.
+        unsafe { (*pac::TIM2::ptr()).cnt().read().bits() }
+    }
+}
+
+/// Starts what [`cycles`] reads.
+pub fn start_cycle_counter(core: &mut cortex_m::Peripherals) {
+    #[cfg(not(feature = "qemu"))]
+    {
+        core.DCB.enable_trace();
+        core.DWT.enable_cycle_counter();
+    }
+    #[cfg(feature = "qemu")]
+    {
+        let _ = core;
+        // Note(unsafe): TIM2 CR1 = CEN; QEMU's TIM2 then counts at 1 GHz of emulated time.
+        unsafe { (*pac::TIM2::ptr()).cr1().write(|w| w.bits(1)) };
+    }
+}
