@@ -274,8 +274,9 @@ fn qemu_end_to_end() {
     expect(&mut link, "save", true, "saved");
     let all = expect(&mut link, "get", true, "right_sin3");
     assert!(all.contains("delta_left = 0.000000045"), "{all}");
-    expect(&mut link, "reset_pose 1.5 -2 0.25", true, "ok");
+    // The reset applies at the next sample, whose record may precede the reply frame.
     let reset_from = link.records.len();
+    expect(&mut link, "reset_pose 1.5 -2 0.25", true, "ok");
 
     // Records until 12 s of emulated time after the reset.
     let r0 = loop {
