@@ -176,7 +176,7 @@ pub fn simulate(o: &SimulateOptions) -> Result<ExitCode> {
         .map(|w| (w[1].0 - w[0].0).hypot(w[1].1 - w[0].1))
         .sum();
     let turned: f64 = sim.truth.windows(2).map(|w| (w[1].2 - w[0].2).abs()).sum();
-    println!(
+    crate::outln!(
         "simulated {} samples over {:.1} s: {:.1} m travelled, {:.0} deg turned; true left_diameter {}, right_diameter {}, track_width {}",
         sim.samples.len(),
         sim.samples.last().map_or(0.0, |s| s.t),
@@ -339,12 +339,12 @@ pub fn calibrate(o: &CalibrateOptions) -> Result<ExitCode> {
     let cov1 = coverage(&ev.horizontal[1..], &ev.sigma_h[1..], 1.0);
     let cov3 = coverage(&ev.horizontal[1..], &ev.sigma_h[1..], 3.0);
 
-    println!(
+    crate::outln!(
         "calibration: {} common times, {:.1} m of reference path",
         g.points + 1,
         ev.dist.last().unwrap_or(&0.0)
     );
-    println!("  {:<16} {:>14} {:>14}", "parameter", "initial", "estimate");
+    crate::outln!("  {:<16} {:>14} {:>14}", "parameter", "initial", "estimate");
     for (k, a, b) in [
         (
             "left_diameter",
@@ -358,11 +358,13 @@ pub fn calibrate(o: &CalibrateOptions) -> Result<ExitCode> {
         ),
         ("track_width", initial.track_width, c.params.track_width),
     ] {
-        println!("  {k:<16} {a:>14.6} {b:>14.6}");
+        crate::outln!("  {k:<16} {a:>14.6} {b:>14.6}");
     }
-    println!(
+    crate::outln!(
         "  {:<16} {:>14} {:>14.6}",
-        "initial heading", "", g.heading0
+        "initial heading",
+        "",
+        g.heading0
     );
     if let Some(u) = &c.uncertainty {
         let (a, b) = match c.params.uncertainty_model {
@@ -375,9 +377,9 @@ pub fn calibrate(o: &CalibrateOptions) -> Result<ExitCode> {
                 (c.params.kappa_left, c.params.kappa_right),
             ),
         };
-        println!("  {:<16} {:>14.4e} {:>14.4e}", u.keys.0, a.0, b.0);
-        println!("  {:<16} {:>14.4e} {:>14.4e}", u.keys.1, a.1, b.1);
-        println!(
+        crate::outln!("  {:<16} {:>14.4e} {:>14.4e}", u.keys.0, a.0, b.0);
+        crate::outln!("  {:<16} {:>14.4e} {:>14.4e}", u.keys.1, a.1, b.1);
+        crate::outln!(
             "uncertainty fit: {} sub-trajectories of {} m, {} points; 1-sigma band covers {:.1} % (target 68.3 %), 3-sigma {:.1} %",
             u.windows,
             o.delta_window,
@@ -389,7 +391,7 @@ pub fn calibrate(o: &CalibrateOptions) -> Result<ExitCode> {
             eprintln!("warning: uncertainty fit: {w}");
         }
     }
-    println!(
+    crate::outln!(
         "eq (16): {:.6} m over {} points (mean {:.4} m); {} stages, {} iterations, {} integrator runs",
         g.cost,
         g.points,
@@ -398,7 +400,7 @@ pub fn calibrate(o: &CalibrateOptions) -> Result<ExitCode> {
         g.iterations,
         g.evaluations
     );
-    println!(
+    crate::outln!(
         "horizontal error: mean {:.4} m, rms {:.4} m, p95 {:.4} m, max {:.4} m; within 1 sigma {:.1} %, 3 sigma {:.1} %",
         h.mean,
         h.rms,
@@ -408,7 +410,7 @@ pub fn calibrate(o: &CalibrateOptions) -> Result<ExitCode> {
         100.0 * cov3
     );
     if !he.is_empty() {
-        println!(
+        crate::outln!(
             "heading error: mean |e| {:.3} deg, rms {:.3} deg, max {:.3} deg; within 1 sigma {:.1} %, 3 sigma {:.1} %",
             head.mean.to_degrees(),
             head.rms.to_degrees(),
@@ -473,7 +475,7 @@ pub fn calibrate(o: &CalibrateOptions) -> Result<ExitCode> {
             &fit,
         );
         std::fs::write(p, text).with_context(|| format!("{}: cannot write", p.display()))?;
-        println!("wrote {}", p.display());
+        crate::outln!("wrote {}", p.display());
     }
     if let Some(dir) = &o.plots {
         let mut files = crate::plots::run_figures(dir, "calibrate", "Estimation run", ev)?;
@@ -486,10 +488,10 @@ pub fn calibrate(o: &CalibrateOptions) -> Result<ExitCode> {
             files.extend(crate::plots::window_figures(dir, &c.windows, full)?);
         }
         for f in files {
-            println!("wrote {}", f.display());
+            crate::outln!("wrote {}", f.display());
         }
     }
-    println!("done in {:.2} s", started.elapsed().as_secs_f64());
+    crate::outln!("done in {:.2} s", started.elapsed().as_secs_f64());
     Ok(ExitCode::SUCCESS)
 }
 
@@ -497,10 +499,18 @@ fn print_window_stats(est: &[calib::WindowEstimate]) {
     let mut lengths: Vec<f64> = est.iter().map(|e| e.length).collect();
     lengths.sort_by(f64::total_cmp);
     lengths.dedup();
-    println!("stability study (estimates on consecutive sub-trajectories):");
-    println!(
+    crate::outln!("stability study (estimates on consecutive sub-trajectories):");
+    crate::outln!(
         "  {:>6} {:>5} {:>5}  {:<15} {:>10} {:>10} {:>10} {:>10} {:>10}",
-        "length", "fits", "fail", "parameter", "mean", "std", "median", "min", "max"
+        "length",
+        "fits",
+        "fail",
+        "parameter",
+        "mean",
+        "std",
+        "median",
+        "min",
+        "max"
     );
     for l in lengths {
         let all: Vec<&calib::WindowEstimate> = est.iter().filter(|e| e.length == l).collect();
@@ -528,9 +538,13 @@ fn print_window_stats(est: &[calib::WindowEstimate]) {
             } else {
                 format!("{:>7} {:>5} {:>5}", "", "", "")
             };
-            println!(
+            crate::outln!(
                 "  {head}  {name:<15} {:>10.5} {:>10.5} {:>10.5} {:>10.5} {:>10.5}{note}",
-                s.mean, s.std, s.median, s.min, s.max
+                s.mean,
+                s.std,
+                s.median,
+                s.min,
+                s.max
             );
         }
     }
@@ -603,7 +617,7 @@ pub fn validate(
     };
     let ev = calib::evaluate(&run, &params, h0)?;
     let report = validation_report(&ev);
-    println!(
+    crate::outln!(
         "validation: {} common times, {:.1} m of reference path, initial heading {:.6} rad ({})",
         run.len(),
         ev.dist.last().unwrap_or(&0.0),
@@ -644,7 +658,7 @@ pub fn validate(
     }
     if let Some(dir) = plots {
         for f in crate::plots::run_figures(dir, "validate", "Validation run", &ev)? {
-            println!("wrote {}", f.display());
+            crate::outln!("wrote {}", f.display());
         }
     }
     Ok(ExitCode::SUCCESS)

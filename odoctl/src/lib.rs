@@ -7,6 +7,16 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+/// `println!` that ignores write errors (a closed pipe, as with `odoctl ... | head`, ends the
+/// output quietly instead of panicking).
+#[macro_export]
+macro_rules! outln {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout(), $($arg)*);
+    }};
+}
+
 pub mod calib;
 pub mod commands;
 pub mod config;

@@ -704,9 +704,9 @@ pub fn config(port: &str, baud: u32, action: ConfigAction) -> Result<ExitCode> {
     let mut s = Session::new(open(port, baud)?, None)?;
     for line in &lines {
         let (ok, text) = s.command(line, REPLY_TIMEOUT)?;
-        println!("> {line}");
+        crate::outln!("> {line}");
         for l in text.lines() {
-            println!("{l}");
+            crate::outln!("{l}");
         }
         if !ok {
             eprintln!("odoctl: the unit rejected `{line}`");

@@ -286,6 +286,14 @@ fn main() -> ExitCode {
     match run(cli) {
         Ok(code) => code,
         Err(e) => {
+            let broken_pipe = e.chain().any(|c| {
+                c.downcast_ref::<std::io::Error>()
+                    .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+            });
+            if broken_pipe {
+                // The reader of our output went away (`odoctl monitor ... | head`): not an error.
+                return ExitCode::SUCCESS;
+            }
             let _ = std::io::stdout().flush();
             eprintln!("odoctl: error: {e:#}");
             ExitCode::FAILURE
