@@ -277,6 +277,7 @@ fn qemu_end_to_end() {
     // The reset applies at the next sample, whose record may precede the reply frame.
     let reset_from = link.records.len();
     expect(&mut link, "reset_pose 1.5 -2 0.25", true, "ok");
+    let replied_at = link.records.len();
 
     // Records until 12 s of emulated time after the reset.
     let r0 = loop {
@@ -287,7 +288,7 @@ fn qemu_end_to_end() {
             break i;
         }
         assert!(
-            link.records.len() < reset_from + 100,
+            link.records.len() < replied_at + 100,
             "no record carries the reset pose"
         );
         link.next_frame();
