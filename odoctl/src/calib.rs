@@ -596,6 +596,8 @@ pub enum DeltaMode {
 /// Result of the uncertainty fit.
 #[derive(Debug, Clone)]
 pub struct UncertaintyFit {
+    /// The model whose coefficients were fitted.
+    pub model: UncertaintyModel,
     /// The parameters with the fitted coefficients.
     pub params: ChassisParams,
     /// Which keys were fitted (`delta_left`/`delta_right` or `kappa_left`/`kappa_right`).
@@ -758,6 +760,7 @@ pub fn fit_uncertainty(
     let params = at(value);
     let ev = collect(&params)?;
     Ok(UncertaintyFit {
+        model: geometry.uncertainty_model,
         params,
         keys,
         windows: wins.len(),

@@ -13,7 +13,7 @@ pub use crate::link::{config, decode, monitor, record, ConfigAction};
 
 use crate::calib::{self, DeltaMode, Run, WindowStart};
 use crate::config::{self as cfg, FitValue};
-use crate::core_api::{ChassisParams, Pose};
+use crate::core_api::{ChassisParams, Pose, UncertaintyModel};
 use crate::csvio;
 use crate::replay as rp;
 use crate::simulate::{self, PathKind};
@@ -209,6 +209,10 @@ pub struct CalibrateOptions {
     pub delta_mode: DeltaMode,
     /// Fit the uncertainty coefficients.
     pub fit_delta: bool,
+    /// The uncertainty models whose coefficients are fitted (empty: the initial estimate's
+    /// `uncertainty_model`). The result keeps the initial model when it is among them, else
+    /// the last one.
+    pub models: Vec<UncertaintyModel>,
     /// Nelder-Mead polish of eq (16).
     pub polish: bool,
     /// Stability study lengths (m).
@@ -243,8 +247,8 @@ pub struct Calibration {
     pub params: ChassisParams,
     /// The eq (16) fit.
     pub geometry: calib::GeomFit,
-    /// The uncertainty fit, when run.
-    pub uncertainty: Option<calib::UncertaintyFit>,
+    /// The uncertainty fits, one per model fitted.
+    pub uncertainty: Vec<calib::UncertaintyFit>,
     /// Evaluation of the whole run with the final parameters.
     pub evaluation: calib::Evaluation,
     /// The stability study.
@@ -277,23 +281,38 @@ pub fn calibrate_run(
         &pb,
     )?;
     pb.finish_and_clear();
-    let (params, uncertainty) = if o.fit_delta {
-        let pb = bar(o.quiet, "uncertainty fit");
-        let u = calib::fit_uncertainty(
-            &run,
-            &geometry.params,
-            geometry.heading0,
-            initial,
-            o.delta_window,
-            o.reference_sigma,
-            o.delta_mode,
-            &pb,
-        )?;
-        pb.finish_and_clear();
-        (u.params, Some(u))
-    } else {
-        (geometry.params, None)
-    };
+    let mut params = geometry.params;
+    let mut uncertainty = Vec::new();
+    if o.fit_delta {
+        let models = if o.models.is_empty() {
+            vec![initial.uncertainty_model]
+        } else {
+            o.models.clone()
+        };
+        for &m in &models {
+            let pb = bar(o.quiet, &format!("{} model fit", cfg::model_name(m)));
+            let mut p = params;
+            p.uncertainty_model = m;
+            let u = calib::fit_uncertainty(
+                &run,
+                &p,
+                geometry.heading0,
+                initial,
+                o.delta_window,
+                o.reference_sigma,
+                o.delta_mode,
+                &pb,
+            )?;
+            pb.finish_and_clear();
+            params = u.params;
+            uncertainty.push(u);
+        }
+        params.uncertainty_model = if models.contains(&initial.uncertainty_model) {
+            initial.uncertainty_model
+        } else {
+            *models.last().expect("one model")
+        };
+    }
     let evaluation = calib::evaluate(&run, &params, geometry.heading0)?;
     let windows = if o.windows.is_empty() {
         Vec::new()
@@ -366,13 +385,13 @@ pub fn calibrate(o: &CalibrateOptions) -> Result<ExitCode> {
         "",
         g.heading0
     );
-    if let Some(u) = &c.uncertainty {
-        let (a, b) = match c.params.uncertainty_model {
-            crate::core_api::UncertaintyModel::Paper => (
+    for u in &c.uncertainty {
+        let (a, b) = match u.model {
+            UncertaintyModel::Paper => (
                 (initial.delta_left, initial.delta_right),
                 (c.params.delta_left, c.params.delta_right),
             ),
-            crate::core_api::UncertaintyModel::Covariance => (
+            UncertaintyModel::Covariance => (
                 (initial.kappa_left, initial.kappa_right),
                 (c.params.kappa_left, c.params.kappa_right),
             ),
@@ -380,7 +399,8 @@ pub fn calibrate(o: &CalibrateOptions) -> Result<ExitCode> {
         crate::outln!("  {:<16} {:>14.4e} {:>14.4e}", u.keys.0, a.0, b.0);
         crate::outln!("  {:<16} {:>14.4e} {:>14.4e}", u.keys.1, a.1, b.1);
         crate::outln!(
-            "uncertainty fit: {} sub-trajectories of {} m, {} points; 1-sigma band covers {:.1} % (target 68.3 %), 3-sigma {:.1} %",
+            "{} model fit: {} sub-trajectories of {} m, {} points; 1-sigma band covers {:.1} % (target 68.3 %), 3-sigma {:.1} %",
+            cfg::model_name(u.model),
             u.windows,
             o.delta_window,
             u.points,
@@ -452,7 +472,7 @@ pub fn calibrate(o: &CalibrateOptions) -> Result<ExitCode> {
             fit.push(("heading_error_rms", FitValue::Num(head.rms)));
             fit.push(("heading_error_max", FitValue::Num(head.max)));
         }
-        if let Some(u) = &c.uncertainty {
+        if !c.uncertainty.is_empty() {
             fit.push((
                 "uncertainty_criterion",
                 FitValue::Text(format!(
@@ -465,10 +485,21 @@ pub fn calibrate(o: &CalibrateOptions) -> Result<ExitCode> {
             ));
             fit.push(("uncertainty_window", FitValue::Num(o.delta_window)));
             fit.push(("reference_sigma", FitValue::Num(o.reference_sigma)));
-            fit.push(("uncertainty_points", FitValue::Int(u.points as i64)));
-            fit.push(("uncertainty_coverage_1sigma", FitValue::Num(u.coverage1)));
-            fit.push(("uncertainty_coverage_3sigma", FitValue::Num(u.coverage3)));
         }
+        let mut per_model: Vec<(String, FitValue)> = Vec::new();
+        for u in &c.uncertainty {
+            let name = cfg::model_name(u.model);
+            per_model.push((format!("{name}_points"), FitValue::Int(u.points as i64)));
+            per_model.push((
+                format!("{name}_coverage_1sigma"),
+                FitValue::Num(u.coverage1),
+            ));
+            per_model.push((
+                format!("{name}_coverage_3sigma"),
+                FitValue::Num(u.coverage3),
+            ));
+        }
+        fit.extend(per_model.iter().map(|(k, v)| (k.as_str(), v.clone())));
         let text = cfg::render_params(
             &c.params,
             "odoctl calibrate: chassis parameters estimated by eq (16) of Jilek, Burian, Kriz",
@@ -590,6 +621,7 @@ fn write_windows_csv(path: &Path, est: &[calib::WindowEstimate]) -> Result<()> {
 }
 
 /// `odoctl validate`.
+#[allow(clippy::too_many_arguments)]
 pub fn validate(
     samples_path: &Path,
     reference_path: &Path,
@@ -598,8 +630,13 @@ pub fn validate(
     heading: Option<f64>,
     errors: Option<&Path>,
     plots: Option<&Path>,
+    models: &[UncertaintyModel],
+    reference_sigma: f64,
 ) -> Result<ExitCode> {
-    let params = cfg::load(config, sets)?;
+    let mut params = cfg::load(config, sets)?;
+    if let [one] = models {
+        params.uncertainty_model = *one;
+    }
     let samples = csvio::read_samples(samples_path)?;
     let reference = csvio::read_reference(reference_path)?;
     let matches = csvio::match_or_fail(
@@ -628,7 +665,65 @@ pub fn validate(
             "fitted by eq (16)"
         }
     );
-    print!("{report}");
+    crate::outln!("{}", report.trim_end());
+    let widened = |e: &calib::Evaluation, k: f64| -> f64 {
+        let s: Vec<f64> = e.sigma_h[1..]
+            .iter()
+            .map(|s| (s * s + reference_sigma * reference_sigma).sqrt())
+            .collect();
+        coverage(&e.horizontal[1..], &s, k)
+    };
+    crate::outln!(
+        "  with the reference noise ({reference_sigma} m) added to the horizontal bands: {:.1} % in 1 sigma, {:.1} % in 3 sigma",
+        100.0 * widened(&ev, 1.0),
+        100.0 * widened(&ev, 3.0)
+    );
+    let mut compared = Vec::new();
+    if models.len() > 1 {
+        crate::outln!(
+            "uncertainty models on this run (observed coverage; nominal 68.3 % in 1 sigma, 99.7 % in 3 sigma; horizontal bands widened by the reference noise {reference_sigma} m):"
+        );
+        crate::outln!(
+            "  {:<12} {:>11} {:>11} {:>11} {:>11} {:>14}",
+            "model",
+            "horiz 1sig",
+            "horiz 3sig",
+            "head 1sig",
+            "head 3sig",
+            "final sigma_h"
+        );
+        for &m in models {
+            let mut p = params;
+            p.uncertainty_model = m;
+            let e = calib::evaluate(&run, &p, h0)?;
+            let (he, hs) = e.heading_pairs();
+            let pct = |v: f64| {
+                if v.is_nan() {
+                    "-".to_string()
+                } else {
+                    format!("{:.1} %", 100.0 * v)
+                }
+            };
+            crate::outln!(
+                "  {:<12} {:>11} {:>11} {:>11} {:>11} {:>12.4} m",
+                cfg::model_name(m),
+                pct(widened(&e, 1.0)),
+                pct(widened(&e, 3.0)),
+                pct(coverage(
+                    he.get(1..).unwrap_or(&[]),
+                    hs.get(1..).unwrap_or(&[]),
+                    1.0
+                )),
+                pct(coverage(
+                    he.get(1..).unwrap_or(&[]),
+                    hs.get(1..).unwrap_or(&[]),
+                    3.0
+                )),
+                e.sigma_h.last().copied().unwrap_or(f64::NAN)
+            );
+            compared.push((cfg::model_name(m), e.sigma_h));
+        }
+    }
     if let Some(p) = errors {
         let mut w = create(p)?;
         writeln!(
@@ -657,7 +752,16 @@ pub fn validate(
         w.flush()?;
     }
     if let Some(dir) = plots {
-        for f in crate::plots::run_figures(dir, "validate", "Validation run", &ev)? {
+        let mut files = crate::plots::run_figures(dir, "validate", "Validation run", &ev)?;
+        if !compared.is_empty() {
+            files.push(crate::plots::models_figure(
+                dir,
+                &ev.t,
+                &ev.horizontal,
+                &compared,
+            )?);
+        }
+        for f in files {
             crate::outln!("wrote {}", f.display());
         }
     }

@@ -6,6 +6,7 @@ use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand};
 
+use odo_core::odometry::UncertaintyModel;
 use odoctl::calib::{DeltaMode, WindowStart};
 use odoctl::simulate::PathKind;
 
@@ -136,9 +137,42 @@ enum Cmd {
         /// Write PNG figures (trajectory, horizontal and heading error with bands) here.
         #[arg(long)]
         plots: Option<PathBuf>,
+        /// Which uncertainty models to evaluate (with the coefficients of the file): the file's
+        /// `uncertainty_model` (`config`), one, or `all` to compare their coverage.
+        #[arg(long, value_enum, default_value_t = Models::Config)]
+        models: Models,
+        /// Horizontal RMS noise of the reference (m): also reported is the coverage of the
+        /// bands widened by it, `sqrt((k sigma_h)^2 + (k sigma_ref)^2)`, as the calibration's
+        /// criterion uses.
+        #[arg(long, default_value_t = 0.008)]
+        reference_sigma: f64,
     },
     /// Write a synthetic run (SAMPLES and REFERENCE CSVs) with known true parameters.
     Simulate(SimulateArgs),
+}
+
+/// A choice of uncertainty models.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum Models {
+    /// The model named by the parameters (`uncertainty_model`).
+    Config,
+    /// The paper's eqs (19)-(28).
+    Paper,
+    /// The first-order covariance propagation.
+    Covariance,
+    /// Both.
+    All,
+}
+
+impl Models {
+    fn list(self) -> Vec<UncertaintyModel> {
+        match self {
+            Self::Config => vec![],
+            Self::Paper => vec![UncertaintyModel::Paper],
+            Self::Covariance => vec![UncertaintyModel::Covariance],
+            Self::All => vec![UncertaintyModel::Paper, UncertaintyModel::Covariance],
+        }
+    }
 }
 
 #[derive(Subcommand, Clone)]
@@ -203,6 +237,10 @@ struct CalibrateArgs {
     /// Skip the uncertainty fit (keep the initial coefficients).
     #[arg(long)]
     no_delta: bool,
+    /// Which uncertainty models' coefficients to fit: the initial estimate's
+    /// `uncertainty_model` (`config`), one, or `all` (the result keeps the initial model).
+    #[arg(long, value_enum, default_value_t = Models::Config)]
+    models: Models,
     /// Skip the Nelder-Mead polish of eq (16) after the Levenberg-Marquardt fits.
     #[arg(long)]
     no_polish: bool,
@@ -363,6 +401,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             reference_sigma: a.reference_sigma,
             delta_mode: a.delta_mode,
             fit_delta: !a.no_delta,
+            models: a.models.list(),
             polish: !a.no_polish,
             windows: a.windows,
             window_start: a.window_start,
@@ -377,6 +416,8 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             heading,
             errors,
             plots,
+            models,
+            reference_sigma,
         } => c::validate(
             &samples,
             &reference,
@@ -385,6 +426,8 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             heading,
             errors.as_deref(),
             plots.as_deref(),
+            &models.list(),
+            reference_sigma,
         ),
         Cmd::Simulate(a) => c::simulate(&c::SimulateOptions {
             samples: a.samples,

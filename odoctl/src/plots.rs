@@ -258,6 +258,101 @@ fn error_figure(
     Ok(())
 }
 
+/// `validate_models.png`: the horizontal error against the 1-sigma (solid) and 3-sigma
+/// (thin) bands of each uncertainty model, full range and zoomed on the errors.
+pub fn models_figure(
+    dir: &Path,
+    t: &[f64],
+    err: &[f64],
+    models: &[(&str, Vec<f64>)],
+) -> Result<PathBuf> {
+    register_font()?;
+    let path = dir.join("validate_models.png");
+    draw_models(&path, t, err, models)?;
+    Ok(path)
+}
+
+fn draw_models(path: &Path, t: &[f64], err: &[f64], models: &[(&str, Vec<f64>)]) -> Result<()> {
+    let root = BitMapBackend::new(path, (1100, 900)).into_drawing_area();
+    root.fill(&WHITE).map_err(pe)?;
+    let root = root
+        .titled(
+            "Horizontal error and the uncertainty models' bands",
+            (FAMILY, 24),
+        )
+        .map_err(pe)?;
+    let (t0, t1) = range(t.iter().copied(), 0.0);
+    let emax = err
+        .iter()
+        .copied()
+        .filter(|v| v.is_finite())
+        .fold(1e-9, f64::max);
+    let full = models
+        .iter()
+        .flat_map(|(_, s)| s.iter().map(|v| 3.0 * v))
+        .filter(|v| v.is_finite())
+        .fold(emax, f64::max)
+        * 1.05;
+    let (top, bottom) = root.split_vertically(450);
+    for (area, ymax, note) in [
+        (&top, full, "full range"),
+        (&bottom, emax * 1.3, "zoom on the errors"),
+    ] {
+        let mut chart = ChartBuilder::on(area)
+            .caption(note, (FAMILY, 16))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(80)
+            .build_cartesian_2d(t0..t1, 0.0..ymax)
+            .map_err(pe)?;
+        chart
+            .configure_mesh()
+            .x_desc("time [s]")
+            .y_desc("horizontal error [m]")
+            .label_style((FAMILY, 14))
+            .draw()
+            .map_err(pe)?;
+        let clip = |v: f64| v.min(ymax);
+        chart
+            .draw_series(LineSeries::new(
+                t.iter().copied().zip(err.iter().map(|&e| clip(e))),
+                ODO.stroke_width(1),
+            ))
+            .map_err(pe)?
+            .label("error")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], ODO.stroke_width(2)));
+        for (i, (name, s)) in models.iter().enumerate() {
+            let color = if i == 0 { BAND1 } else { BAND3 };
+            chart
+                .draw_series(LineSeries::new(
+                    t.iter().copied().zip(s.iter().map(|&v| clip(v))),
+                    color.stroke_width(2),
+                ))
+                .map_err(pe)?
+                .label(format!("{name}: 1 and 3 sigma"))
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+                });
+            chart
+                .draw_series(LineSeries::new(
+                    t.iter().copied().zip(s.iter().map(|&v| clip(3.0 * v))),
+                    color.stroke_width(1),
+                ))
+                .map_err(pe)?;
+        }
+        chart
+            .configure_series_labels()
+            .label_font((FAMILY, 15))
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperLeft)
+            .draw()
+            .map_err(pe)?;
+    }
+    root.present().map_err(pe)?;
+    Ok(())
+}
+
 const PARAM_NAMES: [&str; 3] = ["left_diameter [m]", "right_diameter [m]", "track_width [m]"];
 
 fn palette(i: usize) -> RGBColor {

@@ -31,6 +31,7 @@ fn options() -> CalibrateOptions {
         reference_sigma: 0.008,
         delta_mode: DeltaMode::Equal,
         fit_delta: true,
+        models: vec![],
         polish: true,
         windows: vec![],
         window_start: WindowStart::Initial,
@@ -74,7 +75,7 @@ fn calibrate_recovers_the_truth_from_the_papers_poor_first_estimate() {
         );
         assert!(e[2].abs() < 2e-3, "track width off by {e:?}");
         assert!((c.geometry.heading0 - 0.3).abs() < 0.01);
-        let u = c.uncertainty.unwrap();
+        let u = &c.uncertainty[0];
         assert!(
             (u.coverage1 - calib::ONE_SIGMA_COVERAGE).abs() < 0.01,
             "coverage {}",

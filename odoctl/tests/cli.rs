@@ -125,6 +125,8 @@ fn simulate_calibrate_validate_with_plots() {
         s(&d.join("e.csv")),
         "--plots",
         s(&plots),
+        "--models",
+        "all",
     ]);
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(
@@ -137,6 +139,8 @@ fn simulate_calibrate_validate_with_plots() {
         "{out}"
     );
     assert!(plots.join("validate_heading_error.png").exists());
+    assert!(plots.join("validate_models.png").exists());
+    assert!(out.contains("covariance"), "{out}");
 }
 
 #[test]
