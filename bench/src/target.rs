@@ -204,7 +204,10 @@ fn main() -> ! {
     // Stack used by one step: paint the stack below the current frame, step, find the
     // deepest overwritten word.
     let used = stack_of_step(&designed);
-    hprintln!("bench stack of one integrator step {} bytes", used);
+    hprintln!(
+        "bench stack of one integrator step (stack painting, incl. 64 B margin) {} bytes",
+        used
+    );
 
     debug::exit(debug::EXIT_SUCCESS);
     loop {
@@ -212,39 +215,21 @@ fn main() -> ! {
     }
 }
 
-/// Bytes of stack below the caller's frame used by one integrator step.
+/// Bytes of stack below the caller's frame used by `f`: the stack below the current frame is
+/// painted, `f` runs, and the deepest overwritten word is found.
 #[inline(never)]
-fn stack_of_step(params: &ChassisParams) -> usize {
-    const PAINT: usize = 1024;
+pub fn stack_used(f: impl FnOnce()) -> usize {
+    const PAINT: usize = 2048;
+    const MARGIN: usize = 64;
     const PATTERN: u32 = 0xC0FF_EE11;
-    let mut integ = match Integrator::new(params, WheelCounts::default(), Pose::default()) {
-        Ok(i) => i,
-        Err(_) => return 0,
-    };
     let sp = cortex_m::register::msp::read() as usize;
-    let base = (sp - 64 - PAINT * 4) & !3;
+    let base = (sp - MARGIN - PAINT * 4) & !3;
     for k in 0..PAINT {
-        // Note(unsafe): writes the pattern into free stack below the current frame (64 bytes
-        // of margin for this function's own calls); nothing lives there.
+        // Note(unsafe): writes the pattern into free stack below the current frame (MARGIN
+        // bytes kept for this function's own calls); nothing lives there.
         unsafe { core::ptr::write_volatile((base + k * 4) as *mut u32, PATTERN) };
     }
-    // Inputs generated on the fly: an input array would itself sit in the painted region.
-    let mut rng = crate::inputs::Rng(99);
-    let mut g = [0i64; 2];
-    for _ in 0..SAMPLES {
-        g[0] += (rng.next() % 2000) as i64 - 500;
-        g[1] += (rng.next() % 2000) as i64 - 500;
-        black_box(integ.step(
-            WheelCounts {
-                left: g[0],
-                right: g[1],
-            },
-            IndexRefs {
-                left: Some(5),
-                right: Some(9),
-            },
-        ));
-    }
+    f();
     let mut deepest = PAINT;
     for k in 0..PAINT {
         // Note(unsafe): reads back the painted region written above.
@@ -253,7 +238,34 @@ fn stack_of_step(params: &ChassisParams) -> usize {
             break;
         }
     }
-    (PAINT - deepest) * 4 + 64
+    (PAINT - deepest) * 4 + MARGIN
+}
+
+/// Bytes of stack used by integrator steps over varied inputs.
+fn stack_of_step(params: &ChassisParams) -> usize {
+    let mut integ = match Integrator::new(params, WheelCounts::default(), Pose::default()) {
+        Ok(i) => i,
+        Err(_) => return 0,
+    };
+    stack_used(|| {
+        // Inputs generated on the fly: an input array would itself sit in the painted region.
+        let mut rng = crate::inputs::Rng(99);
+        let mut g = [0i64; 2];
+        for _ in 0..SAMPLES {
+            g[0] += (rng.next() % 2000) as i64 - 500;
+            g[1] += (rng.next() % 2000) as i64 - 500;
+            black_box(integ.step(
+                WheelCounts {
+                    left: g[0],
+                    right: g[1],
+                },
+                IndexRefs {
+                    left: Some(5),
+                    right: Some(9),
+                },
+            ));
+        }
+    })
 }
 
 #[panic_handler]

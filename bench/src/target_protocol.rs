@@ -7,7 +7,7 @@ use odo_core::protocol::command::{execute, parse};
 use odo_core::protocol::{encode_frame, FrameDecoder, Message, PoseRecord, MAX_ENCODED_FRAME};
 use odo_core::settings::Settings;
 
-use crate::target::{count, report};
+use crate::target::{count, report, stack_used};
 
 /// Runs the protocol benchmarks.
 pub fn run(overhead: u32) {
@@ -72,4 +72,18 @@ pub fn run(overhead: u32) {
         });
     }
     report("command execute incl. reply (8 lines)", &mut parse_counts);
+
+    let record = Message::Pose(PoseRecord {
+        x: 1.0,
+        ..PoseRecord::default()
+    });
+    let used = stack_used(|| {
+        let mut out = [0u8; MAX_ENCODED_FRAME];
+        black_box(encode_frame(black_box(&record), 7, &mut out).is_ok());
+        black_box(&out);
+    });
+    hprintln!(
+        "bench stack of frame encoding incl. its output buffer (stack painting) {} bytes",
+        used
+    );
 }
