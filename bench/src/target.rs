@@ -57,7 +57,15 @@ pub fn report(name: &str, v: &mut [u32]) -> u32 {
 }
 
 /// Runs the integrator over the input set, counting each step.
-fn integrator_steps(params: &ChassisParams, index: bool, overhead: u32, out: &mut [u32; SAMPLES]) {
+/// With `with_sigma`, each count includes taking the sigmas for a record (`sigma()`), which
+/// is where the covariance model takes its square roots.
+fn integrator_steps(
+    params: &ChassisParams,
+    index: bool,
+    with_sigma: bool,
+    overhead: u32,
+    out: &mut [u32; SAMPLES],
+) {
     let mut integ = match Integrator::new(params, WheelCounts::default(), Pose::default()) {
         Ok(i) => i,
         Err(_) => return,
@@ -79,6 +87,9 @@ fn integrator_steps(params: &ChassisParams, index: bool, overhead: u32, out: &mu
         };
         out[k] = count(overhead, || {
             black_box(integ.step(black_box(counts), black_box(refs)));
+            if with_sigma {
+                black_box(integ.sigma());
+            }
         });
     }
     black_box(integ.pose());
@@ -121,7 +132,7 @@ fn main() -> ! {
 
     let mut full = [0u32; SAMPLES];
     let designed = ChassisParams::DESIGNED;
-    integrator_steps(&designed, false, overhead, &mut full);
+    integrator_steps(&designed, false, false, overhead, &mut full);
     let full_median = report("step, paper model (odometry+unc.)", &mut full);
 
     // Uncertainty alone: Jacobian plus the paper's propagation.
@@ -161,14 +172,18 @@ fn main() -> ! {
         uncertainty_model: UncertaintyModel::Covariance,
         ..designed
     };
-    integrator_steps(&covariance, false, overhead, &mut full);
+    integrator_steps(&covariance, false, false, overhead, &mut full);
     report("step, covariance model", &mut full);
+    integrator_steps(&designed, false, true, overhead, &mut full);
+    report("step + sigma(), paper model", &mut full);
+    integrator_steps(&covariance, false, true, overhead, &mut full);
+    report("step + sigma(), covariance model", &mut full);
 
     let with_diff = ChassisParams {
         delta_diff: 2.0e-8,
         ..designed
     };
-    integrator_steps(&with_diff, false, overhead, &mut full);
+    integrator_steps(&with_diff, false, false, overhead, &mut full);
     report("step, paper model + delta_diff", &mut full);
 
     let wobbly = ChassisParams {
@@ -182,7 +197,7 @@ fn main() -> ! {
         },
         ..designed
     };
-    integrator_steps(&wobbly, true, overhead, &mut full);
+    integrator_steps(&wobbly, true, false, overhead, &mut full);
     report("step, per-angle wheel functions", &mut full);
 
     let mut naive = NaiveIntegrator::new([0.26, 0.26], 0.563, 20_000, 3.9e-8);
