@@ -423,7 +423,7 @@ fn convert(s: &Scan, f: &Format) -> Result<u64, DecimalError> {
     }
     // The value lies in [10^(top-1), 10^top).
     let top = s.n + s.exp;
-    if top - 1 >= f.max_dec {
+    if top > f.max_dec {
         return Err(DecimalError::Overflow);
     }
     if top <= f.min_dec {
@@ -692,7 +692,7 @@ mod tests {
             f64::MAX,
             f64::MIN_POSITIVE,
             5e-324,
-            2.2250738585072009e-308,
+            f64::from_bits((1 << 52) - 1),
             1.0,
         ] {
             assert_eq!(text64(v).parse::<f64>().unwrap(), v);
