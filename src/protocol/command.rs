@@ -276,18 +276,11 @@ fn usage_of(cmd: &str) -> &'static str {
 }
 
 fn number(w: &str) -> Result<f64, CommandError<'_>> {
-    let t = w.trim_start_matches(['+', '-']);
-    if ["nan", "inf", "infinity"]
-        .iter()
-        .any(|n| t.eq_ignore_ascii_case(n))
-    {
-        return Err(CommandError::NotFinite(w));
-    }
-    match w.parse::<f64>() {
-        Ok(v) if v.is_finite() => Ok(v),
-        Ok(_) => Err(CommandError::NotFinite(w)),
-        Err(_) => Err(CommandError::BadNumber(w)),
-    }
+    crate::decimal::parse_f64(w).map_err(|e| match e {
+        crate::decimal::DecimalError::Invalid => CommandError::BadNumber(w),
+        // NaN/inf words, or a literal too large for f64 such as 1e999.
+        _ => CommandError::NotFinite(w),
+    })
 }
 
 /// What the firmware must do after [`execute`].

@@ -4,6 +4,7 @@
 
 pub mod store;
 
+use crate::decimal::{self, DecimalError, Shortest};
 use crate::odometry::{ChassisParams, UncertaintyModel, WHEEL_HARMONICS};
 use crate::protocol::bytes::{OutOfSpace, Reader, Writer};
 use crate::protocol::crc::crc32;
@@ -582,24 +583,12 @@ pub enum Value {
 
 impl fmt::Display for Value {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        // `{}` of a float is the shortest decimal that parses back to the same value; it
-        // never uses an exponent, so very small or large magnitudes use `{:e}` (also
-        // shortest round-trip) to stay short.
+        // Shortest round-trip decimal, plain for 1e-9 <= |v| < 1e9 and scientific
+        // otherwise (`crate::decimal`, which keeps core's float formatting out of the
+        // firmware).
         match *self {
-            Value::F64(v) => {
-                if v != 0.0 && !(1e-9..1e9).contains(&v.abs()) {
-                    write!(f, "{v:e}")
-                } else {
-                    write!(f, "{v}")
-                }
-            }
-            Value::F32(v) => {
-                if v != 0.0 && !(1e-9..1e9).contains(&v.abs()) {
-                    write!(f, "{v:e}")
-                } else {
-                    write!(f, "{v}")
-                }
-            }
+            Value::F64(v) => decimal::write_f64(v, f),
+            Value::F32(v) => decimal::write_f32(v, f),
             Value::U32(v) => write!(f, "{v}"),
             Value::Word(w) => f.write_str(w),
         }
@@ -656,8 +645,8 @@ impl fmt::Display for SettingError {
             Self::Chassis(k) => write!(
                 f,
                 "{k}: does not fit the other chassis keys (one increment must stay within {} m and {} rad)",
-                ChassisParams::MAX_DISTANCE_PER_COUNT,
-                ChassisParams::MAX_HEADING_PER_COUNT
+                Shortest(ChassisParams::MAX_DISTANCE_PER_COUNT),
+                Shortest(ChassisParams::MAX_HEADING_PER_COUNT)
             ),
         }
     }
@@ -709,38 +698,25 @@ fn check_range(key: Key, s: &Settings) -> Result<(), SettingError> {
     }
 }
 
-fn is_nan_or_inf_word(text: &str) -> bool {
-    let t = text.trim_start_matches(['+', '-']);
-    ["nan", "inf", "infinity"]
-        .iter()
-        .any(|w| t.eq_ignore_ascii_case(w))
-}
-
 fn parse_f64(key: &'static str, text: &str) -> Result<f64, SettingError> {
-    if is_nan_or_inf_word(text) {
-        return Err(SettingError::NotFinite(key));
-    }
-    let v: f64 = text.parse().map_err(|_| SettingError::BadNumber(key))?;
-    if !v.is_finite() {
-        // A literal too large for f64, such as 1e999.
-        return Err(SettingError::NotFinite(key));
-    }
-    Ok(v)
+    decimal::parse_f64(text).map_err(|e| match e {
+        DecimalError::Invalid => SettingError::BadNumber(key),
+        // NaN/inf words, or a literal too large for f64 such as 1e999.
+        DecimalError::NotFinite | DecimalError::Overflow => SettingError::NotFinite(key),
+    })
 }
 
 fn parse_f32(key: &'static str, text: &str) -> Result<f32, SettingError> {
     parse_f64(key, text)?;
     // Parse again directly as f32: correctly rounded, so the text form of an f32 value
     // always parses back to the identical value (no double rounding through f64).
-    let v: f32 = text.parse().map_err(|_| SettingError::BadNumber(key))?;
-    if !v.is_finite() {
+    decimal::parse_f32(text).map_err(|_| {
         // Finite as f64 but beyond f32, such as 1e39.
-        return Err(match key_info_by_name(key) {
+        match key_info_by_name(key) {
             Some(i) => SettingError::OutOfRange(key, i.kind),
             None => SettingError::BadNumber(key),
-        });
-    }
-    Ok(v)
+        }
+    })
 }
 
 fn parse_u32(key: &'static str, text: &str) -> Result<u32, SettingError> {
