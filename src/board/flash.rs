@@ -15,7 +15,7 @@
 use odo_core::settings::store::Flash;
 
 /// Why a flash operation failed.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, defmt::Format)]
+#[derive(Clone, Copy, PartialEq, Eq, defmt::Format)]
 #[cfg_attr(feature = "qemu", allow(dead_code))]
 pub enum FlashError {
     /// Sector, offset or length outside the settings sectors, or misaligned.
@@ -24,6 +24,18 @@ pub enum FlashError {
     Locked,
     /// Error flags of FLASH_SR after the operation (WRPERR, PGAERR, PGPERR, PGSERR, OPERR).
     Status(u32),
+}
+
+/// The text of `#[derive(Debug)]` (it ends up in the `save failed` reply), written by hand:
+/// the derived form pulls in core's `{:#?}` machinery (debug builders, `PadAdapter`).
+impl core::fmt::Debug for FlashError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Range => f.write_str("Range"),
+            Self::Locked => f.write_str("Locked"),
+            Self::Status(flags) => write!(f, "Status({flags})"),
+        }
+    }
 }
 
 #[cfg(not(feature = "qemu"))]
