@@ -236,6 +236,17 @@ proptest! {
         }
     }
 
+    /// Clinger's fast path and its edges: up to 19 digits, small exponents.
+    #[test]
+    fn parse_fast_path_region(m in any::<u64>(), shift in 0u32..64, e in -30i32..=30, frac in 0usize..4) {
+        let digits = (m >> shift).to_string();
+        let text = match frac.min(digits.len() - 1) {
+            0 => format!("{digits}e{e}"),
+            f => format!("{}.{}e{e}", &digits[..digits.len() - f], &digits[digits.len() - f..]),
+        };
+        check_parse(&text)?;
+    }
+
     /// Strings over the number alphabet: the same accepted syntax and values as std.
     #[test]
     fn syntax_like_std(text in "[-+]?[0-9.eE+-]{0,40}|[-+]?(inf|nan|infinity|INF|NaN|Infinity)") {

@@ -216,6 +216,9 @@ const F32: Format = Format {
 #[derive(Clone, Copy)]
 struct Big([u32; LIMBS]);
 
+// The basic operations stay out of line: inlined into every caller they cost more flash
+// than the calls.
+
 impl Big {
     fn from_u64(v: u64) -> Self {
         let mut b = Big([0; LIMBS]);
@@ -235,11 +238,13 @@ impl Big {
         }
     }
 
+    #[inline(never)]
     fn cmp(&self, o: &Big) -> Ordering {
         self.0.iter().rev().cmp(o.0.iter().rev())
     }
 
     /// `self = self * m + a`.
+    #[inline(never)]
     fn mul_add(&mut self, m: u32, a: u32) {
         let mut carry = a as u64;
         for x in self.0.iter_mut() {
@@ -267,6 +272,7 @@ impl Big {
         self.mul_pow(10, 9, n);
     }
 
+    #[inline(never)]
     fn add(&mut self, o: &Big) {
         let mut carry = false;
         for (x, &y) in self.0.iter_mut().zip(o.0.iter()) {
@@ -279,6 +285,7 @@ impl Big {
     }
 
     /// `self -= o`; requires `self >= o`.
+    #[inline(never)]
     fn sub(&mut self, o: &Big) {
         let mut borrow = false;
         for (x, &y) in self.0.iter_mut().zip(o.0.iter()) {
@@ -545,7 +552,18 @@ fn write_bits(bits: u64, f: &Format, out: &mut dyn fmt::Write) -> fmt::Result {
             out.write_str(".")?;
             put(out, more)?;
         }
-        write!(out, "e{}", k - 1)
+        // The exponent (|k - 1| <= 324), without core's formatting machinery.
+        let e = (k - 1).unsigned_abs();
+        out.write_str(if k < 1 { "e-" } else { "e" })?;
+        let ds = [(e / 100 % 10) as u8, (e / 10 % 10) as u8, (e % 10) as u8].map(|d| b'0' + d);
+        let skip = if e >= 100 {
+            0
+        } else if e >= 10 {
+            1
+        } else {
+            2
+        };
+        put(out, &ds[skip..])
     }
 }
 
