@@ -525,7 +525,9 @@ impl Iterator for ReplyChunks<'_> {
                 }
             }
         };
-        let (head, tail) = self.rest.split_at(cut);
+        // `cut` is a char boundary by construction; the checked split keeps the panic path (and
+        // the string-formatting code it drags into the firmware) out of the image.
+        let (head, tail) = self.rest.split_at_checked(cut).unwrap_or((self.rest, ""));
         self.rest = tail;
         let mut text = String::new();
         // `head` is at most MAX_REPLY_TEXT bytes by construction.
