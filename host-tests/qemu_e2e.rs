@@ -26,7 +26,9 @@ use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
 use std::time::{Duration, Instant};
 
 use odo_core::odometry::{IndexRefs, Integrator, Pose, WheelCounts};
-use odo_core::protocol::{DecoderStats, Frame, FrameDecoder, Message, PoseRecord, SyncMode};
+use odo_core::protocol::{
+    DecoderStats, Frame, FrameDecoder, Message, PoseRecord, SettingsSource, Status, SyncMode,
+};
 use odo_core::settings::Settings;
 
 /// Emulated time the replay must cover after the pose reset, microseconds.
@@ -78,6 +80,8 @@ struct Link {
     /// Frame sequence numbers of every frame, in order.
     seqs: Vec<u32>,
     device_info: usize,
+    /// Status heartbeats received so far, in order.
+    heartbeats: Vec<Status>,
     start: Instant,
 }
 
@@ -90,6 +94,7 @@ impl Link {
                 match &f.message {
                     Message::Pose(r) => self.records.push(*r),
                     Message::DeviceInfo(_) => self.device_info += 1,
+                    Message::Status(s) => self.heartbeats.push(*s),
                     _ => {}
                 }
                 *f
@@ -226,6 +231,7 @@ fn qemu_end_to_end() {
         records: Vec::new(),
         seqs: Vec::new(),
         device_info: 0,
+        heartbeats: Vec::new(),
         start,
     };
 
@@ -329,6 +335,24 @@ fn qemu_end_to_end() {
         );
     }
     assert_eq!(records[0].sequence, 0, "the first record is sample 0");
+
+    // The once-a-second Status heartbeat: one per 50 samples, counting them.
+    let beats = &link.heartbeats;
+    assert!(beats.len() >= 10, "{} heartbeats in over 10 s", beats.len());
+    for w in beats.windows(2) {
+        assert_eq!(
+            w[1].samples - w[0].samples,
+            50,
+            "one heartbeat per second of samples"
+        );
+        assert_eq!(w[1].uptime_us - w[0].uptime_us, 1_000_000);
+    }
+    assert!(beats
+        .iter()
+        .all(|b| b.rate_hz == 50 && b.dropped_total == 0));
+    assert!(beats
+        .last()
+        .is_some_and(|b| b.settings_source == SettingsSource::Flash && !b.settings_dirty));
     assert!(records.iter().all(|r| r.dropped == 0));
     assert!(records
         .iter()

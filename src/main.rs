@@ -50,8 +50,8 @@ mod app {
     };
     use odo_core::protocol::command::{self, Action, LineAssembler, Reply};
     use odo_core::protocol::{
-        self, CommandReply, DeviceInfo, GnssTime, Message, PoseRecord, SettingsSource, StatusFlags,
-        WheelStatus, PROTOCOL_VERSION,
+        self, CommandReply, DeviceInfo, GnssTime, Message, PoseRecord, SettingsSource, Status,
+        StatusFlags, WheelStatus, PROTOCOL_VERSION,
     };
     use odo_core::settings::{store::SettingsStore, SampleMode, Settings, TimeTagRef};
     use odo_core::timing::index::DEFAULT_TOLERANCE;
@@ -105,6 +105,14 @@ mod app {
         reset: Option<Pose>,
     }
 
+    /// Where the settings in use came from and whether they differ from the stored ones
+    /// (kept by the command task, reported by the heartbeat).
+    #[derive(Clone, Copy)]
+    pub struct StoreState {
+        source: SettingsSource,
+        dirty: bool,
+    }
+
     /// What the processing task last knew, for `status`.
     #[derive(Clone, Copy, Default)]
     pub struct Live {
@@ -129,6 +137,7 @@ mod app {
         requests: Requests,
         live: Live,
         host_errors: RxErrors,
+        store_state: StoreState,
     }
 
     #[local]
@@ -309,6 +318,10 @@ mod app {
                 requests: Requests::default(),
                 live: Live::default(),
                 host_errors: RxErrors::default(),
+                store_state: StoreState {
+                    source: loaded.source,
+                    dirty: false,
+                },
             },
             Local {
                 sampler,
@@ -472,7 +485,7 @@ mod app {
         binds = SPI2,
         priority = 2,
         local = [samples_out, index_out_left, index_out_right, gnss_out, processor, led, watchdog],
-        shared = [link, requests, live]
+        shared = [link, requests, live, host_errors, store_state]
     )]
     fn process(mut cx: process::Context) {
         let p = cx.local.processor;
@@ -498,6 +511,18 @@ mod app {
                 let sent = send(&mut cx.shared.link, &Message::Pose(record), RECORD_RESERVE);
                 p.sent(sent);
             }
+            if p.heartbeat_due() {
+                let store = cx.shared.store_state.lock(|s| *s);
+                let rx_errors = cx.shared.host_errors.lock(|e| e.lost);
+                let status = p.heartbeat(&raw, store, rx_errors);
+                // Like a record: sent whole when there is room, else skipped (the next one
+                // follows a second later).
+                send(
+                    &mut cx.shared.link,
+                    &Message::Status(status),
+                    RECORD_RESERVE,
+                );
+            }
             let spent = board::cycles().wrapping_sub(start);
             let live = p.live(&raw, spent);
             cx.shared.live.lock(|l| *l = live);
@@ -505,7 +530,7 @@ mod app {
     }
 
     /// Commands from the host (SPI3 vector, pended by the USART2 interrupt).
-    #[task(binds = SPI3, priority = 1, local = [host_rx_out, commands, cfg_in], shared = [link, requests, live, host_errors])]
+    #[task(binds = SPI3, priority = 1, local = [host_rx_out, commands, cfg_in], shared = [link, requests, live, host_errors, store_state])]
     fn commands_task(mut cx: commands_task::Context) {
         let c = cx.local.commands;
         while let Some(byte) = cx.local.host_rx_out.dequeue() {
@@ -518,6 +543,7 @@ mod app {
                 Action::None => {}
                 Action::SettingsChanged => {
                     c.dirty = true;
+                    cx.shared.store_state.lock(|s| s.dirty = true);
                     let cfg = discipline_config(&c.settings, c.timer_hz);
                     if cx.local.cfg_in.enqueue(cfg).is_err() {
                         defmt::warn!("sampler configuration queue full");
@@ -529,6 +555,12 @@ mod app {
                     Ok(generation) => {
                         c.dirty = false;
                         c.source = SettingsSource::Flash;
+                        cx.shared.store_state.lock(|s| {
+                            *s = StoreState {
+                                source: SettingsSource::Flash,
+                                dirty: false,
+                            }
+                        });
                         defmt::info!("settings saved, generation {}", generation);
                         reply.push_line(format_args!("saved (generation {generation})"));
                     }
@@ -903,6 +935,28 @@ mod app {
                 index_right: refs.right.unwrap_or(0),
                 dropped: self.dropped_since,
             }))
+        }
+
+        /// True when the sample just processed starts a new second of samples: time for the
+        /// once-a-second Status heartbeat.
+        fn heartbeat_due(&self) -> bool {
+            self.sequence.wrapping_sub(1) % self.settings.rate.max(1) == 0
+        }
+
+        /// The Status heartbeat after sample `raw`.
+        fn heartbeat(&self, raw: &RawSample, store: StoreState, rx_errors: u32) -> Status {
+            Status {
+                uptime_us: self.mcu_time_us,
+                flags: self.flags,
+                rate_hz: self.settings.rate,
+                samples: self.sequence,
+                dropped_total: self.dropped_total,
+                pps_edges: raw.stats.accepted,
+                pps_rejected: raw.stats.glitches,
+                rx_errors,
+                settings_source: store.source,
+                settings_dirty: store.dirty,
+            }
         }
 
         /// The record was queued (true) or dropped for lack of room (false).
