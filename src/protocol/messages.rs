@@ -289,7 +289,7 @@ pub struct Status {
     pub pps_edges: u32,
     /// PPS edges rejected as glitches since start.
     pub pps_rejected: u32,
-    /// Command lines rejected as too long plus UART receive errors since start.
+    /// Host-link receive bytes lost (UART overrun or a full receive queue) since start.
     pub rx_errors: u32,
     /// Where the settings in use came from.
     pub settings_source: SettingsSource,
