@@ -12,7 +12,10 @@ use odo_core::odometry::{
     WheelHarmonics,
 };
 use proptest::prelude::*;
+
+mod support;
 use std::f64::consts::{PI, TAU};
+use support::Rng;
 
 /// The paper's odometry and uncertainty in f64.
 #[derive(Debug, Clone)]
@@ -158,20 +161,6 @@ fn refs(r: [Option<i64>; 2]) -> IndexRefs {
     IndexRefs {
         left: r[0],
         right: r[1],
-    }
-}
-
-/// A deterministic pseudo-random generator (xorshift64*), so long drives need no data files.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-    fn uniform(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
     }
 }
 
@@ -956,4 +945,25 @@ proptest! {
         prop_assume!(v.is_finite() && v.abs() < 9.2e18);
         prop_assert_eq!(trig::f32_to_i64(v), v as i64);
     }
+}
+
+#[test]
+fn parameter_errors_name_the_exact_key() {
+    use odo_core::odometry::ParamError;
+    let mut p = ChassisParams::DESIGNED;
+    p.right_wheel.sin[1] = 0.2;
+    assert_eq!(p.validate(), Err(ParamError::OutOfRange("right_sin2")));
+    p.right_wheel.sin[1] = f32::NAN;
+    assert_eq!(p.validate(), Err(ParamError::NotFinite("right_sin2")));
+    let p = ChassisParams {
+        kappa_left: -1.0,
+        ..ChassisParams::DESIGNED
+    };
+    assert_eq!(p.validate(), Err(ParamError::OutOfRange("kappa_left")));
+    let p = ChassisParams {
+        track_width: f64::INFINITY,
+        ..ChassisParams::DESIGNED
+    };
+    assert_eq!(p.validate(), Err(ParamError::NotFinite("track_width")));
+    assert_eq!(ChassisParams::DESIGNED.validate(), Ok(()));
 }

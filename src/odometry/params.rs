@@ -104,30 +104,13 @@ impl ChassisParams {
     /// Checks every parameter against its documented range; the first offending key is
     /// named in the error.
     pub fn validate(&self) -> Result<(), ParamError> {
-        let length = |key: &'static str, v: f64| {
-            if !v.is_finite() {
-                Err(ParamError::NotFinite(key))
-            } else if !(Self::MIN_LENGTH..=Self::MAX_LENGTH).contains(&v) {
-                Err(ParamError::OutOfRange(key))
-            } else {
-                Ok(())
-            }
-        };
-        length("left_diameter", self.left_diameter)?;
-        length("right_diameter", self.right_diameter)?;
-        length("track_width", self.track_width)?;
+        let length = (Self::MIN_LENGTH, Self::MAX_LENGTH);
+        check("left_diameter", self.left_diameter, length)?;
+        check("right_diameter", self.right_diameter, length)?;
+        check("track_width", self.track_width, length)?;
         if !Self::TICKS_PER_REV_RANGE.contains(&self.ticks_per_rev) {
             return Err(ParamError::OutOfRange("ticks_per_rev"));
         }
-        let delta = |key: &'static str, v: f32| {
-            if !v.is_finite() {
-                Err(ParamError::NotFinite(key))
-            } else if !(0.0..=Self::MAX_DELTA).contains(&v) {
-                Err(ParamError::OutOfRange(key))
-            } else {
-                Ok(())
-            }
-        };
         // Keep one increment's distance and heading change within the fixed-point ranges of
         // the integrator: at most 3 cm and 0.01 rad per increment.
         for diameter in [self.left_diameter, self.right_diameter] {
@@ -138,33 +121,50 @@ impl ChassisParams {
                 return Err(ParamError::OutOfRange("ticks_per_rev"));
             }
         }
-        delta("delta_left", self.delta_left)?;
-        delta("delta_right", self.delta_right)?;
-        delta("delta_diff", self.delta_diff)?;
-        let kappa = |key: &'static str, v: f32| {
-            if !v.is_finite() {
-                Err(ParamError::NotFinite(key))
-            } else if !(0.0..=Self::MAX_KAPPA).contains(&v) {
-                Err(ParamError::OutOfRange(key))
-            } else {
-                Ok(())
-            }
-        };
-        kappa("kappa_left", self.kappa_left)?;
-        kappa("kappa_right", self.kappa_right)?;
-        for (key, wheel) in [
-            ("left_cos/sin", &self.left_wheel),
-            ("right_cos/sin", &self.right_wheel),
+        let delta = (0.0, Self::MAX_DELTA);
+        check("delta_left", self.delta_left, delta)?;
+        check("delta_right", self.delta_right, delta)?;
+        check("delta_diff", self.delta_diff, delta)?;
+        let kappa = (0.0, Self::MAX_KAPPA);
+        check("kappa_left", self.kappa_left, kappa)?;
+        check("kappa_right", self.kappa_right, kappa)?;
+        let harmonic = (-Self::MAX_HARMONIC, Self::MAX_HARMONIC);
+        for (wheel, [cos_keys, sin_keys]) in [
+            (&self.left_wheel, HARMONIC_KEYS[0]),
+            (&self.right_wheel, HARMONIC_KEYS[1]),
         ] {
-            for c in wheel.cos.iter().chain(wheel.sin.iter()) {
-                if !c.is_finite() {
-                    return Err(ParamError::NotFinite(key));
-                }
-                if c.abs() > Self::MAX_HARMONIC {
-                    return Err(ParamError::OutOfRange(key));
-                }
+            for h in 0..WHEEL_HARMONICS {
+                check(cos_keys[h], wheel.cos[h], harmonic)?;
+                check(sin_keys[h], wheel.sin[h], harmonic)?;
             }
         }
+        Ok(())
+    }
+}
+
+/// Setting names of the wheel-function coefficients: `[wheel][cos, sin][harmonic - 1]`.
+pub const HARMONIC_KEYS: [[[&str; WHEEL_HARMONICS]; 2]; 2] = [
+    [
+        ["left_cos1", "left_cos2", "left_cos3"],
+        ["left_sin1", "left_sin2", "left_sin3"],
+    ],
+    [
+        ["right_cos1", "right_cos2", "right_cos3"],
+        ["right_sin1", "right_sin2", "right_sin3"],
+    ],
+];
+
+/// `v` must be finite and within `lo..=hi`; errors name `key`.
+fn check<T: PartialOrd + Into<f64> + Copy>(
+    key: &'static str,
+    v: T,
+    (lo, hi): (T, T),
+) -> Result<(), ParamError> {
+    if !v.into().is_finite() {
+        Err(ParamError::NotFinite(key))
+    } else if !(lo..=hi).contains(&v) {
+        Err(ParamError::OutOfRange(key))
+    } else {
         Ok(())
     }
 }
