@@ -13,6 +13,8 @@
 #![cfg_attr(not(test), no_std)]
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
+// Errors are returned, never unwrapped, in code that runs on the unit.
+#![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 
 pub mod decimal;
 pub mod odometry;
