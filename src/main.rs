@@ -128,6 +128,9 @@ mod app {
         /// Most cycles of one sample interrupt, and of processing one sample.
         isr_cycles_max: u32,
         process_cycles_max: u32,
+        /// Cycles of the last sample interrupt and of processing the last sample.
+        isr_cycles_last: u32,
+        process_cycles_last: u32,
     }
 
     #[shared]
@@ -662,6 +665,10 @@ mod app {
                 "sample_isr_max = {} {unit}, process_max = {} {unit}",
                 live.isr_cycles_max, live.process_cycles_max
             ));
+            reply.push_line(format_args!(
+                "sample_isr_last = {} {unit}, process_last = {} {unit}",
+                live.isr_cycles_last, live.process_cycles_last
+            ));
             let source = match self.source {
                 SettingsSource::Flash => "flash",
                 SettingsSource::Defaults => "defaults",
@@ -976,6 +983,8 @@ mod app {
             Live {
                 isr_cycles_max: self.isr_cycles_max,
                 process_cycles_max: self.process_cycles_max,
+                isr_cycles_last: raw.isr_cycles,
+                process_cycles_last: process_cycles,
                 samples: self.sequence,
                 dropped_total: self.dropped_total,
                 flags: self.flags,
