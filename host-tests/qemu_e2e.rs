@@ -19,9 +19,8 @@
 //! skipped with a message, unless `ODO_QEMU_REQUIRED=1` (as in CI), which makes it fail.
 
 use std::io::{Read, Write};
-use std::net::{TcpListener, TcpStream};
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::net::TcpStream;
+use std::path::Path;
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
 use std::time::{Duration, Instant};
 
@@ -31,40 +30,12 @@ use odo_core::protocol::{
 };
 use odo_core::settings::Settings;
 
+mod support;
+
 /// Emulated time the replay must cover after the pose reset, microseconds.
 const REPLAY_US: u64 = 12_000_000;
 /// Wall-clock limit of the whole test.
 const DEADLINE: Duration = Duration::from_secs(120);
-
-fn image() -> PathBuf {
-    std::env::var_os("ODO_QEMU_IMAGE")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| {
-            Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("target/qemu/thumbv7em-none-eabihf/release/odo-unit")
-        })
-}
-
-fn qemu() -> Option<PathBuf> {
-    if let Some(q) = std::env::var_os("QEMU_SYSTEM_ARM") {
-        return Some(PathBuf::from(q));
-    }
-    std::env::var_os("PATH")?
-        .to_str()?
-        .split(':')
-        .map(|d| Path::new(d).join("qemu-system-arm"))
-        .find(|p| p.is_file())
-}
-
-/// QEMU, killed when dropped.
-struct Qemu(Child);
-
-impl Drop for Qemu {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
 
 /// Frames and the decoder's counters, as the reader thread sees them.
 enum Event {
@@ -140,57 +111,11 @@ fn expect(link: &mut Link, line: &str, ok: bool, contains: &str) -> String {
 
 #[test]
 fn qemu_end_to_end() {
-    let required = std::env::var("ODO_QEMU_REQUIRED").is_ok_and(|v| v == "1");
-    let image = image();
-    let Some(qemu_bin) = qemu() else {
-        assert!(
-            !required,
-            "qemu-system-arm not found and ODO_QEMU_REQUIRED=1"
-        );
-        eprintln!(
-            "SKIPPED qemu_end_to_end: qemu-system-arm not found (apt-get install qemu-system-arm)"
-        );
+    let Some(qemu) = support::qemu::boot(Path::new(env!("CARGO_MANIFEST_DIR")), "qemu_end_to_end")
+    else {
         return;
     };
-    if !image.is_file() {
-        assert!(
-            !required,
-            "{} missing and ODO_QEMU_REQUIRED=1",
-            image.display()
-        );
-        eprintln!(
-            "SKIPPED qemu_end_to_end: no image at {} (cargo build --release --features qemu --target-dir target/qemu)",
-            image.display()
-        );
-        return;
-    }
-
-    // A free local port for QEMU's server socket.
-    let port = TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .expect("free port")
-        .port();
-    let _qemu = Qemu(
-        Command::new(&qemu_bin)
-            .args([
-                "-machine",
-                "netduinoplus2",
-                "-display",
-                "none",
-                "-nodefaults",
-            ])
-            .args(["-icount", "shift=0,sleep=off"])
-            .args(["-semihosting-config", "enable=on,target=native"])
-            .args(["-serial", "null", "-serial"])
-            .arg(format!("tcp:127.0.0.1:{port},server=on,wait=on"))
-            .arg("-kernel")
-            .arg(&image)
-            .stdin(Stdio::null())
-            .stdout(Stdio::null()) // defmt frames over semihosting (binary)
-            .stderr(Stdio::inherit())
-            .spawn()
-            .expect("start QEMU"),
-    );
+    let port = qemu.port;
     let start = Instant::now();
     let stream = loop {
         match TcpStream::connect(("127.0.0.1", port)) {

@@ -2,6 +2,8 @@
 // Each test binary uses a different part of this module.
 #![allow(dead_code)]
 
+pub mod qemu;
+
 /// A deterministic xorshift64* generator, so long simulated drives need no data files.
 pub struct Rng(pub u64);
 

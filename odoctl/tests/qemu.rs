@@ -7,83 +7,21 @@
 
 mod common;
 
-use std::net::TcpListener;
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::path::Path;
 use std::time::{Duration, Instant};
 
 use common::{odoctl, read, scratch};
 
-struct Qemu(Child);
-
-impl Drop for Qemu {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-fn image() -> PathBuf {
-    std::env::var_os("ODO_QEMU_IMAGE")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| {
-            Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("../target/qemu/thumbv7em-none-eabihf/release/odo-unit")
-        })
-}
-
-fn qemu() -> Option<PathBuf> {
-    if let Some(q) = std::env::var_os("QEMU_SYSTEM_ARM") {
-        return Some(PathBuf::from(q));
-    }
-    std::env::var_os("PATH")?
-        .to_str()?
-        .split(':')
-        .map(|d| Path::new(d).join("qemu-system-arm"))
-        .find(|p| p.is_file())
-}
+#[path = "../../host-tests/support/qemu.rs"]
+mod qemu_support;
 
 #[test]
 fn odoctl_against_the_qemu_image() {
-    let required = std::env::var("ODO_QEMU_REQUIRED").is_ok_and(|v| v == "1");
-    let (Some(qemu), true) = (qemu(), image().is_file()) else {
-        assert!(
-            !required,
-            "qemu-system-arm or {} missing and ODO_QEMU_REQUIRED=1",
-            image().display()
-        );
-        eprintln!(
-            "SKIPPED odoctl_against_the_qemu_image: no qemu-system-arm or no image at {}",
-            image().display()
-        );
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let Some(qemu) = qemu_support::boot(&repo, "odoctl_against_the_qemu_image") else {
         return;
     };
-    let port = TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let _q = Qemu(
-        Command::new(qemu)
-            .args([
-                "-machine",
-                "netduinoplus2",
-                "-display",
-                "none",
-                "-nodefaults",
-            ])
-            .args(["-icount", "shift=0,sleep=off"])
-            .args(["-semihosting-config", "enable=on,target=native"])
-            .args(["-serial", "null", "-serial"])
-            .arg(format!("tcp:127.0.0.1:{port},server=on,wait=on"))
-            .arg("-kernel")
-            .arg(image())
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .expect("start QEMU"),
-    );
+    let port = qemu.port;
     let addr = format!("tcp:127.0.0.1:{port}");
     // Wait for QEMU's socket.
     let start = Instant::now();
