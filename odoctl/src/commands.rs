@@ -104,6 +104,10 @@ pub struct SimulateOptions {
     pub slip: f64,
     /// Slip correlation length (m).
     pub slip_corr: f64,
+    /// Opposite-phase slip when turning (standard deviation; 0 = none).
+    pub slip_turn: f64,
+    /// Its correlation length (m of differential travel).
+    pub slip_turn_corr: f64,
     /// Reference horizontal RMS noise (m).
     pub rtk_sigma: f64,
     /// Reference heading noise (rad), or no heading column.
@@ -139,8 +143,11 @@ pub fn simulate(o: &SimulateOptions) -> Result<ExitCode> {
     if !(o.speed > 0.0 && o.speed <= 10.0) {
         bail!("--speed {}: must be in (0, 10] m/s", o.speed);
     }
-    if o.length.is_nan() || o.length <= 0.0 || o.slip < 0.0 || o.rtk_sigma < 0.0 {
-        bail!("--length must be positive, --slip and --rtk-sigma non-negative");
+    if o.length.is_nan()
+        || o.length <= 0.0
+        || !(o.slip >= 0.0 && o.slip_turn >= 0.0 && o.rtk_sigma >= 0.0)
+    {
+        bail!("--length must be positive, --slip, --slip-turn and --rtk-sigma non-negative");
     }
     let mut rng = simulate::Rng::new(o.seed ^ 0x5EED);
     let segments = simulate::path(o.path, o.length, &mut rng);
@@ -151,6 +158,8 @@ pub fn simulate(o: &SimulateOptions) -> Result<ExitCode> {
         speed: o.speed,
         slip: o.slip,
         slip_corr: o.slip_corr,
+        slip_turn: o.slip_turn,
+        slip_turn_corr: o.slip_turn_corr,
         rtk_sigma: o.rtk_sigma,
         heading_sigma: o.heading_sigma,
         start: o.start,
@@ -209,6 +218,11 @@ pub struct CalibrateOptions {
     pub delta_mode: DeltaMode,
     /// Fit the uncertainty coefficients.
     pub fit_delta: bool,
+    /// Fit `delta_diff` of the paper's model by the heading criterion (when the reference has
+    /// a heading; else the initial value is kept).
+    pub fit_delta_diff: bool,
+    /// Reference heading noise (rad), added to `sigma_heading` in the heading criterion.
+    pub reference_heading_sigma: f64,
     /// The uncertainty models whose coefficients are fitted (empty: the initial estimate's
     /// `uncertainty_model`). The result keeps the initial model when it is among them, else
     /// the last one.
@@ -264,6 +278,9 @@ pub fn calibrate_run(
     initial: &ChassisParams,
     o: &CalibrateOptions,
 ) -> Result<Calibration> {
+    if !(o.reference_sigma >= 0.0 && o.reference_heading_sigma >= 0.0) {
+        bail!("--reference-sigma and --reference-heading-sigma-deg must be non-negative");
+    }
     let matches = csvio::match_or_fail(samples, names.0, reference, names.1, 10)?;
     let run = Run::new(samples, reference, matches);
     let h0 = run.heading_guess(0);
@@ -289,21 +306,38 @@ pub fn calibrate_run(
         } else {
             o.models.clone()
         };
+        let restarts = calib::Restarts::new(&run, &params, geometry.heading0, o.delta_window)?;
         for &m in &models {
             let pb = bar(o.quiet, &format!("{} model fit", cfg::model_name(m)));
             let mut p = params;
             p.uncertainty_model = m;
-            let u = calib::fit_uncertainty(
+            let mut u = calib::fit_uncertainty_on(
                 &run,
+                &restarts,
                 &p,
-                geometry.heading0,
                 initial,
-                o.delta_window,
                 o.reference_sigma,
                 o.delta_mode,
                 &pb,
             )?;
             pb.finish_and_clear();
+            if m == UncertaintyModel::Paper {
+                let pb = bar(o.quiet, "delta_diff fit");
+                u = calib::fit_delta_diff(
+                    &run,
+                    &restarts,
+                    u,
+                    initial,
+                    calib::DiffOptions {
+                        fit: o.fit_delta_diff,
+                        ref_heading_sigma: o.reference_heading_sigma,
+                        ref_sigma: o.reference_sigma,
+                        mode: o.delta_mode,
+                    },
+                    &pb,
+                )?;
+                pb.finish_and_clear();
+            }
             params = u.params;
             uncertainty.push(u);
         }
@@ -410,6 +444,38 @@ pub fn calibrate(o: &CalibrateOptions) -> Result<ExitCode> {
         if let Some(w) = &u.warning {
             eprintln!("warning: uncertainty fit: {w}");
         }
+        if let Some(d) = &u.diff {
+            crate::outln!(
+                "  {:<16} {:>14.4e} {:>14.4e}",
+                "delta_diff",
+                d.initial,
+                d.delta_diff
+            );
+            let deg = o.reference_heading_sigma.to_degrees();
+            if d.fitted {
+                crate::outln!(
+                    "delta_diff fit: {} heading points, reference heading noise {deg} deg; heading 1-sigma band covers {:.1} % -> {:.1} % (target 68.3 %), 3-sigma {:.1} % -> {:.1} %; delta {} ({:.4e} with the initial delta_diff), horizontal 1-sigma {:.1} %",
+                    d.points,
+                    100.0 * d.coverage1_before,
+                    100.0 * d.coverage1,
+                    100.0 * d.coverage3_before,
+                    100.0 * d.coverage3,
+                    if d.joint { "refitted with it" } else { "held" },
+                    d.delta_before,
+                    100.0 * u.coverage1
+                );
+            } else {
+                crate::outln!(
+                    "delta_diff kept (--no-fit-delta-diff): {} heading points, reference heading noise {deg} deg; heading 1-sigma band covers {:.1} %, 3-sigma {:.1} %",
+                    d.points,
+                    100.0 * d.coverage1,
+                    100.0 * d.coverage3
+                );
+            }
+            if let Some(w) = &d.warning {
+                eprintln!("warning: delta_diff fit: {w}");
+            }
+        }
     }
     crate::outln!(
         "eq (16): {:.6} m over {} points (mean {:.4} m); {} stages, {} iterations, {} integrator runs",
@@ -499,11 +565,54 @@ pub fn calibrate(o: &CalibrateOptions) -> Result<ExitCode> {
                 FitValue::Num(u.coverage3),
             ));
         }
+        let diff = c.uncertainty.iter().find_map(|u| u.diff.as_ref());
+        if let Some(d) = diff {
+            if d.fitted {
+                per_model.push((
+                    "delta_diff_criterion".into(),
+                    FitValue::Text(
+                        "smallest delta_diff >= 0 for which, with delta refitted by the horizontal criterion, the 1-sigma heading band sqrt(sigma_heading^2 + (1 + 1/n) reference_heading_sigma^2) covers 68.27 % of the errors of the heading change since each restart (wrapped) on the same sub-trajectories".into(),
+                    ),
+                ));
+                per_model.push(("delta_diff_initial".into(), FitValue::Num(d.initial)));
+                per_model.push(("delta_before_diff".into(), FitValue::Num(d.delta_before)));
+                per_model.push((
+                    "delta_diff_joint".into(),
+                    FitValue::Text(
+                        if d.joint {
+                            "delta refitted"
+                        } else {
+                            "delta held"
+                        }
+                        .into(),
+                    ),
+                ));
+            }
+            per_model.push((
+                "reference_heading_sigma".into(),
+                FitValue::Num(o.reference_heading_sigma),
+            ));
+            per_model.push(("heading_points".into(), FitValue::Int(d.points as i64)));
+            for (k, v) in [
+                ("heading_coverage_1sigma_before", d.coverage1_before),
+                ("heading_coverage_3sigma_before", d.coverage3_before),
+                ("heading_coverage_1sigma", d.coverage1),
+                ("heading_coverage_3sigma", d.coverage3),
+            ] {
+                per_model.push((k.into(), FitValue::Num(v)));
+            }
+        }
         fit.extend(per_model.iter().map(|(k, v)| (k.as_str(), v.clone())));
-        let text = cfg::render_params(
+        let always: &[&str] = if diff.is_some_and(|d| d.fitted) {
+            &["delta_diff"]
+        } else {
+            &[]
+        };
+        let text = cfg::render_params_with(
             &c.params,
             "odoctl calibrate: chassis parameters estimated by eq (16) of Jilek, Burian, Kriz",
             &fit,
+            always,
         );
         std::fs::write(p, text).with_context(|| format!("{}: cannot write", p.display()))?;
         crate::outln!("wrote {}", p.display());
@@ -632,7 +741,11 @@ pub fn validate(
     plots: Option<&Path>,
     models: &[UncertaintyModel],
     reference_sigma: f64,
+    reference_heading_sigma: f64,
 ) -> Result<ExitCode> {
+    if !(reference_sigma >= 0.0 && reference_heading_sigma >= 0.0) {
+        bail!("--reference-sigma and --reference-heading-sigma-deg must be non-negative");
+    }
     let mut params = cfg::load(config, sets)?;
     if let [one] = models {
         params.uncertainty_model = *one;
@@ -678,10 +791,22 @@ pub fn validate(
         100.0 * widened(&ev, 1.0),
         100.0 * widened(&ev, 3.0)
     );
+    // Heading: the error of the heading change since the start (what sigma_heading, zero at
+    // the start, predicts), bands widened by the reference heading noise; the start excluded.
+    let widened_heading =
+        |e: &calib::Evaluation, k: f64| calib::heading_coverage(e, reference_heading_sigma, k, 1);
+    let heading_deg = reference_heading_sigma.to_degrees();
+    if calib::heading_points(&ev, 1) > 0 {
+        crate::outln!(
+            "  heading change since the start vs sigma_heading, the reference heading noise ({heading_deg} deg) added: {:.1} % in 1 sigma, {:.1} % in 3 sigma",
+            100.0 * widened_heading(&ev, 1.0),
+            100.0 * widened_heading(&ev, 3.0)
+        );
+    }
     let mut compared = Vec::new();
     if models.len() > 1 {
         crate::outln!(
-            "uncertainty models on this run (observed coverage; nominal 68.3 % in 1 sigma, 99.7 % in 3 sigma; horizontal bands widened by the reference noise {reference_sigma} m):"
+            "uncertainty models on this run (observed coverage; nominal 68.3 % in 1 sigma, 99.7 % in 3 sigma; bands widened by the reference noise, {reference_sigma} m horizontal, {heading_deg} deg heading; heading = change since the start):"
         );
         crate::outln!(
             "  {:<12} {:>11} {:>11} {:>11} {:>11} {:>14}",
@@ -692,11 +817,26 @@ pub fn validate(
             "head 3sig",
             "final sigma_h"
         );
+        // The paper's model with and without its proposed delta_diff term, when the file has one.
+        let mut rows: Vec<(&'static str, ChassisParams)> = Vec::new();
         for &m in models {
             let mut p = params;
             p.uncertainty_model = m;
+            if m == UncertaintyModel::Paper && p.delta_diff > 0.0 {
+                rows.push((
+                    "paper",
+                    ChassisParams {
+                        delta_diff: 0.0,
+                        ..p
+                    },
+                ));
+                rows.push(("paper+diff", p));
+            } else {
+                rows.push((cfg::model_name(m), p));
+            }
+        }
+        for (name, p) in rows {
             let e = calib::evaluate(&run, &p, h0)?;
-            let (he, hs) = e.heading_pairs();
             let pct = |v: f64| {
                 if v.is_nan() {
                     "-".to_string()
@@ -706,22 +846,14 @@ pub fn validate(
             };
             crate::outln!(
                 "  {:<12} {:>11} {:>11} {:>11} {:>11} {:>12.4} m",
-                cfg::model_name(m),
+                name,
                 pct(widened(&e, 1.0)),
                 pct(widened(&e, 3.0)),
-                pct(coverage(
-                    he.get(1..).unwrap_or(&[]),
-                    hs.get(1..).unwrap_or(&[]),
-                    1.0
-                )),
-                pct(coverage(
-                    he.get(1..).unwrap_or(&[]),
-                    hs.get(1..).unwrap_or(&[]),
-                    3.0
-                )),
+                pct(widened_heading(&e, 1.0)),
+                pct(widened_heading(&e, 3.0)),
                 e.sigma_h.last().copied().unwrap_or(f64::NAN)
             );
-            compared.push((cfg::model_name(m), e.sigma_h));
+            compared.push((name, e.sigma_h));
         }
     }
     if let Some(p) = errors {

@@ -277,11 +277,26 @@ pub enum FitValue {
 
 /// Renders a parameter file: a comment header, the shared keys at top level, then `[fit]`.
 pub fn render_params(p: &ChassisParams, comment: &str, fit: &[(&str, FitValue)]) -> String {
+    render_params_with(p, comment, fit, &[])
+}
+
+/// [`render_params`] that also writes the keys `always` (e.g. a fitted `delta_diff` of 0).
+pub fn render_params_with(
+    p: &ChassisParams,
+    comment: &str,
+    fit: &[(&str, FitValue)],
+    always: &[&str],
+) -> String {
     let mut s = String::new();
     for line in comment.lines() {
         let _ = writeln!(s, "# {line}");
     }
-    for k in keys_to_write(p) {
+    let listed = keys_to_write(p);
+    for k in KEYS
+        .iter()
+        .copied()
+        .filter(|k| listed.contains(k) || always.contains(k))
+    {
         let v = get_key(p, k).expect("known key");
         if k == "uncertainty_model" {
             let _ = writeln!(s, "{k} = \"{v}\"");

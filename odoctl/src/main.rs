@@ -146,6 +146,10 @@ enum Cmd {
         /// criterion uses.
         #[arg(long, default_value_t = 0.008)]
         reference_sigma: f64,
+        /// Heading noise of the reference (degrees, 1 sigma): also reported is the coverage of
+        /// the heading bands widened by it, as `calibrate`'s `delta_diff` criterion uses.
+        #[arg(long, default_value_t = 0.5)]
+        reference_heading_sigma_deg: f64,
     },
     /// Write a synthetic run (SAMPLES and REFERENCE CSVs) with known true parameters.
     Simulate(SimulateArgs),
@@ -237,6 +241,15 @@ struct CalibrateArgs {
     /// Skip the uncertainty fit (keep the initial coefficients).
     #[arg(long)]
     no_delta: bool,
+    /// Keep the initial `delta_diff` instead of fitting it. By default, when the paper's model
+    /// is fitted and the reference has a heading column, `delta_diff` is fitted so that the
+    /// 1-sigma heading band covers 68.27 % of the heading errors, and delta refitted after it.
+    #[arg(long)]
+    no_fit_delta_diff: bool,
+    /// Reference heading noise (degrees, 1 sigma), added to sigma_heading in the `delta_diff`
+    /// criterion; the default is `simulate --heading-sigma-deg`'s (a BD982-like dual antenna).
+    #[arg(long, default_value_t = 0.5)]
+    reference_heading_sigma_deg: f64,
     /// Which uncertainty models' coefficients to fit: the initial estimate's
     /// `uncertainty_model` (`config`), one, or `all` (the result keeps the initial model).
     #[arg(long, value_enum, default_value_t = Models::Config)]
@@ -296,6 +309,14 @@ struct SimulateArgs {
     /// Correlation length of the slip (m of wheel travel).
     #[arg(long, default_value_t = 0.1)]
     slip_corr: f64,
+    /// Opposite-phase slip when turning (what `delta_diff` models): standard deviation of the
+    /// relative error of the differential travel |ds1 - ds2|/2, added to wheel 1 and taken
+    /// from wheel 2; 0 = none.
+    #[arg(long, default_value_t = 0.0)]
+    slip_turn: f64,
+    /// Correlation length of the turning slip (m of differential travel |ds1 - ds2|/2).
+    #[arg(long, default_value_t = 1.0)]
+    slip_turn_corr: f64,
     /// Horizontal RMS noise of the reference position (m); the BD982's RTK figure.
     #[arg(long, default_value_t = 0.008)]
     rtk_sigma: f64,
@@ -401,6 +422,8 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             reference_sigma: a.reference_sigma,
             delta_mode: a.delta_mode,
             fit_delta: !a.no_delta,
+            fit_delta_diff: !a.no_fit_delta_diff,
+            reference_heading_sigma: a.reference_heading_sigma_deg.to_radians(),
             models: a.models.list(),
             polish: !a.no_polish,
             windows: a.windows,
@@ -418,6 +441,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             plots,
             models,
             reference_sigma,
+            reference_heading_sigma_deg,
         } => c::validate(
             &samples,
             &reference,
@@ -428,6 +452,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             plots.as_deref(),
             &models.list(),
             reference_sigma,
+            reference_heading_sigma_deg.to_radians(),
         ),
         Cmd::Simulate(a) => c::simulate(&c::SimulateOptions {
             samples: a.samples,
@@ -441,6 +466,8 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             speed: a.speed,
             slip: a.slip,
             slip_corr: a.slip_corr,
+            slip_turn: a.slip_turn,
+            slip_turn_corr: a.slip_turn_corr,
             rtk_sigma: a.rtk_sigma,
             heading_sigma: (!a.no_heading).then(|| a.heading_sigma_deg.to_radians()),
             start: (a.x0, a.y0, a.heading0),

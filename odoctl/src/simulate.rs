@@ -6,7 +6,12 @@
 //! `ds = v dt +- omega w/2 dt` (left = wheel 1 is the outer wheel of a clockwise turn), and the
 //! wheel *turns* by `ds (1 + eps) / (pi D)`, where `eps` is that wheel's slip: a Gauss-Markov
 //! process over the distance the wheel rolls (standard deviation `slip`, correlation length
-//! `slip_corr` metres), independent between the wheels. The encoder counts are the floor of the
+//! `slip_corr` metres), independent between the wheels. Optionally (`slip_turn`, 0 by default)
+//! an opposite-phase slip when turning, the mechanism of the paper's discussion: wheel 1 turns
+//! by `+e` and wheel 2 by `-e` more, `e = eps_turn |ds_1 - ds_2| / 2`, `eps_turn` a Gauss-Markov
+//! process of standard deviation `slip_turn` and correlation length `slip_turn_corr` metres of
+//! differential travel `|ds_1 - ds_2| / 2`; it only acts where the wheels' distances differ
+//! (arcs, spins), and it is what `delta_diff` models. The encoder counts are the floor of the
 //! accumulated turn times `ticks_per_rev`, from an arbitrary offset; the index count is the
 //! count at the last whole turn past an arbitrary index phase. SAMPLES rows are taken at
 //! `rate` Hz; REFERENCE rows at the same times carry the true centre position plus normal
@@ -131,6 +136,12 @@ pub struct SimOptions {
     pub slip: f64,
     /// Correlation length of the slip (m of wheel travel).
     pub slip_corr: f64,
+    /// Opposite-phase slip when turning: standard deviation of `eps_turn`, the relative
+    /// error of the differential travel `|ds_1 - ds_2| / 2` (0 = none; draws no random numbers,
+    /// so runs without it are unchanged).
+    pub slip_turn: f64,
+    /// Correlation length of the turning slip (m of differential travel `|ds_1 - ds_2| / 2`).
+    pub slip_turn_corr: f64,
     /// Horizontal RMS noise of the reference position (m).
     pub rtk_sigma: f64,
     /// Noise of the reference heading (rad); `None` writes no heading column.
@@ -166,6 +177,11 @@ pub fn simulate(o: &SimOptions) -> SimRun {
     let mut index: [Option<i64>; 2] = [None, None];
     let diam = [o.truth.left_diameter, o.truth.right_diameter];
     let mut eps = [rng.normal() * o.slip, rng.normal() * o.slip];
+    let mut eps_turn = if o.slip_turn > 0.0 {
+        rng.normal() * o.slip_turn
+    } else {
+        0.0
+    };
     let mut samples = Vec::new();
     let mut reference = Vec::new();
     let mut truth = Vec::new();
@@ -242,6 +258,17 @@ pub fn simulate(o: &SimOptions) -> SimRun {
         y += chord * mid.cos();
         h += da;
         let wheel = [ds + da * w / 2.0, ds - da * w / 2.0];
+        // Opposite-phase slip of the turn: +e on wheel 1, -e on wheel 2.
+        let half_diff = 0.5 * (wheel[0] - wheel[1]).abs();
+        if o.slip_turn > 0.0 && half_diff > 0.0 {
+            let rho = if o.slip_turn_corr > 0.0 {
+                (-half_diff / o.slip_turn_corr).exp()
+            } else {
+                0.0
+            };
+            eps_turn = rho * eps_turn + (1.0 - rho * rho).sqrt() * o.slip_turn * rng.normal();
+        }
+        let e = eps_turn * half_diff;
         for j in 0..2 {
             let rolled = wheel[j].abs();
             if o.slip > 0.0 && rolled > 0.0 {
@@ -253,7 +280,8 @@ pub fn simulate(o: &SimOptions) -> SimRun {
                 eps[j] = rho * eps[j] + (1.0 - rho * rho).sqrt() * o.slip * rng.normal();
             }
             let before = turn[j];
-            turn[j] += wheel[j] * (1.0 + eps[j]) / (PI * diam[j]) * p;
+            let opposite = if j == 0 { e } else { -e };
+            turn[j] += (wheel[j] * (1.0 + eps[j]) + opposite) / (PI * diam[j]) * p;
             // The index line fires where the turn passes index_phase + k P; the counter
             // latched there reads exactly that count.
             let (k0, k1) = (

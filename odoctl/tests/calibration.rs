@@ -31,6 +31,8 @@ fn options() -> CalibrateOptions {
         reference_sigma: 0.008,
         delta_mode: DeltaMode::Equal,
         fit_delta: true,
+        fit_delta_diff: true,
+        reference_heading_sigma: 0.5f64.to_radians(),
         models: vec![],
         polish: true,
         windows: vec![],
@@ -83,7 +85,68 @@ fn calibrate_recovers_the_truth_from_the_papers_poor_first_estimate() {
         );
         assert_eq!(c.params.delta_left, c.params.delta_right);
         assert!(c.params.delta_left > 0.0);
+        // No slip when turning: the paper's model already covers the heading changes, and
+        // delta_diff stays 0.
+        let d = u.diff.as_ref().expect("the reference has a heading");
+        eprintln!(
+            "seed {seed}: delta_diff {:e}, heading coverage {:.3} -> {:.3}",
+            d.delta_diff, d.coverage1_before, d.coverage1
+        );
+        assert_eq!(c.params.delta_diff, 0.0);
+        assert!(d.coverage1 >= calib::ONE_SIGMA_COVERAGE && d.coverage3 > 0.99);
     }
+}
+
+#[test]
+fn delta_diff_is_fitted_when_the_wheels_slip_in_opposite_phase_while_turning() {
+    // simulate --slip-turn 0.03: the paper's model, delta fitted on the horizontal errors,
+    // under-covers the heading changes; delta_diff brings the heading band to nominal with
+    // delta refitted, so the horizontal band stays nominal too.
+    let sim = common::sim_turn_slip(PathKind::Estimation, 70.0, 11, 0.03);
+    let started = Instant::now();
+    let c = calibrate_run(
+        &sim.samples,
+        &sim.reference,
+        ("s", "r"),
+        &common::truth(),
+        &options(),
+    )
+    .unwrap();
+    let u = &c.uncertainty[0];
+    let d = u.diff.as_ref().expect("the reference has a heading");
+    eprintln!(
+        "delta {:e} -> {:e}, delta_diff {:e}; heading 1-sigma {:.3} -> {:.3}, 3-sigma {:.3} -> {:.3}; horizontal 1-sigma {:.3}; {:.2} s",
+        d.delta_before,
+        c.params.delta_left,
+        d.delta_diff,
+        d.coverage1_before,
+        d.coverage1,
+        d.coverage3_before,
+        d.coverage3,
+        u.coverage1,
+        started.elapsed().as_secs_f64()
+    );
+    assert!(d.fitted && d.joint && d.warning.is_none());
+    assert!(c.params.delta_diff > 1e-7, "{}", c.params.delta_diff);
+    assert!(d.coverage1_before < calib::ONE_SIGMA_COVERAGE - 0.03);
+    assert!((d.coverage1 - calib::ONE_SIGMA_COVERAGE).abs() < 0.01);
+    assert!((u.coverage1 - calib::ONE_SIGMA_COVERAGE).abs() < 0.01);
+    assert!(f64::from(c.params.delta_left) < d.delta_before);
+    // --no-fit-delta-diff keeps the initial value and reports the same "before" coverage.
+    let kept = calibrate_run(
+        &sim.samples,
+        &sim.reference,
+        ("s", "r"),
+        &common::truth(),
+        &CalibrateOptions {
+            fit_delta_diff: false,
+            ..options()
+        },
+    )
+    .unwrap();
+    let k = kept.uncertainty[0].diff.as_ref().unwrap();
+    assert_eq!(kept.params.delta_diff, 0.0);
+    assert!(!k.fitted && k.coverage1 == d.coverage1_before);
 }
 
 #[test]
@@ -155,6 +218,8 @@ fn replay_with_the_true_parameters_follows_the_reference() {
         speed: 0.5,
         slip: 0.0,
         slip_corr: 0.1,
+        slip_turn: 0.0,
+        slip_turn_corr: 1.0,
         rtk_sigma: 0.0,
         heading_sigma: None,
         start: (0.0, 0.0, 0.0),

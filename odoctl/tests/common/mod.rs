@@ -47,6 +47,12 @@ pub fn truth() -> ChassisParams {
 
 /// A simulated run with the tool's default noise.
 pub fn sim(kind: PathKind, length: f64, seed: u64) -> SimRun {
+    sim_turn_slip(kind, length, seed, 0.0)
+}
+
+/// A simulated run with the tool's default noise plus opposite-phase slip when turning
+/// (`simulate --slip-turn`, correlation 1 m of differential travel).
+pub fn sim_turn_slip(kind: PathKind, length: f64, seed: u64, slip_turn: f64) -> SimRun {
     let mut rng = simulate::Rng::new(seed ^ 0x5EED);
     simulate::simulate(&SimOptions {
         truth: truth(),
@@ -55,6 +61,8 @@ pub fn sim(kind: PathKind, length: f64, seed: u64) -> SimRun {
         speed: 0.5,
         slip: 0.001,
         slip_corr: 0.1,
+        slip_turn,
+        slip_turn_corr: 1.0,
         rtk_sigma: 0.008,
         heading_sigma: Some(0.5f64.to_radians()),
         start: (3.0, -2.0, 0.3),
