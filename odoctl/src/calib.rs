@@ -31,6 +31,9 @@
 //! `e <= sqrt(sigma_h^2 + sigma_ref^2)` holds at 68.27 % of those points (the 1-sigma band
 //! covers the errors as often as a normal 1-sigma interval would); `sigma_ref` is the
 //! reference's own horizontal noise (8 mm RMS for the BD982; 0 to ignore it).
+//!
+//! For the paper's model with a reference heading, [`fit_delta_diff`] then fits `delta_diff`
+//! on the same sub-trajectories by the heading-change coverage, with delta refitted jointly.
 
 use anyhow::{anyhow, bail, Result};
 use indicatif::ProgressBar;
