@@ -393,4 +393,15 @@ fn qemu_end_to_end() {
     let status = expect(&mut link, "status", true, "sample_isr_max");
     assert!(status.contains("records_dropped = 0"), "{status}");
     assert!(distance > 1.0, "the drive moved");
+    // Stack high-water mark after every command, error path and 12 s of sampling: well
+    // inside the stack region.
+    let stack: Vec<usize> = status
+        .lines()
+        .find_map(|l| l.strip_prefix("stack_used = "))
+        .map(|l| l.split(' ').filter_map(|w| w.parse().ok()).collect())
+        .unwrap_or_default();
+    assert!(
+        matches!(stack[..], [used, size] if used > 1024 && used < size / 2),
+        "stack: {stack:?}"
+    );
 }

@@ -203,6 +203,7 @@ mod app {
         cfg_q: Queue<DisciplineConfig, 4> = Queue::new(),
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
+        board::stack::paint();
         let dp = cx.device;
         let mut core = cx.core;
         board::start_cycle_counter(&mut core);
@@ -669,6 +670,8 @@ mod app {
                 "sample_isr_last = {} {unit}, process_last = {} {unit}",
                 live.isr_cycles_last, live.process_cycles_last
             ));
+            let (used, size) = board::stack::high_water();
+            reply.push_line(format_args!("stack_used = {used} of {size} bytes"));
             let source = match self.source {
                 SettingsSource::Flash => "flash",
                 SettingsSource::Defaults => "defaults",

@@ -28,6 +28,7 @@ pub mod sampler;
 pub mod serial;
 #[cfg(feature = "qemu")]
 pub mod sim;
+pub mod stack;
 
 use stm32f4xx_hal::{pac, rcc::Config};
 
