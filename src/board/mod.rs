@@ -44,7 +44,8 @@ pub const WATCHDOG_MS: u32 = 4_000;
 /// Board: 84 MHz from the PLL. With the `hse` feature off (default) the PLL runs from the
 /// 16 MHz HSI (+-1 % at 25 C: irrelevant when PPS-locked, since the period is measured); a
 /// board with a crystal builds with `--features hse` for an 8 MHz HSE ([`HSE_HZ`]), which is
-/// what makes free-running (indoor) sample timing accurate. APB1 = 42 MHz, so TIM2-5 count
+/// what makes free-running (indoor) sample timing accurate; a Nucleo-64, whose ST-LINK feeds
+/// its 8 MHz clock into OSC_IN, builds with `--features hse-bypass`. APB1 = 42 MHz, so TIM2-5 count
 /// at 84 MHz; APB2 = 84 MHz.
 ///
 /// QEMU: the HSI at 16 MHz without PLL (QEMU's RCC never reports the PLL locked).
@@ -56,7 +57,12 @@ pub fn clock_config() -> Config {
     #[cfg(all(not(feature = "qemu"), feature = "hse"))]
     {
         use stm32f4xx_hal::prelude::*;
-        Config::hse(HSE_HZ.Hz()).sysclk(84.MHz()).pclk1(42.MHz())
+        let config = Config::hse(HSE_HZ.Hz()).sysclk(84.MHz()).pclk1(42.MHz());
+        // A Nucleo-64 has no crystal: its ST-LINK feeds an 8 MHz clock (MCO) into OSC_IN,
+        // which the HSE must take in bypass mode.
+        #[cfg(feature = "hse-bypass")]
+        let config = config.bypass_hse_oscillator();
+        config
     }
     #[cfg(all(not(feature = "qemu"), not(feature = "hse")))]
     {
