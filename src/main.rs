@@ -42,7 +42,7 @@ mod app {
         flash::SettingsFlash,
         sampler::Sampler,
         serial::{GnssUart, HostUart, RxErrors, TxRing},
-        Acquisition, IndexPin, Led,
+        Acquisition, GnssRx, IndexPin, Led,
     };
     use heapless::spsc::{Consumer, Producer, Queue};
     use odo_core::odometry::{
@@ -157,7 +157,7 @@ mod app {
         host: HostUart,
         host_rx_in: Producer<'static, u8>,
         host_rx_out: Consumer<'static, u8>,
-        gnss: GnssUart,
+        gnss: GnssRx,
         gnss_in: Producer<'static, u8>,
         gnss_out: Consumer<'static, u8>,
         cfg_in: Producer<'static, DisciplineConfig>,
@@ -252,6 +252,9 @@ mod app {
 
         let host = HostUart::new(dp.USART2, &mut rcc, clocks.pclk1().raw(), settings.baud);
         let gnss = GnssUart::new(dp.USART1, &mut rcc, clocks.pclk2().raw(), board::GNSS_BAUD);
+        // QEMU: PPS captures and NMEA bytes from the simulated receiver (src/board/sim_gnss.rs).
+        #[cfg(feature = "qemu")]
+        let (gnss, gnss_sim) = board::sim_gnss::attach(gnss);
 
         let (samples_in, samples_out) = cx.local.samples_q.split();
         let (index_in_left, index_out_left) = cx.local.index_left_q.split();
@@ -274,7 +277,10 @@ mod app {
                 }
             }
         };
+        #[cfg(not(feature = "qemu"))]
         let (sampler, s0) = Sampler::start(dp.TIM5, &mut rcc, disc);
+        #[cfg(feature = "qemu")]
+        let (sampler, s0) = Sampler::start(dp.TIM5, &mut rcc, disc, gnss_sim);
         // Sample 0 is now: snapshot it as the starting point of the integration.
         let first = RawSample {
             sample: s0,

@@ -19,7 +19,8 @@
 //!
 //! The `qemu` feature builds the same application for QEMU's `netduinoplus2`: HSI 16 MHz, the
 //! timers count at 1 GHz of emulated time, the encoders, index pulses and fault lines come
-//! from the deterministic [`sim`] drive, the settings flash is RAM ([`flash`]).
+//! from the deterministic [`sim`] drive, the PPS captures and NMEA bytes from the simulated
+//! GNSS receiver [`sim_gnss`], the settings flash is RAM ([`flash`]).
 
 #[cfg_attr(feature = "qemu", allow(dead_code))]
 pub mod encoders;
@@ -28,12 +29,23 @@ pub mod sampler;
 pub mod serial;
 #[cfg(feature = "qemu")]
 pub mod sim;
+#[cfg(feature = "qemu")]
+pub mod sim_gnss;
 pub mod stack;
 
 use stm32f4xx_hal::{pac, rcc::Config};
 
 /// Baud rate of the GNSS receiver's NMEA output (USART1).
 pub const GNSS_BAUD: u32 = 38_400;
+
+/// Where the USART1 interrupt takes NMEA bytes from: the UART on the board; in the `qemu`
+/// build the simulated receiver's wire ([`sim_gnss::SimUart`]).
+#[cfg(not(feature = "qemu"))]
+pub type GnssRx = serial::GnssUart;
+/// Where the USART1 interrupt takes NMEA bytes from: the UART on the board; in the `qemu`
+/// build the simulated receiver's wire ([`sim_gnss::SimUart`]).
+#[cfg(feature = "qemu")]
+pub type GnssRx = sim_gnss::SimUart;
 
 /// Watchdog timeout, milliseconds: longer than the worst-case 128 KiB sector erase (2 s at
 /// x32 parallelism, during which the CPU stalls on flash reads) with margin.

@@ -8,9 +8,15 @@
 //! update event; a PPS capture is that plus CCR1 (or, when the update flag was already
 //! pending, see [`resolve_capture`]).
 //!
-//! QEMU models TIM5's update interrupt but not input capture (no PPS there) and applies ARR
-//! writes at once; ARR is only written when it changes, which in free mode at a rate that
-//! divides the tick frequency is never after start.
+//! QEMU models TIM5's update interrupt but not input capture, and applies ARR writes at once;
+//! ARR is only written when it changes, which in free mode at a rate that divides the tick
+//! frequency is never after start (in PPS mode QEMU's interrupts then drift from the
+//! software's tick timeline by the ARR changes; everything, the simulated drive and GNSS
+//! receiver included, runs on that timeline). In the `qemu` build the PPS captures come from
+//! the simulated receiver ([`super::sim_gnss`]): at each update event, an edge that fell in
+//! the period just ended is handled as the CC1 interrupt the board takes at the edge (CC1IF
+//! alone, the simulated CCR1), before the update; the sampler also lets the receiver send
+//! the NMEA bytes due by the sample instant.
 
 use odo_core::timing::{
     resolve_capture, ConfigError, Discipline, DisciplineConfig, PpsEvent, Sample,
@@ -44,6 +50,9 @@ pub struct Sampler {
     /// The two samples committed to the hardware: the next update event, and the one after.
     committed: [Sample; 2],
     arr: u32,
+    /// The simulated GNSS receiver: PPS captures and NMEA bytes (QEMU has neither).
+    #[cfg(feature = "qemu")]
+    gnss: super::sim_gnss::SimGnss,
 }
 
 fn arr_of(len: u64) -> u32 {
@@ -52,7 +61,12 @@ fn arr_of(len: u64) -> u32 {
 
 impl Sampler {
     /// Configures TIM5 and starts it; returns the sampler and sample 0 (tick 0: now).
-    pub fn start(tim: pac::TIM5, rcc: &mut pac::RCC, mut disc: Discipline) -> (Self, Sample) {
+    pub fn start(
+        tim: pac::TIM5,
+        rcc: &mut pac::RCC,
+        mut disc: Discipline,
+        #[cfg(feature = "qemu")] gnss: super::sim_gnss::SimGnss,
+    ) -> (Self, Sample) {
         pac::TIM5::enable(rcc);
         let s0 = disc.next_sample(0);
         let s1 = disc.next_sample(0);
@@ -87,6 +101,8 @@ impl Sampler {
             cur_len: s1.tick - s0.tick,
             committed: [s1, s2],
             arr: second,
+            #[cfg(feature = "qemu")]
+            gnss,
         };
         (sampler, s0)
     }
@@ -96,11 +112,16 @@ impl Sampler {
     pub fn on_interrupt(&mut self) -> Event {
         let sr = self.tim.sr().read().bits();
         let mut event = Event::default();
+        #[cfg(feature = "qemu")]
+        if sr & SR_UIF != 0 {
+            if let Some(ccr) = self.gnss.capture(self.period_start, self.cur_len) {
+                // The CC1 interrupt the board takes at the edge, before this update event.
+                self.on_capture(SR_CC1IF, ccr, &mut event);
+            }
+        }
         if sr & SR_CC1IF != 0 {
             let ccr = self.tim.ccr1().read().bits(); // reading CCR1 clears CC1IF
-            let tick = resolve_capture(self.period_start, self.cur_len, ccr, sr & SR_UIF != 0);
-            event.pps = Some((tick, self.disc.on_pps(tick)));
-            event.overcapture = sr & SR_CC1OF != 0;
+            self.on_capture(sr, ccr, &mut event);
         }
         let clear = SR_UIF | if event.overcapture { SR_CC1OF } else { 0 };
         if sr & clear != 0 {
@@ -120,8 +141,17 @@ impl Sampler {
                 self.arr = arr;
             }
             event.sample = Some(sample);
+            #[cfg(feature = "qemu")]
+            self.gnss.transmit(self.period_start);
         }
         event
+    }
+
+    /// A PPS capture: `ccr` latched with the status flags `sr`.
+    fn on_capture(&mut self, sr: u32, ccr: u32, event: &mut Event) {
+        let tick = resolve_capture(self.period_start, self.cur_len, ccr, sr & SR_UIF != 0);
+        event.pps = Some((tick, self.disc.on_pps(tick)));
+        event.overcapture = sr & SR_CC1OF != 0;
     }
 
     /// Changes the discipline's configuration (mode at once, rate from the next second).
