@@ -18,83 +18,22 @@
 //! (`target/qemu/thumbv7em-none-eabihf/release/odo-unit`, or `$ODO_QEMU_IMAGE`) the test is
 //! skipped with a message, unless `ODO_QEMU_REQUIRED=1` (as in CI), which makes it fail.
 
-use std::io::{Read, Write};
-use std::net::TcpStream;
 use std::path::Path;
-use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
 use std::time::{Duration, Instant};
 
 use odo_core::odometry::{IndexRefs, Integrator, Pose, WheelCounts};
-use odo_core::protocol::{
-    DecoderStats, Frame, FrameDecoder, Message, PoseRecord, SettingsSource, Status, SyncMode,
-};
+use odo_core::protocol::{SettingsSource, SyncMode};
 use odo_core::settings::Settings;
 
 mod support;
+use support::qemu::UnitLink;
 
 /// Emulated time the replay must cover after the pose reset, microseconds.
 const REPLAY_US: u64 = 12_000_000;
 /// Wall-clock limit of the whole test.
 const DEADLINE: Duration = Duration::from_secs(120);
 
-/// Frames and the decoder's counters, as the reader thread sees them.
-enum Event {
-    Frame(Box<Frame>),
-    Closed(DecoderStats),
-}
-
-struct Link {
-    stream: TcpStream,
-    rx: Receiver<Event>,
-    /// Pose records received so far, in order.
-    records: Vec<PoseRecord>,
-    /// Frame sequence numbers of every frame, in order.
-    seqs: Vec<u32>,
-    device_info: usize,
-    /// Status heartbeats received so far, in order.
-    heartbeats: Vec<Status>,
-    start: Instant,
-}
-
-impl Link {
-    fn next_frame(&mut self) -> Frame {
-        let left = DEADLINE.saturating_sub(self.start.elapsed());
-        match self.rx.recv_timeout(left) {
-            Ok(Event::Frame(f)) => {
-                self.seqs.push(f.seq);
-                match &f.message {
-                    Message::Pose(r) => self.records.push(*r),
-                    Message::DeviceInfo(_) => self.device_info += 1,
-                    Message::Status(s) => self.heartbeats.push(*s),
-                    _ => {}
-                }
-                *f
-            }
-            Ok(Event::Closed(stats)) => panic!("link closed by QEMU ({stats:?})"),
-            Err(RecvTimeoutError::Timeout) => panic!("no frame before the deadline"),
-            Err(RecvTimeoutError::Disconnected) => panic!("reader thread ended"),
-        }
-    }
-
-    /// Sends a command line and returns (ok, text) of its reply (all chunks joined).
-    fn command(&mut self, line: &str) -> (bool, String) {
-        self.stream
-            .write_all(format!("{line}\r\n").as_bytes())
-            .expect("send command");
-        let mut text = String::new();
-        loop {
-            if let Message::Reply(r) = self.next_frame().message {
-                text.push_str(&r.text);
-                if !r.more {
-                    println!("> {line}\n{text}");
-                    return (r.ok, text);
-                }
-            }
-        }
-    }
-}
-
-fn expect(link: &mut Link, line: &str, ok: bool, contains: &str) -> String {
+fn expect(link: &mut UnitLink, line: &str, ok: bool, contains: &str) -> String {
     let (got_ok, text) = link.command(line);
     assert_eq!(got_ok, ok, "`{line}` answered {text:?}");
     assert_eq!(
@@ -115,50 +54,8 @@ fn qemu_end_to_end() {
     else {
         return;
     };
-    let port = qemu.port;
     let start = Instant::now();
-    let stream = loop {
-        match TcpStream::connect(("127.0.0.1", port)) {
-            Ok(s) => break s,
-            Err(e) if start.elapsed() < Duration::from_secs(20) => {
-                let _ = e;
-                std::thread::sleep(Duration::from_millis(50));
-            }
-            Err(e) => panic!("cannot connect to QEMU's USART2 on port {port}: {e}"),
-        }
-    };
-    let (tx, rx) = mpsc::channel();
-    let mut reader = stream.try_clone().expect("clone socket");
-    std::thread::spawn(move || {
-        let mut decoder = FrameDecoder::new();
-        let mut buf = [0u8; 4096];
-        loop {
-            let n = match reader.read(&mut buf) {
-                Ok(0) | Err(_) => 0,
-                Ok(n) => n,
-            };
-            if n == 0 {
-                let _ = tx.send(Event::Closed(decoder.stats()));
-                return;
-            }
-            for &b in &buf[..n] {
-                if let Some(Ok(frame)) = decoder.push(b) {
-                    if tx.send(Event::Frame(Box::new(frame))).is_err() {
-                        return;
-                    }
-                }
-            }
-        }
-    });
-    let mut link = Link {
-        stream,
-        rx,
-        records: Vec::new(),
-        seqs: Vec::new(),
-        device_info: 0,
-        heartbeats: Vec::new(),
-        start,
-    };
+    let mut link = UnitLink::connect(qemu.port, DEADLINE);
 
     // Records flow from boot.
     while link.records.len() < 5 {

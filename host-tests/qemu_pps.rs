@@ -24,18 +24,16 @@
 //!
 //! Skipped without QEMU or the image unless `ODO_QEMU_REQUIRED=1` (see `support/qemu.rs`).
 
-use std::io::{Read, Write};
-use std::net::TcpStream;
 use std::path::Path;
-use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
 use std::time::{Duration, Instant};
 
 use odo_core::odometry::{IndexRefs, Integrator, Pose, WheelCounts};
-use odo_core::protocol::{Frame, FrameDecoder, Message, PoseRecord, Status, SyncMode};
+use odo_core::protocol::{PoseRecord, Status, SyncMode};
 use odo_core::settings::Settings;
 use odo_core::timing::UtcDateTime;
 
 mod support;
+use support::qemu::UnitLink;
 
 // The simulated receiver, as documented in src/board/sim_gnss.rs (MCU ticks are ns in QEMU).
 /// One GNSS second in MCU ticks: the MCU clock is 37 ppm fast.
@@ -66,60 +64,11 @@ const DEADLINE: Duration = Duration::from_secs(120);
 /// Emulated time after which the test gives up waiting for the script, us.
 const MAX_EMULATED_US: u64 = 90_000_000;
 
-enum Event {
-    Frame(Box<Frame>),
-    Closed,
-}
-
-struct Link {
-    stream: TcpStream,
-    rx: Receiver<Event>,
-    records: Vec<PoseRecord>,
-    seqs: Vec<u32>,
-    heartbeats: Vec<Status>,
-    start: Instant,
-}
-
-impl Link {
-    fn next_frame(&mut self) -> Frame {
-        let left = DEADLINE.saturating_sub(self.start.elapsed());
-        match self.rx.recv_timeout(left) {
-            Ok(Event::Frame(f)) => {
-                self.seqs.push(f.seq);
-                match &f.message {
-                    Message::Pose(r) => self.records.push(*r),
-                    Message::Status(s) => self.heartbeats.push(*s),
-                    _ => {}
-                }
-                *f
-            }
-            Ok(Event::Closed) => panic!("link closed by QEMU"),
-            Err(RecvTimeoutError::Timeout) => panic!("no frame before the deadline"),
-            Err(RecvTimeoutError::Disconnected) => panic!("reader thread ended"),
-        }
-    }
-
-    fn command(&mut self, line: &str) -> (bool, String) {
-        self.stream
-            .write_all(format!("{line}\r\n").as_bytes())
-            .expect("send command");
-        let mut text = String::new();
-        loop {
-            if let Message::Reply(r) = self.next_frame().message {
-                text.push_str(&r.text);
-                if !r.more {
-                    println!("> {line}\n{text}");
-                    return (r.ok, text);
-                }
-            }
-        }
-    }
-
-    fn expect(&mut self, line: &str, contains: &str) -> String {
-        let (ok, text) = self.command(line);
-        assert!(ok && text.contains(contains), "`{line}` answered {text:?}");
-        text
-    }
+/// `line` must be answered ok, with `contains` in the reply.
+fn expect(link: &mut UnitLink, line: &str, contains: &str) -> String {
+    let (ok, text) = link.command(line);
+    assert!(ok && text.contains(contains), "`{line}` answered {text:?}");
+    text
 }
 
 /// Nominal MCU time of the edge of receiver second `n`, ns.
@@ -172,45 +121,8 @@ fn qemu_pps_calibration_mode() {
     ) else {
         return;
     };
-    let port = qemu.port;
     let start = Instant::now();
-    let stream = loop {
-        match TcpStream::connect(("127.0.0.1", port)) {
-            Ok(s) => break s,
-            Err(_) if start.elapsed() < Duration::from_secs(20) => {
-                std::thread::sleep(Duration::from_millis(50));
-            }
-            Err(e) => panic!("cannot connect to QEMU's USART2 on port {port}: {e}"),
-        }
-    };
-    let (tx, rx) = mpsc::channel();
-    let mut reader = stream.try_clone().expect("clone socket");
-    std::thread::spawn(move || {
-        let mut decoder = FrameDecoder::new();
-        let mut buf = [0u8; 4096];
-        loop {
-            let n = reader.read(&mut buf).unwrap_or(0);
-            if n == 0 {
-                let _ = tx.send(Event::Closed);
-                return;
-            }
-            for &b in &buf[..n] {
-                if let Some(Ok(frame)) = decoder.push(b) {
-                    if tx.send(Event::Frame(Box::new(frame))).is_err() {
-                        return;
-                    }
-                }
-            }
-        }
-    });
-    let mut link = Link {
-        stream,
-        rx,
-        records: Vec::new(),
-        seqs: Vec::new(),
-        heartbeats: Vec::new(),
-        start,
-    };
+    let mut link = UnitLink::connect(qemu.port, DEADLINE);
 
     // GPS time of receiver second 0 by the core's conversion; the week and time of week by
     // hand (2026-11-21 is a Saturday: 6 days and 12 h into GPS week 2445, plus 18 s).
@@ -222,10 +134,10 @@ fn qemu_pps_calibration_mode() {
     while link.records.len() < 5 {
         link.next_frame();
     }
-    link.expect("get time_tag_pps", "time_tag_pps = previous");
-    link.expect("mode pps", "ok");
+    expect(&mut link, "get time_tag_pps", "time_tag_pps = previous");
+    expect(&mut link, "mode pps", "ok");
     let reset_from = link.records.len();
-    link.expect("reset_pose 10 20 0.5", "ok");
+    expect(&mut link, "reset_pose 10 20 0.5", "ok");
 
     // Records until one whole lap of the script after the first time-tagged record, with an
     // outage (holdover, reacquisition) behind.
@@ -256,7 +168,7 @@ fn qemu_pps_calibration_mode() {
         link.next_frame();
     }
     let before_status = link.records.len();
-    let status = link.expect("status", "pps_glitches");
+    let status = expect(&mut link, "status", "pps_glitches");
     let records = link.records.clone();
     let t_lo = records[before_status - 1].mcu_time_us * 1000;
     let t_hi = records.last().expect("records").mcu_time_us * 1000;

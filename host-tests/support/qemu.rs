@@ -89,3 +89,115 @@ pub fn boot(repo: &Path, test: &str) -> Option<Qemu> {
         .expect("start QEMU");
     Some(Qemu { child, port })
 }
+
+/// A frame from the reader thread, or the end of the stream with the decoder's counters.
+enum Event {
+    Frame(Box<odo_core::protocol::Frame>),
+    Closed(odo_core::protocol::DecoderStats),
+}
+
+/// The host side of the unit's link: a reader thread decodes frames with the core's
+/// `FrameDecoder`; every frame is kept by kind, in order.
+pub struct UnitLink {
+    stream: std::net::TcpStream,
+    rx: std::sync::mpsc::Receiver<Event>,
+    deadline: std::time::Instant,
+    /// Pose records received so far.
+    pub records: Vec<odo_core::protocol::PoseRecord>,
+    /// Status heartbeats received so far.
+    pub heartbeats: Vec<odo_core::protocol::Status>,
+    /// Frame sequence numbers of every frame.
+    pub seqs: Vec<u32>,
+    /// DeviceInfo frames received.
+    pub device_info: usize,
+}
+
+impl UnitLink {
+    /// Connects to QEMU's USART2 on 127.0.0.1:`port` (retrying while QEMU starts); every
+    /// later wait fails the test after `limit` of wall-clock time from now.
+    pub fn connect(port: u16, limit: std::time::Duration) -> Self {
+        use std::io::Read;
+        use std::time::{Duration, Instant};
+        let start = Instant::now();
+        let stream = loop {
+            match std::net::TcpStream::connect(("127.0.0.1", port)) {
+                Ok(s) => break s,
+                Err(_) if start.elapsed() < Duration::from_secs(20) => {
+                    std::thread::sleep(Duration::from_millis(50));
+                }
+                Err(e) => panic!("cannot connect to QEMU's USART2 on port {port}: {e}"),
+            }
+        };
+        let (tx, rx) = std::sync::mpsc::channel();
+        let mut reader = stream.try_clone().expect("clone socket");
+        std::thread::spawn(move || {
+            let mut decoder = odo_core::protocol::FrameDecoder::new();
+            let mut buf = [0u8; 4096];
+            loop {
+                let n = reader.read(&mut buf).unwrap_or(0);
+                if n == 0 {
+                    let _ = tx.send(Event::Closed(decoder.stats()));
+                    return;
+                }
+                for &b in &buf[..n] {
+                    if let Some(Ok(frame)) = decoder.push(b) {
+                        if tx.send(Event::Frame(Box::new(frame))).is_err() {
+                            return;
+                        }
+                    }
+                }
+            }
+        });
+        Self {
+            stream,
+            rx,
+            deadline: start + limit,
+            records: Vec::new(),
+            heartbeats: Vec::new(),
+            seqs: Vec::new(),
+            device_info: 0,
+        }
+    }
+
+    /// The next frame (also filed in `records`, `heartbeats`, `seqs`, `device_info`).
+    pub fn next_frame(&mut self) -> odo_core::protocol::Frame {
+        use odo_core::protocol::Message;
+        use std::sync::mpsc::RecvTimeoutError;
+        let left = self
+            .deadline
+            .saturating_duration_since(std::time::Instant::now());
+        match self.rx.recv_timeout(left) {
+            Ok(Event::Frame(f)) => {
+                self.seqs.push(f.seq);
+                match &f.message {
+                    Message::Pose(r) => self.records.push(*r),
+                    Message::Status(s) => self.heartbeats.push(*s),
+                    Message::DeviceInfo(_) => self.device_info += 1,
+                    Message::Reply(_) => {}
+                }
+                *f
+            }
+            Ok(Event::Closed(stats)) => panic!("link closed by QEMU ({stats:?})"),
+            Err(RecvTimeoutError::Timeout) => panic!("no frame before the deadline"),
+            Err(RecvTimeoutError::Disconnected) => panic!("reader thread ended"),
+        }
+    }
+
+    /// Sends a command line; returns (ok, text) of its reply, all chunks joined.
+    pub fn command(&mut self, line: &str) -> (bool, String) {
+        use std::io::Write;
+        self.stream
+            .write_all(format!("{line}\r\n").as_bytes())
+            .expect("send command");
+        let mut text = String::new();
+        loop {
+            if let odo_core::protocol::Message::Reply(r) = self.next_frame().message {
+                text.push_str(&r.text);
+                if !r.more {
+                    println!("> {line}\n{text}");
+                    return (r.ok, text);
+                }
+            }
+        }
+    }
+}

@@ -12,6 +12,8 @@ use std::time::{Duration, Instant};
 
 use common::{odoctl, read, scratch};
 
+// odoctl talks to the unit itself; only the launcher of this module is used here.
+#[allow(dead_code)]
 #[path = "../../host-tests/support/qemu.rs"]
 mod qemu_support;
 
