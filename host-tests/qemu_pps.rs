@@ -10,7 +10,7 @@
 //! cargo test --target x86_64-unknown-linux-gnu --test qemu_pps -- --nocapture
 //! ```
 //!
-//! It boots the image (free-running, as always), sends `mode pps` and a `reset_pose`, reads
+//! It boots the image (free-running, as always), sends a `reset_pose` and `mode pps`, reads
 //! records over more than one lap of the script after the lock and checks: the sync state goes
 //! FreeRunning -> PpsLocked, then Holdover for the 3 s outage and PpsLocked again; from the
 //! first time-tagged record on, every record carries GPS week/time of week of the simulated
@@ -135,9 +135,11 @@ fn qemu_pps_calibration_mode() {
         link.next_frame();
     }
     expect(&mut link, "get time_tag_pps", "time_tag_pps = previous");
-    expect(&mut link, "mode pps", "ok");
+    // The reset first: emulated time runs ahead while a reply crosses the socket, so only
+    // this order guarantees that the replay from the reset covers the lock.
     let reset_from = link.records.len();
     expect(&mut link, "reset_pose 10 20 0.5", "ok");
+    expect(&mut link, "mode pps", "ok");
 
     // Records until one whole lap of the script after the first time-tagged record, with an
     // outage (holdover, reacquisition) behind.
