@@ -21,7 +21,6 @@
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use odo_core::odometry::{IndexRefs, Integrator, Pose, WheelCounts};
 use odo_core::protocol::{SettingsSource, SyncMode};
 use odo_core::settings::Settings;
 
@@ -216,70 +215,8 @@ fn qemu_end_to_end() {
         .is_some_and(|r| r.flags.left.index_seen && r.flags.right.index_seen));
 
     // Replay the counts through the core integrator: bit-exact poses and sigmas.
-    let start_rec = &records[r0];
-    let mut integrator = Integrator::new(
-        &settings.chassis,
-        WheelCounts {
-            left: start_rec.gamma_left,
-            right: start_rec.gamma_right,
-        },
-        Pose {
-            x: start_rec.x,
-            y: start_rec.y,
-            heading: start_rec.heading,
-        },
-    )
-    .expect("valid parameters");
-    let mut replayed = 0;
-    let mut distance = 0.0f64;
-    for r in &records[r0 + 1..] {
-        let refs = IndexRefs {
-            left: r.flags.left.index_seen.then_some(r.index_left),
-            right: r.flags.right.index_seen.then_some(r.index_right),
-        };
-        let before = integrator.pose();
-        let status = integrator.step(
-            WheelCounts {
-                left: r.gamma_left,
-                right: r.gamma_right,
-            },
-            refs,
-        );
-        assert!(!status.overrange);
-        let pose = integrator.pose();
-        let sigma = integrator.sigma();
-        distance += (pose.x - before.x).hypot(pose.y - before.y);
-        let got = (
-            r.x,
-            r.y,
-            r.heading,
-            r.sigma_x,
-            r.sigma_y,
-            r.sigma_heading,
-            r.sigma_xy,
-        );
-        let want = (
-            pose.x,
-            pose.y,
-            pose.heading,
-            sigma.x,
-            sigma.y,
-            sigma.heading,
-            sigma.xy,
-        );
-        assert!(
-            got.0.to_bits() == want.0.to_bits()
-                && got.1.to_bits() == want.1.to_bits()
-                && got.2.to_bits() == want.2.to_bits()
-                && got.3.to_bits() == want.3.to_bits()
-                && got.4.to_bits() == want.4.to_bits()
-                && got.5.to_bits() == want.5.to_bits()
-                && got.6.to_bits() == want.6.to_bits(),
-            "record {}: firmware {got:?} != replay {want:?}",
-            r.sequence
-        );
-        replayed += 1;
-    }
+    let distance = support::qemu::assert_replay_bit_exact(&settings.chassis, &records[r0..]);
+    let replayed = records.len() - r0 - 1;
     let last = records.last().expect("records");
     println!(
         "replayed {replayed} records bit-exact: {distance:.2} m driven, final pose ({:.4}, {:.4}, {:.4} rad), sigma ({:.2e}, {:.2e}, {:.2e})",

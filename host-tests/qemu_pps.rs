@@ -27,7 +27,6 @@
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use odo_core::odometry::{IndexRefs, Integrator, Pose, WheelCounts};
 use odo_core::protocol::{PoseRecord, Status, SyncMode};
 use odo_core::settings::Settings;
 use odo_core::timing::UtcDateTime;
@@ -401,56 +400,7 @@ fn qemu_pps_calibration_mode() {
             r.x == 10.0 && r.y == 20.0 && r.heading == 0.5 && r.sigma_x == 0.0
         })
         .expect("a record carries the reset pose");
-    let settings = Settings::DEFAULT;
-    let s = &records[r0];
-    let mut integrator = Integrator::new(
-        &settings.chassis,
-        WheelCounts {
-            left: s.gamma_left,
-            right: s.gamma_right,
-        },
-        Pose {
-            x: s.x,
-            y: s.y,
-            heading: s.heading,
-        },
-    )
-    .expect("valid parameters");
-    for r in &records[r0 + 1..] {
-        let refs = IndexRefs {
-            left: r.flags.left.index_seen.then_some(r.index_left),
-            right: r.flags.right.index_seen.then_some(r.index_right),
-        };
-        let step = integrator.step(
-            WheelCounts {
-                left: r.gamma_left,
-                right: r.gamma_right,
-            },
-            refs,
-        );
-        assert!(!step.overrange);
-        let (p, q) = (integrator.pose(), integrator.sigma());
-        let got = (
-            [r.x, r.y, r.heading],
-            [r.sigma_x, r.sigma_y, r.sigma_heading, r.sigma_xy],
-        );
-        let want = ([p.x, p.y, p.heading], [q.x, q.y, q.heading, q.xy]);
-        let same64 = got
-            .0
-            .iter()
-            .zip(&want.0)
-            .all(|(a, b)| a.to_bits() == b.to_bits());
-        let same32 = got
-            .1
-            .iter()
-            .zip(&want.1)
-            .all(|(a, b)| a.to_bits() == b.to_bits());
-        assert!(
-            same64 && same32,
-            "record {}: firmware {got:?} != replay {want:?}",
-            r.sequence
-        );
-    }
+    support::qemu::assert_replay_bit_exact(&Settings::DEFAULT.chassis, &records[r0..]);
     println!(
         "replayed {} records bit-exact from record {}",
         records.len() - r0 - 1,

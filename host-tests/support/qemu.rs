@@ -201,3 +201,61 @@ impl UnitLink {
         }
     }
 }
+
+/// Replays the raw counts of `records` through the core integrator, starting at the first
+/// record's counts and pose (which must carry zero sigmas, as after a `reset_pose`), and
+/// asserts that every later record's pose and sigmas equal the replay's bit for bit: the
+/// firmware and the host run the same integer and IEEE-754 arithmetic. Returns the distance
+/// the replay drove, metres.
+pub fn assert_replay_bit_exact(
+    params: &odo_core::odometry::ChassisParams,
+    records: &[odo_core::protocol::PoseRecord],
+) -> f64 {
+    use odo_core::odometry::{IndexRefs, Integrator, Pose, WheelCounts};
+    let counts = |r: &odo_core::protocol::PoseRecord| WheelCounts {
+        left: r.gamma_left,
+        right: r.gamma_right,
+    };
+    let first = records.first().expect("records to replay");
+    let start = Pose {
+        x: first.x,
+        y: first.y,
+        heading: first.heading,
+    };
+    let mut integrator = Integrator::new(params, counts(first), start).expect("valid parameters");
+    let mut distance = 0.0f64;
+    for r in &records[1..] {
+        let refs = IndexRefs {
+            left: r.flags.left.index_seen.then_some(r.index_left),
+            right: r.flags.right.index_seen.then_some(r.index_right),
+        };
+        let before = integrator.pose();
+        assert!(!integrator.step(counts(r), refs).overrange);
+        let (pose, sigma) = (integrator.pose(), integrator.sigma());
+        distance += (pose.x - before.x).hypot(pose.y - before.y);
+        let got = (
+            [r.x, r.y, r.heading],
+            [r.sigma_x, r.sigma_y, r.sigma_heading, r.sigma_xy],
+        );
+        let want = (
+            [pose.x, pose.y, pose.heading],
+            [sigma.x, sigma.y, sigma.heading, sigma.xy],
+        );
+        let same = got
+            .0
+            .iter()
+            .zip(&want.0)
+            .all(|(a, b)| a.to_bits() == b.to_bits())
+            && got
+                .1
+                .iter()
+                .zip(&want.1)
+                .all(|(a, b)| a.to_bits() == b.to_bits());
+        assert!(
+            same,
+            "record {}: firmware {got:?} != replay {want:?}",
+            r.sequence
+        );
+    }
+    distance
+}
