@@ -127,11 +127,12 @@ impl<'a> Table<'a> {
         })
     }
 
-    fn column(&self, name: &str) -> Option<usize> {
-        self.columns.iter().position(|c| c == name)
+    fn column<'n>(&self, name: &'n str) -> Option<Col<'n>> {
+        let index = self.columns.iter().position(|c| c == name)?;
+        Some(Col { name, index })
     }
 
-    fn required(&self, name: &str) -> Result<usize> {
+    fn required<'n>(&self, name: &'n str) -> Result<Col<'n>> {
         self.column(name).ok_or_else(|| {
             anyhow!(
                 "{}:{}: missing column `{name}` (header has: {})",
@@ -141,62 +142,93 @@ impl<'a> Table<'a> {
             )
         })
     }
-}
 
-fn field_err(file: &str, line: usize, col: &str, value: &str, what: &str) -> anyhow::Error {
-    anyhow!("{file}:{line}: column `{col}`: `{value}` is not {what}")
-}
-
-fn parse_f64(file: &str, line: usize, col: &str, v: &str) -> Result<f64> {
-    let x: f64 = v
-        .parse()
-        .map_err(|_| field_err(file, line, col, v, "a number"))?;
-    if !x.is_finite() {
-        return Err(field_err(file, line, col, v, "a finite number"));
-    }
-    Ok(x)
-}
-
-fn parse_f32(file: &str, line: usize, col: &str, v: &str) -> Result<f32> {
-    let x: f32 = v
-        .parse()
-        .map_err(|_| field_err(file, line, col, v, "a number"))?;
-    if !x.is_finite() {
-        return Err(field_err(file, line, col, v, "a finite number"));
-    }
-    Ok(x)
-}
-
-fn parse_i64(file: &str, line: usize, col: &str, v: &str) -> Result<i64> {
-    v.parse()
-        .map_err(|_| field_err(file, line, col, v, "an integer"))
-}
-
-fn parse_u64(file: &str, line: usize, col: &str, v: &str) -> Result<u64> {
-    let v2 = v.trim_start_matches("0x");
-    if v2.len() != v.len() {
-        return u64::from_str_radix(v2, 16)
-            .map_err(|_| field_err(file, line, col, v, "a hexadecimal integer"));
-    }
-    v.parse()
-        .map_err(|_| field_err(file, line, col, v, "a non-negative integer"))
-}
-
-fn opt<T>(v: &str, f: impl FnOnce(&str) -> Result<T>) -> Result<Option<T>> {
-    if v.is_empty() {
-        Ok(None)
-    } else {
-        f(v).map(Some)
+    /// The data rows, in file order.
+    fn rows(&self) -> impl Iterator<Item = Row<'_>> {
+        self.rows.iter().map(|(line, fields)| Row {
+            file: self.file,
+            line: *line,
+            fields,
+        })
     }
 }
 
-fn check_time(file: &str, line: usize, t: f64, prev: Option<f64>) -> Result<()> {
-    if let Some(p) = prev {
-        if t <= p {
-            bail!("{file}:{line}: time {t} is not after the previous row's time {p} (time must increase)");
+/// A column found in the header: its name (for errors) and its position.
+#[derive(Clone, Copy)]
+struct Col<'n> {
+    name: &'n str,
+    index: usize,
+}
+
+/// A field parser: the value, or what the text is not (`"a number"`...).
+type Parser<T> = fn(&str) -> Result<T, &'static str>;
+
+/// One data row; its fields are parsed with errors naming the file, the line and the column.
+struct Row<'t> {
+    file: &'t str,
+    line: usize,
+    fields: &'t [&'t str],
+}
+
+impl Row<'_> {
+    fn get<T>(&self, col: Col, parse: Parser<T>) -> Result<T> {
+        let value = self.fields[col.index];
+        parse(value).map_err(|what| {
+            anyhow!(
+                "{}:{}: column `{}`: `{value}` is not {what}",
+                self.file,
+                self.line,
+                col.name
+            )
+        })
+    }
+
+    /// The value of an optional column: `None` when the file has no such column or the field
+    /// is empty.
+    fn optional<T>(&self, col: Option<Col>, parse: Parser<T>) -> Result<Option<T>> {
+        match col {
+            Some(c) if !self.fields[c.index].is_empty() => self.get(c, parse).map(Some),
+            _ => Ok(None),
         }
     }
-    Ok(())
+
+    /// The row's time, which must be after the previous row's (`prev`, updated).
+    fn time(&self, col: Col, prev: &mut Option<f64>) -> Result<f64> {
+        let t = self.get(col, real)?;
+        if let Some(p) = *prev {
+            if t <= p {
+                bail!(
+                    "{}:{}: time {t} is not after the previous row's time {p} (time must increase)",
+                    self.file,
+                    self.line
+                );
+            }
+        }
+        *prev = Some(t);
+        Ok(t)
+    }
+}
+
+/// A finite `f64` or `f32`.
+fn real<T: std::str::FromStr + Into<f64> + Copy>(v: &str) -> Result<T, &'static str> {
+    let x: T = v.parse().map_err(|_| "a number")?;
+    if !x.into().is_finite() {
+        return Err("a finite number");
+    }
+    Ok(x)
+}
+
+fn integer(v: &str) -> Result<i64, &'static str> {
+    v.parse().map_err(|_| "an integer")
+}
+
+/// A non-negative integer, hexadecimal with a `0x` prefix.
+fn unsigned(v: &str) -> Result<u64, &'static str> {
+    let v2 = v.trim_start_matches("0x");
+    if v2.len() != v.len() {
+        return u64::from_str_radix(v2, 16).map_err(|_| "a hexadecimal integer");
+    }
+    v.parse().map_err(|_| "a non-negative integer")
 }
 
 fn read_text(path: &Path) -> Result<String> {
@@ -219,46 +251,29 @@ pub fn parse_samples(file: &str, text: &str) -> Result<Vec<Sample>> {
     let cxy = table.column("sigma_xy");
     let mut out = Vec::with_capacity(table.rows.len());
     let mut prev = None;
-    for (line, f) in &table.rows {
-        let line = *line;
-        let t = parse_f64(file, line, "t", f[ct])?;
-        check_time(file, line, t, prev)?;
-        prev = Some(t);
+    for row in table.rows() {
+        let t = row.time(ct, &mut prev)?;
         let mut s = Sample {
             t,
-            left: parse_i64(file, line, "left", f[cl])?,
-            right: parse_i64(file, line, "right", f[cr])?,
-            ..Sample::default()
+            left: row.get(cl, integer)?,
+            right: row.get(cr, integer)?,
+            left_index: row.optional(cli, integer)?,
+            right_index: row.optional(cri, integer)?,
+            flags: row.optional(cflags, unsigned)?,
+            unit: None,
         };
-        if let Some(c) = cli {
-            s.left_index = opt(f[c], |v| parse_i64(file, line, "left_index", v))?;
-        }
-        if let Some(c) = cri {
-            s.right_index = opt(f[c], |v| parse_i64(file, line, "right_index", v))?;
-        }
-        if let Some(c) = cflags {
-            s.flags = opt(f[c], |v| parse_u64(file, line, "flags", v))?;
-        }
         if has_pose {
-            let g = |i: usize| f[pose_cols[i].expect("checked")];
-            if !g(0).is_empty() {
+            let g = |i: usize| pose_cols[i].expect("checked");
+            if !row.fields[g(0).index].is_empty() {
                 s.unit = Some(UnitPose {
-                    seq: match cseq {
-                        Some(c) => opt(f[c], |v| parse_u64(file, line, "seq", v))?,
-                        None => None,
-                    },
-                    x: parse_f64(file, line, "x", g(0))?,
-                    y: parse_f64(file, line, "y", g(1))?,
-                    heading: parse_f64(file, line, "heading", g(2))?,
-                    sigma_x: parse_f32(file, line, "sigma_x", g(3))?,
-                    sigma_y: parse_f32(file, line, "sigma_y", g(4))?,
-                    sigma_heading: parse_f32(file, line, "sigma_heading", g(5))?,
-                    sigma_xy: match cxy {
-                        Some(c) => {
-                            opt(f[c], |v| parse_f32(file, line, "sigma_xy", v))?.unwrap_or(0.0)
-                        }
-                        None => 0.0,
-                    },
+                    seq: row.optional(cseq, unsigned)?,
+                    x: row.get(g(0), real)?,
+                    y: row.get(g(1), real)?,
+                    heading: row.get(g(2), real)?,
+                    sigma_x: row.get(g(3), real)?,
+                    sigma_y: row.get(g(4), real)?,
+                    sigma_heading: row.get(g(5), real)?,
+                    sigma_xy: row.optional(cxy, real)?.unwrap_or(0.0),
                 });
             }
         }
@@ -281,19 +296,12 @@ pub fn parse_reference(file: &str, text: &str) -> Result<Vec<RefPoint>> {
     let ch = table.column("heading");
     let mut out = Vec::with_capacity(table.rows.len());
     let mut prev = None;
-    for (line, f) in &table.rows {
-        let line = *line;
-        let t = parse_f64(file, line, "t", f[ct])?;
-        check_time(file, line, t, prev)?;
-        prev = Some(t);
+    for row in table.rows() {
         out.push(RefPoint {
-            t,
-            x: parse_f64(file, line, "x", f[cx])?,
-            y: parse_f64(file, line, "y", f[cy])?,
-            heading: match ch {
-                Some(c) => opt(f[c], |v| parse_f64(file, line, "heading", v))?,
-                None => None,
-            },
+            t: row.time(ct, &mut prev)?,
+            x: row.get(cx, real)?,
+            y: row.get(cy, real)?,
+            heading: row.optional(ch, real)?,
         });
     }
     Ok(out)
