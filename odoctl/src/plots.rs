@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Once;
 
 use anyhow::{anyhow, Result};
+use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
@@ -47,6 +48,32 @@ fn range(values: impl Iterator<Item = f64>, pad: f64) -> (f64, f64) {
     }
     let span = (hi - lo).max(1e-9);
     (lo - pad * span, hi + pad * span)
+}
+
+/// A legend entry's sample: a short line in `style`.
+fn legend_line(style: impl Into<ShapeStyle>) -> impl Fn((i32, i32)) -> PathElement<(i32, i32)> {
+    let style = style.into();
+    move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style)
+}
+
+/// The chart of every figure: `f64` on both axes.
+type Chart<'a, 'b> =
+    ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// The series' legend, in a box at `position`, text of `font_size`.
+fn legend_box<'a, 'b: 'a>(
+    chart: &mut Chart<'a, 'b>,
+    font_size: u32,
+    position: SeriesLabelPosition,
+) -> Result<()> {
+    chart
+        .configure_series_labels()
+        .label_font((FAMILY, font_size))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .position(position)
+        .draw()
+        .map_err(pe)
 }
 
 const ODO: RGBColor = RGBColor(200, 30, 30);
@@ -108,25 +135,18 @@ pub fn run_figures(dir: &Path, prefix: &str, title: &str, ev: &Evaluation) -> Re
             ))
             .map_err(pe)?
             .label("reference (RTK GNSS)")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], REF.stroke_width(2)));
+            .legend(legend_line(REF.stroke_width(2)));
         chart
             .draw_series(LineSeries::new(ev.odo.iter().copied(), ODO.stroke_width(2)))
             .map_err(pe)?
             .label("odometry")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], ODO.stroke_width(2)));
+            .legend(legend_line(ODO.stroke_width(2)));
         if let Some(&p) = ev.reference.first() {
             chart
                 .draw_series(std::iter::once(Circle::new(p, 6, REF.filled())))
                 .map_err(pe)?;
         }
-        chart
-            .configure_series_labels()
-            .label_font((FAMILY, 16))
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()
-            .map_err(pe)?;
+        legend_box(&mut chart, 16, SeriesLabelPosition::UpperRight)?;
         root.present().map_err(pe)?;
     }
     out.push(path);
@@ -187,45 +207,20 @@ fn error_figure(
     s3: &[f64],
     symmetric: bool,
 ) -> Result<()> {
-    let root = BitMapBackend::new(path, (1100, 900)).into_drawing_area();
-    root.fill(&WHITE).map_err(pe)?;
-    let root = root.titled(caption, (FAMILY, 24)).map_err(pe)?;
-    let (t0, t1) = range(t.iter().copied(), 0.0);
     let fold =
         |it: &mut dyn Iterator<Item = f64>| it.filter(|v| v.is_finite()).fold(1e-9, f64::max);
     let emax = fold(&mut err.iter().map(|e| e.abs()));
     let full = fold(&mut err.iter().map(|e| e.abs()).chain(s3.iter().copied())) * 1.05;
-    // Top: the whole range (the bands of the paper's model can dwarf the errors); bottom: zoom
-    // on the errors, bands clipped.
-    let (top, bottom) = root.split_vertically(450);
-    for (area, ymax, note) in [
-        (&top, full, "full range"),
-        (&bottom, emax * 1.3, "zoom on the errors"),
-    ] {
-        let y0 = if symmetric { -ymax } else { 0.0 };
-        let mut chart = ChartBuilder::on(area)
-            .caption(note, (FAMILY, 16))
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(80)
-            .build_cartesian_2d(t0..t1, y0..ymax)
-            .map_err(pe)?;
-        chart
-            .configure_mesh()
-            .x_desc("time [s]")
-            .y_desc(ydesc)
-            .label_style((FAMILY, 14))
-            .draw()
-            .map_err(pe)?;
+    let panels = ErrorPanels {
+        caption,
+        ydesc,
+        full,
+        emax,
+        symmetric,
+    };
+    panels.draw(path, t, |chart, y0, ymax| {
         let clip = |v: f64| v.clamp(y0, ymax);
-        chart
-            .draw_series(LineSeries::new(
-                t.iter().copied().zip(err.iter().map(|&e| clip(e))),
-                ODO.stroke_width(1),
-            ))
-            .map_err(pe)?
-            .label("error")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], ODO.stroke_width(2)));
+        error_series(chart, t, err.iter().map(|&e| clip(e)))?;
         for (band, color, label) in [(s1, BAND1, "1 sigma"), (s3, BAND3, "3 sigma")] {
             let style = color.stroke_width(2);
             chart
@@ -235,7 +230,7 @@ fn error_figure(
                 ))
                 .map_err(pe)?
                 .label(label)
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
+                .legend(legend_line(style));
             if symmetric {
                 chart
                     .draw_series(LineSeries::new(
@@ -245,16 +240,72 @@ fn error_figure(
                     .map_err(pe)?;
             }
         }
-        chart
-            .configure_series_labels()
-            .label_font((FAMILY, 15))
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .position(SeriesLabelPosition::UpperLeft)
-            .draw()
-            .map_err(pe)?;
+        Ok(())
+    })
+}
+
+/// A figure of an error against time in two panels, 1100 x 900: the whole range up to `full`
+/// on top (the bands of the paper's model can dwarf the errors), and below a zoom on the errors
+/// (up to 1.3 `emax`), bands clipped.
+struct ErrorPanels<'s> {
+    caption: &'s str,
+    ydesc: &'s str,
+    full: f64,
+    emax: f64,
+    /// The y axis from `-ymax` (else from 0).
+    symmetric: bool,
+}
+
+impl ErrorPanels<'_> {
+    /// Draws the figure; `series(chart, y0, ymax)` draws a panel's series.
+    fn draw(
+        &self,
+        path: &Path,
+        t: &[f64],
+        mut series: impl FnMut(&mut Chart, f64, f64) -> Result<()>,
+    ) -> Result<()> {
+        let root = BitMapBackend::new(path, (1100, 900)).into_drawing_area();
+        root.fill(&WHITE).map_err(pe)?;
+        let root = root.titled(self.caption, (FAMILY, 24)).map_err(pe)?;
+        let (t0, t1) = range(t.iter().copied(), 0.0);
+        let (top, bottom) = root.split_vertically(450);
+        for (area, ymax, note) in [
+            (&top, self.full, "full range"),
+            (&bottom, self.emax * 1.3, "zoom on the errors"),
+        ] {
+            let y0 = if self.symmetric { -ymax } else { 0.0 };
+            let mut chart = ChartBuilder::on(area)
+                .caption(note, (FAMILY, 16))
+                .margin(12)
+                .x_label_area_size(40)
+                .y_label_area_size(80)
+                .build_cartesian_2d(t0..t1, y0..ymax)
+                .map_err(pe)?;
+            chart
+                .configure_mesh()
+                .x_desc("time [s]")
+                .y_desc(self.ydesc)
+                .label_style((FAMILY, 14))
+                .draw()
+                .map_err(pe)?;
+            series(&mut chart, y0, ymax)?;
+            legend_box(&mut chart, 15, SeriesLabelPosition::UpperLeft)?;
+        }
+        root.present().map_err(pe)?;
+        Ok(())
     }
-    root.present().map_err(pe)?;
+}
+
+/// The error line of an error figure.
+fn error_series(chart: &mut Chart, t: &[f64], err: impl Iterator<Item = f64>) -> Result<()> {
+    chart
+        .draw_series(LineSeries::new(
+            t.iter().copied().zip(err),
+            ODO.stroke_width(1),
+        ))
+        .map_err(pe)?
+        .label("error")
+        .legend(legend_line(ODO.stroke_width(2)));
     Ok(())
 }
 
@@ -273,15 +324,6 @@ pub fn models_figure(
 }
 
 fn draw_models(path: &Path, t: &[f64], err: &[f64], models: &[(&str, Vec<f64>)]) -> Result<()> {
-    let root = BitMapBackend::new(path, (1100, 900)).into_drawing_area();
-    root.fill(&WHITE).map_err(pe)?;
-    let root = root
-        .titled(
-            "Horizontal error and the uncertainty models' bands",
-            (FAMILY, 24),
-        )
-        .map_err(pe)?;
-    let (t0, t1) = range(t.iter().copied(), 0.0);
     let emax = err
         .iter()
         .copied()
@@ -293,34 +335,16 @@ fn draw_models(path: &Path, t: &[f64], err: &[f64], models: &[(&str, Vec<f64>)])
         .filter(|v| v.is_finite())
         .fold(emax, f64::max)
         * 1.05;
-    let (top, bottom) = root.split_vertically(450);
-    for (area, ymax, note) in [
-        (&top, full, "full range"),
-        (&bottom, emax * 1.3, "zoom on the errors"),
-    ] {
-        let mut chart = ChartBuilder::on(area)
-            .caption(note, (FAMILY, 16))
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(80)
-            .build_cartesian_2d(t0..t1, 0.0..ymax)
-            .map_err(pe)?;
-        chart
-            .configure_mesh()
-            .x_desc("time [s]")
-            .y_desc("horizontal error [m]")
-            .label_style((FAMILY, 14))
-            .draw()
-            .map_err(pe)?;
+    let panels = ErrorPanels {
+        caption: "Horizontal error and the uncertainty models' bands",
+        ydesc: "horizontal error [m]",
+        full,
+        emax,
+        symmetric: false,
+    };
+    panels.draw(path, t, |chart, _, ymax| {
         let clip = |v: f64| v.min(ymax);
-        chart
-            .draw_series(LineSeries::new(
-                t.iter().copied().zip(err.iter().map(|&e| clip(e))),
-                ODO.stroke_width(1),
-            ))
-            .map_err(pe)?
-            .label("error")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], ODO.stroke_width(2)));
+        error_series(chart, t, err.iter().map(|&e| clip(e)))?;
         for (i, (name, s)) in models.iter().enumerate() {
             let color = if i == 0 { BAND1 } else { BAND3 };
             chart
@@ -330,9 +354,7 @@ fn draw_models(path: &Path, t: &[f64], err: &[f64], models: &[(&str, Vec<f64>)])
                 ))
                 .map_err(pe)?
                 .label(format!("{name}: 1 and 3 sigma"))
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-                });
+                .legend(legend_line(color.stroke_width(2)));
             chart
                 .draw_series(LineSeries::new(
                     t.iter().copied().zip(s.iter().map(|&v| clip(3.0 * v))),
@@ -340,17 +362,8 @@ fn draw_models(path: &Path, t: &[f64], err: &[f64], models: &[(&str, Vec<f64>)])
                 ))
                 .map_err(pe)?;
         }
-        chart
-            .configure_series_labels()
-            .label_font((FAMILY, 15))
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .position(SeriesLabelPosition::UpperLeft)
-            .draw()
-            .map_err(pe)?;
-    }
-    root.present().map_err(pe)?;
-    Ok(())
+        Ok(())
+    })
 }
 
 const PARAM_NAMES: [&str; 3] = ["left_diameter [m]", "right_diameter [m]", "track_width [m]"];
@@ -416,9 +429,7 @@ pub fn window_figures(dir: &Path, est: &[WindowEstimate], full: [f64; 3]) -> Res
                     .draw_series(LineSeries::new(pts.iter().copied(), color.stroke_width(1)))
                     .map_err(pe)?
                     .label(format!("{l} m"))
-                    .legend(move |(x, y)| {
-                        PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-                    });
+                    .legend(legend_line(color.stroke_width(2)));
                 chart
                     .draw_series(pts.iter().map(|&q| Circle::new(q, 3, color.filled())))
                     .map_err(pe)?;
@@ -430,15 +441,8 @@ pub fn window_figures(dir: &Path, est: &[WindowEstimate], full: [f64; 3]) -> Res
                 ))
                 .map_err(pe)?
                 .label("whole run")
-                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
-            chart
-                .configure_series_labels()
-                .label_font((FAMILY, 14))
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .position(SeriesLabelPosition::UpperRight)
-                .draw()
-                .map_err(pe)?;
+                .legend(legend_line(BLACK));
+            legend_box(&mut chart, 14, SeriesLabelPosition::UpperRight)?;
         }
         root.present().map_err(pe)?;
     }
