@@ -96,26 +96,8 @@ pub struct SimulateOptions {
     pub path: PathKind,
     /// Path length (m).
     pub length: f64,
-    /// Sample rate (Hz).
-    pub rate: f64,
-    /// Speed (m/s).
-    pub speed: f64,
-    /// Slip standard deviation.
-    pub slip: f64,
-    /// Slip correlation length (m).
-    pub slip_corr: f64,
-    /// Opposite-phase slip when turning (standard deviation; 0 = none).
-    pub slip_turn: f64,
-    /// Its correlation length (m of differential travel).
-    pub slip_turn_corr: f64,
-    /// Reference horizontal RMS noise (m).
-    pub rtk_sigma: f64,
-    /// Reference heading noise (rad), or no heading column.
-    pub heading_sigma: Option<f64>,
-    /// Initial pose.
-    pub start: (f64, f64, f64),
-    /// Seed.
-    pub seed: u64,
+    /// Rate, speed, noise, start and seed.
+    pub settings: simulate::SimSettings,
 }
 
 /// The default true chassis of `simulate`: the paper's final estimates (Table 2) with its
@@ -137,33 +119,25 @@ pub fn simulate(o: &SimulateOptions) -> Result<ExitCode> {
     };
     cfg::apply_sets(&mut truth, &o.sets)?;
     let truth = cfg::validated(truth, "true parameters")?;
-    if !(o.rate > 0.0 && o.rate <= 10_000.0) {
-        bail!("--rate {}: must be in (0, 10000] Hz", o.rate);
+    let run = &o.settings;
+    if !(run.rate > 0.0 && run.rate <= 10_000.0) {
+        bail!("--rate {}: must be in (0, 10000] Hz", run.rate);
     }
-    if !(o.speed > 0.0 && o.speed <= 10.0) {
-        bail!("--speed {}: must be in (0, 10] m/s", o.speed);
+    if !(run.speed > 0.0 && run.speed <= 10.0) {
+        bail!("--speed {}: must be in (0, 10] m/s", run.speed);
     }
     if o.length.is_nan()
         || o.length <= 0.0
-        || !(o.slip >= 0.0 && o.slip_turn >= 0.0 && o.rtk_sigma >= 0.0)
+        || !(run.slip >= 0.0 && run.slip_turn >= 0.0 && run.rtk_sigma >= 0.0)
     {
         bail!("--length must be positive, --slip, --slip-turn and --rtk-sigma non-negative");
     }
-    let mut rng = simulate::Rng::new(o.seed ^ 0x5EED);
+    let mut rng = simulate::Rng::new(run.seed ^ 0x5EED);
     let segments = simulate::path(o.path, o.length, &mut rng);
     let sim = simulate::simulate(&simulate::SimOptions {
         truth,
         segments,
-        rate: o.rate,
-        speed: o.speed,
-        slip: o.slip,
-        slip_corr: o.slip_corr,
-        slip_turn: o.slip_turn,
-        slip_turn_corr: o.slip_turn_corr,
-        rtk_sigma: o.rtk_sigma,
-        heading_sigma: o.heading_sigma,
-        start: o.start,
-        seed: o.seed,
+        settings: o.settings,
     });
     let mut w = create(&o.samples)?;
     csvio::write_samples(&mut w, &sim.samples, false)?;

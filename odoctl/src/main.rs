@@ -8,7 +8,7 @@ use clap::{Args, Parser, Subcommand};
 
 use odo_core::odometry::UncertaintyModel;
 use odoctl::calib::{DeltaMode, WindowStart};
-use odoctl::simulate::PathKind;
+use odoctl::simulate::{PathKind, SimSettings};
 
 #[derive(Parser)]
 #[command(
@@ -462,16 +462,18 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             truth_out: a.truth_out,
             path: a.path,
             length: a.length,
-            rate: a.rate,
-            speed: a.speed,
-            slip: a.slip,
-            slip_corr: a.slip_corr,
-            slip_turn: a.slip_turn,
-            slip_turn_corr: a.slip_turn_corr,
-            rtk_sigma: a.rtk_sigma,
-            heading_sigma: (!a.no_heading).then(|| a.heading_sigma_deg.to_radians()),
-            start: (a.x0, a.y0, a.heading0),
-            seed: a.seed,
+            settings: SimSettings {
+                rate: a.rate,
+                speed: a.speed,
+                slip: a.slip,
+                slip_corr: a.slip_corr,
+                slip_turn: a.slip_turn,
+                slip_turn_corr: a.slip_turn_corr,
+                rtk_sigma: a.rtk_sigma,
+                heading_sigma: (!a.no_heading).then(|| a.heading_sigma_deg.to_radians()),
+                start: (a.x0, a.y0, a.heading0),
+                seed: a.seed,
+            },
         }),
     }
 }

@@ -128,6 +128,13 @@ pub struct SimOptions {
     pub truth: ChassisParams,
     /// The path.
     pub segments: Vec<Segment>,
+    /// Rate, speed, noise, start and seed.
+    pub settings: SimSettings,
+}
+
+/// How a simulated run is sampled, driven and disturbed.
+#[derive(Debug, Clone, Copy)]
+pub struct SimSettings {
     /// Sample rate (Hz).
     pub rate: f64,
     /// Centre speed on straights and arcs; wheel speed on spins (m/s).
@@ -165,20 +172,32 @@ pub struct SimRun {
 
 /// Runs the plant. Stand-stills of 1 s open and close the run.
 pub fn simulate(o: &SimOptions) -> SimRun {
-    let mut rng = Rng::new(o.seed);
+    let SimSettings {
+        rate,
+        speed,
+        slip,
+        slip_corr,
+        slip_turn,
+        slip_turn_corr,
+        rtk_sigma,
+        heading_sigma,
+        start,
+        seed,
+    } = o.settings;
+    let mut rng = Rng::new(seed);
     let sub: u32 = 20; // sub-steps per sample
-    let dt = 1.0 / (o.rate * f64::from(sub));
+    let dt = 1.0 / (rate * f64::from(sub));
     let w = o.truth.track_width;
     let p = f64::from(o.truth.ticks_per_rev);
-    let (mut x, mut y, mut h) = o.start;
+    let (mut x, mut y, mut h) = start;
     // Wheel turns in increments, from arbitrary offsets; index phases arbitrary.
     let mut turn = [1234.25, -777.5];
     let index_phase = [(rng.uniform() * p).floor(), (rng.uniform() * p).floor()];
     let mut index: [Option<i64>; 2] = [None, None];
     let diam = [o.truth.left_diameter, o.truth.right_diameter];
-    let mut eps = [rng.normal() * o.slip, rng.normal() * o.slip];
-    let mut eps_turn = if o.slip_turn > 0.0 {
-        rng.normal() * o.slip_turn
+    let mut eps = [rng.normal() * slip, rng.normal() * slip];
+    let mut eps_turn = if slip_turn > 0.0 {
+        rng.normal() * slip_turn
     } else {
         0.0
     };
@@ -194,13 +213,13 @@ pub fn simulate(o: &SimOptions) -> SimRun {
     for s in &plan {
         match *s {
             Segment::Stop(t) => motions.push((t, 0.0, 0.0)),
-            Segment::Straight(l) => motions.push((l.abs() / o.speed, o.speed * l.signum(), 0.0)),
+            Segment::Straight(l) => motions.push((l.abs() / speed, speed * l.signum(), 0.0)),
             Segment::Arc(r, a) => {
-                let t = r * a.abs() / o.speed;
-                motions.push((t, o.speed, a / t));
+                let t = r * a.abs() / speed;
+                motions.push((t, speed, a / t));
             }
             Segment::Spin(a) => {
-                let t = (a.abs() * w / 2.0) / o.speed;
+                let t = (a.abs() * w / 2.0) / speed;
                 motions.push((t, 0.0, a / t));
             }
         }
@@ -216,7 +235,7 @@ pub fn simulate(o: &SimOptions) -> SimRun {
                       turn: &[f64; 2],
                       index: &[Option<i64>; 2],
                       rng: &mut Rng| {
-        let t = n as f64 / o.rate;
+        let t = n as f64 / rate;
         let c = [turn[0].floor() as i64, turn[1].floor() as i64];
         samples.push(Sample {
             t,
@@ -226,14 +245,12 @@ pub fn simulate(o: &SimOptions) -> SimRun {
             right_index: index[1],
             ..Sample::default()
         });
-        let s = o.rtk_sigma / 2f64.sqrt();
+        let s = rtk_sigma / 2f64.sqrt();
         reference.push(RefPoint {
             t,
             x: x + s * rng.normal(),
             y: y + s * rng.normal(),
-            heading: o
-                .heading_sigma
-                .map(|hs| crate::stats::wrap_angle(h + hs * rng.normal())),
+            heading: heading_sigma.map(|hs| crate::stats::wrap_angle(h + hs * rng.normal())),
         });
         truth.push((x, y, h));
     };
@@ -260,24 +277,24 @@ pub fn simulate(o: &SimOptions) -> SimRun {
         let wheel = [ds + da * w / 2.0, ds - da * w / 2.0];
         // Opposite-phase slip of the turn: +e on wheel 1, -e on wheel 2.
         let half_diff = 0.5 * (wheel[0] - wheel[1]).abs();
-        if o.slip_turn > 0.0 && half_diff > 0.0 {
-            let rho = if o.slip_turn_corr > 0.0 {
-                (-half_diff / o.slip_turn_corr).exp()
+        if slip_turn > 0.0 && half_diff > 0.0 {
+            let rho = if slip_turn_corr > 0.0 {
+                (-half_diff / slip_turn_corr).exp()
             } else {
                 0.0
             };
-            eps_turn = rho * eps_turn + (1.0 - rho * rho).sqrt() * o.slip_turn * rng.normal();
+            eps_turn = rho * eps_turn + (1.0 - rho * rho).sqrt() * slip_turn * rng.normal();
         }
         let e = eps_turn * half_diff;
         for j in 0..2 {
             let rolled = wheel[j].abs();
-            if o.slip > 0.0 && rolled > 0.0 {
-                let rho = if o.slip_corr > 0.0 {
-                    (-rolled / o.slip_corr).exp()
+            if slip > 0.0 && rolled > 0.0 {
+                let rho = if slip_corr > 0.0 {
+                    (-rolled / slip_corr).exp()
                 } else {
                     0.0
                 };
-                eps[j] = rho * eps[j] + (1.0 - rho * rho).sqrt() * o.slip * rng.normal();
+                eps[j] = rho * eps[j] + (1.0 - rho * rho).sqrt() * slip * rng.normal();
             }
             let before = turn[j];
             let opposite = if j == 0 { e } else { -e };

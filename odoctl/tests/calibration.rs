@@ -214,16 +214,18 @@ fn replay_with_the_true_parameters_follows_the_reference() {
     let clean = odoctl::simulate::simulate(&odoctl::simulate::SimOptions {
         truth: common::truth(),
         segments: odoctl::simulate::path(PathKind::Validation, 40.0, &mut rng),
-        rate: 50.0,
-        speed: 0.5,
-        slip: 0.0,
-        slip_corr: 0.1,
-        slip_turn: 0.0,
-        slip_turn_corr: 1.0,
-        rtk_sigma: 0.0,
-        heading_sigma: None,
-        start: (0.0, 0.0, 0.0),
-        seed: 1,
+        settings: odoctl::simulate::SimSettings {
+            rate: 50.0,
+            speed: 0.5,
+            slip: 0.0,
+            slip_corr: 0.1,
+            slip_turn: 0.0,
+            slip_turn_corr: 1.0,
+            rtk_sigma: 0.0,
+            heading_sigma: None,
+            start: (0.0, 0.0, 0.0),
+            seed: 1,
+        },
     });
     let rows = odoctl::replay::replay(&common::truth(), &clean.samples, Pose::default()).unwrap();
     let err = rows

@@ -17,7 +17,7 @@ use odo_core::protocol::{
 };
 use odo_core::settings::Settings;
 use odoctl::csvio::Sample;
-use odoctl::simulate::{self, PathKind, SimOptions, SimRun};
+use odoctl::simulate::{self, PathKind, SimOptions, SimRun, SimSettings};
 
 /// The odoctl binary.
 pub fn bin() -> &'static str {
@@ -57,16 +57,18 @@ pub fn sim_turn_slip(kind: PathKind, length: f64, seed: u64, slip_turn: f64) -> 
     simulate::simulate(&SimOptions {
         truth: truth(),
         segments: simulate::path(kind, length, &mut rng),
-        rate: 50.0,
-        speed: 0.5,
-        slip: 0.001,
-        slip_corr: 0.1,
-        slip_turn,
-        slip_turn_corr: 1.0,
-        rtk_sigma: 0.008,
-        heading_sigma: Some(0.5f64.to_radians()),
-        start: (3.0, -2.0, 0.3),
-        seed,
+        settings: SimSettings {
+            rate: 50.0,
+            speed: 0.5,
+            slip: 0.001,
+            slip_corr: 0.1,
+            slip_turn,
+            slip_turn_corr: 1.0,
+            rtk_sigma: 0.008,
+            heading_sigma: Some(0.5f64.to_radians()),
+            start: (3.0, -2.0, 0.3),
+            seed,
+        },
     })
 }
 
