@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::{odoctl, read, scratch};
+use common::{odoctl, read, scratch, success_stdout};
 
 fn s(p: &std::path::Path) -> &str {
     p.to_str().unwrap()
@@ -53,12 +53,7 @@ fn simulate_calibrate_validate_with_plots() {
         s(&d.join("w.csv")),
         "--quiet",
     ]);
-    let out = String::from_utf8_lossy(&o.stdout);
-    assert!(
-        o.status.success(),
-        "{out}\n{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    let out = success_stdout(&o);
     assert!(out.contains("stability study"), "{out}");
     let p = odoctl::config::read_params(&cal, odo_core::odometry::ChassisParams::DESIGNED).unwrap();
     let t = common::truth();
@@ -128,12 +123,7 @@ fn simulate_calibrate_validate_with_plots() {
         "--models",
         "all",
     ]);
-    let out = String::from_utf8_lossy(&o.stdout);
-    assert!(
-        o.status.success(),
-        "{out}\n{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    let out = success_stdout(&o);
     assert!(
         out.contains("horizontal error [m]") && out.contains("in 1sig"),
         "{out}"

@@ -5,7 +5,7 @@ mod common;
 
 use std::time::Duration;
 
-use common::{odoctl, read, scratch};
+use common::{odoctl, read, scratch, success_stdout};
 use odo_core::protocol::Message;
 use odoctl::simulate::PathKind;
 
@@ -104,12 +104,7 @@ fn config_against_a_unit_on_tcp() {
     let addr = format!("tcp:127.0.0.1:{port}");
     // One connection serves the whole test: use the raw command, then push on a second unit.
     let o = odoctl(&["config", "--port", &addr, "push", s(&push), "--no-save"]);
-    let out = String::from_utf8_lossy(&o.stdout);
-    assert!(
-        o.status.success(),
-        "{out} {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    let out = success_stdout(&o);
     assert!(
         out.contains(
             "> set left_diameter 0.2611 right_diameter 0.2605 track_width 0.565 delta_left 2e-8"

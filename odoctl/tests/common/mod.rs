@@ -32,6 +32,18 @@ pub fn odoctl(args: &[&str]) -> Output {
         .expect("odoctl runs")
 }
 
+/// Asserts that odoctl succeeded (else fails showing its stdout and stderr); returns its stdout.
+#[track_caller]
+pub fn success_stdout(o: &Output) -> String {
+    let out = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(
+        o.status.success(),
+        "{out}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    out
+}
+
 /// A fresh scratch directory under the target dir.
 pub fn scratch(name: &str) -> PathBuf {
     let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
