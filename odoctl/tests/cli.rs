@@ -8,6 +8,16 @@ fn s(p: &std::path::Path) -> &str {
     p.to_str().unwrap()
 }
 
+/// The numbers of a CSV text's last row.
+fn last_row(csv: &str) -> Vec<f64> {
+    csv.lines()
+        .last()
+        .unwrap()
+        .split(',')
+        .map(|v| v.parse().unwrap())
+        .collect()
+}
+
 #[test]
 fn simulate_calibrate_validate_with_plots() {
     let d = scratch("cli_calibrate");
@@ -171,20 +181,7 @@ fn replay_writes_one_row_per_sample() {
     );
     assert_eq!(out.lines().count(), read(&sm).lines().count());
     // Final pose near the reference's last point.
-    let last: Vec<f64> = out
-        .lines()
-        .last()
-        .unwrap()
-        .split(',')
-        .map(|v| v.parse().unwrap())
-        .collect();
-    let rlast: Vec<f64> = read(&rf)
-        .lines()
-        .last()
-        .unwrap()
-        .split(',')
-        .map(|v| v.parse().unwrap())
-        .collect();
+    let (last, rlast) = (last_row(&out), last_row(&read(&rf)));
     assert!(
         (last[1] - rlast[1]).hypot(last[2] - rlast[2]) < 0.05,
         "{last:?} {rlast:?}"
