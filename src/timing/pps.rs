@@ -21,9 +21,29 @@
 //!   period from the last real edge, flagged. An edge found again within the window of its
 //!   predicted time re-locks (`Reacquired`).
 //! - [`SyncState::FreeRunning`]: `mode = free`, or the holdover lasted longer than
-//!   `holdover_s`, or no PPS was ever seen. `P` is the nominal timer frequency: the grid
-//!   runs off the MCU clock alone. In `mode = pps` two edges one second apart (within
-//!   `max_offset_ppm`) lock it again.
+//!   `holdover_s`, or no PPS was ever seen. `P` is the nominal timer frequency (after a
+//!   holdover that ran out in `mode = pps`: the last measured period, which is closer to the
+//!   truth than nominal on an RC clock): the grid runs off the MCU clock alone. In
+//!   `mode = pps` it locks again on the PPS (see *Acquisition*).
+//!
+//! # Clock tolerance
+//! `max_offset_ppm` is how far the timer's real frequency may be from `timer_hz`: it must
+//! cover the clock's whole error, or the PPS never locks. [`DisciplineConfig::for_clock`]
+//! sets it from the clock's tolerance: [`HSE_CRYSTAL_TOLERANCE_PPM`] for a crystal,
+//! [`HSI_TOLERANCE_PPM`] for the STM32's internal RC oscillator (+-4 % over temperature).
+//! Nothing else assumes a small offset: once locked, every prediction, window and rounding
+//! uses the measured period, not `timer_hz`; `timer_hz` only sets the free-running period,
+//! the acquisition test and the length in ticks of the default glitch window (50 us of
+//! *nominal* time, 48-52 us of real time at +-4 %).
+//!
+//! # Acquisition
+//! From free-running in `mode = pps`, an interval between two edges within
+//! `max_offset_ppm` (plus the glitch window) of one nominal second is a candidate period.
+//! With a crystal tolerance (`max_offset_ppm <=` [`DIRECT_LOCK_MAX_PPM`]) the pair locks at
+//! once (the second edge). With a wider tolerance a pair is not selective (a spurious edge
+//! within +-5 % of a second after a real one would pass), so a third edge must confirm the
+//! candidate period: it must fall within `glitch_window_ticks` of the candidate's
+//! prediction, exactly as an edge does when locked. The schedule locks at that third edge.
 //!
 //! # Glitches
 //! While locked (or in holdover) an edge farther than `glitch_window_ticks` from its
@@ -34,6 +54,24 @@ use core::ops::RangeInclusive;
 
 /// Accepted sample rates, samples per second (both modes).
 pub const RATE_RANGE: RangeInclusive<u32> = 1..=10_000;
+
+/// Frequency tolerance to configure for a timer clocked from an HSE crystal (or an external
+/// clock of crystal accuracy), ppm: a +-100 ppm part (initial tolerance, temperature, ageing)
+/// with a wide margin. The default of [`DisciplineConfig::new`].
+pub const HSE_CRYSTAL_TOLERANCE_PPM: u32 = 500;
+
+/// Frequency tolerance to configure for a timer clocked from the STM32F401's internal 16 MHz
+/// RC oscillator (HSI), ppm: +-1 % at 25 C, +-4 % over the temperature range (datasheet),
+/// plus a 1 % margin.
+pub const HSI_TOLERANCE_PPM: u32 = 50_000;
+
+/// Largest `max_offset_ppm` [`DisciplineConfig::validate`] accepts, ppm (10 %): beyond it
+/// whole seconds could no longer be told apart reliably from one interval.
+pub const MAX_OFFSET_LIMIT_PPM: u32 = 100_000;
+
+/// Widest `max_offset_ppm` with which two edges lock at once; above it a third edge must
+/// confirm the period (see the module documentation, *Acquisition*), ppm.
+pub const DIRECT_LOCK_MAX_PPM: u32 = 1_000;
 
 /// Where the samples' timing comes from (the `mode` setting).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -65,7 +103,9 @@ pub struct DisciplineConfig {
     pub rate_hz: u32,
     /// PPS-locked or free-running.
     pub mode: SyncMode,
-    /// Largest accepted difference of a measured PPS period from `timer_hz`, ppm.
+    /// Largest accepted difference of a measured PPS period from `timer_hz`, ppm: the
+    /// timer clock's frequency tolerance (1..=[`MAX_OFFSET_LIMIT_PPM`]; see
+    /// [`DisciplineConfig::for_clock`]).
     pub max_offset_ppm: u32,
     /// Largest accepted distance of a PPS edge from its predicted time, ticks.
     pub glitch_window_ticks: u32,
@@ -80,7 +120,7 @@ pub enum ConfigError {
     TimerHz,
     /// `rate_hz` outside [`RATE_RANGE`].
     Rate,
-    /// `max_offset_ppm` zero or above 10,000.
+    /// `max_offset_ppm` zero or above [`MAX_OFFSET_LIMIT_PPM`].
     Offset,
     /// `glitch_window_ticks` zero or not below a quarter of a second.
     Window,
@@ -89,14 +129,23 @@ pub enum ConfigError {
 }
 
 impl DisciplineConfig {
-    /// The defaults for a timer at `timer_hz`: 50 Hz, PPS mode, +-500 ppm (a +-100 ppm
-    /// crystal with a wide margin), a 50 us glitch window, 10 s of holdover.
+    /// The defaults for a timer at nominally `timer_hz`: 50 Hz, PPS mode, +-500 ppm
+    /// ([`HSE_CRYSTAL_TOLERANCE_PPM`]: a crystal), a 50 us glitch window (in nominal ticks),
+    /// 10 s of holdover. For another clock use [`DisciplineConfig::for_clock`].
     pub const fn new(timer_hz: u32) -> Self {
+        Self::for_clock(timer_hz, HSE_CRYSTAL_TOLERANCE_PPM)
+    }
+
+    /// The defaults of [`DisciplineConfig::new`] for a timer whose real frequency is within
+    /// `tolerance_ppm` of `timer_hz`: [`HSE_CRYSTAL_TOLERANCE_PPM`] for a crystal,
+    /// [`HSI_TOLERANCE_PPM`] for the internal RC oscillator. It becomes `max_offset_ppm`
+    /// (validated: at most [`MAX_OFFSET_LIMIT_PPM`]).
+    pub const fn for_clock(timer_hz: u32, tolerance_ppm: u32) -> Self {
         Self {
             timer_hz,
             rate_hz: 50,
             mode: SyncMode::Pps,
-            max_offset_ppm: 500,
+            max_offset_ppm: tolerance_ppm,
             glitch_window_ticks: timer_hz / 20_000,
             holdover_s: 10,
         }
@@ -110,7 +159,7 @@ impl DisciplineConfig {
         if !RATE_RANGE.contains(&self.rate_hz) {
             return Err(ConfigError::Rate);
         }
-        if self.max_offset_ppm == 0 || self.max_offset_ppm > 10_000 {
+        if self.max_offset_ppm == 0 || self.max_offset_ppm > MAX_OFFSET_LIMIT_PPM {
             return Err(ConfigError::Offset);
         }
         if self.glitch_window_ticks == 0 || self.glitch_window_ticks >= self.timer_hz / 4 {
@@ -125,6 +174,11 @@ impl DisciplineConfig {
     /// Largest accepted deviation of a measured period from nominal, ticks.
     fn max_offset_ticks(&self) -> u64 {
         u64::from(self.timer_hz) * u64::from(self.max_offset_ppm) / 1_000_000
+    }
+
+    /// Whether acquisition needs a third edge to confirm the period (wide tolerance).
+    fn lock_needs_confirmation(&self) -> bool {
+        self.max_offset_ppm > DIRECT_LOCK_MAX_PPM
     }
 }
 
@@ -148,7 +202,8 @@ pub struct Sample {
 pub enum PpsEvent {
     /// `mode = free`: edges are not used.
     Ignored,
-    /// Free-running: kept as a candidate, waiting for a second edge one second later.
+    /// Free-running: kept as a candidate, waiting for the edge(s) one second later that
+    /// lock (see the module documentation, *Acquisition*).
     Candidate,
     /// Lock acquired from free-running; the edge starts second `second`.
     Locked {
@@ -211,8 +266,11 @@ pub struct Discipline {
     last_edge: Option<(u64, u32)>,
     /// Seconds lost since `last_edge` (holdover).
     missed: u32,
-    /// Free-running in PPS mode: the last unpaired edge.
+    /// Free-running in PPS mode: the last edge not yet part of a lock.
     candidate: Option<u64>,
+    /// Free-running in PPS mode, wide tolerance: the interval ending at `candidate` when it
+    /// was within tolerance (the period a third edge must confirm).
+    candidate_period: Option<u64>,
     stats: PpsStats,
 }
 
@@ -233,6 +291,7 @@ impl Discipline {
             last_edge: None,
             missed: 0,
             candidate: None,
+            candidate_period: None,
             stats: PpsStats::default(),
         })
     }
@@ -249,7 +308,7 @@ impl Discipline {
         let mode_changed = cfg.mode != self.cfg.mode || cfg.timer_hz != self.cfg.timer_hz;
         self.cfg = cfg;
         if mode_changed {
-            self.free_run();
+            self.free_run(u64::from(cfg.timer_hz));
         }
         Ok(())
     }
@@ -288,12 +347,13 @@ impl Discipline {
         self.period = period;
     }
 
-    /// Falls back to free-running (nominal period), forgetting all edges.
-    fn free_run(&mut self) {
-        self.change_period(u64::from(self.cfg.timer_hz));
+    /// Falls back to free-running with `period`, forgetting all edges.
+    fn free_run(&mut self, period: u64) {
+        self.change_period(period);
         self.state = SyncState::FreeRunning;
         self.last_edge = None;
         self.candidate = None;
+        self.candidate_period = None;
         self.missed = 0;
     }
 
@@ -310,7 +370,8 @@ impl Discipline {
             self.missed += 1;
             self.stats.missed += 1;
             if self.missed > self.cfg.holdover_s {
-                self.free_run();
+                // The last measured period is the best estimate of the clock there is.
+                self.free_run(self.period);
                 return;
             }
             self.state = SyncState::Holdover;
@@ -367,7 +428,18 @@ impl Discipline {
                 };
                 let interval = edge.wrapping_sub(candidate);
                 if edge <= candidate || interval.abs_diff(nominal) > max_offset + window {
+                    self.candidate_period = None;
                     return PpsEvent::Candidate;
+                }
+                if self.cfg.lock_needs_confirmation() {
+                    // The edge must fall within the window of the candidate's prediction.
+                    let confirmed = self
+                        .candidate_period
+                        .is_some_and(|p| interval.abs_diff(p) <= window);
+                    if !confirmed {
+                        self.candidate_period = Some(interval);
+                        return PpsEvent::Candidate;
+                    }
                 }
                 // Lock: the edge starts a new second after the ones already committed.
                 let second = if self.cursor_index == 0 {
@@ -383,6 +455,7 @@ impl Discipline {
                 self.period = interval;
                 self.last_edge = Some((edge, second));
                 self.candidate = None;
+                self.candidate_period = None;
                 self.missed = 0;
                 self.state = SyncState::Locked;
                 self.stats.accepted += 1;

@@ -4,8 +4,12 @@
 //! Receivers differ: most (u-blox, Trimble by default) send the ZDA/RMC of second `T`
 //! *after* the PPS edge that marks `T` ([`TimeTagPps::Previous`]); some send it before the
 //! edge it announces ([`TimeTagPps::Next`]). A message is only associated when it arrives
-//! less than one nominal second after (`Previous`) or before (`Next`) its edge; otherwise it
-//! is ignored. Once an edge label `s0` is tied to GPS second `g0`, label `s` is GPS second
+//! less than one second after (`Previous`) or before (`Next`) its edge; otherwise it
+//! is ignored. That second is measured in timer ticks from the accepted edges themselves
+//! (edge to edge over consecutive labels), not taken as the nominal timer frequency: on a
+//! timer 4 % slow a message 1.01 s after a (lost) edge would otherwise still fall within
+//! "one nominal second" and name the wrong label. Until two edges have been seen, the
+//! nominal second is used. Once an edge label `s0` is tied to GPS second `g0`, label `s` is GPS second
 //! `g0 + (s - s0)` as long as the discipline stays locked or in holdover (the labels count
 //! seconds). Every later message is checked against that mapping and replaces it when it
 //! disagrees (counted in `mismatches`).
@@ -26,7 +30,8 @@ pub enum TimeTagPps {
 #[derive(Debug, Clone)]
 pub struct TimeTagger {
     assoc: TimeTagPps,
-    /// One nominal second, ticks: the association window.
+    /// One second in timer ticks (measured from the edges, nominal until then): the
+    /// association window.
     second_ticks: u64,
     /// Last accepted PPS edge: tick and label.
     last_edge: Option<(u64, u32)>,
@@ -38,7 +43,8 @@ pub struct TimeTagger {
 }
 
 impl TimeTagger {
-    /// A tagger with no mapping yet; `second_ticks` is the timer's nominal frequency.
+    /// A tagger with no mapping yet; `second_ticks` is the timer's nominal frequency (the
+    /// second's length until it is measured from two accepted edges).
     pub fn new(assoc: TimeTagPps, second_ticks: u64) -> Self {
         Self {
             assoc,
@@ -71,6 +77,12 @@ impl TimeTagger {
         self.base = None;
     }
 
+    /// The length of a second in use, ticks: measured between the last two accepted edges
+    /// of consecutive labels (averaged when labels were skipped), else nominal.
+    pub fn second_ticks(&self) -> u64 {
+        self.second_ticks
+    }
+
     /// Times a message disagreed with the mapping in force.
     pub fn mismatches(&self) -> u32 {
         self.mismatches
@@ -86,8 +98,15 @@ impl TimeTagger {
         self.base = Some((label, gps));
     }
 
-    /// An accepted PPS edge (tick, label) from the discipline.
+    /// An accepted PPS edge (tick, label) from the discipline. Edges of later labels also
+    /// measure the second (a gap of up to 16 labels is averaged).
     pub fn on_edge(&mut self, tick: u64, label: u32) {
+        if let Some((t0, l0)) = self.last_edge {
+            let n = label.wrapping_sub(l0);
+            if (1..=16).contains(&n) && tick > t0 {
+                self.second_ticks = (tick - t0) / u64::from(n);
+            }
+        }
         self.last_edge = Some((tick, label));
         if let Some((gps, at)) = self.pending.take() {
             if tick >= at && tick - at < self.second_ticks {
