@@ -1,8 +1,12 @@
 //! Settings: key access and text round trips, boundary tables, atomic multi-key changes,
 //! serialisation, and the flash store under a power cut at every erase/program step.
 
+use odo_core::odometry::integrator::MAX_STEP_COUNTS;
 use odo_core::odometry::ChassisParams;
-use odo_core::settings::store::{encode_record, Flash, SettingsStore, SLOT_LEN, WORD};
+use odo_core::protocol::crc::crc32;
+use odo_core::settings::store::{
+    encode_record, Flash, SettingsStore, MAGIC, RECORD_LEN, SLOT_LEN, WORD,
+};
 use odo_core::settings::*;
 use proptest::prelude::*;
 
@@ -414,7 +418,11 @@ fn boundary_table() {
         ("ticks_per_rev", "3", false),
         ("ticks_per_rev", "146", true), // 0.26 m wheels, 0.563 m track: 0.0056 m/increment
         ("ticks_per_rev", "145", false), // heading step above 0.01 rad per increment
-        ("ticks_per_rev", "1048576", true),
+        // At the default 50 Hz and 2 m/s: 669,113 increments per turn keep a sample within
+        // 32,767 increments (the largest ticks_per_rev needs a higher rate, see below).
+        ("ticks_per_rev", "669113", true),
+        ("ticks_per_rev", "669114", false),
+        ("ticks_per_rev", "1048576", false),
         ("ticks_per_rev", "1048577", false),
         ("ticks_per_rev", "-1", false),
         ("ticks_per_rev", "20000.0", false),
@@ -439,10 +447,23 @@ fn boundary_table() {
         ("mode", "pps", true),
         ("mode", "free", true),
         ("mode", "gps", false),
-        ("rate", "1", true),
+        // 1 Hz: 48,971 increments per sample at the default 2 m/s (see the counts table).
+        ("rate", "1", false),
+        ("rate", "2", true),
         ("rate", "0", false),
         ("rate", "100", true),
-        ("rate", "10001", false),
+        ("rate", "1001", false), // MAX_RATE_HZ (1000 needs a divider at 115200 baud)
+        ("rate", "10000", false),
+        ("max_wheel_speed", "2", true),
+        ("max_wheel_speed", "0.01", true),
+        ("max_wheel_speed", "0.0099", false),
+        ("max_wheel_speed", "20", true),
+        ("max_wheel_speed", "20.001", false),
+        ("max_wheel_speed", "0", false),
+        ("max_wheel_speed", "-2", false),
+        ("max_wheel_speed", "nan", false),
+        ("max_wheel_speed", "inf", false),
+        ("max_wheel_speed", "2 m/s", false),
         ("output_divider", "0", false),
         ("output_divider", "10000", true),
         ("time_tag_pps", "previous", true),
@@ -475,6 +496,20 @@ fn error_messages_name_the_problem() {
         "{m}"
     );
     assert!(msg(s.set_many([("mode", "x")])).contains("expected pps|free"));
+    let m = msg(s.set_many([("rate", "1001")]));
+    assert!(m.contains("rate: out of range, 1..=1000"), "{m}");
+    let m = msg(s.set_many([("rate", "1")]));
+    assert_eq!(
+        m,
+        "rate/max_wheel_speed/ticks_per_rev/left_diameter/right_diameter: up to 48971 \
+         increments per sample at max_wheel_speed, above 32767 (the 16-bit right counter \
+         would alias; raise rate, or lower max_wheel_speed or ticks_per_rev)"
+    );
+    let m = msg(s.set_many([("max_wheel_speed", "25")]));
+    assert!(
+        m.contains("max_wheel_speed: out of range, 0.01..=20"),
+        "{m}"
+    );
     assert!(msg(s.set_many([("baud", "1")])).contains("one of 9600"));
     let m = msg(s.set_many([("ticks_per_rev", "100")]));
     assert!(
@@ -513,6 +548,177 @@ fn relations_between_keys_are_atomic() {
     assert!(s.set_many([("baud", "9600")]).is_err());
     s.set_many([("baud", "9600"), ("output_divider", "10")])
         .unwrap();
+    // 1 Hz only for a slower chassis: lowering max_wheel_speed in the same set allows it.
+    let mut s = Settings::DEFAULT;
+    assert!(s.set_many([("rate", "1")]).is_err());
+    assert_eq!(s, Settings::DEFAULT);
+    s.set_many([("rate", "1"), ("max_wheel_speed", "1.3")])
+        .unwrap();
+    // ... and then a finer encoder, or a faster chassis, is refused until the rate rises.
+    let before = s;
+    assert!(s.set_many([("ticks_per_rev", "40000")]).is_err());
+    assert!(s.set_many([("max_wheel_speed", "1.4")]).is_err());
+    assert!(
+        s.set_many([("right_diameter", "0.2")]).is_err(),
+        "smaller wheel"
+    );
+    assert_eq!(s, before);
+    s.set_many([("ticks_per_rev", "40000"), ("rate", "3")])
+        .unwrap();
+    // The largest ticks_per_rev at 2 m/s from 79 Hz up (32,495 increments per sample).
+    let mut s = Settings::DEFAULT;
+    assert!(s
+        .set_many([("ticks_per_rev", "1048576"), ("rate", "78")])
+        .is_err());
+    s.set_many([("ticks_per_rev", "1048576"), ("rate", "79")])
+        .unwrap();
+    // The fastest rate, with a divider for the link.
+    let mut s = Settings::DEFAULT;
+    s.set_many([("rate", "1000"), ("output_divider", "10"), ("mode", "pps")])
+        .unwrap();
+    assert!(s.set_many([("rate", "1001"), ("mode", "free")]).is_err());
+}
+
+// ---------------------------------------------------------------------------------------
+// Counts per sample: the 16-bit right counter (TIM3) must not alias
+
+#[test]
+fn counts_limit_constants() {
+    assert_eq!(COUNTER16_MAX_UNREAD, 32_767);
+    assert_eq!(MAX_STEP_COUNTS, 1 << 18);
+    assert_eq!(
+        MAX_COUNTS_PER_SAMPLE, 32_767,
+        "the 16-bit counter binds first"
+    );
+    assert_eq!(MAX_RATE_HZ, 1_000);
+    assert_eq!(1_000_000 % MAX_RATE_HZ, 0, "usable in pps mode");
+    // The documented examples.
+    let c = max_counts_per_sample(2.0, 20_000, 0.26, 1);
+    assert!((c - 48_970.75).abs() < 0.01, "{c}");
+    assert_eq!(Settings::DEFAULT.max_counts_per_sample(), c / 50.0);
+    let t = Settings::DEFAULT.max_unread_interval();
+    assert!((t - 0.669_1).abs() < 1e-4, "{t}");
+    assert_eq!(max_unread_interval(0.0, 20_000, 0.26), f64::INFINITY);
+    assert_eq!(max_unread_interval(-1.0, 20_000, 0.26), 0.0);
+    assert_eq!(max_unread_interval(f64::NAN, 20_000, 0.26), 0.0);
+    assert_eq!(max_counts_per_sample(2.0, 20_000, 0.26, 0), f64::INFINITY);
+}
+
+/// The largest diameter `d` (m) for which `max_counts_per_sample(v, tpr, d, rate)` exceeds
+/// the limit: the next f64 above it gives at most the limit. Found by bisection on the bits
+/// of positive f64 (ordered like the values).
+fn boundary_diameter(v: f64, tpr: u32, rate: u32) -> f64 {
+    let limit = MAX_COUNTS_PER_SAMPLE as f64;
+    let (mut lo, mut hi) = (1e-3f64.to_bits(), 100f64.to_bits());
+    assert!(max_counts_per_sample(v, tpr, f64::from_bits(lo), rate) > limit);
+    assert!(max_counts_per_sample(v, tpr, f64::from_bits(hi), rate) <= limit);
+    while hi - lo > 1 {
+        let mid = lo + (hi - lo) / 2;
+        if max_counts_per_sample(v, tpr, f64::from_bits(mid), rate) > limit {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    f64::from_bits(lo)
+}
+
+/// Boundary table at 1 Hz with a fine encoder: just below, at and just above the limit of
+/// 32,767 increments per sample, through `set_many` (which names the keys and leaves the
+/// settings intact), on either wheel, and with the smaller wheel deciding.
+#[test]
+fn counts_per_sample_boundary_table() {
+    let tpr = 1_048_576; // the largest ticks_per_rev
+    let base = Settings {
+        rate: 1,
+        max_wheel_speed: 0.05, // m/s
+        chassis: ChassisParams {
+            ticks_per_rev: tpr,
+            ..ChassisParams::DESIGNED
+        },
+        ..Settings::DEFAULT
+    };
+    // The f32 value of max_wheel_speed, exactly.
+    let v = f64::from(base.max_wheel_speed);
+    let d_over = boundary_diameter(v, tpr, 1);
+    let d_at = f64::from_bits(d_over.to_bits() + 1);
+    // The exact diameter: 0.05 * 2^20 / (pi * 32767) = 0.50931... m.
+    assert!((d_at - 0.509_31).abs() < 1e-5, "{d_at}");
+    let at = max_counts_per_sample(v, tpr, d_at, 1);
+    assert!(at <= 32_767.0 && at > 32_767.0 - 1e-9, "{at}");
+    assert!(max_counts_per_sample(v, tpr, d_over, 1) > 32_767.0);
+    let rows: &[(f64, f64, bool, &str)] = &[
+        // (left_diameter, right_diameter, accepted, what)
+        (0.6, 0.6, true, "well below: 27,814 increments"),
+        (d_at * 1.000_001, d_at * 1.000_001, true, "just below"),
+        (d_at, d_at, true, "at the limit"),
+        (d_over, d_over, false, "one ulp above"),
+        (d_at * 0.999_999, d_at * 0.999_999, false, "just above"),
+        (d_over, 0.6, false, "left wheel smaller"),
+        (0.6, d_over, false, "right wheel smaller"),
+        (0.6, d_at, true, "right wheel smaller, at the limit"),
+        (0.26, 0.26, false, "well above: 64,187 increments"),
+    ];
+    for &(l, r, ok, what) in rows {
+        let mut s = base;
+        // Debug form: the shortest text that parses back to the same f64.
+        let (lt, rt) = (format!("{l:?}"), format!("{r:?}"));
+        let res = s.set_many([
+            ("left_diameter", lt.as_str()),
+            ("right_diameter", rt.as_str()),
+        ]);
+        assert_eq!(res.is_ok(), ok, "{what}: {l} {r}: {res:?}");
+        if ok {
+            assert_eq!((s.chassis.left_diameter, s.chassis.right_diameter), (l, r));
+            assert!(s.max_counts_per_sample() <= 32_767.0);
+            assert!(
+                s.max_unread_interval() >= 1.0,
+                "{what}: a whole 1 Hz period"
+            );
+        } else {
+            assert_eq!(s, base, "{what}: changed something");
+            let e = res.unwrap_err().to_string();
+            assert!(
+                e.starts_with("rate/max_wheel_speed/ticks_per_rev/left_diameter/right_diameter")
+                    && e.contains("above 32767"),
+                "{e}"
+            );
+            // validate() agrees on the settings as they would have been.
+            let mut t = base;
+            t.chassis.left_diameter = l;
+            t.chassis.right_diameter = r;
+            assert!(matches!(
+                t.validate(),
+                Err(SettingError::CountsPerSample { counts }) if counts >= 32_768
+            ));
+        }
+    }
+    // The rate scales it: 64,187 increments at 1 Hz are 32,093 at 2 Hz.
+    let mut s = base;
+    s.set_many([("left_diameter", "0.26"), ("right_diameter", "0.26")])
+        .unwrap_err();
+    s.set_many([
+        ("left_diameter", "0.26"),
+        ("right_diameter", "0.26"),
+        ("rate", "2"),
+    ])
+    .unwrap();
+    assert!((s.max_counts_per_sample() - 32_093.47).abs() < 0.01);
+}
+
+/// The unread interval is the limit's time at max_wheel_speed, and a sample period of
+/// valid settings always fits in it.
+#[test]
+fn max_unread_interval_matches_counts() {
+    for (v, tpr, d) in [(2.0, 20_000, 0.26), (0.5, 1_048_576, 0.4), (20.0, 4, 10.0)] {
+        let t = max_unread_interval(v, tpr, d);
+        let c = max_counts_per_sample(v, tpr, d, 1) * t;
+        assert!((c - 32_767.0).abs() < 1e-6, "{v} {tpr} {d}: {c}");
+    }
+    for i in 0..50 {
+        let s = variant(i);
+        assert!(s.max_unread_interval() >= 1.0 / f64::from(s.rate));
+    }
 }
 
 #[test]
@@ -528,4 +734,143 @@ fn serialisation_round_trip_and_checksum() {
     let mut b = Settings::DEFAULT.to_bytes();
     b[96] = 7; // bad uncertainty model code
     assert!(Settings::from_bytes(&b).is_err());
+    // The new key is the last field.
+    let mut s = Settings::DEFAULT;
+    s.max_wheel_speed = 1.25;
+    let b = s.to_bytes();
+    assert_eq!(&b[112..116], &1.25f32.to_le_bytes());
+    assert_eq!(Settings::from_bytes(&b).unwrap(), s);
+    assert!(
+        Settings::from_bytes(&b[..112]).is_err(),
+        "version 2 needs 116 bytes"
+    );
+    assert!(Settings::from_bytes_version(3, &b).is_err());
+    assert!(Settings::from_bytes_version(0, &b).is_err());
+}
+
+// ---------------------------------------------------------------------------------------
+// Format version 1 (before max_wheel_speed): still loads
+
+/// A record exactly as the firmware of format version 1 wrote it: 112-byte payload (the
+/// version 2 payload without its last 4 bytes), CRC at 124, 128 bytes.
+fn v1_record(settings: &Settings, generation: u32) -> Vec<u8> {
+    let mut r = Vec::new();
+    r.extend_from_slice(&MAGIC.to_le_bytes());
+    r.extend_from_slice(&1u16.to_le_bytes());
+    r.extend_from_slice(&112u16.to_le_bytes());
+    r.extend_from_slice(&generation.to_le_bytes());
+    r.extend_from_slice(&settings.to_bytes()[..Settings::SERIALIZED_LEN_V1]);
+    let crc = crc32(&r);
+    r.extend_from_slice(&crc.to_le_bytes());
+    assert_eq!(r.len(), 128);
+    r
+}
+
+#[test]
+fn record_layout_of_format_version_2() {
+    let r = encode_record(&variant(4), 9);
+    assert_eq!(RECORD_LEN, 132);
+    assert_eq!(r.len(), RECORD_LEN);
+    assert_eq!(RECORD_LEN % WORD, 0);
+    assert_eq!(&r[4..8], &[2, 0, 116, 0]);
+    assert_eq!(&r[12..128], &variant(4).to_bytes());
+    assert_eq!(&r[128..132], &crc32(&r[..128]).to_le_bytes());
+    // The v1 record is the same bytes up to the payload's end, but its own header and CRC.
+    let old = v1_record(&variant(4), 9);
+    assert_eq!(&old[12..124], &r[12..124]);
+}
+
+#[test]
+fn format_version_1_record_loads_with_the_default_max_wheel_speed() {
+    let mut old = variant(3);
+    old.rate = 100;
+    // Whatever the in-memory value, a v1 record cannot carry it.
+    old.max_wheel_speed = 7.0;
+    let mut f = SimFlash::new(4 * SLOT_LEN);
+    f.program(0, 0, &v1_record(&old, 41)).unwrap();
+    let expect = Settings {
+        max_wheel_speed: Settings::DEFAULT_MAX_WHEEL_SPEED,
+        ..old
+    };
+    assert_eq!(load(&f), (expect, SettingsSource::Flash, 41));
+    assert_eq!(
+        Settings::from_bytes_version(1, &old.to_bytes()[..112]).unwrap(),
+        expect
+    );
+    // The next save writes version 2 after it, above its generation, and wins.
+    let mut store = SettingsStore::new(&mut f);
+    assert_eq!(store.save(&variant(5)).unwrap(), 42);
+    assert_eq!(load(&f), (variant(5), SettingsSource::Flash, 42));
+    assert_eq!(&f.mem[0][SLOT_LEN + 4..SLOT_LEN + 8], &[2, 0, 116, 0]);
+    assert_eq!(f.violations, 0);
+    // The v1 record is still the fallback if the new one is damaged.
+    f.mem[0][SLOT_LEN + 20] ^= 0x10;
+    assert_eq!(load(&f), (expect, SettingsSource::Flash, 41));
+}
+
+/// Damaged or mislabelled v1 records are refused like any other, and saving over them
+/// keeps the generations increasing and never programs a used word.
+#[test]
+fn corrupt_or_mislabelled_old_records_are_rejected() {
+    let good = v1_record(&variant(2), 10);
+    let cases: Vec<(&str, Vec<u8>)> = vec![
+        ("payload bit", {
+            let mut r = good.clone();
+            r[40] ^= 1;
+            r
+        }),
+        ("crc bit", {
+            let mut r = good.clone();
+            r[125] ^= 0x80;
+            r
+        }),
+        ("v1 header with a v2 length", {
+            let mut r = good.clone();
+            r[6] = 116;
+            r
+        }),
+        ("v2 header on a v1 record", {
+            let mut r = good.clone();
+            r[4] = 2;
+            let crc = crc32(&r[..124]);
+            r[124..128].copy_from_slice(&crc.to_le_bytes());
+            r
+        }),
+        ("unknown version 3", {
+            let mut r = good.clone();
+            r[4] = 3;
+            let crc = crc32(&r[..124]);
+            r[124..128].copy_from_slice(&crc.to_le_bytes());
+            r
+        }),
+        ("v1 with settings the new rules refuse (rate 1 at 2 m/s)", {
+            let mut s = variant(2);
+            s.rate = 1;
+            v1_record(&s, 10)
+        }),
+    ];
+    for (what, rec) in cases {
+        let mut f = SimFlash::new(2 * SLOT_LEN);
+        f.program(0, 0, &rec).unwrap();
+        let before = f.mem.clone();
+        assert_eq!(
+            load(&f),
+            (Settings::DEFAULT, SettingsSource::Defaults, 0),
+            "{what}"
+        );
+        assert_eq!(f.mem, before, "{what}: loading changed the flash");
+        // A save goes after it (never over it), above any CRC-valid generation.
+        let mut store = SettingsStore::new(&mut f);
+        let g = store.save(&variant(7)).unwrap();
+        assert!(g >= 1, "{what}");
+        assert_eq!(load(&f).0, variant(7), "{what}");
+        assert_eq!(&f.mem[0][..128], &rec[..], "{what}: old slot untouched");
+        assert_eq!(f.violations, 0, "{what}");
+    }
+    // The CRC-valid but refused record still counts for the generation.
+    let mut s = variant(2);
+    s.rate = 1;
+    let mut f = SimFlash::new(2 * SLOT_LEN);
+    f.program(0, 0, &v1_record(&s, 10)).unwrap();
+    assert_eq!(SettingsStore::new(&mut f).save(&variant(7)).unwrap(), 11);
 }

@@ -5,6 +5,7 @@
 pub mod store;
 
 use crate::decimal::{self, DecimalError, Shortest};
+use crate::odometry::integrator::MAX_STEP_COUNTS;
 use crate::odometry::{ChassisParams, UncertaintyModel, WHEEL_HARMONICS};
 use crate::protocol::bytes::{OutOfSpace, Reader, Writer};
 use crate::protocol::crc::crc32;
@@ -42,6 +43,88 @@ pub const BAUD_RATES: [u32; 8] = [
 /// stop bit), used to check that the output rate fits the baud rate.
 pub const POSE_FRAME_BITS: u32 = 1140;
 
+/// Highest accepted `rate`, Hz: what the processing task sustains with a wide margin.
+///
+/// Derivation, from the instruction counts of the README's performance table (`bench/run`,
+/// release code under QEMU) and the firmware's own `process_max` in `status`:
+///
+/// * a typical sample costs the processing task about 7,000 instructions (timing, flags,
+///   index, odometry and uncertainty, the record's f64 fields, the 114-byte frame at
+///   2,540, queueing); the per-angle wheel model adds up to 2,113 - 808 = 1,305 in its
+///   worst case: about **8,300 instructions** per sample;
+/// * the worst sample (`process_max`: the first one, which builds the integrator, and the
+///   ones that log a state change or send the once-a-second Status) costs about
+///   **24,000 instructions**;
+/// * at 84 MHz the flash needs 2 wait states; the ART accelerator hides most of them, but
+///   counted at **2 cycles per instruction** (no cache hits at all) a typical sample takes
+///   16,600 cycles (198 us) and the worst 48,000 cycles (571 us).
+///
+/// At 1,000 Hz this is 999 x 16,600 + 48,000 = 16.6 million cycles per second, **20 % of the
+/// CPU** (within the 25 % budget that leaves the rest to the sample interrupt, the UART
+/// interrupts and the command task), and even the worst sample ends well within one 1 ms
+/// sample period, so the sample queue never fills in steady state. 1,000 also divides
+/// 1,000,000, so it is accepted in `pps` mode. Above it the budget would be spent on a
+/// cost that has not been measured on a board.
+pub const MAX_RATE_HZ: u32 = 1_000;
+
+/// Most counts the 16-bit right encoder counter (TIM3) may advance between two reads and
+/// still be extended without ambiguity: half its range, 2^15 - 1 = 32,767 increments. One
+/// more and a turn forward cannot be told from a turn backward (the count aliases).
+/// The left encoder's 32-bit counter (TIM2) allows 2^31 - 1.
+pub const COUNTER16_MAX_UNREAD: u64 = (1 << 15) - 1;
+
+/// Most increments one wheel may make between two samples, by design: the smaller of
+/// [`COUNTER16_MAX_UNREAD`] (aliasing of the right counter) and the integrator's per-sample
+/// limit [`MAX_STEP_COUNTS`] (2^18; a larger step is refused as a fault). 32,767.
+pub const MAX_COUNTS_PER_SAMPLE: u64 = if COUNTER16_MAX_UNREAD < MAX_STEP_COUNTS {
+    COUNTER16_MAX_UNREAD
+} else {
+    MAX_STEP_COUNTS
+};
+
+/// Increments per second of a wheel of `diameter` (m) with `ticks_per_rev` increments per
+/// turn whose surface moves at `wheel_speed` (m/s): `wheel_speed * ticks_per_rev /
+/// (pi * diameter)`, increments/s. A non-positive or NaN diameter gives infinity or NaN.
+pub fn counts_per_second(wheel_speed: f64, ticks_per_rev: u32, diameter: f64) -> f64 {
+    wheel_speed * f64::from(ticks_per_rev) / (core::f64::consts::PI * diameter)
+}
+
+/// Most increments a wheel can make between two samples at `rate_hz` when its surface moves
+/// at most at `max_wheel_speed` (m/s): [`counts_per_second`] / `rate_hz`, increments (not
+/// rounded). Pass the smaller wheel diameter (m) to bound both wheels. The settings refuse
+/// any combination where this exceeds [`MAX_COUNTS_PER_SAMPLE`]; `rate_hz = 0` gives
+/// infinity.
+///
+/// The paper's chassis (0.26 m wheels, 20,000 increments per turn) at 2 m/s and 1 Hz:
+/// 48,971 increments, refused; at 2 Hz 24,485, accepted.
+pub fn max_counts_per_sample(
+    max_wheel_speed: f64,
+    ticks_per_rev: u32,
+    diameter: f64,
+    rate_hz: u32,
+) -> f64 {
+    counts_per_second(max_wheel_speed, ticks_per_rev, diameter) / f64::from(rate_hz)
+}
+
+/// Longest time, seconds, the encoder counters can go unread (no sample taken, for example
+/// while a flash erase stalls the CPU) without the 16-bit right counter aliasing or a step
+/// exceeding the integrator's limit, with the wheels at most at `max_wheel_speed` (m/s):
+/// [`MAX_COUNTS_PER_SAMPLE`] / [`counts_per_second`], with the smaller wheel `diameter` (m).
+///
+/// Infinity when `max_wheel_speed` is 0 (nothing moves); 0 when the arguments give no
+/// positive count rate otherwise (negative or NaN), so that a caller comparing a stall
+/// against it refuses. The paper's chassis at 2 m/s: 0.669 s.
+pub fn max_unread_interval(max_wheel_speed: f64, ticks_per_rev: u32, diameter: f64) -> f64 {
+    let cps = counts_per_second(max_wheel_speed, ticks_per_rev, diameter);
+    if cps == 0.0 {
+        f64::INFINITY
+    } else if cps > 0.0 {
+        MAX_COUNTS_PER_SAMPLE as f64 / cps
+    } else {
+        0.0
+    }
+}
+
 /// Everything the unit keeps across resets.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Settings {
@@ -49,8 +132,10 @@ pub struct Settings {
     pub chassis: ChassisParams,
     /// `mode`: sample timing.
     pub mode: SampleMode,
-    /// `rate`: samples per second, Hz (1..=10000; in `pps` mode it must divide 1_000_000 so
-    /// that every sample falls on a whole microsecond after the PPS edge).
+    /// `rate`: samples per second, Hz (1..=[`MAX_RATE_HZ`]; in `pps` mode it must divide
+    /// 1_000_000 so that every sample falls on a whole microsecond after the PPS edge; high
+    /// enough that a wheel at `max_wheel_speed` makes at most [`MAX_COUNTS_PER_SAMPLE`]
+    /// increments per sample).
     pub rate: u32,
     /// `output_divider`: send every Nth sample as a record (1..=10000).
     pub output_divider: u32,
@@ -58,11 +143,16 @@ pub struct Settings {
     pub time_tag_pps: TimeTagRef,
     /// `baud`: UART baud rate (one of [`BAUD_RATES`]); the firmware applies it at start.
     pub baud: u32,
+    /// `max_wheel_speed`: the highest surface speed either wheel is stated to reach, m/s
+    /// (0.01..=20). Bounds the increments per sample ([`Settings::max_counts_per_sample`])
+    /// and the time the counters may go unread ([`Settings::max_unread_interval`]).
+    pub max_wheel_speed: f32,
 }
 
 impl Settings {
     /// The defaults: the paper's designed chassis ([`ChassisParams::DESIGNED`]), free-running
-    /// at 50 Hz, every sample sent, NMEA time refers to the previous PPS edge, 115200 baud.
+    /// at 50 Hz, every sample sent, NMEA time refers to the previous PPS edge, 115200 baud,
+    /// wheels at most at 2 m/s.
     pub const DEFAULT: Self = Self {
         chassis: ChassisParams::DESIGNED,
         mode: SampleMode::Free,
@@ -70,7 +160,46 @@ impl Settings {
         output_divider: 1,
         time_tag_pps: TimeTagRef::Previous,
         baud: 115_200,
+        max_wheel_speed: Self::DEFAULT_MAX_WHEEL_SPEED,
     };
+
+    /// Default `max_wheel_speed`, m/s; also what a stored record of format version 1
+    /// (which predates the key) loads with.
+    pub const DEFAULT_MAX_WHEEL_SPEED: f32 = 2.0;
+
+    /// Accepted `max_wheel_speed`, m/s, as (min, max): 0.01..=20, from a creeping robot to
+    /// well beyond a mapping chassis (72 km/h).
+    pub const MAX_WHEEL_SPEED_RANGE: (f32, f32) = (0.01, 20.0);
+
+    /// The smaller of the two wheel diameters, m: the wheel that turns faster at a given
+    /// surface speed.
+    pub fn smaller_diameter(&self) -> f64 {
+        self.chassis.left_diameter.min(self.chassis.right_diameter)
+    }
+
+    /// [`max_counts_per_sample`] for these settings (`max_wheel_speed`, `ticks_per_rev`, the
+    /// smaller diameter, `rate`): the most increments either wheel can make between two
+    /// samples, increments. [`Self::validate`] refuses settings where it exceeds
+    /// [`MAX_COUNTS_PER_SAMPLE`].
+    pub fn max_counts_per_sample(&self) -> f64 {
+        max_counts_per_sample(
+            f64::from(self.max_wheel_speed),
+            self.chassis.ticks_per_rev,
+            self.smaller_diameter(),
+            self.rate,
+        )
+    }
+
+    /// [`max_unread_interval`] for these settings: the longest time, seconds, the counters may
+    /// go unread with the wheels at `max_wheel_speed` without aliasing. For valid settings
+    /// it is at least one sample period, `1 / rate`.
+    pub fn max_unread_interval(&self) -> f64 {
+        max_unread_interval(
+            f64::from(self.max_wheel_speed),
+            self.chassis.ticks_per_rev,
+            self.smaller_diameter(),
+        )
+    }
 
     /// Checks every key's range and the relations between keys; names the offending key.
     pub fn validate(&self) -> Result<(), SettingError> {
@@ -91,6 +220,14 @@ impl Settings {
             return Err(SettingError::Inconsistent(
                 "rate/output_divider: records need more than the baud rate (raise output_divider or baud)",
             ));
+        }
+        let counts = self.max_counts_per_sample();
+        // NaN is refused too.
+        if counts.is_nan() || counts > MAX_COUNTS_PER_SAMPLE as f64 {
+            return Err(SettingError::CountsPerSample {
+                // Saturating conversion; rounded up so that the text never shows the limit.
+                counts: ceil_u64(counts),
+            });
         }
         Ok(())
     }
@@ -127,6 +264,7 @@ impl Settings {
                 TimeTagRef::Next => "next",
             }),
             Key::Baud => Value::U32(self.baud),
+            Key::MaxWheelSpeed => Value::F32(self.max_wheel_speed),
         }
     }
 
@@ -157,6 +295,7 @@ impl Settings {
                     Key::LeftCos(h) => c.left_wheel.cos[h.index()] = v,
                     Key::LeftSin(h) => c.left_wheel.sin[h.index()] = v,
                     Key::RightCos(h) => c.right_wheel.cos[h.index()] = v,
+                    Key::MaxWheelSpeed => next.max_wheel_speed = v,
                     _ => {
                         if let Key::RightSin(h) = key {
                             c.right_wheel.sin[h.index()] = v;
@@ -218,8 +357,13 @@ impl Settings {
         Ok(())
     }
 
-    /// Length of the serialised form, bytes.
-    pub const SERIALIZED_LEN: usize = 112;
+    /// Length of the serialised form of format version [`SETTINGS_FORMAT_VERSION`] (2),
+    /// bytes.
+    pub const SERIALIZED_LEN: usize = 116;
+
+    /// Length of the serialised form of format version 1, bytes: the version 2 layout
+    /// without its last field, `max_wheel_speed`.
+    pub const SERIALIZED_LEN_V1: usize = 112;
 
     /// Serialises into the fixed little-endian layout of format version
     /// [`SETTINGS_FORMAT_VERSION`] (documented in `docs/PROTOCOL.md`).
@@ -265,11 +409,29 @@ impl Settings {
         w.u8(0)?;
         w.u32(self.rate)?;
         w.u32(self.output_divider)?;
-        w.u32(self.baud)
+        w.u32(self.baud)?;
+        // Format version 2 appends this field.
+        w.f32(self.max_wheel_speed)
     }
 
-    /// Parses the serialised form and validates it.
+    /// Parses the serialised form of the current format version ([`SETTINGS_FORMAT_VERSION`],
+    /// at least [`Self::SERIALIZED_LEN`] bytes; extra bytes are ignored) and validates it.
     pub fn from_bytes(bytes: &[u8]) -> Result<Self, SettingError> {
+        Self::from_bytes_version(SETTINGS_FORMAT_VERSION, bytes)
+    }
+
+    /// Parses the serialised form of format `version` and validates it: version 2
+    /// ([`Self::SERIALIZED_LEN`] bytes) or version 1 ([`Self::SERIALIZED_LEN_V1`] bytes,
+    /// stored by firmware before `max_wheel_speed` existed; that key takes
+    /// [`Self::DEFAULT_MAX_WHEEL_SPEED`]). Too few bytes, a bad code, an unknown version or
+    /// settings that do not validate (including under rules added since the record was
+    /// written) are errors.
+    pub fn from_bytes_version(version: u16, bytes: &[u8]) -> Result<Self, SettingError> {
+        if !(1..=SETTINGS_FORMAT_VERSION).contains(&version) {
+            return Err(SettingError::Inconsistent(
+                "serialised settings: unknown format version",
+            ));
+        }
         let bad = SettingError::Inconsistent("serialised settings: truncated or bad code");
         let mut r = Reader::new(bytes);
         let mut s = Self::DEFAULT;
@@ -311,6 +473,9 @@ impl Settings {
             s.rate = r.u32()?;
             s.output_divider = r.u32()?;
             s.baud = r.u32()?;
+            if version >= 2 {
+                s.max_wheel_speed = r.f32()?;
+            }
             Ok(Some(()))
         })()
         .ok()
@@ -333,8 +498,9 @@ impl Default for Settings {
     }
 }
 
-/// Version of the serialised settings layout ([`Settings::to_bytes`]).
-pub const SETTINGS_FORMAT_VERSION: u16 = 1;
+/// Version of the serialised settings layout ([`Settings::to_bytes`]). Version 2 appended
+/// `max_wheel_speed` to version 1; [`Settings::from_bytes_version`] reads both.
+pub const SETTINGS_FORMAT_VERSION: u16 = 2;
 
 /// Harmonic number 1..=3 of a wheel-function key.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -399,6 +565,8 @@ pub enum Key {
     TimeTagPps,
     /// `baud`, bit/s.
     Baud,
+    /// `max_wheel_speed`, m/s.
+    MaxWheelSpeed,
 }
 
 /// How a key's value is typed and bounded.
@@ -461,7 +629,7 @@ const HARM: Kind = Kind::F32 {
 
 impl Key {
     /// Number of keys.
-    pub const COUNT: usize = 27;
+    pub const COUNT: usize = 28;
 
     /// Every key, in the order `get` lists them.
     pub const ALL: [Key; Self::COUNT] = {
@@ -494,6 +662,7 @@ impl Key {
             Key::OutputDivider,
             Key::TimeTagPps,
             Key::Baud,
+            Key::MaxWheelSpeed,
         ]
     };
 
@@ -538,7 +707,7 @@ impl Key {
                 "rate",
                 Kind::U32 {
                     min: 1,
-                    max: 10_000,
+                    max: MAX_RATE_HZ,
                 },
                 "Hz",
             ),
@@ -552,6 +721,14 @@ impl Key {
             ),
             Key::TimeTagPps => ("time_tag_pps", Kind::Word(&["previous", "next"]), ""),
             Key::Baud => ("baud", Kind::U32Set(&BAUD_RATES), "bit/s"),
+            Key::MaxWheelSpeed => (
+                "max_wheel_speed",
+                Kind::F32 {
+                    min: Settings::MAX_WHEEL_SPEED_RANGE.0,
+                    max: Settings::MAX_WHEEL_SPEED_RANGE.1,
+                },
+                "m/s",
+            ),
         };
         KeyInfo { name, kind, unit }
     }
@@ -611,6 +788,13 @@ pub enum SettingError {
     /// The chassis keys are each in range but refused together by
     /// `ChassisParams::validate` (the key it named).
     Chassis(&'static str),
+    /// A wheel at `max_wheel_speed` could make more than [`MAX_COUNTS_PER_SAMPLE`]
+    /// increments between two samples (keys `rate`, `max_wheel_speed`, `ticks_per_rev`,
+    /// `left_diameter`, `right_diameter`): the 16-bit right counter would alias.
+    CountsPerSample {
+        /// [`Settings::max_counts_per_sample`] rounded up (saturating), increments.
+        counts: u64,
+    },
 }
 
 impl fmt::Display for SettingError {
@@ -647,6 +831,13 @@ impl fmt::Display for SettingError {
                 "{k}: does not fit the other chassis keys (one increment must stay within {} m and {} rad)",
                 Shortest(ChassisParams::MAX_DISTANCE_PER_COUNT),
                 Shortest(ChassisParams::MAX_HEADING_PER_COUNT)
+            ),
+            Self::CountsPerSample { counts } => write!(
+                f,
+                "rate/max_wheel_speed/ticks_per_rev/left_diameter/right_diameter: up to {counts} \
+                 increments per sample at max_wheel_speed, above {MAX_COUNTS_PER_SAMPLE} (the \
+                 16-bit right counter would alias; raise rate, or lower max_wheel_speed or \
+                 ticks_per_rev)"
             ),
         }
     }
@@ -695,6 +886,20 @@ fn check_range(key: Key, s: &Settings) -> Result<(), SettingError> {
         Ok(())
     } else {
         Err(bad)
+    }
+}
+
+/// `v` rounded up to an integer, saturating at 0 and `u64::MAX` (NaN gives `u64::MAX`).
+fn ceil_u64(v: f64) -> u64 {
+    if v.is_nan() {
+        return u64::MAX;
+    }
+    // `as` saturates; add 1 unless the value is already whole (no `f64::ceil` in core).
+    let t = v as u64;
+    if (t as f64) < v {
+        t.saturating_add(1)
+    } else {
+        t
     }
 }
 

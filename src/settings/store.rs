@@ -15,19 +15,25 @@
 //! | offset | size | field |
 //! |---|---|---|
 //! | 0 | 4 | magic `0x534F444F` (bytes `4F 44 4F 53`, "ODOS") |
-//! | 4 | 2 | settings format version ([`super::SETTINGS_FORMAT_VERSION`]) |
-//! | 6 | 2 | payload length ([`Settings::SERIALIZED_LEN`]) |
+//! | 4 | 2 | settings format version ([`super::SETTINGS_FORMAT_VERSION`], 2) |
+//! | 6 | 2 | payload length `n` ([`Settings::SERIALIZED_LEN`], 116) |
 //! | 8 | 4 | generation, 1 for the first save |
-//! | 12 | 112 | payload ([`Settings::to_bytes`]) |
-//! | 124 | 4 | CRC-32/ISO-HDLC of bytes 0..124 |
+//! | 12 | n | payload ([`Settings::to_bytes`]) |
+//! | 12 + n | 4 | CRC-32/ISO-HDLC of bytes 0..12 + n |
+//!
+//! Saves write format version 2 ([`RECORD_LEN`] = 132 bytes). Loading also accepts the
+//! records of format version 1 (payload 112 bytes, CRC at 124, 128 bytes), written by
+//! firmware before `max_wheel_speed` existed: they load with that key at its default. The
+//! version and length must be one of these two pairs, else the record is skipped.
 
 use super::{Settings, SettingsSource, SETTINGS_FORMAT_VERSION};
+use crate::protocol::bytes::Reader;
 use crate::protocol::crc::crc32;
 
 /// Record magic ("ODOS" in memory order).
 pub const MAGIC: u32 = 0x534F_444F;
-/// Bytes programmed per save.
-pub const RECORD_LEN: usize = 128;
+/// Bytes programmed per save (a record of format version [`SETTINGS_FORMAT_VERSION`]).
+pub const RECORD_LEN: usize = CRC_AT + 4;
 /// Bytes reserved per record in a sector (room for a larger future layout).
 pub const SLOT_LEN: usize = 256;
 /// Bytes per flash program unit: offsets and lengths passed to [`Flash::program`] are
@@ -35,6 +41,12 @@ pub const SLOT_LEN: usize = 256;
 pub const WORD: usize = 4;
 
 const CRC_AT: usize = 12 + Settings::SERIALIZED_LEN;
+
+/// The (format version, payload length) pairs a record may carry, bytes.
+const FORMATS: [(u16, usize); 2] = [
+    (1, Settings::SERIALIZED_LEN_V1),
+    (SETTINGS_FORMAT_VERSION, Settings::SERIALIZED_LEN),
+];
 
 /// The two settings sectors as the store sees them. Erased flash reads 0xFF; programming
 /// can only clear bits.
@@ -149,11 +161,11 @@ impl<F: Flash> SettingsStore<F> {
                     continue;
                 }
                 used_end = slot + 1;
-                let Some(generation) = record_generation(&buf) else {
+                let Some((generation, settings)) = parse_record(&buf) else {
                     continue;
                 };
                 scan.max_generation = scan.max_generation.max(generation);
-                if let Some(settings) = record_settings(&buf) {
+                if let Some(settings) = settings {
                     if scan.best.is_none_or(|(g, _, _)| generation > g) {
                         scan.best = Some((generation, sector, settings));
                     }
@@ -234,27 +246,30 @@ pub fn encode_record(settings: &Settings, generation: u32) -> [u8; RECORD_LEN] {
     r
 }
 
-/// Generation of a record whose magic, version, length and CRC are right.
-fn record_generation(r: &[u8]) -> Option<u32> {
-    let word = |i: usize| {
-        r.get(i..i + 4)
-            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-    };
-    if word(0)? != MAGIC {
+/// Format version and payload length of a record whose magic, version, length pair
+/// ([`FORMATS`]) and CRC are right.
+fn record_format(r: &[u8]) -> Option<(u16, usize)> {
+    let mut h = Reader::new(r);
+    if h.u32().ok()? != MAGIC {
         return None;
     }
-    let version = u16::from_le_bytes([r[4], r[5]]);
-    let len = u16::from_le_bytes([r[6], r[7]]) as usize;
-    if version != SETTINGS_FORMAT_VERSION || len != Settings::SERIALIZED_LEN {
+    let version = h.u16().ok()?;
+    let len = usize::from(h.u16().ok()?);
+    if !FORMATS.contains(&(version, len)) {
         return None;
     }
-    if crc32(r.get(..CRC_AT)?) != word(CRC_AT)? {
-        return None;
-    }
-    word(8)
+    let crc_at = 12 + len;
+    let stored = Reader::new(r.get(crc_at..)?).u32().ok()?;
+    (crc32(r.get(..crc_at)?) == stored).then_some((version, len))
 }
 
-/// Settings of a CRC-valid record, if they decode and validate.
-fn record_settings(r: &[u8]) -> Option<Settings> {
-    Settings::from_bytes(r.get(12..CRC_AT)?).ok()
+/// A record whose magic, version, length and CRC are right: its generation, and its
+/// settings (either format version) if they decode and validate.
+fn parse_record(r: &[u8]) -> Option<(u32, Option<Settings>)> {
+    let (version, len) = record_format(r)?;
+    let generation = Reader::new(r.get(8..)?).u32().ok()?;
+    let settings = r
+        .get(12..12 + len)
+        .and_then(|payload| Settings::from_bytes_version(version, payload).ok());
+    Some((generation, settings))
 }
