@@ -85,8 +85,95 @@ fn status_round_trip() {
         rx_errors: 1,
         settings_source: SettingsSource::Flash,
         settings_dirty: true,
+        samples_lost: 3,
+        gnss_rx_lost: 0xFFFF_FFFE,
+        merged_samples: 99,
     });
     assert_eq!(roundtrip(&msg, u32::MAX).message, msg);
+}
+
+/// The Status body layout of docs/PROTOCOL.md, field by field, and the lengths a reader
+/// accepts: at least 52 bytes (longer is a later revision), shorter is malformed,
+/// including the 40-byte body of earlier firmware.
+#[test]
+fn status_layout_and_short_bodies() {
+    let st = Status {
+        uptime_us: 0x0102_0304_0506_0708,
+        flags: StatusFlags {
+            sync: SyncMode::PpsLocked,
+            time_valid: true,
+            ..Default::default()
+        },
+        rate_hz: 50,
+        samples: 0x1111_1111,
+        dropped_total: 0x2222_2222,
+        pps_edges: 0x3333_3333,
+        pps_rejected: 0x4444_4444,
+        rx_errors: 0x5555_5555,
+        settings_source: SettingsSource::Flash,
+        settings_dirty: true,
+        samples_lost: 0xA1A2_A3A4,
+        gnss_rx_lost: 0xB1B2_B3B4,
+        merged_samples: 0xC1C2_C3C4,
+    };
+    assert_eq!(Status::BODY_LEN, 52);
+    let mut body = [0xEEu8; 60];
+    let n = st.write_body(&mut body).unwrap();
+    assert_eq!(n, Status::BODY_LEN);
+    let field = |at: usize| u32::from_le_bytes(body[at..at + 4].try_into().unwrap());
+    assert_eq!(&body[0..8], &0x0102_0304_0506_0708u64.to_le_bytes());
+    assert_eq!(field(8), 0b101);
+    assert_eq!(
+        (
+            field(12),
+            field(16),
+            field(20),
+            field(24),
+            field(28),
+            field(32)
+        ),
+        (
+            50,
+            0x1111_1111,
+            0x2222_2222,
+            0x3333_3333,
+            0x4444_4444,
+            0x5555_5555
+        )
+    );
+    assert_eq!(&body[36..40], &[1, 1, 0, 0], "source, dirty, reserved");
+    assert_eq!(
+        (field(40), field(44), field(48)),
+        (0xA1A2_A3A4, 0xB1B2_B3B4, 0xC1C2_C3C4),
+        "samples_lost, gnss_rx_lost, merged_samples"
+    );
+    assert_eq!(Status::read_body(&body[..52]), Ok(st));
+    assert_eq!(
+        Status::read_body(&body[..60]),
+        Ok(st),
+        "appended bytes ignored"
+    );
+    // Through the decoder: a body one byte short, and the old 40-byte body, are malformed;
+    // the frames around them decode and the sequence counts them.
+    let mut dec = FrameDecoder::new();
+    let mut got = Vec::new();
+    dec.feed(&raw_frame(1, 0x02, 0, &body[..52]), |r| got.push(r));
+    dec.feed(&raw_frame(1, 0x02, 1, &body[..51]), |r| got.push(r));
+    dec.feed(&raw_frame(1, 0x02, 2, &body[..40]), |r| got.push(r));
+    dec.feed(&raw_frame(1, 0x02, 3, &body[..60]), |r| got.push(r));
+    assert_eq!(got[0].as_ref().unwrap().message, Message::Status(st));
+    assert_eq!(got[1], Err(DecodeError::BodyTooShort(0x02)));
+    assert_eq!(got[2], Err(DecodeError::BodyTooShort(0x02)));
+    assert_eq!(got[3].as_ref().unwrap().message, Message::Status(st));
+    let s = dec.stats();
+    assert_eq!((s.frames, s.malformed, s.seq_gaps), (2, 2, 0));
+    for len in 0..Status::BODY_LEN {
+        assert_eq!(
+            Status::read_body(&body[..len]),
+            Err(DecodeError::BodyTooShort(0x02)),
+            "{len} bytes"
+        );
+    }
 }
 
 #[test]
@@ -249,6 +336,9 @@ fn all_kinds() -> Vec<(Message, u32)> {
             Message::Status(Status {
                 uptime_us: 123_456_789,
                 rate_hz: 50,
+                samples_lost: 1,
+                gnss_rx_lost: 2,
+                merged_samples: 3,
                 ..Default::default()
             }),
             0,

@@ -292,15 +292,18 @@ pub const TABLE_HEADER: &str =
 fn describe(f: &Frame) -> Option<String> {
     match &f.message {
         Message::Status(s) => Some(format!(
-            "# status: uptime {:.1} s, rate {} Hz, sync {}, samples {}, dropped {}, PPS edges {} (rejected {}), rx errors {}, settings {:?}{}",
+            "# status: uptime {:.1} s, rate {} Hz, sync {}, samples {}, dropped {}, samples lost {}, merged {}, PPS edges {} (rejected {}), rx errors {}, GNSS rx lost {}, settings {:?}{}",
             s.uptime_us as f64 * 1e-6,
             s.rate_hz,
             sync_name(s.flags.sync),
             s.samples,
             s.dropped_total,
+            s.samples_lost,
+            s.merged_samples,
             s.pps_edges,
             s.pps_rejected,
             s.rx_errors,
+            s.gnss_rx_lost,
             s.settings_source,
             if s.settings_dirty { " (unsaved changes)" } else { "" }
         )),

@@ -204,5 +204,12 @@ fn record_and_monitor_against_a_unit_on_tcp() {
         out.contains("# link: frames") && out.contains("records 20"),
         "{out}"
     );
+    // The fake unit's heartbeat, with its loss counters.
+    assert!(
+        out.contains("# status: ")
+            && out.contains("samples lost 1, merged 2")
+            && out.contains("GNSS rx lost 3"),
+        "{out}"
+    );
     unit.join().unwrap();
 }

@@ -295,11 +295,24 @@ pub struct Status {
     pub settings_source: SettingsSource,
     /// The settings in use differ from the ones stored (a `save` is pending).
     pub settings_dirty: bool,
+    /// Samples dropped since start because the queue from the sample interrupt to the
+    /// processing task was full (wrapping): the processing task never saw them, and the
+    /// next sample it processes spans their periods too.
+    pub samples_lost: u32,
+    /// GNSS receiver UART bytes lost since start: receive overrun or a full NMEA byte
+    /// queue (wrapping). A lost byte can cost a time message.
+    pub gnss_rx_lost: u32,
+    /// Samples merged since start because the sample interrupt ran late, for example while
+    /// a flash erase stalled the CPU: periods whose counts were folded into the next sample
+    /// (wrapping).
+    pub merged_samples: u32,
 }
 
 impl Status {
-    /// Body length in bytes.
-    pub const BODY_LEN: usize = 40;
+    /// Body length in bytes. Version 1 of the protocol first had 40 bytes (up to
+    /// `settings_dirty` and 2 reserved bytes); `samples_lost`, `gnss_rx_lost` and
+    /// `merged_samples` are appended.
+    pub const BODY_LEN: usize = 52;
 
     /// Writes the body into `out`; returns its length.
     pub fn write_body(&self, out: &mut [u8]) -> Result<usize, EncodeError> {
@@ -315,13 +328,18 @@ impl Status {
             w.u32(self.rx_errors)?;
             w.u8(self.settings_source.code())?;
             w.u8(self.settings_dirty as u8)?;
-            w.u16(0)
+            w.u16(0)?;
+            w.u32(self.samples_lost)?;
+            w.u32(self.gnss_rx_lost)?;
+            w.u32(self.merged_samples)
         })()
         .map_err(|_| EncodeError::BufferTooSmall)?;
         Ok(w.pos())
     }
 
-    /// Reads a body (at least [`Self::BODY_LEN`] bytes).
+    /// Reads a body (at least [`Self::BODY_LEN`] bytes; extra bytes are ignored). The
+    /// 40-byte body of earlier firmware is too short: the loss counters it lacks cannot be
+    /// told from zero.
     pub fn read_body(body: &[u8]) -> Result<Self, DecodeError> {
         if body.len() < Self::BODY_LEN {
             return Err(DecodeError::BodyTooShort(MsgType::Status as u8));
@@ -342,6 +360,10 @@ impl Status {
             1 => true,
             _ => return Err(DecodeError::BadField("settings dirty")),
         };
+        r.u16().map_err(short)?;
+        let samples_lost = r.u32().map_err(short)?;
+        let gnss_rx_lost = r.u32().map_err(short)?;
+        let merged_samples = r.u32().map_err(short)?;
         Ok(Self {
             uptime_us,
             flags,
@@ -353,6 +375,9 @@ impl Status {
             rx_errors,
             settings_source,
             settings_dirty,
+            samples_lost,
+            gnss_rx_lost,
+            merged_samples,
         })
     }
 }

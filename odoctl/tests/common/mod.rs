@@ -180,6 +180,9 @@ pub fn fake_unit(samples: Vec<Sample>, period: Duration) -> (u16, JoinHandle<Set
         // A heartbeat first, as a unit that is up sends them.
         let status = odo_core::protocol::Status {
             rate_hz: 50,
+            samples_lost: 1,
+            merged_samples: 2,
+            gnss_rx_lost: 3,
             ..Default::default()
         };
         send(&mut sock, status.into());
