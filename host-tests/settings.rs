@@ -193,6 +193,28 @@ fn save_load_round_trip_and_sector_alternation() {
     assert_eq!(f.erases, 6);
 }
 
+/// `next_save_erases` predicts exactly the saves that erase, and reading it changes nothing.
+#[test]
+fn next_save_erases_predicts_the_erase() {
+    let mut store = SettingsStore::new(SimFlash::new(3 * SLOT_LEN));
+    for i in 1..=20u32 {
+        let predicted = store.next_save_erases().unwrap();
+        let before = store.flash().erases;
+        let mem = store.flash().mem.clone();
+        assert_eq!(store.next_save_erases().unwrap(), predicted);
+        assert_eq!(store.flash().mem, mem, "a query changed the flash");
+        store.save(&variant(i)).unwrap();
+        let erased = store.flash().erases > before;
+        assert_eq!(predicted, erased, "save {i}");
+        // With 3-slot sectors: saves 1-3 fill sector 0, then every third save erases.
+        assert_eq!(erased, i >= 4 && (i - 4) % 3 == 0, "save {i}");
+    }
+    // A flash that cannot be read is an error, not a guess.
+    let mut dead = SimFlash::new(3 * SLOT_LEN);
+    dead.dead = true;
+    assert!(SettingsStore::new(dead).next_save_erases().is_err());
+}
+
 #[test]
 fn invalid_settings_are_not_saved() {
     let mut store = SettingsStore::new(SimFlash::new(2 * SLOT_LEN));

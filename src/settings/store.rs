@@ -203,6 +203,17 @@ impl<F: Flash> SettingsStore<F> {
         })
     }
 
+    /// Whether the next [`Self::save`] must erase a sector first (the sector holding the
+    /// newest usable record is full: every 512th save on the real geometry). On the
+    /// STM32F401 an erase stalls the CPU, and the sampling, for up to 2 s; compare that with
+    /// [`Settings::max_unread_interval`] before saving while the wheels may turn. Reads the
+    /// flash, changes nothing.
+    pub fn next_save_erases(&mut self) -> Result<bool, StoreError<F::Error>> {
+        let scan = self.scan()?;
+        let target = scan.best.map_or(0, |(_, sector, _)| sector);
+        Ok(scan.next_free[target].is_none())
+    }
+
     /// Saves `settings` (validated first); returns the new record's generation. At most one
     /// sector erase and one record program; safe against a power cut at any point.
     pub fn save(&mut self, settings: &Settings) -> Result<u32, StoreError<F::Error>> {
