@@ -1,14 +1,21 @@
-//! The settings flash: sectors 6 and 7 of the STM32F401RE (0x0804_0000 and 0x0806_0000,
-//! 128 KiB each, outside the program's FLASH region in `memory.x`), behind the settings
-//! store's [`Flash`] trait.
+//! The settings flash: sectors 1 and 2 of the STM32F401RE (0x0800_4000 and 0x0800_8000,
+//! 16 KiB each, a hole in the program's FLASH region that `memory.x` keeps empty and checks
+//! at link time), behind the settings store's [`Flash`] trait.
 //!
-//! Erase and program use 32-bit parallelism (PSIZE = x32, supply 2.7-3.6 V): a 128 KiB
-//! sector erase takes 1-2 s (datasheet t_ERASE128KB, max 2 s). The F401 has one flash bank,
-//! so the CPU stalls on every flash read (instructions, vector table) while an erase runs:
-//! no interrupt is served for up to 2 s. The store erases only when a sector is full (one
-//! save in 512), the watchdog ([`super::WATCHDOG_MS`]) outlasts it, and the counters keep
-//! counting in hardware; see `docs/HARDWARE.md` for what a stall does to sampling. The data
-//! cache is reset after every erase and program so reads see the new contents.
+//! Parallelism: x32 (PSIZE = 10) needs VDD >= 2.7 V, which only the brown-out reset at level
+//! 3 guarantees (option bytes, BOR_LEV = 00). The driver reads BOR_LEV at each operation and
+//! falls back to x8, valid down to 1.8 V, on any lower level: slower, never out of spec.
+//! A 16 KiB sector erase takes 250 ms typical, 500 ms max at x32 (400 / 800 ms at x8;
+//! datasheet DS9716, table "Flash memory programming"): [`MAX_ERASE_MS`].
+//!
+//! The F401 has one flash bank, so the CPU stalls on every flash read (instructions, the
+//! vector table) while an erase runs: no interrupt is served until it ends. The hardware
+//! keeps counting meanwhile (encoders, the free-running sample timer, the PPS capture) and
+//! the sampler merges the samples the stall passed over (`src/board/sampler.rs`). The store
+//! erases only when a sector is full (one save in 64); the watchdog is fed just before the
+//! erase, and its shortest timeout (LSI at 47 kHz) outlasts [`MAX_ERASE_MS`] by 5x
+//! ([`super::WATCHDOG_MS`]). The data cache is reset after every erase and program so reads
+//! see the new contents.
 //!
 //! The `qemu` build keeps the two sectors in RAM (4 KiB each): QEMU's flash is read-only.
 
@@ -38,6 +45,10 @@ impl core::fmt::Debug for FlashError {
     }
 }
 
+/// Longest CPU stall of one settings-sector erase, milliseconds: 16 KiB at x8 parallelism
+/// (the slower of the two the driver may use; x32 is 500 ms).
+pub const MAX_ERASE_MS: u32 = 800;
+
 #[cfg(not(feature = "qemu"))]
 pub use board::SettingsFlash;
 #[cfg(feature = "qemu")]
@@ -56,11 +67,15 @@ mod board {
     use stm32f4xx_hal::pac;
 
     /// Bytes per settings sector.
-    pub const SECTOR_SIZE: usize = 128 * 1024;
-    /// Addresses of the two settings sectors (flash sectors 6 and 7).
-    const BASE: [usize; 2] = [0x0804_0000, 0x0806_0000];
+    pub const SECTOR_SIZE: usize = 16 * 1024;
+    /// Addresses of the two settings sectors (flash sectors 1 and 2; `_settings_start` and
+    /// `_settings_end` in memory.x).
+    const BASE: [usize; 2] = [0x0800_4000, 0x0800_8000];
     /// Flash sector numbers.
-    const SNB: [u32; 2] = [6, 7];
+    const SNB: [u32; 2] = [1, 2];
+
+    /// Longest 16 KiB sector erase at x32 parallelism, milliseconds.
+    const MAX_ERASE_X32_MS: u32 = 500;
 
     const KEY1: u32 = 0x4567_0123;
     const KEY2: u32 = 0xCDEF_89AB;
@@ -69,7 +84,10 @@ mod board {
     const SR_ERRORS: u32 = 1 << 1 | 0b1111 << 4;
     const CR_PG: u32 = 1 << 0;
     const CR_SER: u32 = 1 << 1;
+    const CR_PSIZE_X8: u32 = 0b00 << 8;
     const CR_PSIZE_X32: u32 = 0b10 << 8;
+    /// FLASH_OPTCR BOR_LEV (bits 3:2): 00 is level 3, VDD 2.70-3.60 V.
+    const OPTCR_BOR_LEV: u32 = 0b11 << 2;
     const CR_STRT: u32 = 1 << 16;
     const CR_LOCK: u32 = 1 << 31;
     const ACR_DCEN: u32 = 1 << 10;
@@ -84,6 +102,21 @@ mod board {
         /// Takes the flash controller.
         pub fn new(flash: pac::FLASH) -> Self {
             Self { flash }
+        }
+
+        /// True when the brown-out reset guarantees the 2.7 V that x32 parallelism needs.
+        fn x32_allowed(&self) -> bool {
+            self.flash.optcr().read().bits() & OPTCR_BOR_LEV == 0
+        }
+
+        /// Longest CPU stall of one sector erase with the parallelism the BOR level allows,
+        /// milliseconds: 500 at x32, [`super::MAX_ERASE_MS`] (800) at x8.
+        pub fn max_stall_ms(&self) -> u32 {
+            if self.x32_allowed() {
+                MAX_ERASE_X32_MS
+            } else {
+                super::MAX_ERASE_MS
+            }
         }
 
         fn wait(&self) -> Result<(), FlashError> {
@@ -135,9 +168,17 @@ mod board {
 
         fn erase(&mut self, sector: usize) -> Result<(), FlashError> {
             check(sector, 0, 0, SECTOR_SIZE)?;
+            let psize = if self.x32_allowed() {
+                CR_PSIZE_X32
+            } else {
+                CR_PSIZE_X8
+            };
             self.unlocked(|f| {
-                let cr = CR_PSIZE_X32 | CR_SER | SNB[sector] << 3;
-                // Note(unsafe): CR = PSIZE x32 | SER | SNB, then STRT (RM0368 sec. 3.5.3).
+                let cr = psize | CR_SER | SNB[sector] << 3;
+                // The CPU stalls from STRT to the end of the erase: give the watchdog its
+                // whole period for it.
+                super::super::watchdog_feed();
+                // Note(unsafe): CR = PSIZE | SER | SNB, then STRT (RM0368 sec. 3.5.3).
                 unsafe {
                     f.flash.cr().write(|w| w.bits(cr));
                     f.flash.cr().write(|w| w.bits(cr | CR_STRT));
@@ -151,16 +192,29 @@ mod board {
             if offset % 4 != 0 || data.len() % 4 != 0 {
                 return Err(FlashError::Range);
             }
+            let x32 = self.x32_allowed();
             self.unlocked(|f| {
-                // Note(unsafe): CR = PSIZE x32 | PG (RM0368 sec. 3.5.4).
-                unsafe { f.flash.cr().write(|w| w.bits(CR_PSIZE_X32 | CR_PG)) };
-                for (i, word) in data.chunks_exact(4).enumerate() {
-                    let value = u32::from_le_bytes([word[0], word[1], word[2], word[3]]);
-                    let addr = (BASE[sector] + offset + 4 * i) as *mut u32;
-                    // Note(unsafe): an aligned word inside settings sector `sector` (checked
-                    // above), which memory.x keeps out of the program; PG is set.
-                    unsafe { core::ptr::write_volatile(addr, value) };
-                    f.wait()?;
+                let psize = if x32 { CR_PSIZE_X32 } else { CR_PSIZE_X8 };
+                // Note(unsafe): CR = PSIZE | PG (RM0368 sec. 3.5.4).
+                unsafe { f.flash.cr().write(|w| w.bits(psize | CR_PG)) };
+                let base = BASE[sector] + offset;
+                if x32 {
+                    for (i, word) in data.chunks_exact(4).enumerate() {
+                        let value = u32::from_le_bytes([word[0], word[1], word[2], word[3]]);
+                        let addr = (base + 4 * i) as *mut u32;
+                        // Note(unsafe): an aligned word inside settings sector `sector`
+                        // (checked above), which memory.x keeps out of the program; PG is set.
+                        unsafe { core::ptr::write_volatile(addr, value) };
+                        f.wait()?;
+                    }
+                } else {
+                    for (i, byte) in data.iter().enumerate() {
+                        let addr = (base + i) as *mut u8;
+                        // Note(unsafe): a byte inside settings sector `sector` (checked
+                        // above), which memory.x keeps out of the program; PG is set, x8.
+                        unsafe { core::ptr::write_volatile(addr, *byte) };
+                        f.wait()?;
+                    }
                 }
                 Ok(())
             })
@@ -192,6 +246,11 @@ mod ram {
     }
 
     impl SettingsFlash {
+        /// Longest CPU stall of an erase, milliseconds: none, the sectors are RAM.
+        pub fn max_stall_ms(&self) -> u32 {
+            0
+        }
+
         /// Two erased sectors.
         pub const fn new() -> Self {
             Self {

@@ -51,8 +51,8 @@ const FORMATS: [(u16, usize); 2] = [
 /// The two settings sectors as the store sees them. Erased flash reads 0xFF; programming
 /// can only clear bits.
 ///
-/// On the STM32F401RE, sector index 0 is flash sector 6 (0x0804_0000) and index 1 is
-/// sector 7 (0x0806_0000), 128 KiB each.
+/// On the STM32F401RE, sector index 0 is flash sector 1 (0x0800_4000) and index 1 is
+/// sector 2 (0x0800_8000), 16 KiB each (`memory.x`).
 pub trait Flash {
     /// The driver's error.
     type Error: core::fmt::Debug;
@@ -204,8 +204,8 @@ impl<F: Flash> SettingsStore<F> {
     }
 
     /// Whether the next [`Self::save`] must erase a sector first (the sector holding the
-    /// newest usable record is full: every 512th save on the real geometry). On the
-    /// STM32F401 an erase stalls the CPU, and the sampling, for up to 2 s; compare that with
+    /// newest usable record is full: every 64th save on the real geometry). On the
+    /// STM32F401 an erase stalls the CPU, and the sampling, for up to 0.8 s; compare that with
     /// [`Settings::max_unread_interval`] before saving while the wheels may turn. Reads the
     /// flash, changes nothing.
     pub fn next_save_erases(&mut self) -> Result<bool, StoreError<F::Error>> {
