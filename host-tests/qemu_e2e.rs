@@ -226,6 +226,17 @@ fn qemu_end_to_end() {
     // The unit's own measurement of its per-sample cost (instructions under -icount).
     let status = expect(&mut link, "status", true, "sample_isr_max");
     assert!(status.contains("records_dropped = 0"), "{status}");
+    // Nothing lost or merged on the way: no sample queue overflow, no late sample interrupt
+    // (QEMU never stalls), no GNSS byte or index pulse lost; the QEMU build runs on the HSI.
+    for line in [
+        "samples_lost = 0, merged_samples = 0",
+        "gnss_rx_lost = 0",
+        "index_lost = 0",
+        "pps_overcaptures = 0",
+        "clock = hsi",
+    ] {
+        assert!(status.contains(line), "{line:?} missing in {status}");
+    }
     assert!(distance > 1.0, "the drive moved");
     // Stack high-water mark after every command, error path and 12 s of sampling: well
     // inside the stack region.

@@ -381,6 +381,10 @@ fn qemu_pps_calibration_mode() {
     };
     let errors = in_range("nmea_errors", corrupt(t_lo), corrupt(t_hi));
     assert_eq!(field(&status, "pps_locks"), 1);
+    // The capture path lost nothing: one edge per interrupt, no sample merged.
+    assert_eq!(field(&status, "pps_overcaptures"), 0);
+    assert_eq!(field(&status, "merged_samples"), 0);
+    assert_eq!(field(&status, "samples_lost"), 0);
     assert!(glitches >= 1 && missed >= 3 && errors >= 1);
     let second_ticks = field(&status, "second_ticks");
     assert!(

@@ -1,15 +1,18 @@
 //! The RTIC application of the odometry unit (STM32F401): thin wiring around `odo_core`.
 //!
-//! Data path of one sample: the TIM5 update event is the sample instant (its period comes
+//! Data path of one sample: a TIM5 compare match is the sample instant (the grid comes
 //! from the PPS discipline, `odo_core::timing::pps`); the TIM5 interrupt (priority 4)
-//! snapshots both encoder counters and the fault lines and hands a [`app::RawSample`] to the
-//! processing task through a lock-free queue. The processing task (priority 2) extends the
+//! snapshots both encoder counters as its first action, then the fault lines, labels the
+//! instant (`odo_core::timing::catch_up`, which also merges the points a stall passed over)
+//! and hands a [`app::RawSample`] to the processing task through a lock-free queue. The processing task (priority 2) extends the
 //! counters to 64 bits, applies index pulses, integrates, tags GNSS time, builds the pose
 //! record and queues its frame for the host link whole, or drops it and counts it. The
 //! USART2 interrupt (priority 3) moves queued bytes to the UART and received bytes to the
 //! command task (priority 1), which parses and executes command lines, saves settings to
-//! flash and queues the replies. Index (EXTI, priority 4) and NMEA (USART1, priority 3)
-//! interrupts only latch and queue.
+//! flash and queues the replies. Index (TIM2/TIM3 capture, priority 4) and NMEA (USART1,
+//! priority 3) interrupts only take the latched value and queue it. Only the processing and
+//! command tasks log (defmt-rtt in non-blocking mode: a full RTT buffer drops log frames,
+//! it never stalls the firmware).
 //!
 //! Pins, peripherals and clocks: `src/board/mod.rs` and `docs/HARDWARE.md`.
 #![cfg_attr(target_os = "none", no_std, no_main)]
@@ -38,11 +41,11 @@ use panic_probe as _;
 mod app {
     use crate::board::{
         self,
-        encoders::{Snapshot, LEFT_BITS, RIGHT_BITS},
+        encoders::{IndexCapture, Snapshot, LEFT_BITS, RIGHT_BITS},
         flash::SettingsFlash,
         sampler::Sampler,
         serial::{GnssUart, HostUart, RxErrors, TxRing},
-        Acquisition, GnssRx, IndexPin, Led,
+        Acquisition, ClockSource, GnssRx, Led,
     };
     use heapless::spsc::{Consumer, Producer, Queue};
     use odo_core::odometry::{
@@ -60,7 +63,6 @@ mod app {
         PpsStats, Sample, SyncMode, SyncState, TimeTagPps, TimeTagger,
     };
     use rtic::Mutex;
-    use stm32f4xx_hal::gpio::ExtiPin;
     use stm32f4xx_hal::pac::Interrupt;
     use stm32f4xx_hal::prelude::*;
     use stm32f4xx_hal::watchdog::IndependentWatchdog;
@@ -90,6 +92,14 @@ mod app {
         sim_index: [Option<u32>; 2],
         /// Cycles (instructions in QEMU) the sample interrupt took up to the hand-over.
         isr_cycles: u32,
+        /// Grid points merged into this sample because the interrupt ran late (a stall).
+        merged: u32,
+        /// Timer ticks from the sample's grid point to the interrupt's counter reading.
+        latency: u32,
+        /// A PPS edge was lost to an over-capture before this sample.
+        pps_overcapture: bool,
+        /// Samples lost so far because the queue to the processing task was full.
+        queue_lost: u32,
     }
 
     /// The host link's transmit side: the byte ring and the frame sequence number.
@@ -131,6 +141,19 @@ mod app {
         /// Cycles of the last sample interrupt and of processing the last sample.
         isr_cycles_last: u32,
         process_cycles_last: u32,
+        /// Samples lost between the sample interrupt and the processing task (queue full).
+        samples_lost: u32,
+        /// Grid points merged into later samples (late sample interrupts: flash stalls).
+        merged_samples: u32,
+        /// Largest latency from a sample's grid point to the interrupt's counter reading,
+        /// timer ticks.
+        latency_max: u32,
+        /// Index pulses lost to an over-capture (left, right).
+        index_lost: [u32; 2],
+        /// PPS edges lost to an over-capture.
+        pps_overcaptures: u32,
+        /// The wheels moved within the last second.
+        moving: bool,
     }
 
     #[shared]
@@ -140,6 +163,7 @@ mod app {
         requests: Requests,
         live: Live,
         host_errors: RxErrors,
+        gnss_errors: RxErrors,
         store_state: StoreState,
     }
 
@@ -148,12 +172,10 @@ mod app {
         sampler: Sampler,
         samples_in: Producer<'static, RawSample>,
         samples_out: Consumer<'static, RawSample>,
-        index_pin_left: IndexPin<'B', 0>,
-        index_pin_right: IndexPin<'B', 1>,
-        index_in_left: Producer<'static, u32>,
-        index_in_right: Producer<'static, u32>,
-        index_out_left: Consumer<'static, u32>,
-        index_out_right: Consumer<'static, u32>,
+        index_in_left: Producer<'static, IndexCapture>,
+        index_in_right: Producer<'static, IndexCapture>,
+        index_out_left: Consumer<'static, IndexCapture>,
+        index_out_right: Consumer<'static, IndexCapture>,
         host: HostUart,
         host_rx_in: Producer<'static, u8>,
         host_rx_out: Consumer<'static, u8>,
@@ -168,9 +190,15 @@ mod app {
         watchdog: IndependentWatchdog,
     }
 
-    /// The discipline configuration that `settings` ask for.
-    fn discipline_config(settings: &Settings, timer_hz: u32) -> DisciplineConfig {
-        let mut cfg = DisciplineConfig::new(timer_hz);
+    /// The discipline configuration that `settings` ask for, with the PPS lock range of
+    /// the clock running now.
+    fn discipline_config(
+        settings: &Settings,
+        timer_hz: u32,
+        clock: ClockSource,
+    ) -> DisciplineConfig {
+        let tolerance = board::clock_tolerance_ppm(board::clock_source(clock));
+        let mut cfg = DisciplineConfig::for_clock(timer_hz, tolerance);
         cfg.rate_hz = settings.rate;
         cfg.mode = match settings.mode {
             SampleMode::Pps => SyncMode::Pps,
@@ -196,8 +224,8 @@ mod app {
 
     #[init(local = [
         samples_q: Queue<RawSample, 32> = Queue::new(),
-        index_left_q: Queue<u32, 16> = Queue::new(),
-        index_right_q: Queue<u32, 16> = Queue::new(),
+        index_left_q: Queue<IndexCapture, 16> = Queue::new(),
+        index_right_q: Queue<IndexCapture, 16> = Queue::new(),
         host_rx_q: Queue<u8, 512> = Queue::new(),
         gnss_q: Queue<u8, 512> = Queue::new(),
         cfg_q: Queue<DisciplineConfig, 4> = Queue::new(),
@@ -207,16 +235,18 @@ mod app {
         let dp = cx.device;
         let mut core = cx.core;
         board::start_cycle_counter(&mut core);
-        let mut rcc = dp.RCC.freeze(board::clock_config());
-        let clocks = rcc.clocks;
-        let timer_hz = board::timer_hz(&clocks);
-
+        // The watchdog first (it runs from the LSI): nothing after this can hang for good.
         let mut watchdog = IndependentWatchdog::new(dp.IWDG);
         watchdog.stop_on_debug(&dp.DBGMCU, true);
         watchdog.start(board::WATCHDOG_MS.millis());
+        let (mut rcc, clock) = board::start_clocks(dp.RCC);
+        let clocks = rcc.clocks;
+        let timer_hz = board::timer_hz(&clocks);
+        if clock == ClockSource::HsiFallback {
+            defmt::error!("HSE did not start: running from the HSI (+-4 %)");
+        }
 
-        let mut exti = dp.EXTI;
-        let pins = board::pins(dp.GPIOA, dp.GPIOB, dp.GPIOC, dp.SYSCFG, &mut exti, &mut rcc);
+        let pins = board::pins(dp.GPIOA, dp.GPIOB, dp.GPIOC, &mut rcc);
 
         // Settings: the newest valid record in flash, else the defaults.
         #[cfg(not(feature = "qemu"))]
@@ -226,11 +256,11 @@ mod app {
         let mut store = SettingsStore::new(flash);
         let loaded = store.load_or_defaults();
         let mut settings = loaded.settings;
-        let mut cfg = discipline_config(&settings, timer_hz);
+        let mut cfg = discipline_config(&settings, timer_hz, clock);
         if cfg.validate().is_err() {
             defmt::error!("settings: rate/mode unusable by the sampler, using the defaults");
             settings = Settings::DEFAULT;
-            cfg = discipline_config(&settings, timer_hz);
+            cfg = discipline_config(&settings, timer_hz, clock);
         }
         match loaded.source {
             SettingsSource::Flash => defmt::info!(
@@ -267,7 +297,8 @@ mod app {
             Ok(d) => d,
             Err(_) => {
                 defmt::error!("sampler configuration invalid: free-running at 50 Hz");
-                let mut c = DisciplineConfig::new(timer_hz);
+                let mut c =
+                    DisciplineConfig::for_clock(timer_hz, board::clock_tolerance_ppm(clock));
                 c.mode = SyncMode::Free;
                 c.rate_hz = 50;
                 cfg = c;
@@ -292,6 +323,10 @@ mod app {
             period: sampler.discipline().period(),
             sim_index: [None, None],
             isr_cycles: 0,
+            merged: 0,
+            latency: 0,
+            pps_overcapture: false,
+            queue_lost: 0,
         };
         let mut samples_in = samples_in;
         let _ = samples_in.enqueue(first);
@@ -317,6 +352,7 @@ mod app {
             source: loaded.source,
             dirty: false,
             timer_hz,
+            clock,
         };
         (
             Shared {
@@ -328,6 +364,7 @@ mod app {
                 requests: Requests::default(),
                 live: Live::default(),
                 host_errors: RxErrors::default(),
+                gnss_errors: RxErrors::default(),
                 store_state: StoreState {
                     source: loaded.source,
                     dirty: false,
@@ -337,8 +374,6 @@ mod app {
                 sampler,
                 samples_in,
                 samples_out,
-                index_pin_left: pins.index_left,
-                index_pin_right: pins.index_right,
                 index_in_left,
                 index_in_right,
                 index_out_left,
@@ -366,14 +401,23 @@ mod app {
         }
     }
 
-    /// The sample instant (TIM5 update) and the PPS capture (TIM5 CH1): snapshot and hand on.
+    /// The sample instant (TIM5 compare) and the PPS capture (TIM5 CH1): snapshot and hand
+    /// on. No logging here: events travel with the sample to the processing task.
     #[task(
         binds = TIM5,
         priority = 4,
-        local = [sampler, samples_in, cfg_out, lost: u32 = 0, pps: Option<(u64, PpsEvent)> = None],
+        local = [
+            sampler, samples_in, cfg_out,
+            lost: u32 = 0,
+            pps: Option<(u64, PpsEvent)> = None,
+            overcapture: bool = false,
+        ],
         shared = [acq]
     )]
     fn sample(mut cx: sample::Context) {
+        // First action: both encoder counters (the board's timers; the simulated drive is
+        // sampled at the sample's tick below).
+        let entry_counts = cx.shared.acq.lock(|acq| acq.snapshot_now());
         let entry = board::cycles();
         let sampler = cx.local.sampler;
         let event = sampler.on_interrupt();
@@ -385,21 +429,20 @@ mod app {
                 *cx.local.pps = Some(pps);
             }
         }
-        if event.overcapture {
-            defmt::warn!("PPS: over-capture (two edges in one interrupt)");
-        }
+        *cx.local.overcapture |= event.overcapture;
         let Some(sample) = event.sample else {
             return;
         };
         let (counts, faults, sim_index) = cx.shared.acq.lock(|acq| {
-            let counts = acq.snapshot(sample.tick);
+            let counts = entry_counts.unwrap_or_else(|| acq.snapshot(sample.tick));
             (counts, acq.faults(sample.tick), acq.simulated_index())
         });
         while let Some(cfg) = cx.local.cfg_out.dequeue() {
-            if sampler.set_config(cfg).is_err() {
-                defmt::error!("sampler configuration rejected");
-            }
+            // A rejected configuration keeps the running one; the command task validated
+            // it already (`discipline_config` of validated settings).
+            let _ = sampler.set_config(cfg);
         }
+        sampler.follow_clock();
         let raw = RawSample {
             sample,
             counts,
@@ -410,40 +453,48 @@ mod app {
             period: sampler.discipline().period(),
             sim_index,
             isr_cycles: board::cycles().wrapping_sub(entry),
+            merged: event.merged,
+            latency: event.latency,
+            pps_overcapture: core::mem::take(cx.local.overcapture),
+            queue_lost: *cx.local.lost,
         };
         if cx.local.samples_in.enqueue(raw).is_err() {
-            *cx.local.lost += 1;
+            *cx.local.lost = cx.local.lost.wrapping_add(1);
         }
         rtic::pend(Interrupt::SPI2);
     }
 
-    /// Left index pulse: latch the left counter.
-    #[task(binds = EXTI0, priority = 4, local = [index_pin_left, index_in_left], shared = [acq])]
+    /// Left index pulse: TIM2 latched the left counter at the edge (CH3 capture).
+    #[task(binds = TIM2, priority = 4, local = [index_in_left], shared = [acq])]
     fn index_left(mut cx: index_left::Context) {
-        let raw = cx.shared.acq.lock(|acq| acq.latch(0));
-        cx.local.index_pin_left.clear_interrupt_pending_bit();
-        let _ = cx.local.index_in_left.enqueue(raw);
+        if let Some(capture) = cx.shared.acq.lock(|acq| acq.take_index(0)) {
+            let _ = cx.local.index_in_left.enqueue(capture);
+        }
     }
 
-    /// Right index pulse: latch the right counter.
-    #[task(binds = EXTI1, priority = 4, local = [index_pin_right, index_in_right], shared = [acq])]
+    /// Right index pulse: TIM3 latched the right counter at the edge (CH4 capture).
+    #[task(binds = TIM3, priority = 4, local = [index_in_right], shared = [acq])]
     fn index_right(mut cx: index_right::Context) {
-        let raw = cx.shared.acq.lock(|acq| acq.latch(1));
-        cx.local.index_pin_right.clear_interrupt_pending_bit();
-        let _ = cx.local.index_in_right.enqueue(raw);
+        if let Some(capture) = cx.shared.acq.lock(|acq| acq.take_index(1)) {
+            let _ = cx.local.index_in_right.enqueue(capture);
+        }
     }
 
     /// NMEA bytes from the GNSS receiver.
-    #[task(binds = USART1, priority = 3, local = [gnss, gnss_in, errors: RxErrors = RxErrors { lost: 0 }])]
-    fn gnss_rx(cx: gnss_rx::Context) {
-        if let Some(byte) = cx.local.gnss.on_interrupt(cx.local.errors) {
-            if cx.local.gnss_in.enqueue(byte).is_err() {
-                cx.local.errors.lost = cx.local.errors.lost.wrapping_add(1);
+    #[task(binds = USART1, priority = 3, local = [gnss, gnss_in], shared = [gnss_errors])]
+    fn gnss_rx(mut cx: gnss_rx::Context) {
+        let gnss = cx.local.gnss;
+        let gnss_in = cx.local.gnss_in;
+        cx.shared.gnss_errors.lock(|errors| {
+            if let Some(byte) = gnss.on_interrupt(errors) {
+                if gnss_in.enqueue(byte).is_err() {
+                    errors.lost = errors.lost.wrapping_add(1);
+                }
+                if byte == b'\n' {
+                    rtic::pend(Interrupt::SPI2);
+                }
             }
-            if byte == b'\n' {
-                rtic::pend(Interrupt::SPI2);
-            }
-        }
+        });
     }
 
     /// The host link: bytes out of the transmit ring, command bytes in.
@@ -495,7 +546,7 @@ mod app {
         binds = SPI2,
         priority = 2,
         local = [samples_out, index_out_left, index_out_right, gnss_out, processor, led, watchdog],
-        shared = [link, requests, live, host_errors, store_state]
+        shared = [link, requests, live, host_errors, gnss_errors, store_state]
     )]
     fn process(mut cx: process::Context) {
         let p = cx.local.processor;
@@ -505,10 +556,10 @@ mod app {
         while let Some(raw) = cx.local.samples_out.dequeue() {
             let start = board::cycles();
             while let Some(l) = cx.local.index_out_left.dequeue() {
-                p.on_index(0, l);
+                p.on_index_capture(0, l);
             }
             while let Some(r) = cx.local.index_out_right.dequeue() {
-                p.on_index(1, r);
+                p.on_index_capture(1, r);
             }
             let requests = cx.shared.requests.lock(core::mem::take);
             p.apply(requests);
@@ -524,7 +575,8 @@ mod app {
             if p.heartbeat_due() {
                 let store = cx.shared.store_state.lock(|s| *s);
                 let rx_errors = cx.shared.host_errors.lock(|e| e.lost);
-                let status = p.heartbeat(&raw, store, rx_errors);
+                let gnss_lost = cx.shared.gnss_errors.lock(|e| e.lost);
+                let status = p.heartbeat(&raw, store, rx_errors, gnss_lost);
                 // Like a record: sent whole when there is room, else skipped (the next one
                 // follows a second later).
                 send(
@@ -540,7 +592,7 @@ mod app {
     }
 
     /// Commands from the host (SPI3 vector, pended by the USART2 interrupt).
-    #[task(binds = SPI3, priority = 1, local = [host_rx_out, commands, cfg_in], shared = [link, requests, live, host_errors, store_state])]
+    #[task(binds = SPI3, priority = 1, local = [host_rx_out, commands, cfg_in], shared = [link, requests, live, host_errors, gnss_errors, store_state])]
     fn commands_task(mut cx: commands_task::Context) {
         let c = cx.local.commands;
         while let Some(byte) = cx.local.host_rx_out.dequeue() {
@@ -554,12 +606,22 @@ mod app {
                 Action::SettingsChanged => {
                     c.dirty = true;
                     cx.shared.store_state.lock(|s| s.dirty = true);
-                    let cfg = discipline_config(&c.settings, c.timer_hz);
+                    let cfg = discipline_config(&c.settings, c.timer_hz, c.clock);
                     if cx.local.cfg_in.enqueue(cfg).is_err() {
                         defmt::warn!("sampler configuration queue full");
                     }
                     let settings = c.settings;
                     cx.shared.requests.lock(|r| r.settings = Some(settings));
+                }
+                Action::Save
+                    if cx.shared.live.lock(|l| l.moving)
+                        && !stall_safe(&c.settings, c.store.flash().max_stall_ms())
+                        && c.store.next_save_erases().unwrap_or(true) =>
+                {
+                    reply = Reply::error(format_args!(
+                        "save refused while the wheels turn: a flash erase stops the CPU for up to {} ms, longer than the right counter can go unread at max_wheel_speed; save at rest",
+                        c.store.flash().max_stall_ms()
+                    ));
                 }
                 Action::Save => match c.store.save(&c.settings) {
                     Ok(generation) => {
@@ -587,7 +649,8 @@ mod app {
                 Action::Status => {
                     let live = cx.shared.live.lock(|l| *l);
                     let rx_lost = cx.shared.host_errors.lock(|e| e.lost);
-                    c.status(&mut reply, &live, rx_lost);
+                    let gnss_lost = cx.shared.gnss_errors.lock(|e| e.lost);
+                    c.status(&mut reply, &live, rx_lost, gnss_lost);
                 }
                 Action::Version => {
                     reply.push_line(format_args!(
@@ -620,6 +683,13 @@ mod app {
         }
     }
 
+    /// True when a flash erase stall of `stall_ms` cannot alias the 16-bit right counter at
+    /// `max_wheel_speed`: a save is then safe while the wheels turn. (Only one save in 64
+    /// erases; the others stall the CPU for about 1 ms per record.)
+    fn stall_safe(settings: &Settings, stall_ms: u32) -> bool {
+        settings.max_unread_interval() * 1000.0 > f64::from(stall_ms)
+    }
+
     /// State of the command task.
     pub struct Commands {
         assembler: LineAssembler,
@@ -628,36 +698,64 @@ mod app {
         source: SettingsSource,
         dirty: bool,
         timer_hz: u32,
+        /// The clock source found at start.
+        clock: ClockSource,
     }
 
     impl Commands {
-        fn status(&self, reply: &mut Reply, live: &Live, rx_lost: u32) {
+        fn status(&self, reply: &mut Reply, live: &Live, rx_lost: u32, gnss_lost: u32) {
             let sync = match live.flags.sync {
                 protocol::SyncMode::FreeRunning => "free",
                 protocol::SyncMode::PpsLocked => "locked",
                 protocol::SyncMode::Holdover => "holdover",
             };
             let on = |b: bool| if b { "yes" } else { "no" };
+            let clock = match board::clock_source(self.clock) {
+                ClockSource::Hse => "hse",
+                ClockSource::Hsi => "hsi",
+                ClockSource::HsiFallback => "hsi-fallback (HSE failed)",
+            };
+            reply.push_line(format_args!("clock = {clock}"));
             reply.push_line(format_args!("sync = {sync}"));
             reply.push_line(format_args!("time_valid = {}", on(live.flags.time_valid)));
             reply.push_line(format_args!("samples = {}", live.samples));
             reply.push_line(format_args!("mcu_time_us = {}", live.mcu_time_us));
             reply.push_line(format_args!("records_dropped = {}", live.dropped_total));
+            reply.push_line(format_args!(
+                "samples_lost = {}, merged_samples = {}",
+                live.samples_lost, live.merged_samples
+            ));
+            let latency_ns = u64::from(live.latency_max) * 1_000_000_000 / u64::from(self.timer_hz);
+            reply.push_line(format_args!("sample_latency_max = {latency_ns} ns"));
             reply.push_line(format_args!("second_ticks = {}", live.period));
             reply.push_line(format_args!(
-                "pps_accepted = {}, pps_glitches = {}, pps_missed = {}, pps_locks = {}",
-                live.stats.accepted, live.stats.glitches, live.stats.missed, live.stats.locks
+                "pps_accepted = {}, pps_glitches = {}, pps_missed = {}, pps_locks = {}, pps_overcaptures = {}",
+                live.stats.accepted,
+                live.stats.glitches,
+                live.stats.missed,
+                live.stats.locks,
+                live.pps_overcaptures
             ));
             reply.push_line(format_args!(
-                "nmea_time_messages = {}, nmea_errors = {}",
+                "nmea_time_messages = {}, nmea_errors = {}, gnss_rx_lost = {gnss_lost}",
                 live.time_messages, live.nmea_errors
             ));
-            for (name, w, m) in [
-                ("left", live.flags.left, live.index_mismatches[0]),
-                ("right", live.flags.right, live.index_mismatches[1]),
+            for (name, w, m, lost) in [
+                (
+                    "left",
+                    live.flags.left,
+                    live.index_mismatches[0],
+                    live.index_lost[0],
+                ),
+                (
+                    "right",
+                    live.flags.right,
+                    live.index_mismatches[1],
+                    live.index_lost[1],
+                ),
             ] {
                 reply.push_line(format_args!(
-                    "{name}: fault = {}, index_seen = {}, index_mismatches = {m}",
+                    "{name}: fault = {}, index_seen = {}, index_mismatches = {m}, index_lost = {lost}",
                     on(w.fault),
                     on(w.index_seen)
                 ));
@@ -713,6 +811,13 @@ mod app {
         mcu_time_us: u64,
         isr_cycles_max: u32,
         process_cycles_max: u32,
+        merged_samples: u32,
+        latency_max: u32,
+        index_lost: [u32; 2],
+        pps_overcaptures: u32,
+        /// Counts of the last sample, and the sample sequence at which they last changed.
+        last_counts: Option<(u32, u32)>,
+        last_motion: u32,
     }
 
     impl Processor {
@@ -740,7 +845,22 @@ mod app {
                 mcu_time_us: 0,
                 isr_cycles_max: 0,
                 process_cycles_max: 0,
+                merged_samples: 0,
+                latency_max: 0,
+                index_lost: [0; 2],
+                pps_overcaptures: 0,
+                last_counts: None,
+                last_motion: 0,
             }
+        }
+
+        /// An index pulse latched by the wheel's timer.
+        fn on_index_capture(&mut self, wheel: usize, capture: IndexCapture) {
+            if capture.overcapture {
+                self.index_lost[wheel] = self.index_lost[wheel].wrapping_add(1);
+                defmt::warn!("wheel {}: index pulse lost (over-capture)", wheel);
+            }
+            self.on_index(wheel, capture.raw);
         }
 
         fn on_nmea_byte(&mut self, byte: u8) {
@@ -803,6 +923,24 @@ mod app {
         /// Integrates one sample. `None` when nothing was integrated (never, today);
         /// `Some(None)` when the record is not sent (`output_divider`).
         fn on_sample(&mut self, raw: &RawSample) -> Option<Option<PoseRecord>> {
+            if raw.merged > 0 {
+                self.merged_samples = self.merged_samples.wrapping_add(raw.merged);
+                defmt::warn!(
+                    "sample interrupt late by {} ticks: {} samples merged",
+                    raw.latency,
+                    raw.merged
+                );
+            }
+            self.latency_max = self.latency_max.max(raw.latency);
+            if raw.pps_overcapture {
+                self.pps_overcaptures = self.pps_overcaptures.wrapping_add(1);
+                defmt::warn!("PPS: over-capture (two edges in one interrupt)");
+            }
+            let counts_now = (raw.counts.left, raw.counts.right);
+            if self.last_counts != Some(counts_now) {
+                self.last_counts = Some(counts_now);
+                self.last_motion = self.sequence;
+            }
             let counts = match &mut self.extenders {
                 Some(ext) => {
                     ext[0].update(raw.counts.left);
@@ -960,7 +1098,13 @@ mod app {
         }
 
         /// The Status heartbeat after sample `raw`.
-        fn heartbeat(&self, raw: &RawSample, store: StoreState, rx_errors: u32) -> Status {
+        fn heartbeat(
+            &self,
+            raw: &RawSample,
+            store: StoreState,
+            rx_errors: u32,
+            gnss_lost: u32,
+        ) -> Status {
             Status {
                 uptime_us: self.mcu_time_us,
                 flags: self.flags,
@@ -972,6 +1116,9 @@ mod app {
                 rx_errors,
                 settings_source: store.source,
                 settings_dirty: store.dirty,
+                samples_lost: raw.queue_lost,
+                gnss_rx_lost: gnss_lost,
+                merged_samples: self.merged_samples,
             }
         }
 
@@ -1003,6 +1150,12 @@ mod app {
                 nmea_errors: self.nmea_errors,
                 time_messages: self.time_messages,
                 mcu_time_us: self.mcu_time_us,
+                samples_lost: raw.queue_lost,
+                merged_samples: self.merged_samples,
+                latency_max: self.latency_max,
+                index_lost: self.index_lost,
+                pps_overcaptures: self.pps_overcaptures,
+                moving: self.sequence.wrapping_sub(self.last_motion) <= self.settings.rate.max(1),
             }
         }
     }

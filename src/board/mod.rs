@@ -5,17 +5,19 @@
 //! |------------------------------|-----------------------|------|----|-------|
 //! | left encoder A / B           | TIM2 CH1 / CH2, QEI x4 (32-bit) | PA15 / PB3 | 1 | boot as JTDI / JTDO: SWD only |
 //! | right encoder A / B          | TIM3 CH1 / CH2, QEI x4 (16-bit) | PA6 / PA7  | 2 | |
-//! | left index N                 | EXTI0, rising edge    | PB0  | -  | latches TIM2 |
-//! | right index N                | EXTI1, rising edge    | PB1  | -  | latches TIM3 |
+//! | left index N                 | TIM2 CH3 input capture | PB10 | 1 | latches the left count in hardware |
+//! | right index N                | TIM3 CH4 input capture | PB1  | 2 | latches the right count in hardware |
 //! | left encoder fault           | GPIO in, pull-up      | PC2  | -  | active low |
 //! | right encoder fault          | GPIO in, pull-up      | PC3  | -  | active low |
-//! | GNSS 1-PPS                   | TIM5 CH1 input capture | PA0 | 2  | rising edge; TIM5 also times the samples |
+//! | GNSS 1-PPS                   | TIM5 CH1 input capture | PA0 | 2  | rising edge, pull-down, filtered; TIM5 also times the samples |
 //! | GNSS NMEA (receiver TX)      | USART1 RX             | PA10 | 7  | [`GNSS_BAUD`] 8N1, RS-232 level shifter |
 //! | host link TX / RX            | USART2 TX / RX        | PA2 / PA3 | 7 | Nucleo ST-LINK virtual COM port; QEMU `-serial` #2 |
 //! | status LED                   | GPIO out              | PA5  | -  | on = PPS locked (Nucleo LD2) |
 //!
-//! Interrupt priorities (RTIC): TIM5 sample/PPS and EXTI0/1 index = 4; USART1/USART2 = 3;
-//! the processing task (SPI2 vector) = 2; the command task (SPI3 vector) = 1.
+//! Interrupt priorities (RTIC): TIM5 sample/PPS and TIM2/TIM3 index captures = 4;
+//! USART1/USART2 = 3; the processing task (SPI2 vector) = 2; the command task (SPI3
+//! vector) = 1. The index counts are latched by the timers themselves, so the capture
+//! interrupts' latency does not matter (they must only run within one wheel turn).
 //!
 //! The `qemu` feature builds the same application for QEMU's `netduinoplus2`: HSI 16 MHz, the
 //! timers count at 1 GHz of emulated time, the encoders, index pulses and fault lines come
@@ -47,18 +49,152 @@ pub type GnssRx = serial::GnssUart;
 #[cfg(feature = "qemu")]
 pub type GnssRx = sim_gnss::SimUart;
 
-/// Watchdog timeout, milliseconds: longer than the worst-case 128 KiB sector erase (2 s at
-/// x32 parallelism, during which the CPU stalls on flash reads) with margin.
+/// Watchdog timeout, milliseconds, at the LSI's nominal 32 kHz. The LSI runs anywhere
+/// from 17 to 47 kHz (datasheet DS9716), so the real timeout lies between 2.7 s and 7.5 s:
+/// the shortest is 3.4x the longest flash stall ([`flash::MAX_ERASE_MS`], 800 ms), before
+/// which the flash driver feeds the watchdog.
 pub const WATCHDOG_MS: u32 = 4_000;
+
+/// Shortest watchdog timeout over the LSI's range (47 kHz), milliseconds.
+pub const WATCHDOG_MIN_MS: u32 = WATCHDOG_MS * 32 / 47;
+
+const _: () = assert!(WATCHDOG_MIN_MS > 3 * flash::MAX_ERASE_MS);
+
+/// Reloads the independent watchdog from anywhere (the flash driver, just before an erase).
+#[cfg_attr(feature = "qemu", allow(dead_code))]
+pub fn watchdog_feed() {
+    // Note(unsafe): a write of the reload key 0xAAAA to IWDG_KR, a write-only register whose
+    // only effect is the reload; atomic, and harmless before the watchdog is started.
+    unsafe { (*pac::IWDG::ptr()).kr().write(|w| w.bits(0xAAAA)) };
+}
+
+/// Where the system clock comes from after [`start_clocks`].
+#[derive(Clone, Copy, PartialEq, Eq, defmt::Format)]
+pub enum ClockSource {
+    /// PLL from the HSE ([`HSE_HZ`]): crystal or external clock accuracy.
+    #[cfg_attr(any(feature = "qemu", not(feature = "hse")), allow(dead_code))]
+    Hse,
+    /// PLL from the 16 MHz HSI (+-1 % at 25 C, +-4 % over temperature): a build without
+    /// the `hse` feature, or QEMU.
+    #[cfg_attr(all(not(feature = "qemu"), feature = "hse"), allow(dead_code))]
+    Hsi,
+    /// The build asked for the HSE but it did not start within [`HSE_STARTUP_MS`], or the
+    /// clock security system saw it fail later: PLL from the HSI, reported in `status`.
+    HsiFallback,
+}
+
+/// How long start-up waits for the HSE to become ready, milliseconds (a crystal takes about
+/// 2 ms; an external clock is ready at once).
+#[cfg_attr(any(feature = "qemu", not(feature = "hse")), allow(dead_code))]
+pub const HSE_STARTUP_MS: u32 = 100;
+
+/// Set by the clock security system's NMI when the HSE failed after start-up.
+static HSE_FAILED: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
+
+/// The clock source now: [`ClockSource::HsiFallback`] once the clock security system has
+/// switched away from a failed HSE.
+pub fn clock_source(at_start: ClockSource) -> ClockSource {
+    if HSE_FAILED.load(core::sync::atomic::Ordering::Relaxed) {
+        ClockSource::HsiFallback
+    } else {
+        at_start
+    }
+}
+
+/// Largest frequency error of the timer clock for `source`, ppm: what the PPS discipline
+/// must accept to lock ([`odo_core::timing`]'s tolerance constants).
+pub fn clock_tolerance_ppm(source: ClockSource) -> u32 {
+    match source {
+        ClockSource::Hse => odo_core::timing::HSE_CRYSTAL_TOLERANCE_PPM,
+        ClockSource::Hsi | ClockSource::HsiFallback => odo_core::timing::HSI_TOLERANCE_PPM,
+    }
+}
+
+/// Starts the clocks ([`clock_config`]) without ever hanging: with the `hse` feature, the
+/// HSE is started first and waited for at most [`HSE_STARTUP_MS`] (at the reset clock, the
+/// 16 MHz HSI); if it is not ready the PLL runs from the HSI instead and the result says
+/// so. With the HSE running, the clock security system is enabled: an HSE failure then
+/// raises the NMI, which restarts the PLL from the HSI at the same 84 MHz.
+pub fn start_clocks(rcc: pac::RCC) -> (stm32f4xx_hal::rcc::Rcc, ClockSource) {
+    use stm32f4xx_hal::rcc::RccExt;
+    #[cfg(all(not(feature = "qemu"), feature = "hse"))]
+    {
+        rcc.cr().modify(|_, w| {
+            #[cfg(feature = "hse-bypass")]
+            w.hsebyp().set_bit();
+            w.hseon().set_bit()
+        });
+        // About 10 cycles per poll at 16 MHz.
+        let polls = HSE_STARTUP_MS * (16_000_000 / 1000 / 10);
+        let mut ready = false;
+        for _ in 0..polls {
+            if rcc.cr().read().hserdy().bit_is_set() {
+                ready = true;
+                break;
+            }
+        }
+        if ready {
+            let rcc = rcc.freeze(clock_config());
+            // Note(unsafe): RCC_CR CSSON (bit 19): the clock security system watches the
+            // HSE from now on; a failure raises the NMI (handler below).
+            unsafe {
+                (*pac::RCC::ptr())
+                    .cr()
+                    .modify(|r, w| w.bits(r.bits() | 1 << 19))
+            };
+            return (rcc, ClockSource::Hse);
+        }
+        rcc.cr()
+            .modify(|_, w| w.hseon().clear_bit().hsebyp().clear_bit());
+        (rcc.freeze(hsi_config()), ClockSource::HsiFallback)
+    }
+    #[cfg(any(feature = "qemu", not(feature = "hse")))]
+    {
+        (rcc.freeze(clock_config()), ClockSource::Hsi)
+    }
+}
+
+/// The clock security system's NMI: the HSE failed, the hardware switched the system clock
+/// to the HSI and stopped the PLL. Restarts the PLL from the HSI at the same 84 MHz (so the
+/// timers, UARTs and flash wait states stay right) and flags the fallback.
+#[cfg(all(not(feature = "qemu"), feature = "hse"))]
+#[cortex_m_rt::exception]
+unsafe fn NonMaskableInt() {
+    // Note(unsafe): raw RCC registers, RM0368 sec. 6.3: CIR CSSC (bit 23) clears the CSS
+    // flag; PLLCFGR = HSI source, M = 16, N = 336, P = /4, Q = 7 (1 MHz VCO input, 336 MHz
+    // VCO, 84 MHz SYSCLK, 48 MHz Q); PLLON (bit 24) and wait for PLLRDY (bit 25, the HSI
+    // always runs); CFGR SW = PLL (0b10) and wait for SWS. Nothing else touches RCC after
+    // start-up, and the NMI preempts everything, so these read-modify-writes are not raced.
+    unsafe {
+        let rcc = &*pac::RCC::ptr();
+        rcc.cir().modify(|r, w| w.bits(r.bits() | 1 << 23));
+        rcc.pllcfgr()
+            .write(|w| w.bits(16 | 336 << 6 | 0b01 << 16 | 7 << 24));
+        rcc.cr().modify(|r, w| w.bits(r.bits() | 1 << 24));
+        while rcc.cr().read().bits() & 1 << 25 == 0 {}
+        rcc.cfgr().modify(|r, w| w.bits((r.bits() & !0b11) | 0b10));
+        while rcc.cfgr().read().bits() >> 2 & 0b11 != 0b10 {}
+    }
+    HSE_FAILED.store(true, core::sync::atomic::Ordering::Relaxed);
+}
+
+/// The HSI variant of [`clock_config`]: the same 84 MHz from the 16 MHz HSI.
+#[cfg_attr(feature = "qemu", allow(dead_code))]
+pub fn hsi_config() -> Config {
+    use stm32f4xx_hal::prelude::*;
+    Config::hsi().sysclk(84.MHz()).pclk1(42.MHz())
+}
 
 /// Clock configuration.
 ///
-/// Board: 84 MHz from the PLL. With the `hse` feature off (default) the PLL runs from the
-/// 16 MHz HSI (+-1 % at 25 C: irrelevant when PPS-locked, since the period is measured); a
-/// board with a crystal builds with `--features hse` for an 8 MHz HSE ([`HSE_HZ`]), which is
-/// what makes free-running (indoor) sample timing accurate; a Nucleo-64, whose ST-LINK feeds
-/// its 8 MHz clock into OSC_IN, builds with `--features hse-bypass`. APB1 = 42 MHz, so TIM2-5 count
-/// at 84 MHz; APB2 = 84 MHz.
+/// Board: 84 MHz from the PLL. The default build (feature `hse-bypass`) takes an 8 MHz
+/// external clock on OSC_IN in bypass mode, as a Nucleo-64's ST-LINK provides; a board with
+/// an 8 MHz crystal builds with `--no-default-features --features hse`; without either, the
+/// PLL runs from the 16 MHz HSI, +-1 % at 25 C and +-4 % over temperature: the PPS
+/// discipline still locks (its tolerance follows the clock, [`clock_tolerance_ppm`]), but
+/// free-running (indoor) timing is only that good and the UART baud rates may leave the
+/// receivers' tolerance (docs/HARDWARE.md). APB1 = 42 MHz, so TIM2-5 count at 84 MHz;
+/// APB2 = 84 MHz.
 ///
 /// QEMU: the HSI at 16 MHz without PLL (QEMU's RCC never reports the PLL locked).
 pub fn clock_config() -> Config {
@@ -78,13 +214,12 @@ pub fn clock_config() -> Config {
     }
     #[cfg(all(not(feature = "qemu"), not(feature = "hse")))]
     {
-        use stm32f4xx_hal::prelude::*;
-        Config::hsi().sysclk(84.MHz()).pclk1(42.MHz())
+        hsi_config()
     }
 }
 
 /// Frequency of the HSE crystal with the `hse` feature, Hz.
-#[cfg_attr(not(feature = "hse"), allow(dead_code))]
+#[cfg_attr(any(feature = "qemu", not(feature = "hse")), allow(dead_code))]
 pub const HSE_HZ: u32 = 8_000_000;
 
 /// Frequency of the TIM5 sample timer's ticks, Hz: TIM2-5 in QEMU count at 1 GHz of emulated
@@ -121,59 +256,41 @@ pub fn unique_id() -> [u8; 12] {
 pub struct Pins {
     /// Status LED.
     pub led: Led,
-    /// Left index line (EXTI0).
-    pub index_left: IndexPin<'B', 0>,
-    /// Right index line (EXTI1).
-    pub index_right: IndexPin<'B', 1>,
     /// Encoder fault lines.
     pub faults: FaultLines,
 }
 
-/// An index input pin, source of its EXTI line.
-pub type IndexPin<const P: char, const N: u8> =
-    stm32f4xx_hal::gpio::Pin<P, N, stm32f4xx_hal::gpio::Input>;
-
-/// Configures the pins of the table above (alternate functions, pulls, EXTI lines). Pins
+/// Configures the pins of the table above (alternate functions, pulls). Pins
 /// that only carry a peripheral function are dropped: their configuration stays in the
 /// GPIO registers.
 pub fn pins(
     gpioa: pac::GPIOA,
     gpiob: pac::GPIOB,
     gpioc: pac::GPIOC,
-    syscfg: pac::SYSCFG,
-    exti: &mut pac::EXTI,
     rcc: &mut stm32f4xx_hal::rcc::Rcc,
 ) -> Pins {
-    use stm32f4xx_hal::gpio::{Edge, ExtiPin, GpioExt};
-    use stm32f4xx_hal::syscfg::SysCfgExt;
+    use stm32f4xx_hal::gpio::GpioExt;
     let a = gpioa.split(rcc);
     let b = gpiob.split(rcc);
     let c = gpioc.split(rcc);
-    let mut syscfg = syscfg.constrain(rcc);
     // Left encoder on TIM2 (AF1); PA15/PB3 leave their JTAG function (SWD stays usable).
     let _ = a.pa15.into_input().into_alternate::<1>();
     let _ = b.pb3.into_input().into_alternate::<1>();
     // Right encoder on TIM3 (AF2).
     let _ = a.pa6.into_alternate::<2>();
     let _ = a.pa7.into_alternate::<2>();
-    // PPS on TIM5 CH1 (AF2).
-    let _ = a.pa0.into_alternate::<2>();
+    // PPS on TIM5 CH1 (AF2), pulled down so that an unplugged receiver reads as no edges.
+    let _ = a.pa0.into_alternate::<2>().internal_pull_down(true);
+    // Index lines on TIM2 CH3 (PB10, AF1) and TIM3 CH4 (PB1, AF2), pulled up (open-collector
+    // or line-driver outputs both work).
+    let _ = b.pb10.into_alternate::<1>().internal_pull_up(true);
+    let _ = b.pb1.into_alternate::<2>().internal_pull_up(true);
     // USART1 RX (GNSS), USART2 TX/RX (host), AF7.
     let _ = a.pa10.into_alternate::<7>();
     let _ = a.pa2.into_alternate::<7>();
     let _ = a.pa3.into_alternate::<7>();
-    // Index lines: inputs with pull-ups, rising edge on EXTI0/EXTI1.
-    let mut index_left = b.pb0.into_pull_up_input();
-    let mut index_right = b.pb1.into_pull_up_input();
-    for pin in [&mut index_left as &mut dyn ExtiPin, &mut index_right] {
-        pin.make_interrupt_source(&mut syscfg);
-        pin.trigger_on_edge(exti, Edge::Rising);
-        pin.enable_interrupt(exti);
-    }
     Pins {
         led: Led(a.pa5.into_push_pull_output()),
-        index_left,
-        index_right,
         faults: FaultLines {
             left: c.pc2.into_pull_up_input(),
             right: c.pc3.into_pull_up_input(),
@@ -236,6 +353,20 @@ impl Acquisition {
         }
     }
 
+    /// Both counters now, read first thing in the sample interrupt (the board's timers);
+    /// `None` in QEMU, whose drive is sampled at the sample's tick ([`Self::snapshot`]).
+    #[inline(always)]
+    pub fn snapshot_now(&self) -> Option<encoders::Snapshot> {
+        #[cfg(not(feature = "qemu"))]
+        {
+            Some(self.encoders.snapshot())
+        }
+        #[cfg(feature = "qemu")]
+        {
+            None
+        }
+    }
+
     /// Both counters at the sample instant `tick`.
     #[inline(always)]
     pub fn snapshot(&mut self, tick: u64) -> encoders::Snapshot {
@@ -250,26 +381,27 @@ impl Acquisition {
         }
     }
 
-    /// The counter of `wheel` (0 left, 1 right) now (index interrupt).
-    #[inline(always)]
-    pub fn latch(&self, wheel: usize) -> u32 {
+    /// The index pulse of `wheel` (0 left, 1 right) latched by its timer since the last
+    /// call (the timer's capture interrupt); never one in QEMU, whose drive reports its
+    /// pulses with the samples ([`Self::simulated_index`]).
+    pub fn take_index(&self, wheel: usize) -> Option<encoders::IndexCapture> {
         #[cfg(not(feature = "qemu"))]
         {
             if wheel == 0 {
-                self.encoders.left()
+                self.encoders.take_index_left()
             } else {
-                self.encoders.right()
+                self.encoders.take_index_right()
             }
         }
         #[cfg(feature = "qemu")]
         {
             let _ = wheel;
-            0
+            None
         }
     }
 
     /// Index pulses of the simulated drive since the last snapshot (none on the board,
-    /// where they come through EXTI).
+    /// where the timers latch them).
     pub fn simulated_index(&mut self) -> [Option<u32>; 2] {
         #[allow(unused_mut)]
         let mut out = [None, None];
