@@ -896,3 +896,20 @@ fn corrupt_or_mislabelled_old_records_are_rejected() {
     f.program(0, 0, &v1_record(&s, 10)).unwrap();
     assert_eq!(SettingsStore::new(&mut f).save(&variant(7)).unwrap(), 11);
 }
+
+/// The save guard: an erase stall is survivable below `max_unread_interval` (0.669 s for the
+/// designed chassis at 2 m/s), so the x32 erase (500 ms) is, the x8 erase (800 ms) is not;
+/// slower wheels make the x8 erase survivable too, and a stall of zero always is.
+#[test]
+fn erase_stall_against_the_counter_range() {
+    let d = Settings::DEFAULT;
+    assert!(d.survives_stall(0));
+    assert!(d.survives_stall(500));
+    assert!(d.survives_stall(668));
+    assert!(!d.survives_stall(670));
+    assert!(!d.survives_stall(800));
+    let mut slow = d;
+    slow.max_wheel_speed = 1.0;
+    assert!(slow.survives_stall(800));
+    assert!(!slow.survives_stall(1_400));
+}

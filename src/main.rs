@@ -615,7 +615,7 @@ mod app {
                 }
                 Action::Save
                     if cx.shared.live.lock(|l| l.moving)
-                        && !stall_safe(&c.settings, c.store.flash().max_stall_ms())
+                        && !c.settings.survives_stall(c.store.flash().max_stall_ms())
                         && c.store.next_save_erases().unwrap_or(true) =>
                 {
                     reply = Reply::error(format_args!(
@@ -681,13 +681,6 @@ mod app {
         while !send(link, msg, 0) {
             cortex_m::asm::nop();
         }
-    }
-
-    /// True when a flash erase stall of `stall_ms` cannot alias the 16-bit right counter at
-    /// `max_wheel_speed`: a save is then safe while the wheels turn. (Only one save in 64
-    /// erases; the others stall the CPU for about 1 ms per record.)
-    fn stall_safe(settings: &Settings, stall_ms: u32) -> bool {
-        settings.max_unread_interval() * 1000.0 > f64::from(stall_ms)
     }
 
     /// State of the command task.
