@@ -1,0 +1,268 @@
+//! Calibration speed on the host (`odo-bench calibrate`): `odoctl`'s eq (16) fit and its whole
+//! calibration (eq 16, then the uncertainty coefficients) on runs made by `odoctl`'s own
+//! simulator, exactly as `odoctl simulate` makes them with its defaults (seed 1, 50 Hz,
+//! 0.5 m/s, default slip and RTK noise): the 70 m estimation path and a 3 km random path
+//! (`odoctl simulate --path random --length 3000`). Every fit starts from the paper's poor
+//! first estimate 0.300/0.300/0.700 m. Wall times are medians of several runs (in-process,
+//! no CSV parsing); the eq (16) cost, iterations and integrator runs are printed next to the
+//! figures measured before issue 11 (analytic sensitivities), on the same deterministic
+//! inputs, so the cost comparison is part of the output. Figures only: nothing here fails on
+//! noise.
+//!
+//! `BENCH_REPS` (default 5) sets the repetitions of the 70 m figures; the 3 km figures use
+//! `BENCH_REPS_LONG` (default 3).
+
+use std::time::Instant;
+
+use indicatif::ProgressBar;
+use odo_core::odometry::ChassisParams;
+use odoctl::calib::{self, DeltaMode, GeomOptions, Run, WindowStart};
+use odoctl::commands::{calibrate_run, default_truth, CalibrateOptions};
+use odoctl::csvio::match_times;
+use odoctl::simulate::{self, PathKind, SimOptions, SimRun, SimSettings};
+
+/// Figures measured before issue 11 on the same inputs (commit 0b32b1c, central-difference
+/// Jacobian and Nelder-Mead polish): eq (16) fit seconds, eq (16) cost, iterations,
+/// integrator runs; whole calibration seconds.
+struct Before {
+    fit_s: f64,
+    cost: f64,
+    iterations: usize,
+    runs: usize,
+    calibrate_s: f64,
+}
+
+const BEFORE_70: Before = Before {
+    fit_s: 0.3443,
+    cost: 56.958589,
+    iterations: 344,
+    runs: 1587,
+    calibrate_s: 0.4392,
+};
+const BEFORE_3K: Before = Before {
+    fit_s: 21.5147,
+    cost: 156_080.073_140,
+    iterations: 477,
+    runs: 3342,
+    calibrate_s: 27.2369,
+};
+/// Stability study `--windows 1,2,4,8` on the 70 m run before issue 11 (s).
+const BEFORE_WINDOWS_70: f64 = 0.4162;
+
+fn poor() -> ChassisParams {
+    ChassisParams {
+        left_diameter: 0.300,
+        right_diameter: 0.300,
+        track_width: 0.700,
+        ..ChassisParams::DESIGNED
+    }
+}
+
+/// The run of `odoctl simulate --path KIND --length LENGTH` with its defaults.
+fn sim(kind: PathKind, length: f64) -> SimRun {
+    let settings = SimSettings {
+        rate: 50.0,
+        speed: 0.5,
+        slip: 0.001,
+        slip_corr: 0.1,
+        slip_turn: 0.0,
+        slip_turn_corr: 1.0,
+        rtk_sigma: 0.008,
+        heading_sigma: Some(0.5f64.to_radians()),
+        start: (0.0, 0.0, 0.3),
+        seed: 1,
+    };
+    let mut rng = simulate::Rng::new(settings.seed ^ 0x5EED);
+    simulate::simulate(&SimOptions {
+        truth: default_truth(),
+        segments: simulate::path(kind, length, &mut rng),
+        settings,
+    })
+}
+
+fn options() -> CalibrateOptions {
+    CalibrateOptions {
+        samples: "samples.csv".into(),
+        reference: "reference.csv".into(),
+        initial: None,
+        sets: vec![],
+        out: None,
+        delta_window: 10.0,
+        reference_sigma: 0.008,
+        delta_mode: DeltaMode::Equal,
+        fit_delta: true,
+        fit_delta_diff: true,
+        reference_heading_sigma: 0.5f64.to_radians(),
+        models: vec![],
+        polish: true,
+        windows: vec![],
+        window_start: WindowStart::Initial,
+        windows_out: None,
+        plots: None,
+        quiet: true,
+    }
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn reps(var: &str, default: usize) -> usize {
+    std::env::var(var)
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .filter(|&n| n > 0)
+        .unwrap_or(default)
+}
+
+fn ratio(before: f64, now: f64) -> String {
+    if before.is_finite() {
+        format!("{:.1}x faster", before / now)
+    } else {
+        "no earlier figure".into()
+    }
+}
+
+fn case(name: &str, run: &SimRun, n: usize, before: &Before) {
+    let r = Run::new(
+        &run.samples,
+        &run.reference,
+        match_times(&run.samples, &run.reference),
+    );
+    let last = r.len() - 1;
+    let mut times = Vec::new();
+    let mut fit = None;
+    for _ in 0..n {
+        let t = Instant::now();
+        let f = calib::fit_geometry(
+            &r,
+            &poor(),
+            r.heading_guess(0),
+            0,
+            last,
+            GeomOptions::default(),
+            &ProgressBar::hidden(),
+        );
+        times.push(t.elapsed().as_secs_f64());
+        fit = Some(f);
+    }
+    let f = match fit {
+        Some(Ok(f)) => f,
+        Some(Err(e)) => {
+            println!("{name}: eq (16) fit failed: {e}");
+            return;
+        }
+        None => return,
+    };
+    let t_fit = median(times);
+    println!(
+        "{name}: {} samples, eq (16) fit from 0.300/0.300/0.700: {:.4} s (median of {n}; before {:.4} s, {})",
+        run.samples.len(),
+        t_fit,
+        before.fit_s,
+        ratio(before.fit_s, t_fit)
+    );
+    println!(
+        "{name}:   eq (16) {:.6} m (before {:.6} m, difference {:+.2e} m); {} iterations (before {}), {} integrator runs (before {}); estimate {:.6}/{:.6}/{:.6} m",
+        f.cost,
+        before.cost,
+        f.cost - before.cost,
+        f.iterations,
+        before.iterations,
+        f.evaluations,
+        before.runs,
+        f.params.left_diameter,
+        f.params.right_diameter,
+        f.params.track_width
+    );
+    // The resolution of eq (16) itself: the fixed-point integrator rounds every position
+    // increment to 2^-32 m and the transfer constants to 2^-48 m, so the cost is not smooth
+    // below about 1e-7 of it. Its spread under diameter changes of a few 1e-9 (nanometres)
+    // around the estimate, where the smooth cost changes by far less:
+    let mut lo: f64 = 0.0;
+    let mut hi: f64 = 0.0;
+    for k in [-3.0, -2.0, -1.0, 1.0, 2.0, 3.0] {
+        let mut p = f.params;
+        p.left_diameter *= 1.0 + k * 1e-9;
+        if let Some(c) = r.eq16(&p, 0, last, f.heading0) {
+            lo = lo.min(c - f.cost);
+            hi = hi.max(c - f.cost);
+        }
+    }
+    println!(
+        "{name}:   eq (16) arithmetic noise: {lo:+.1e} .. {hi:+.1e} m for left_diameter changed by up to 3e-9 of itself"
+    );
+    let mut times = Vec::new();
+    for _ in 0..n {
+        let t = Instant::now();
+        let c = calibrate_run(
+            &run.samples,
+            &run.reference,
+            ("s", "r"),
+            &poor(),
+            &options(),
+        );
+        times.push(t.elapsed().as_secs_f64());
+        if let Err(e) = c {
+            println!("{name}: calibration failed: {e}");
+            return;
+        }
+    }
+    let t_all = median(times);
+    println!(
+        "{name}:   whole calibration (eq 16 + delta + delta_diff, in-process): {:.4} s (median of {n}; before {:.4} s, {})",
+        t_all,
+        before.calibrate_s,
+        ratio(before.calibrate_s, t_all)
+    );
+}
+
+/// Prints the calibration figures.
+pub fn run() {
+    let n = reps("BENCH_REPS", 5);
+    let n_long = reps("BENCH_REPS_LONG", 3);
+    let s70 = sim(PathKind::Estimation, 70.0);
+    case("70 m estimation path", &s70, n, &BEFORE_70);
+    let s3k = sim(PathKind::Random, 3000.0);
+    case("3 km random path", &s3k, n_long, &BEFORE_3K);
+
+    // The stability study of the 70 m run (fits per window from the initial estimate).
+    let r = Run::new(
+        &s70.samples,
+        &s70.reference,
+        match_times(&s70.samples, &s70.reference),
+    );
+    let Ok(full) = calib::fit_geometry(
+        &r,
+        &poor(),
+        r.heading_guess(0),
+        0,
+        r.len() - 1,
+        GeomOptions::default(),
+        &ProgressBar::hidden(),
+    ) else {
+        println!("stability study: the full fit failed");
+        return;
+    };
+    let mut times = Vec::new();
+    let mut fits = 0;
+    for _ in 0..n {
+        let t = Instant::now();
+        let est = calib::windows_study(
+            &r,
+            &full,
+            &poor(),
+            &[1.0, 2.0, 4.0, 8.0],
+            WindowStart::Initial,
+            &ProgressBar::hidden(),
+        );
+        times.push(t.elapsed().as_secs_f64());
+        fits = est.map_or(0, |e| e.len());
+    }
+    let t = median(times);
+    println!(
+        "70 m stability study --windows 1,2,4,8 ({fits} fits): {t:.4} s (median of {n}; before {BEFORE_WINDOWS_70:.4} s, {})",
+        ratio(BEFORE_WINDOWS_70, t)
+    );
+}
