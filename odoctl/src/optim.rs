@@ -4,7 +4,8 @@
 //!
 //! Residual functions write their residuals into a vector and return `false` when the
 //! parameters are not admissible (for example outside `ChassisParams::validate`'s ranges).
-//! Jacobians are numerical (central differences).
+//! Jacobians are numerical (central differences) or, with [`levenberg_marquardt_jac`],
+//! supplied by the residual function itself (the calibration's forward sensitivities).
 
 /// What is minimised.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -32,6 +33,20 @@ pub struct LmOptions {
     /// Largest step of one iteration, as a fraction of each parameter's scale (a trust
     /// region: steps are shortened to it). Keeps nearly flat directions from jumping.
     pub max_step: f64,
+    /// Stop, without evaluating the trial, when the step's predicted reduction (of the
+    /// Gauss-Newton model, or of the IRLS majoriser for the sum of norms) is below this
+    /// fraction of the objective; 0 = off. Set it at the objective's own noise level (a
+    /// fixed-point integrator's cost is not smooth below about 1e-7 relative) so that the
+    /// fit stops where no real progress is left instead of shrinking the step 30 times.
+    pub pred_tol: f64,
+    /// For [`Objective::SumOfNorms`]: use the Gauss-Newton Hessian of the norms,
+    /// `J^T (I - u u^T) J / |r|` per pair (`u = r/|r|`), instead of the IRLS majoriser
+    /// `J^T J / |r|`. The gradient is the same; the majoriser converges linearly and slowly
+    /// when the residuals are large (a long run's drift), the Newton model quadratically
+    /// near the minimum. Steps are still accepted only when the sum of norms falls.
+    pub newton: bool,
+    /// Initial damping (relative to the diagonal): small when starting near the minimum.
+    pub lambda0: f64,
 }
 
 impl Default for LmOptions {
@@ -42,6 +57,9 @@ impl Default for LmOptions {
             xtol: 1e-11,
             diff_step: 1e-5,
             max_step: 0.25,
+            pred_tol: 0.0,
+            newton: false,
+            lambda0: 1e-3,
         }
     }
 }
@@ -106,7 +124,8 @@ pub fn solve(mut a: Vec<f64>, mut b: Vec<f64>) -> Option<Vec<f64>> {
 
 /// Levenberg-Marquardt (Marquardt's diagonal scaling) minimising `kind` of the residuals of
 /// `f`, starting at `x0`; `scale[i]` is the typical magnitude of parameter `i` (difference
-/// steps and the step test use it).
+/// steps and the step test use it). The Jacobian is numerical (central differences, `2n`
+/// extra evaluations per iteration); [`levenberg_marquardt_jac`] takes an analytic one.
 pub fn levenberg_marquardt<F>(
     mut f: F,
     x0: &[f64],
@@ -117,64 +136,123 @@ pub fn levenberg_marquardt<F>(
 where
     F: FnMut(&[f64], &mut Vec<f64>) -> bool,
 {
-    let n = x0.len();
-    let mut x = x0.to_vec();
-    let mut r = Vec::new();
-    let mut evals = 1;
-    if !f(&x, &mut r) {
-        return None;
-    }
-    let mut cost = objective(kind, &r);
-    let mut lambda = 1e-3;
-    let mut iterations = 0;
-    let mut converged = false;
-    let mut rp = Vec::new();
-    let mut rm = Vec::new();
-    let mut jac = vec![0.0; r.len() * n];
-    while iterations < opts.max_iter {
-        // Weights: 1 for squares, 1/|r_k| for the sum of norms (IRLS majoriser).
-        let m = r.len();
-        let weights: Vec<f64> = match kind {
-            Objective::Squares => vec![1.0; m],
-            Objective::SumOfNorms => {
-                let floor = 1e-9;
-                r.chunks(2)
-                    .flat_map(|c| {
-                        let d = c.iter().map(|v| v * v).sum::<f64>().sqrt().max(floor);
-                        std::iter::repeat_n(1.0 / d, c.len())
-                    })
-                    .collect()
+    let mut extra = 0;
+    let (mut rp, mut rm) = (Vec::new(), Vec::new());
+    let mut res = lm_core(
+        |x: &[f64], r: &mut Vec<f64>, jac: Option<&mut Vec<f64>>| match jac {
+            // Asked at the current point, whose residuals `r` already holds.
+            Some(jac) => {
+                extra += central_differences(
+                    &mut f,
+                    x,
+                    r,
+                    scale,
+                    opts.diff_step,
+                    (&mut rp, &mut rm),
+                    jac,
+                );
+                true
             }
-        };
-        // Central-difference Jacobian, column by column.
-        jac.resize(m * n, 0.0);
-        for j in 0..n {
-            let h = opts.diff_step * scale[j];
-            let mut xp = x.clone();
-            xp[j] += h;
-            let mut xm = x.clone();
-            xm[j] -= h;
-            evals += 2;
-            let okp = f(&xp, &mut rp) && rp.len() == m;
-            let okm = f(&xm, &mut rm) && rm.len() == m;
-            for i in 0..m {
-                jac[i * n + j] = match (okp, okm) {
-                    (true, true) => (rp[i] - rm[i]) / (2.0 * h),
-                    (true, false) => (rp[i] - r[i]) / h,
-                    (false, true) => (r[i] - rm[i]) / h,
-                    (false, false) => 0.0,
-                };
-            }
-        }
-        let mut jtj = vec![0.0; n * n];
-        let mut jtr = vec![0.0; n];
+            None => f(x, r),
+        },
+        x0,
+        scale,
+        kind,
+        opts,
+        false,
+    )?;
+    res.evaluations += extra;
+    Some(res)
+}
+
+/// [`levenberg_marquardt`] with an analytic Jacobian: `f(x, r, jac)` writes the residuals
+/// into `r` and, when `jac` is given, the Jacobian `d r_i / d x_j` into it (row-major,
+/// `r.len()` rows of `x.len()`), in the same pass; it returns `false` when `x` is not
+/// admissible. The Jacobian is requested at every trial point (it is taken to cost about as
+/// much as the residuals), so an accepted step needs no further evaluation.
+pub fn levenberg_marquardt_jac<F>(
+    f: F,
+    x0: &[f64],
+    scale: &[f64],
+    kind: Objective,
+    opts: LmOptions,
+) -> Option<OptResult>
+where
+    F: FnMut(&[f64], &mut Vec<f64>, Option<&mut Vec<f64>>) -> bool,
+{
+    lm_core(f, x0, scale, kind, opts, true)
+}
+
+/// Central-difference Jacobian of `f` at `x` (residuals `r` there) into `jac` (row-major);
+/// returns the number of evaluations.
+fn central_differences<F>(
+    f: &mut F,
+    x: &[f64],
+    r: &[f64],
+    scale: &[f64],
+    diff_step: f64,
+    (rp, rm): (&mut Vec<f64>, &mut Vec<f64>),
+    jac: &mut Vec<f64>,
+) -> usize
+where
+    F: FnMut(&[f64], &mut Vec<f64>) -> bool,
+{
+    let (m, n) = (r.len(), x.len());
+    jac.clear();
+    jac.resize(m * n, 0.0);
+    for j in 0..n {
+        let h = diff_step * scale[j];
+        let mut xp = x.to_vec();
+        xp[j] += h;
+        let mut xm = x.to_vec();
+        xm[j] -= h;
+        let okp = f(&xp, rp) && rp.len() == m;
+        let okm = f(&xm, rm) && rm.len() == m;
         for i in 0..m {
-            let w = weights[i];
-            let row = &jac[i * n..(i + 1) * n];
+            jac[i * n + j] = match (okp, okm) {
+                (true, true) => (rp[i] - rm[i]) / (2.0 * h),
+                (true, false) => (rp[i] - r[i]) / h,
+                (false, true) => (r[i] - rm[i]) / h,
+                (false, false) => 0.0,
+            };
+        }
+    }
+    2 * n
+}
+
+/// The normal equations `J^T W J`, `J^T W r` of `kind`'s weights (1 for squares, `1/|r_k|`
+/// per pair for the sum of norms: the IRLS majoriser).
+fn normal_equations(
+    kind: Objective,
+    newton: bool,
+    r: &[f64],
+    jac: &[f64],
+    n: usize,
+) -> (Vec<f64>, Vec<f64>) {
+    let mut jtj = vec![0.0; n * n];
+    let mut jtr = vec![0.0; n];
+    let floor = 1e-9;
+    let pair = match kind {
+        Objective::Squares => 1,
+        Objective::SumOfNorms => 2,
+    };
+    if newton && kind == Objective::SumOfNorms && r.len() % 2 == 0 {
+        // Gradient sum J_k^T u_k; Hessian sum J_k^T (I - u_k u_k^T) J_k / |r_k|, that is
+        // (v v^T) / |r_k| with v = J_k^T t_k, t_k the unit vector across r_k.
+        for (k, rk) in r.chunks(2).enumerate() {
+            let d = rk[0].hypot(rk[1]).max(floor);
+            let (ux, uy) = (rk[0] / d, rk[1] / d);
+            let (rx, ry) = (
+                &jac[2 * k * n..(2 * k + 1) * n],
+                &jac[(2 * k + 1) * n..(2 * k + 2) * n],
+            );
+            let w = 1.0 / d;
             for a in 0..n {
-                jtr[a] += w * row[a] * r[i];
+                jtr[a] += rx[a] * ux + ry[a] * uy;
+                let va = -rx[a] * uy + ry[a] * ux;
                 for b in a..n {
-                    jtj[a * n + b] += w * row[a] * row[b];
+                    let vb = -rx[b] * uy + ry[b] * ux;
+                    jtj[a * n + b] += w * va * vb;
                 }
             }
         }
@@ -183,6 +261,73 @@ where
                 jtj[a * n + b] = jtj[b * n + a];
             }
         }
+        return (jtj, jtr);
+    }
+    for (k, rk) in r.chunks(pair).enumerate() {
+        let w = match kind {
+            Objective::Squares => 1.0,
+            Objective::SumOfNorms => 1.0 / rk.iter().map(|v| v * v).sum::<f64>().sqrt().max(floor),
+        };
+        for (c, &ri) in rk.iter().enumerate() {
+            let i = k * pair + c;
+            let row = &jac[i * n..(i + 1) * n];
+            for a in 0..n {
+                let wa = w * row[a];
+                jtr[a] += wa * ri;
+                for b in a..n {
+                    jtj[a * n + b] += wa * row[b];
+                }
+            }
+        }
+    }
+    for a in 0..n {
+        for b in 0..a {
+            jtj[a * n + b] = jtj[b * n + a];
+        }
+    }
+    (jtj, jtr)
+}
+
+/// The Levenberg-Marquardt iteration. With `jac_at_trials`, `f` is asked for the residuals
+/// and the Jacobian at every trial point and an accepted trial's Jacobian is reused.
+/// Otherwise `f(x, r, None)` evaluates residuals and `f(x, r, Some(jac))` is called once per
+/// iteration at the current point with `r` holding its residuals, and must only fill `jac`
+/// (its evaluations are not counted here).
+fn lm_core<F>(
+    mut f: F,
+    x0: &[f64],
+    scale: &[f64],
+    kind: Objective,
+    opts: LmOptions,
+    jac_at_trials: bool,
+) -> Option<OptResult>
+where
+    F: FnMut(&[f64], &mut Vec<f64>, Option<&mut Vec<f64>>) -> bool,
+{
+    let n = x0.len();
+    let mut x = x0.to_vec();
+    let mut r = Vec::new();
+    let mut jac = Vec::new();
+    let mut evals = 1;
+    if !f(&x, &mut r, jac_at_trials.then_some(&mut jac)) {
+        return None;
+    }
+    let mut cost = objective(kind, &r);
+    let mut lambda = opts.lambda0;
+    let mut iterations = 0;
+    let mut converged = false;
+    let mut rp = Vec::new();
+    let mut jacp = Vec::new();
+    let mut jac_current = jac_at_trials;
+    while iterations < opts.max_iter {
+        let m = r.len();
+        if !jac_current && !f(&x, &mut r, Some(&mut jac)) {
+            return None;
+        }
+        if jac.len() != m * n {
+            return None;
+        }
+        let (jtj, jtr) = normal_equations(kind, opts.newton, &r, &jac, n);
         let mut accepted = false;
         let mut step_small;
         for _ in 0..30 {
@@ -203,15 +348,35 @@ where
             if worst > opts.max_step {
                 dx.iter_mut().for_each(|d| *d *= opts.max_step / worst);
             }
+            if opts.pred_tol > 0.0 {
+                // Model decrease: -(2 g.dx + dx.H.dx) for squares, half that for the
+                // majoriser of the sum of norms (sum of w |r + J dx|^2 / 2).
+                let quad: f64 = (0..n)
+                    .map(|i| dx[i] * (0..n).map(|j| jtj[i * n + j] * dx[j]).sum::<f64>())
+                    .sum();
+                let lin: f64 = dx.iter().zip(&jtr).map(|(d, g)| d * g).sum();
+                let pred = match kind {
+                    Objective::Squares => -(2.0 * lin + quad),
+                    Objective::SumOfNorms => -(lin + 0.5 * quad),
+                };
+                if pred < opts.pred_tol * cost {
+                    converged = true;
+                    break;
+                }
+            }
             let xn: Vec<f64> = x.iter().zip(&dx).map(|(a, b)| a + b).collect();
             step_small = dx.iter().zip(scale).all(|(d, s)| d.abs() <= opts.xtol * s);
             evals += 1;
-            if f(&xn, &mut rp) && rp.len() == m {
+            if f(&xn, &mut rp, jac_at_trials.then_some(&mut jacp)) && rp.len() == m {
                 let c = objective(kind, &rp);
                 if c < cost {
                     let gain = (cost - c) / cost.max(1e-300);
                     x = xn;
                     std::mem::swap(&mut r, &mut rp);
+                    if jac_at_trials {
+                        std::mem::swap(&mut jac, &mut jacp);
+                    }
+                    jac_current = jac_at_trials;
                     cost = c;
                     lambda = (lambda / 3.0).max(1e-12);
                     accepted = true;
