@@ -16,9 +16,17 @@
 //!    trajectory (2 m of reference path, then x1.5 per stage up to the whole run), each stage
 //!    starting from the previous one's result; a poor first estimate (0.300/0.300/0.700 m)
 //!    would otherwise wind the odometry around the reference and trap the fit;
-//! 2. iteratively reweighted Levenberg-Marquardt on eq (16) itself (weights 1/distance, a
-//!    majoriser of the sum of distances, so each accepted step lowers eq (16));
+//! 2. damped Newton on eq (16) itself: gradient `sum J_k^T u_k`, Hessian
+//!    `sum J_k^T (I - u_k u_k^T) J_k / |r_k|` (`u_k` the unit residual), Levenberg-Marquardt
+//!    damping, steps accepted only when eq (16) falls;
 //! 3. optionally a Nelder-Mead polish of eq (16) with restarts; the lowest eq (16) is kept.
+//!
+//! Every Jacobian is analytic: the forward sensitivities of eqs (7)-(15) with respect to the
+//! diameters, the track width and the initial heading are propagated in f64 in the same
+//! pass as the core integrator ([`Run::integrate_with_sensitivity`]), which stays the one
+//! source of the poses. At the estimate, [`standard_errors`] gives the unknowns' standard
+//! errors and [`track_width_warning`] says when the run turned too little for the track
+//! width.
 //!
 //! # Uncertainty coefficients
 //! The trajectory is cut into consecutive sub-trajectories of `window` metres of reference
@@ -38,7 +46,7 @@
 use anyhow::{anyhow, bail, Result};
 use indicatif::ProgressBar;
 
-use crate::core_api::{ChassisParams, Integrator, Pose, UncertaintyModel};
+use crate::core_api::{trig, ChassisParams, Integrator, Pose, UncertaintyModel};
 use crate::csvio::{RefPoint, Sample};
 use crate::optim::{self, LmOptions, NmOptions, Objective};
 use crate::replay::{counts, index_refs};
@@ -65,6 +73,116 @@ pub struct Run<'a> {
     pub matches: Vec<(usize, usize)>,
     /// Reference path length from the first match to each match (m).
     pub dist: Vec<f64>,
+}
+
+/// The unknowns of the geometry fit, in the order of [`PoseSensitivity`]'s columns and of
+/// the fit's parameter vector.
+pub const GEOMETRY_UNKNOWNS: [&str; 4] = [
+    "left_diameter",
+    "right_diameter",
+    "track_width",
+    "initial_heading",
+];
+
+/// Derivatives of an odometry pose with respect to the geometry fit's unknowns, in the order
+/// of [`GEOMETRY_UNKNOWNS`]: `left_diameter` (m), `right_diameter` (m), `track_width` (m) and
+/// the initial heading (rad). Position rows are in m per unit of the unknown (x east, y
+/// north), the heading row in rad per unit (clockwise positive).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PoseSensitivity {
+    /// `d x / d unknown`.
+    pub x: [f64; 4],
+    /// `d y / d unknown`.
+    pub y: [f64; 4],
+    /// `d heading / d unknown`.
+    pub heading: [f64; 4],
+}
+
+/// Position units of the core integrator per metre (2^32).
+const POSITION_SCALE: f64 = 4_294_967_296.0;
+/// Q30 one.
+const Q30: f64 = 1_073_741_824.0;
+
+/// `sin(h)/h` and its derivative, by their Taylor series (|h| <= pi/4 in a step: truncation
+/// below 1e-10; no branch at 0).
+fn sinc_and_derivative(h: f64) -> (f64, f64) {
+    let h2 = h * h;
+    let sinc = 1.0
+        - h2 / 6.0 * (1.0 - h2 / 20.0 * (1.0 - h2 / 42.0 * (1.0 - h2 / 72.0 * (1.0 - h2 / 110.0))));
+    let d =
+        -h / 3.0 * (1.0 - h2 / 10.0 * (1.0 - h2 / 28.0 * (1.0 - h2 / 54.0 * (1.0 - h2 / 88.0))));
+    (sinc, d)
+}
+
+/// Forward sensitivities of eqs (7)-(15), propagated in f64 beside the core integrator, which
+/// stays the one source of the poses: each step's heading change `dalpha`, chord direction
+/// `theta = alpha + dalpha/2` and chord `dd` are read from the integrator's own state (its
+/// binary heading, its sine/cosine kernel and its fixed-point position increment), the wheel
+/// distances recovered from them as `s_1,2 = ds +- w dalpha/2`, `ds = dd / sinc(dalpha/2)`,
+/// and the derivatives of
+/// `dalpha = (s_1 - s_2)/w`, `dd = ds sinc(dalpha/2)`, `x += dd sin(theta)`,
+/// `y += dd cos(theta)`, `alpha += dalpha` accumulated with `d s_i / d D_i = s_i / D_i` (the
+/// wheel distance, including the per-angle wheel function, is proportional to its diameter).
+struct SensitivityTracker {
+    diameters: [f64; 2],
+    track: f64,
+    position: (i64, i64),
+    heading: u64,
+    sens: PoseSensitivity,
+}
+
+impl SensitivityTracker {
+    /// At the integrator's current pose: zero derivatives except `d heading / d heading0 = 1`.
+    fn new(params: &ChassisParams, integ: &Integrator) -> Self {
+        let mut sens = PoseSensitivity::default();
+        sens.heading[3] = 1.0;
+        Self {
+            diameters: [params.left_diameter, params.right_diameter],
+            track: params.track_width,
+            position: integ.position_fixed(),
+            heading: integ.heading_binary().1,
+            sens,
+        }
+    }
+
+    /// Follows the integrator's last step.
+    fn step(&mut self, integ: &Integrator) {
+        let (x1, y1) = integ.position_fixed();
+        let h1 = integ.heading_binary().1;
+        // |dalpha| < pi/2 (larger steps are not integrated): the wrapping difference is the
+        // integrator's exact increment.
+        let inc = h1.wrapping_sub(self.heading) as i64;
+        let (dxf, dyf) = (
+            x1.wrapping_sub(self.position.0),
+            y1.wrapping_sub(self.position.1),
+        );
+        let theta = self.heading.wrapping_add((inc >> 1) as u64);
+        self.position = (x1, y1);
+        self.heading = h1;
+        if inc == 0 && dxf == 0 && dyf == 0 {
+            return;
+        }
+        let (sq, cq) = trig::sin_cos(theta);
+        let (sin, cos) = (f64::from(sq) / Q30, f64::from(cq) / Q30);
+        let dalpha = inc as f64 * trig::RAD_PER_BINARY;
+        let half = 0.5 * dalpha;
+        let (sinc, dsinc) = sinc_and_derivative(half);
+        let dd = (dxf as f64 * sin + dyf as f64 * cos) / POSITION_SCALE;
+        let ds = dd / sinc;
+        let [d1, d2] = self.diameters;
+        let w = self.track;
+        let (s1, s2) = (ds + w * half, ds - w * half);
+        let d_dalpha = [s1 / (d1 * w), -s2 / (d2 * w), -dalpha / w, 0.0];
+        let d_ds = [0.5 * s1 / d1, 0.5 * s2 / d2, 0.0, 0.0];
+        let s = &mut self.sens;
+        for p in 0..4 {
+            let d_dd = d_ds[p] * sinc + ds * dsinc * 0.5 * d_dalpha[p];
+            let d_theta = s.heading[p] + 0.5 * d_dalpha[p];
+            s.x[p] += d_dd * sin + dd * cos * d_theta;
+            s.y[p] += d_dd * cos - dd * sin * d_theta;
+            s.heading[p] += d_dalpha[p];
+        }
+    }
 }
 
 impl<'a> Run<'a> {
@@ -217,6 +335,77 @@ impl<'a> Run<'a> {
         Ok(())
     }
 
+    /// [`Run::integrate`] with the pose's derivatives with respect to the geometry unknowns
+    /// (see [`PoseSensitivity`]) propagated alongside: `visit(k, &integrator, &sensitivity)`
+    /// at every match `k` in `a+1..=b`.
+    pub fn integrate_with_sensitivity(
+        &self,
+        params: &ChassisParams,
+        a: usize,
+        b: usize,
+        heading0: f64,
+        mut visit: impl FnMut(usize, &Integrator, &PoseSensitivity),
+    ) -> Result<(), crate::core_api::ParamError> {
+        let (sa, _) = self.matches[a];
+        let (x0, y0) = self.anchor(a);
+        let mut integ = Integrator::new(
+            params,
+            counts(&self.samples[sa]),
+            Pose {
+                x: x0,
+                y: y0,
+                heading: heading0,
+            },
+        )?;
+        let mut tracker = SensitivityTracker::new(params, &integ);
+        let mut k = a + 1;
+        let sb = self.matches[b].0;
+        for i in sa + 1..=sb {
+            let s = &self.samples[i];
+            let _ = integ.step(counts(s), index_refs(s));
+            tracker.step(&integ);
+            if k <= b && self.matches[k].0 == i {
+                visit(k, &integ, &tracker.sens);
+                k += 1;
+            }
+        }
+        Ok(())
+    }
+
+    /// [`Run::residuals`] and, with `jac`, their derivatives with respect to the geometry
+    /// unknowns `cols` (indices into [`GEOMETRY_UNKNOWNS`]; row-major: one row per residual,
+    /// one column per entry of `cols`), in the same pass.
+    #[allow(clippy::too_many_arguments)]
+    pub fn residuals_with_jacobian(
+        &self,
+        params: &ChassisParams,
+        a: usize,
+        b: usize,
+        heading0: f64,
+        out: &mut Vec<f64>,
+        jac: Option<&mut Vec<f64>>,
+        cols: &[usize],
+    ) -> bool {
+        let Some(jac) = jac else {
+            return self.residuals(params, a, b, heading0, out);
+        };
+        if cols.iter().any(|&c| c >= GEOMETRY_UNKNOWNS.len()) {
+            return false;
+        }
+        out.clear();
+        jac.clear();
+        self.integrate_with_sensitivity(params, a, b, heading0, |k, integ, d| {
+            let p = integ.pose();
+            let r = self.reference_at(k);
+            out.push(p.x - r.x);
+            out.push(p.y - r.y);
+            jac.extend(cols.iter().map(|&c| d.x[c]));
+            jac.extend(cols.iter().map(|&c| d.y[c]));
+        })
+        .is_ok()
+            && out.iter().chain(jac.iter()).all(|v| v.is_finite())
+    }
+
     /// The x and y differences odometry - reference at matches `a+1..=b`, into `out`;
     /// false when the parameters are not admissible.
     pub fn residuals(
@@ -295,6 +484,18 @@ pub struct GeomFit {
     pub track_estimated: bool,
     /// Total absolute heading change along the stretch at the estimate (rad).
     pub turning: f64,
+    /// The start position the fit used (x east, y north, m): the reference point at the
+    /// first common time, or the mean over the standstill there ([`Run::anchor`]). A replay
+    /// from it with `heading0` and `params` reproduces `cost`.
+    pub start: (f64, f64),
+    /// Standard errors of [`GEOMETRY_UNKNOWNS`] (m, m, m, rad; `None` for an unknown that was
+    /// held); see [`standard_errors`].
+    pub std_errors: [Option<f64>; 4],
+    /// Residual standard deviation `s` of the x and y differences at the estimate (m).
+    pub residual_sigma: f64,
+    /// Set when the trajectory turned too little to determine the track width
+    /// ([`track_width_warning`]).
+    pub track_warning: Option<String>,
 }
 
 /// Options of [`fit_geometry`].
@@ -304,7 +505,9 @@ pub struct GeomOptions {
     pub first_stage: f64,
     /// Growth of the prefix per stage.
     pub stage_growth: f64,
-    /// Run the Nelder-Mead polish of eq (16).
+    /// Run a Nelder-Mead polish of eq (16) after the Newton fit (off by default: it costs
+    /// up to 600 integrator runs and finds only the cost's arithmetic noise, about 1e-7 of
+    /// it, below the Newton minimum).
     pub polish: bool,
     /// The track width is estimated only on a stretch whose total absolute heading change
     /// reaches this (rad); on a straighter one it is not identifiable (eq 8: only turning
@@ -317,7 +520,7 @@ impl Default for GeomOptions {
         Self {
             first_stage: 2.0,
             stage_growth: 1.5,
-            polish: true,
+            polish: false,
             min_turning: 30f64.to_radians(),
         }
     }
@@ -338,18 +541,30 @@ pub fn turning(run: &Run, params: &ChassisParams, a: usize, b: usize, heading0: 
     total
 }
 
-/// Levenberg-Marquardt over the parameters marked free in `free` (the others held).
-fn lm_subset<F>(
-    mut f: F,
+/// Stop a continuation stage's fit when the predicted relative reduction of its cost falls
+/// below this: the stages only carry the estimate along the trajectory, the last fit sets it.
+const STAGE_PRED_TOL: f64 = 1e-4;
+
+/// Stop the final eq (16) fit when the predicted relative reduction falls below this: well
+/// under the noise of eq (16) as the fixed-point integrator computes it (about 1e-7 of the
+/// cost: position increments are rounded to 2^-32 m, transfer constants to 2^-48 m).
+const FINAL_PRED_TOL: f64 = 1e-10;
+
+/// Levenberg-Marquardt over the geometry unknowns marked free in `free` (the others held),
+/// with the analytic Jacobian of [`Run::residuals_with_jacobian`] (its columns of the free
+/// unknowns).
+#[allow(clippy::too_many_arguments)]
+fn lm_subset(
+    run: &Run,
+    base: &ChassisParams,
+    a: usize,
+    b: usize,
     x: &[f64],
     scale: &[f64],
     free: &[bool],
     kind: Objective,
     opts: LmOptions,
-) -> Option<optim::OptResult>
-where
-    F: FnMut(&[f64], &mut Vec<f64>) -> bool,
-{
+) -> Option<optim::OptResult> {
     let idx: Vec<usize> = (0..x.len()).filter(|&i| free[i]).collect();
     let full = |sub: &[f64]| {
         let mut v = x.to_vec();
@@ -360,8 +575,11 @@ where
     };
     let sub0: Vec<f64> = idx.iter().map(|&i| x[i]).collect();
     let sub_scale: Vec<f64> = idx.iter().map(|&i| scale[i]).collect();
-    let mut res =
-        optim::levenberg_marquardt(|s, out| f(&full(s), out), &sub0, &sub_scale, kind, opts)?;
+    let f = |s: &[f64], out: &mut Vec<f64>, jac: Option<&mut Vec<f64>>| {
+        let v = full(s);
+        run.residuals_with_jacobian(&with_geometry(base, &v), a, b, v[3], out, jac, &idx)
+    };
+    let mut res = optim::levenberg_marquardt_jac(f, &sub0, &sub_scale, kind, opts)?;
     res.x = full(&res.x);
     Some(res)
 }
@@ -415,6 +633,10 @@ pub fn fit_geometry(
     let (mut iterations, mut evaluations) = (0, 0);
     let lm = LmOptions {
         max_iter: 60,
+        pred_tol: STAGE_PRED_TOL,
+        // Light damping from the start: the trust region (max_step) bounds the first steps
+        // from a poor estimate, and each stage starts near its minimum.
+        lambda0: 1e-9,
         ..LmOptions::default()
     };
     progress.set_length((ends.len() + 1 + usize::from(opts.polish)) as u64);
@@ -424,10 +646,7 @@ pub fn fit_geometry(
         if !free[2] && turning(run, &with_geometry(start, &x), a, e, x[3]) >= opts.min_turning {
             free[2] = true;
         }
-        let f = |x: &[f64], out: &mut Vec<f64>| {
-            run.residuals(&with_geometry(start, x), a, e, x[3], out)
-        };
-        let res = lm_subset(f, &x, &scale, &free, Objective::Squares, lm)
+        let res = lm_subset(run, start, a, e, &x, &scale, &free, Objective::Squares, lm)
             .ok_or_else(|| anyhow!("the starting parameters are not admissible"))?;
         x = res.x;
         iterations += res.iterations;
@@ -442,16 +661,19 @@ pub fn fit_geometry(
         }
         progress.inc(1);
     }
-    let f =
-        |x: &[f64], out: &mut Vec<f64>| run.residuals(&with_geometry(start, x), a, b, x[3], out);
     let res = lm_subset(
-        f,
+        run,
+        start,
+        a,
+        b,
         &x,
         &scale,
         &free,
         Objective::SumOfNorms,
         LmOptions {
             max_iter: 200,
+            pred_tol: FINAL_PRED_TOL,
+            newton: true,
             ..lm
         },
     )
@@ -493,17 +715,115 @@ pub fn fit_geometry(
         progress.inc(1);
     }
     let params = with_geometry(start, &x);
+    let turned = turning(run, &params, a, b, x[3]);
+    let (std_errors, residual_sigma) = standard_errors(run, &params, a, b, x[3], free)
+        .ok_or_else(|| anyhow!("the fit left the admissible parameter range"))?;
+    evaluations += 2;
+    let track_warning =
+        track_width_warning(free[2], turned, opts.min_turning, &params, &std_errors);
     Ok(GeomFit {
         params,
         heading0: x[3],
+        start: run.anchor(a),
         cost,
         points: b - a,
         iterations,
         evaluations,
         stages: ends.len(),
         track_estimated: free[2],
-        turning: turning(run, &params, a, b, x[3]),
+        turning: turned,
+        std_errors,
+        residual_sigma,
+        track_warning,
     })
+}
+
+/// Relative standard error of `track_width` above which the fit warns that the trajectory
+/// turned too little to determine it (see [`track_width_warning`]).
+pub const TRACK_WIDTH_MAX_RELATIVE_SE: f64 = 1e-3;
+
+/// Total absolute turning below which the fit warns that the track width is poorly
+/// determined, whatever its standard error says (rad; 90 degrees).
+pub const TRACK_WIDTH_WARN_TURNING: f64 = core::f64::consts::FRAC_PI_2;
+
+/// The warning of a geometry fit whose trajectory turned too little to determine the track
+/// width: it was held (total absolute turning below `min_turning`), or the turning is below
+/// [`TRACK_WIDTH_WARN_TURNING`] (90 deg), or the relative standard error of `track_width`
+/// exceeds [`TRACK_WIDTH_MAX_RELATIVE_SE`] (0.1 %, 0.6 mm on a 0.56 m track). Eq (8): only
+/// turning reveals the track width, and the formal standard error assumes independent
+/// residuals, which odometry drift is not, so both the turning and the error are checked.
+pub fn track_width_warning(
+    estimated: bool,
+    turning: f64,
+    min_turning: f64,
+    params: &ChassisParams,
+    std_errors: &[Option<f64>; 4],
+) -> Option<String> {
+    let deg = turning.to_degrees();
+    if !estimated {
+        return Some(format!(
+            "the trajectory turned {deg:.0} deg in all (less than {:.0}): track_width not estimated, kept at {}",
+            min_turning.to_degrees(),
+            params.track_width
+        ));
+    }
+    let rel = std_errors[2].map_or(f64::INFINITY, |se| se / params.track_width);
+    if turning < TRACK_WIDTH_WARN_TURNING || rel.is_nan() || rel > TRACK_WIDTH_MAX_RELATIVE_SE {
+        return Some(format!(
+            "the trajectory turned {deg:.0} deg in all: track_width poorly determined (standard error {:.2} % of it; a fit wants at least {:.0} deg and at most {:.1} %)",
+            100.0 * rel,
+            TRACK_WIDTH_WARN_TURNING.to_degrees(),
+            100.0 * TRACK_WIDTH_MAX_RELATIVE_SE
+        ));
+    }
+    None
+}
+
+/// Standard errors of the geometry unknowns ([`GEOMETRY_UNKNOWNS`]) at an eq (16) estimate
+/// over matches `a..=b`, with the held ones (`free[i]` false) `None`, and the residual
+/// standard deviation `s` (m). From the analytic Jacobian `J` of the x and y residuals (the
+/// unknowns that were free): `cov = (J^T J)^-1 s^2`, `s^2 = sum r^2 / (m - p)` with `m` residual
+/// components (two per common time) and `p` free unknowns: the least-squares approximation
+/// at the eq (16) optimum, for independent residuals (odometry drift is correlated along the
+/// run, so these are lower bounds of the real uncertainty; the stability study shows the
+/// spread over sub-trajectories). An unknown that the data do not determine (`J^T J`
+/// singular) gets an infinite error; `None` when the parameters are not admissible.
+pub fn standard_errors(
+    run: &Run,
+    params: &ChassisParams,
+    a: usize,
+    b: usize,
+    heading0: f64,
+    free: [bool; 4],
+) -> Option<([Option<f64>; 4], f64)> {
+    let idx: Vec<usize> = (0..4).filter(|&i| free[i]).collect();
+    let p = idx.len();
+    let (mut r, mut jac) = (Vec::new(), Vec::new());
+    if !run.residuals_with_jacobian(params, a, b, heading0, &mut r, Some(&mut jac), &idx) {
+        return None;
+    }
+    let mut jtj = vec![0.0; p * p];
+    for row in jac.chunks(p.max(1)) {
+        for i in 0..p {
+            for j in 0..p {
+                jtj[i * p + j] += row[i] * row[j];
+            }
+        }
+    }
+    let m = r.len();
+    let s2 = r.iter().map(|v| v * v).sum::<f64>() / (m.saturating_sub(p).max(1)) as f64;
+    let mut se = [None; 4];
+    for (j, &i) in idx.iter().enumerate() {
+        let mut e = vec![0.0; p];
+        e[j] = 1.0;
+        let var = optim::solve(jtj.clone(), e).map_or(f64::INFINITY, |col| col[j] * s2);
+        se[i] = Some(if var >= 0.0 {
+            var.sqrt()
+        } else {
+            f64::INFINITY
+        });
+    }
+    Some((se, s2.sqrt()))
 }
 
 /// The heading at match `a` minimising eq (16) over `a..=b` with the geometry fixed.
@@ -514,8 +834,10 @@ pub fn fit_heading(
     b: usize,
     guess: f64,
 ) -> Result<f64> {
-    let f = |x: &[f64], out: &mut Vec<f64>| run.residuals(params, a, b, x[0], out);
-    let res = optim::levenberg_marquardt(
+    let f = |x: &[f64], out: &mut Vec<f64>, jac: Option<&mut Vec<f64>>| {
+        run.residuals_with_jacobian(params, a, b, x[0], out, jac, &[3])
+    };
+    let res = optim::levenberg_marquardt_jac(
         f,
         &[guess],
         &[1.0],
@@ -562,6 +884,36 @@ pub struct Evaluation {
 }
 
 impl Evaluation {
+    /// Empties every column, keeping the allocations.
+    pub fn clear(&mut self) {
+        let Self {
+            k,
+            t,
+            dist,
+            odo,
+            reference,
+            horizontal,
+            sigma_h,
+            heading,
+            heading_err,
+            sigma_heading,
+            heading_change_err,
+            start_headings,
+        } = self;
+        k.clear();
+        t.clear();
+        dist.clear();
+        odo.clear();
+        reference.clear();
+        horizontal.clear();
+        sigma_h.clear();
+        heading.clear();
+        heading_err.clear();
+        sigma_heading.clear();
+        heading_change_err.clear();
+        start_headings.clear();
+    }
+
     /// Appends the evaluation of matches `a+1..=b` from a restart at `a` (see
     /// [`Run::integrate`]); with `include_start`, the start point itself too (zero error
     /// by construction, zero sigma).
@@ -771,10 +1123,18 @@ impl Restarts {
     /// Errors and sigmas at every match after each restart (restart points excluded).
     pub fn evaluate(&self, run: &Run, p: &ChassisParams) -> Result<Evaluation> {
         let mut ev = Evaluation::default();
+        self.evaluate_into(run, p, &mut ev)?;
+        Ok(ev)
+    }
+
+    /// [`Restarts::evaluate`] into `ev` (cleared first, its buffers reused: the coverage
+    /// bisections evaluate the same sub-trajectories dozens of times).
+    pub fn evaluate_into(&self, run: &Run, p: &ChassisParams, ev: &mut Evaluation) -> Result<()> {
+        ev.clear();
         for (&(a, b), &h) in self.windows.iter().zip(&self.headings) {
             ev.extend(run, p, a, b, h, false)?;
         }
-        Ok(ev)
+        Ok(())
     }
 }
 
@@ -943,16 +1303,14 @@ fn fit_coefficient(
     };
     let hi = hi / q.max(1.0);
     let at = |v: f64| set_coefficient(geometry, mode, initial, v);
+    let mut scratch = Evaluation::default();
     let (value, warning) = smallest_covering(
         hi,
         false,
         log_tol,
         |v| {
-            Ok(horizontal_coverage(
-                &restarts.evaluate(run, &at(v))?,
-                ref_sigma,
-                1.0,
-            ))
+            restarts.evaluate_into(run, &at(v), &mut scratch)?;
+            Ok(horizontal_coverage(&scratch, ref_sigma, 1.0))
         },
         progress,
     )?;
@@ -1051,13 +1409,11 @@ pub fn fit_delta_diff(
     if points == 0 {
         return Ok(horizontal);
     }
+    let scratch = std::cell::RefCell::new(Evaluation::default());
     let cover = |p: &ChassisParams, k: f64| -> Result<f64> {
-        Ok(heading_coverage(
-            &restarts.evaluate(run, p)?,
-            o.ref_heading_sigma,
-            k,
-            0,
-        ))
+        let mut ev = scratch.borrow_mut();
+        restarts.evaluate_into(run, p, &mut ev)?;
+        Ok(heading_coverage(&ev, o.ref_heading_sigma, k, 0))
     };
     let with = |p: &ChassisParams, v: f64| ChassisParams {
         delta_diff: v as f32,
@@ -1236,4 +1592,179 @@ pub fn windows_study(
         progress.inc(1);
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::commands::default_truth;
+    use crate::csvio::match_times;
+    use crate::simulate::{self, PathKind, SimOptions, SimRun, SimSettings};
+
+    fn sim(kind: PathKind, length: f64, seed: u64) -> SimRun {
+        let settings = SimSettings {
+            rate: 50.0,
+            speed: 0.5,
+            slip: 0.001,
+            slip_corr: 0.1,
+            slip_turn: 0.0,
+            slip_turn_corr: 1.0,
+            rtk_sigma: 0.008,
+            heading_sigma: Some(0.5f64.to_radians()),
+            start: (0.0, 0.0, 0.3),
+            seed,
+        };
+        let mut rng = simulate::Rng::new(seed ^ 0x5EED);
+        simulate::simulate(&SimOptions {
+            truth: default_truth(),
+            segments: simulate::path(kind, length, &mut rng),
+            settings,
+        })
+    }
+
+    /// The analytic Jacobian of the residuals against central differences of the core
+    /// integrator's residuals, column by column (relative to the column's norm).
+    fn check_jacobian(run: &Run, params: &ChassisParams, heading0: f64, a: usize, b: usize) {
+        let cols = [0, 1, 2, 3];
+        let (mut r, mut jac) = (Vec::new(), Vec::new());
+        assert!(run.residuals_with_jacobian(params, a, b, heading0, &mut r, Some(&mut jac), &cols));
+        assert_eq!(jac.len(), r.len() * 4);
+        let x0 = [
+            params.left_diameter,
+            params.right_diameter,
+            params.track_width,
+            heading0,
+        ];
+        for c in cols {
+            // Steps large against the integrator's fixed-point noise (about 1e-8 m on a
+            // position), small against the curvature: 1e-4 of a length, 1e-4 rad.
+            let h = if c == 3 { 1e-4 } else { 1e-4 * x0[c] };
+            let at = |d: f64| {
+                let mut x = x0;
+                x[c] += d;
+                let mut out = Vec::new();
+                assert!(run.residuals(&with_geometry(params, &x), a, b, x[3], &mut out));
+                out
+            };
+            let (rp, rm) = (at(h), at(-h));
+            let (mut diff, mut norm) = (0.0f64, 0.0f64);
+            for i in 0..r.len() {
+                let fd = (rp[i] - rm[i]) / (2.0 * h);
+                diff = diff.hypot(jac[i * 4 + c] - fd);
+                norm = norm.hypot(fd);
+            }
+            assert!(norm > 0.0, "column {c} is zero");
+            // Measured: 4e-7 .. 8e-6, the central differences' own noise.
+            assert!(
+                diff / norm < 2e-5,
+                "column {} ({}): relative difference {:e} (norm {norm:e})",
+                c,
+                GEOMETRY_UNKNOWNS[c],
+                diff / norm
+            );
+        }
+    }
+
+    #[test]
+    fn analytic_jacobian_matches_central_differences() {
+        // Arcs and straights; spins on the spot (validation path); away from the truth and
+        // with a per-angle wheel function (wheel distances not proportional to the counts).
+        let est = sim(PathKind::Estimation, 30.0, 3);
+        let val = sim(PathKind::Validation, 20.0, 4);
+        let mut wavy = default_truth();
+        wavy.left_wheel.cos[0] = 2e-3;
+        wavy.right_wheel.sin[1] = -1e-3;
+        let poor = ChassisParams {
+            left_diameter: 0.27,
+            right_diameter: 0.25,
+            track_width: 0.6,
+            ..ChassisParams::DESIGNED
+        };
+        for s in [&est, &val] {
+            let run = Run::new(
+                &s.samples,
+                &s.reference,
+                match_times(&s.samples, &s.reference),
+            );
+            let last = run.len() - 1;
+            for p in [default_truth(), wavy, poor] {
+                check_jacobian(&run, &p, 0.31, 0, last);
+                check_jacobian(&run, &p, -2.0, last / 3, last);
+            }
+        }
+    }
+
+    #[test]
+    fn residuals_with_jacobian_keeps_the_integrators_residuals() {
+        let s = sim(PathKind::Estimation, 10.0, 5);
+        let run = Run::new(
+            &s.samples,
+            &s.reference,
+            match_times(&s.samples, &s.reference),
+        );
+        let last = run.len() - 1;
+        let p = default_truth();
+        let (mut plain, mut with, mut jac) = (Vec::new(), Vec::new(), Vec::new());
+        assert!(run.residuals(&p, 0, last, 0.3, &mut plain));
+        assert!(run.residuals_with_jacobian(&p, 0, last, 0.3, &mut with, Some(&mut jac), &[2, 0]));
+        assert_eq!(plain, with);
+        assert_eq!(jac.len(), 2 * with.len());
+        assert!(!run.residuals_with_jacobian(&p, 0, last, 0.3, &mut with, Some(&mut jac), &[4]));
+    }
+
+    #[test]
+    fn standard_errors_and_the_track_width_warning() {
+        let s = sim(PathKind::Estimation, 30.0, 6);
+        let run = Run::new(
+            &s.samples,
+            &s.reference,
+            match_times(&s.samples, &s.reference),
+        );
+        let last = run.len() - 1;
+        let fit = fit_geometry(
+            &run,
+            &default_truth(),
+            0.3,
+            0,
+            last,
+            GeomOptions::default(),
+            &ProgressBar::hidden(),
+        )
+        .unwrap();
+        assert!(
+            fit.track_estimated && fit.track_warning.is_none(),
+            "{fit:?}"
+        );
+        for se in fit.std_errors {
+            let se = se.unwrap();
+            assert!(se > 0.0 && se < 1e-3, "{se}");
+        }
+        // The errors scale with the residual sigma: the same fit with all four free again.
+        let (se, s) = standard_errors(&run, &fit.params, 0, last, fit.heading0, [true; 4]).unwrap();
+        assert_eq!(se, fit.std_errors);
+        assert!(
+            (s - fit.residual_sigma).abs() < 1e-15 && s > 0.004 && s < 0.02,
+            "{s}"
+        );
+        // Held unknowns have no error; too little turning warns.
+        let (se, _) = standard_errors(
+            &run,
+            &fit.params,
+            0,
+            last,
+            fit.heading0,
+            [true, true, false, true],
+        )
+        .unwrap();
+        assert!(se[2].is_none() && se[0].is_some());
+        let p = fit.params;
+        let held = track_width_warning(false, 0.2, 0.5, &p, &fit.std_errors).unwrap();
+        assert!(held.contains("not estimated"), "{held}");
+        let little = track_width_warning(true, 1.0, 0.5, &p, &fit.std_errors).unwrap();
+        assert!(little.contains("poorly determined"), "{little}");
+        let mut loose = fit.std_errors;
+        loose[2] = Some(2e-3 * p.track_width);
+        assert!(track_width_warning(true, 10.0, 0.5, &p, &loose).is_some());
+        assert!(track_width_warning(true, 10.0, 0.5, &p, &fit.std_errors).is_none());
+    }
 }

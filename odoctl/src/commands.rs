@@ -371,8 +371,15 @@ pub fn calibrate(o: &CalibrateOptions) -> Result<ExitCode> {
         g.points + 1,
         ev.dist.last().unwrap_or(&0.0)
     );
-    crate::outln!("  {:<16} {:>14} {:>14}", "parameter", "initial", "estimate");
-    for (k, a, b) in [
+    crate::outln!(
+        "  {:<16} {:>14} {:>14} {:>12}",
+        "parameter",
+        "initial",
+        "estimate",
+        "std. error"
+    );
+    let se = |i: usize| g.std_errors[i].map_or_else(|| "held".to_string(), |v| format!("{v:.2e}"));
+    for (i, (k, a, b)) in [
         (
             "left_diameter",
             initial.left_diameter,
@@ -384,15 +391,28 @@ pub fn calibrate(o: &CalibrateOptions) -> Result<ExitCode> {
             c.params.right_diameter,
         ),
         ("track_width", initial.track_width, c.params.track_width),
-    ] {
-        crate::outln!("  {k:<16} {a:>14.6} {b:>14.6}");
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        crate::outln!("  {k:<16} {a:>14.6} {b:>14.6} {:>12}", se(i));
     }
     crate::outln!(
-        "  {:<16} {:>14} {:>14.6}",
+        "  {:<16} {:>14} {:>14.6} {:>12}",
         "initial heading",
         "",
-        g.heading0
+        g.heading0,
+        se(3)
     );
+    crate::outln!(
+        "  start position {:.4} m E, {:.4} m N (the reference, averaged over the standstill there); standard errors (J^T J)^-1 s^2, s = {:.4} m, residuals taken as independent",
+        g.start.0,
+        g.start.1,
+        g.residual_sigma
+    );
+    if let Some(w) = &g.track_warning {
+        eprintln!("warning: eq (16) fit: {w}");
+    }
     for u in &c.uncertainty {
         let (a, b) = match u.model {
             UncertaintyModel::Paper => (
@@ -492,11 +512,27 @@ pub fn calibrate(o: &CalibrateOptions) -> Result<ExitCode> {
                 "reference",
                 FitValue::Text(o.reference.display().to_string()),
             ),
-            ("initial_x", FitValue::Num(ev.reference[0].0)),
-            ("initial_y", FitValue::Num(ev.reference[0].1)),
+            ("initial_x", FitValue::Num(g.start.0)),
+            ("initial_y", FitValue::Num(g.start.1)),
             ("initial_heading", FitValue::Num(g.heading0)),
             ("eq16_cost", FitValue::Num(g.cost)),
             ("points", FitValue::Int(g.points as i64)),
+        ];
+        for (name, se) in calib::GEOMETRY_UNKNOWNS.iter().zip(g.std_errors) {
+            if let Some(v) = se {
+                fit.push((se_keys(name), FitValue::Num(v)));
+            }
+        }
+        fit.push(("residual_sigma", FitValue::Num(g.residual_sigma)));
+        fit.push(("turning", FitValue::Num(g.turning)));
+        fit.push((
+            "track_width_estimated",
+            FitValue::Text(if g.track_estimated { "yes" } else { "no" }.into()),
+        ));
+        if let Some(w) = &g.track_warning {
+            fit.push(("track_width_warning", FitValue::Text(w.clone())));
+        }
+        fit.extend([
             (
                 "path_length",
                 FitValue::Num(*ev.dist.last().unwrap_or(&0.0)),
@@ -507,7 +543,7 @@ pub fn calibrate(o: &CalibrateOptions) -> Result<ExitCode> {
             ("horizontal_error_max", FitValue::Num(h.max)),
             ("coverage_1sigma", FitValue::Num(cov1)),
             ("coverage_3sigma", FitValue::Num(cov3)),
-        ];
+        ]);
         if !he.is_empty() {
             fit.push(("heading_error_rms", FitValue::Num(head.rms)));
             fit.push(("heading_error_max", FitValue::Num(head.max)));
@@ -607,6 +643,16 @@ pub fn calibrate(o: &CalibrateOptions) -> Result<ExitCode> {
     }
     crate::outln!("done in {:.2} s", started.elapsed().as_secs_f64());
     Ok(ExitCode::SUCCESS)
+}
+
+/// The `[fit]` key of an unknown's standard error: `left_diameter_se`, ...
+fn se_keys(name: &str) -> &'static str {
+    match name {
+        "left_diameter" => "left_diameter_se",
+        "right_diameter" => "right_diameter_se",
+        "track_width" => "track_width_se",
+        _ => "initial_heading_se",
+    }
 }
 
 fn print_window_stats(est: &[calib::WindowEstimate]) {

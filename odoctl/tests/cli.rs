@@ -246,3 +246,100 @@ fn bad_files_name_the_file_and_line() {
         "{err}"
     );
 }
+
+#[test]
+fn a_replay_from_the_reported_fit_start_reproduces_the_reported_eq16_cost() {
+    // The [fit] table's initial_x/initial_y are the start the fit used (the reference
+    // averaged over the opening standstill), not the reference's first point: replaying the
+    // counts from there with the estimate reproduces eq (16).
+    let d = scratch("cli_fit_start");
+    let (sm, rf, cal, rep) = (
+        d.join("s.csv"),
+        d.join("r.csv"),
+        d.join("cal.toml"),
+        d.join("replay.csv"),
+    );
+    success_stdout(&odoctl(&[
+        "simulate",
+        "--samples",
+        s(&sm),
+        "--reference",
+        s(&rf),
+        "--length",
+        "30",
+        "--seed",
+        "8",
+    ]));
+    let out = success_stdout(&odoctl(&[
+        "calibrate",
+        "--samples",
+        s(&sm),
+        "--reference",
+        s(&rf),
+        "--no-delta",
+        "--out",
+        s(&cal),
+    ]));
+    assert!(out.contains("std. error"), "{out}");
+    let toml: toml::Table = read(&cal).parse().unwrap();
+    let fit = toml["fit"].as_table().unwrap();
+    let num = |k: &str| fit[k].as_float().unwrap_or_else(|| panic!("[fit] {k}"));
+    for k in [
+        "left_diameter_se",
+        "right_diameter_se",
+        "track_width_se",
+        "initial_heading_se",
+        "residual_sigma",
+    ] {
+        assert!(num(k) > 0.0 && num(k) < 0.05, "{k} = {}", num(k));
+    }
+    let (x0, y0, h0, cost) = (
+        num("initial_x"),
+        num("initial_y"),
+        num("initial_heading"),
+        num("eq16_cost"),
+    );
+    let reference = read(&rf);
+    let first: Vec<f64> = reference
+        .lines()
+        .nth(1)
+        .unwrap()
+        .split(',')
+        .map(|v| v.parse().unwrap())
+        .collect();
+    assert!(
+        (x0, y0) != (first[1], first[2]),
+        "the standstill mean differs from the first reference point"
+    );
+    success_stdout(&odoctl(&[
+        "replay",
+        s(&sm),
+        "--config",
+        s(&cal),
+        "--x",
+        &format!("{x0:?}"),
+        "--y",
+        &format!("{y0:?}"),
+        "--heading",
+        &format!("{h0:?}"),
+        "--out",
+        s(&rep),
+    ]));
+    // Simulated samples and reference share their times row by row; eq (16) sums the
+    // distances after the first common time.
+    let replayed = read(&rep);
+    let mut sum = 0.0;
+    let mut rows = 0;
+    for (o, r) in replayed.lines().zip(reference.lines()).skip(2) {
+        let o: Vec<f64> = o.split(',').map(|v| v.parse().unwrap()).collect();
+        let r: Vec<f64> = r.split(',').map(|v| v.parse().unwrap()).collect();
+        assert_eq!(o[0], r[0]);
+        sum += (o[1] - r[1]).hypot(o[2] - r[2]);
+        rows += 1;
+    }
+    assert_eq!(rows as i64, fit["points"].as_integer().unwrap());
+    assert!(
+        (sum - cost).abs() <= 1e-9 * cost,
+        "replay from the [fit] start: eq (16) {sum} against the reported {cost}"
+    );
+}
