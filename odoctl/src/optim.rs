@@ -601,5 +601,33 @@ mod tests {
             "{l1:?} {nm:?}"
         );
         assert!(l1.x[0] < 0.8 && l1.x[0] > 0.5, "{l1:?}");
+        // The same with the analytic Jacobian (the identity per pair), by the IRLS majoriser
+        // and by the Newton Hessian of the norms: the same minimum.
+        let fj = |x: &[f64], r: &mut Vec<f64>, jac: Option<&mut Vec<f64>>| {
+            if let Some(jac) = jac {
+                jac.clear();
+                for _ in pts {
+                    jac.extend_from_slice(&[1.0, 0.0, 0.0, 1.0]);
+                }
+            }
+            f(x, r)
+        };
+        for newton in [false, true] {
+            let a = levenberg_marquardt_jac(
+                fj,
+                &[3.0, 2.0],
+                &[1.0, 1.0],
+                Objective::SumOfNorms,
+                LmOptions {
+                    newton,
+                    pred_tol: 1e-14,
+                    ..LmOptions::default()
+                },
+            )
+            .unwrap();
+            assert!(a.cost <= nm.cost + 1e-7, "newton {newton}: {a:?} {nm:?}");
+            assert!((a.x[0] - nm.x[0]).abs() < 1e-4, "newton {newton}: {a:?}");
+            assert!((a.x[1] - nm.x[1]).abs() < 1e-4, "newton {newton}: {a:?}");
+        }
     }
 }
