@@ -34,7 +34,7 @@ fn options() -> CalibrateOptions {
         fit_delta_diff: true,
         reference_heading_sigma: 0.5f64.to_radians(),
         models: vec![],
-        polish: true,
+        polish: false,
         windows: vec![],
         window_start: WindowStart::Initial,
         windows_out: None,
