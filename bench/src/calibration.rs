@@ -15,7 +15,7 @@
 use std::time::Instant;
 
 use indicatif::ProgressBar;
-use odo_core::odometry::ChassisParams;
+use odo_core::odometry::{ChassisParams, UncertaintyModel};
 use odoctl::calib::{self, DeltaMode, GeomOptions, Run, WindowStart};
 use odoctl::commands::{calibrate_run, default_truth, CalibrateOptions};
 use odoctl::csvio::match_times;
@@ -217,6 +217,30 @@ fn case(name: &str, run: &SimRun, n: usize, before: &Before) {
         before.calibrate_s,
         ratio(before.calibrate_s, t_all)
     );
+    // The fitted coefficients, both models (the paper's with delta_diff), so that a change of
+    // the uncertainty fits can be checked against the bisection's tolerance.
+    let all = CalibrateOptions {
+        models: vec![UncertaintyModel::Paper, UncertaintyModel::Covariance],
+        ..options()
+    };
+    match calibrate_run(&run.samples, &run.reference, ("s", "r"), &poor(), &all) {
+        Ok(c) => {
+            for u in &c.uncertainty {
+                let p = &u.params;
+                match u.model {
+                    UncertaintyModel::Paper => println!(
+                        "{name}:   paper model: delta {:.9e} / {:.9e}, delta_diff {:.9e} (1-sigma coverage {:.4})",
+                        p.delta_left, p.delta_right, p.delta_diff, u.coverage1
+                    ),
+                    UncertaintyModel::Covariance => println!(
+                        "{name}:   covariance model: kappa {:.9e} / {:.9e} (1-sigma coverage {:.4})",
+                        p.kappa_left, p.kappa_right, u.coverage1
+                    ),
+                }
+            }
+        }
+        Err(e) => println!("{name}: calibration with both models failed: {e}"),
+    }
 }
 
 /// Prints the calibration figures.

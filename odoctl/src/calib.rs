@@ -43,6 +43,9 @@
 //! For the paper's model with a reference heading, [`fit_delta_diff`] then fits `delta_diff`
 //! on the same sub-trajectories by the heading-change coverage, with delta refitted jointly.
 
+use std::cell::RefCell;
+use std::rc::Rc;
+
 use anyhow::{anyhow, bail, Result};
 use indicatif::ProgressBar;
 
@@ -848,6 +851,49 @@ pub fn fit_heading(
     Ok(res.x[0])
 }
 
+/// [`fit_heading`] for the restarts of the uncertainty fits, with the residuals' derivative
+/// with respect to the start heading taken from the integrated positions: the path turns
+/// about its start, `d x / d heading0 = y - y0`, `d y / d heading0 = -(x - x0)` (exactly what
+/// the forward sensitivity of [`Run::residuals_with_jacobian`] sums, without its per-step
+/// work).
+fn fit_restart_heading(
+    run: &Run,
+    params: &ChassisParams,
+    a: usize,
+    b: usize,
+    guess: f64,
+) -> Result<f64> {
+    let (x0, y0) = run.anchor(a);
+    let f = |x: &[f64], out: &mut Vec<f64>, jac: Option<&mut Vec<f64>>| {
+        out.clear();
+        let mut jac = jac;
+        if let Some(j) = jac.as_deref_mut() {
+            j.clear();
+        }
+        run.integrate(params, a, b, x[0], |k, integ| {
+            let p = integ.pose();
+            let r = run.reference_at(k);
+            out.push(p.x - r.x);
+            out.push(p.y - r.y);
+            if let Some(j) = jac.as_deref_mut() {
+                j.push(p.y - y0);
+                j.push(-(p.x - x0));
+            }
+        })
+        .is_ok()
+            && out.iter().all(|v| v.is_finite())
+    };
+    let res = optim::levenberg_marquardt_jac(
+        f,
+        &[guess],
+        &[1.0],
+        Objective::SumOfNorms,
+        LmOptions::default(),
+    )
+    .ok_or_else(|| anyhow!("parameters: not admissible"))?;
+    Ok(res.x[0])
+}
+
 /// Errors and predicted uncertainty along a run.
 #[derive(Debug, Clone, Default)]
 pub struct Evaluation {
@@ -912,6 +958,52 @@ impl Evaluation {
         sigma_heading.clear();
         heading_change_err.clear();
         start_headings.clear();
+    }
+
+    /// Reserves room for `n` more rows in every column.
+    fn reserve(&mut self, n: usize) {
+        self.k.reserve(n);
+        self.t.reserve(n);
+        self.dist.reserve(n);
+        self.odo.reserve(n);
+        self.reference.reserve(n);
+        self.horizontal.reserve(n);
+        self.sigma_h.reserve(n);
+        self.heading.reserve(n);
+        self.heading_err.reserve(n);
+        self.sigma_heading.reserve(n);
+        self.heading_change_err.reserve(n);
+        self.start_headings.reserve(n);
+    }
+
+    /// Moves the rows of `other` to the end of `self`.
+    fn append(&mut self, other: &mut Self) {
+        let Self {
+            k,
+            t,
+            dist,
+            odo,
+            reference,
+            horizontal,
+            sigma_h,
+            heading,
+            heading_err,
+            sigma_heading,
+            heading_change_err,
+            start_headings,
+        } = other;
+        self.k.append(k);
+        self.t.append(t);
+        self.dist.append(dist);
+        self.odo.append(odo);
+        self.reference.append(reference);
+        self.horizontal.append(horizontal);
+        self.sigma_h.append(sigma_h);
+        self.heading.append(heading);
+        self.heading_err.append(heading_err);
+        self.sigma_heading.append(sigma_heading);
+        self.heading_change_err.append(heading_change_err);
+        self.start_headings.append(start_headings);
     }
 
     /// Appends the evaluation of matches `a+1..=b` from a restart at `a` (see
@@ -1099,7 +1191,13 @@ pub struct Restarts {
     pub windows: Vec<(usize, usize)>,
     /// Restart headings (rad).
     pub headings: Vec<f64>,
+    /// The last evaluations (see [`Restarts::evaluate_memo`]).
+    memo: RefCell<Vec<(ChassisParams, bool, Rc<Evaluation>)>>,
 }
+
+/// Evaluations kept by [`Restarts::evaluate_memo`]: the two latest of a coefficient search
+/// (its predictor) and the fit's result.
+const MEMO_EVALUATIONS: usize = 4;
 
 impl Restarts {
     /// Cuts the run and fits the restart headings (eq 16 over each sub-trajectory, from the
@@ -1109,15 +1207,92 @@ impl Restarts {
         if wins.is_empty() {
             bail!("the run is too short for the uncertainty fit (no sub-trajectory of {window} m with 3 points)");
         }
-        let full = evaluate(run, geometry, heading0)?;
-        let mut headings = Vec::with_capacity(wins.len());
-        for &(a, b) in &wins {
-            headings.push(fit_heading(run, geometry, a, b, full.heading[a])?);
-        }
+        // The full-run odometry headings (the pose does not depend on the uncertainty model).
+        let mut full = Vec::with_capacity(run.len());
+        full.push(heading0);
+        run.integrate(geometry, 0, run.len() - 1, heading0, |_, integ| {
+            full.push(integ.pose().heading)
+        })
+        .map_err(|e| anyhow!("parameters: {e}"))?;
+        // The sub-trajectories' fits are independent: spread over the cores (the same fits,
+        // in the same order of results, as one after the other).
+        let threads = std::thread::available_parallelism()
+            .map_or(1, |n| n.get())
+            .min(wins.len());
+        let chunk = wins.len().div_ceil(threads.max(1));
+        let headings = std::thread::scope(|scope| {
+            let jobs: Vec<_> = wins
+                .chunks(chunk)
+                .map(|part| {
+                    let full = &full;
+                    scope.spawn(move || {
+                        part.iter()
+                            .map(|&(a, b)| fit_restart_heading(run, geometry, a, b, full[a]))
+                            .collect::<Result<Vec<f64>>>()
+                    })
+                })
+                .collect();
+            jobs.into_iter()
+                .map(|j| j.join().expect("restart heading fit panicked"))
+                .collect::<Result<Vec<_>>>()
+        })?
+        .concat();
         Ok(Self {
             windows: wins,
             headings,
+            memo: RefCell::default(),
         })
+    }
+
+    /// [`Restarts::evaluate`], remembered: the last [`MEMO_EVALUATIONS`] evaluations are kept
+    /// and returned again for the same parameters (the fits of the coefficients evaluate the
+    /// same parameters several times: the result, its coverages, the refits of delta).
+    pub fn evaluate_memo(&self, run: &Run, p: &ChassisParams) -> Result<Rc<Evaluation>> {
+        self.memo_eval(run, p, true)
+    }
+
+    /// The horizontal errors and sigmas only (`horizontal`, `sigma_h`; the other columns
+    /// may be empty), remembered with [`Restarts::evaluate_memo`]'s evaluations.
+    fn horizontal_memo(&self, run: &Run, p: &ChassisParams) -> Result<Rc<Evaluation>> {
+        self.memo_eval(run, p, false)
+    }
+
+    fn memo_eval(&self, run: &Run, p: &ChassisParams, full: bool) -> Result<Rc<Evaluation>> {
+        let mut memo = self.memo.borrow_mut();
+        if let Some(i) = memo.iter().position(|(q, f, _)| q == p && (*f || !full)) {
+            let hit = memo.remove(i);
+            let ev = Rc::clone(&hit.2);
+            memo.push(hit);
+            return Ok(ev);
+        }
+        // Reuse the buffers of the oldest evaluation when nobody holds it any more.
+        let mut ev = if memo.len() >= MEMO_EVALUATIONS {
+            Rc::try_unwrap(memo.remove(0).2).unwrap_or_default()
+        } else {
+            Evaluation::default()
+        };
+        drop(memo);
+        self.evaluate_parts(run, p, &mut ev, full)?;
+        let ev = Rc::new(ev);
+        let mut memo = self.memo.borrow_mut();
+        // A full evaluation replaces a horizontal one of the same parameters.
+        memo.retain(|(q, _, _)| q != p);
+        memo.push((*p, full, Rc::clone(&ev)));
+        Ok(ev)
+    }
+
+    /// The remembered evaluations whose parameters satisfy `family`, newest first.
+    fn memo_where(
+        &self,
+        family: impl Fn(&ChassisParams) -> bool,
+    ) -> Vec<(ChassisParams, Rc<Evaluation>)> {
+        self.memo
+            .borrow()
+            .iter()
+            .rev()
+            .filter(|(q, _, _)| family(q))
+            .map(|(q, _, ev)| (*q, Rc::clone(ev)))
+            .collect()
     }
 
     /// Errors and sigmas at every match after each restart (restart points excluded).
@@ -1129,10 +1304,75 @@ impl Restarts {
 
     /// [`Restarts::evaluate`] into `ev` (cleared first, its buffers reused: the coverage
     /// bisections evaluate the same sub-trajectories dozens of times).
+    /// The sub-trajectories are evaluated on all cores (independent, appended in order: the
+    /// same evaluation as one after the other).
     pub fn evaluate_into(&self, run: &Run, p: &ChassisParams, ev: &mut Evaluation) -> Result<()> {
+        self.evaluate_parts(run, p, ev, true)
+    }
+
+    /// [`Restarts::evaluate_into`], with only `horizontal` and `sigma_h` filled when not
+    /// `full` (what the coefficient searches need: a fraction of the memory traffic).
+    fn evaluate_parts(
+        &self,
+        run: &Run,
+        p: &ChassisParams,
+        ev: &mut Evaluation,
+        full: bool,
+    ) -> Result<()> {
         ev.clear();
-        for (&(a, b), &h) in self.windows.iter().zip(&self.headings) {
-            ev.extend(run, p, a, b, h, false)?;
+        let threads = std::thread::available_parallelism()
+            .map_or(1, |n| n.get())
+            .min(self.windows.len())
+            .max(1);
+        let chunk = self.windows.len().div_ceil(threads);
+        let jobs: Vec<_> = self
+            .windows
+            .chunks(chunk)
+            .zip(self.headings.chunks(chunk))
+            .collect();
+        let (first, rest) = jobs.split_first().expect("at least one sub-trajectory");
+        let evaluate = |ev: &mut Evaluation, (wins, heads): (&[(usize, usize)], &[f64])| {
+            let n = wins.iter().map(|(a, b)| b - a).sum();
+            if full {
+                ev.reserve(n);
+            } else {
+                ev.horizontal.reserve(n);
+                ev.sigma_h.reserve(n);
+            }
+            for (&(a, b), &h) in wins.iter().zip(heads) {
+                if full {
+                    ev.extend(run, p, a, b, h, false)?;
+                } else {
+                    run.integrate(p, a, b, h, |k, integ| {
+                        let o = integ.pose();
+                        let r = run.reference_at(k);
+                        ev.horizontal.push((o.x - r.x).hypot(o.y - r.y));
+                        ev.sigma_h.push(f64::from(integ.sigma().horizontal()));
+                    })
+                    .map_err(|e| anyhow!("parameters: {e}"))?;
+                }
+            }
+            Ok::<_, anyhow::Error>(())
+        };
+        let parts = std::thread::scope(|scope| {
+            let spawned: Vec<_> = rest
+                .iter()
+                .map(|&job| {
+                    scope.spawn(move || {
+                        let mut part = Evaluation::default();
+                        evaluate(&mut part, job).map(|()| part)
+                    })
+                })
+                .collect();
+            let own = evaluate(ev, *first);
+            let parts = spawned
+                .into_iter()
+                .map(|j| j.join().expect("evaluation panicked"))
+                .collect::<Result<Vec<_>>>();
+            own.and(parts)
+        })?;
+        for mut part in parts {
+            ev.append(&mut part);
         }
         Ok(())
     }
@@ -1303,17 +1543,53 @@ fn fit_coefficient(
     };
     let hi = hi / q.max(1.0);
     let at = |v: f64| set_coefficient(geometry, mode, initial, v);
-    let mut scratch = Evaluation::default();
-    let (value, warning) = smallest_covering(
+    let coefficient = |p: &ChassisParams| match p.uncertainty_model {
+        UncertaintyModel::Paper => f64::from(p.delta_left),
+        UncertaintyModel::Covariance => f64::from(p.kappa_left),
+    };
+    // The evaluations of this family (these parameters but the coefficient) already made,
+    // e.g. by the horizontal fit before a refit of delta: (coefficient, coverage).
+    let family = |p: &ChassisParams| at(coefficient(p)) == *p;
+    let facts = RefCell::new(
+        restarts
+            .memo_where(family)
+            .iter()
+            .map(|(p, ev)| (coefficient(p), horizontal_coverage(ev, ref_sigma, 1.0)))
+            .collect::<Vec<_>>(),
+    );
+    let real = |v: f64| -> Result<f64> {
+        let ev = restarts.horizontal_memo(run, &at(v))?;
+        let c = horizontal_coverage(&ev, ref_sigma, 1.0);
+        facts.borrow_mut().push((v, c));
+        Ok(c)
+    };
+    // The coverage is non-decreasing in the coefficient (what the bisection assumes): a
+    // value at or above one known to cover, or at or below one known not to, is decided
+    // without an evaluation; the bisection then takes exactly the steps it would take with
+    // every coverage evaluated, and only the midpoints between those are evaluated.
+    let cover = |v: f64| -> Result<f64> {
+        let known = known_coverage(&facts.borrow(), v);
+        match known {
+            Some(c) => Ok(c),
+            None => real(v),
+        }
+    };
+    bracket_threshold(
+        restarts,
         hi,
-        false,
         log_tol,
-        |v| {
-            restarts.evaluate_into(run, &at(v), &mut scratch)?;
-            Ok(horizontal_coverage(&scratch, ref_sigma, 1.0))
+        family,
+        ref_sigma,
+        match geometry.uncertainty_model {
+            // sigma proportional to delta (with delta_diff = 0), variance to kappa.
+            UncertaintyModel::Paper => 1.0,
+            UncertaintyModel::Covariance => 0.5,
         },
-        progress,
+        coefficient(geometry),
+        &facts,
+        &real,
     )?;
+    let (value, warning) = smallest_covering(hi, false, log_tol, cover, progress)?;
     let warning = warning.map(|w| {
         if w.contains("reference noise") {
             format!("the reference noise alone ({ref_sigma} m) covers 68.3 % of the errors: the coefficient is not identifiable")
@@ -1322,7 +1598,7 @@ fn fit_coefficient(
         }
     });
     let params = at(value);
-    let ev = restarts.evaluate(run, &params)?;
+    let ev = restarts.evaluate_memo(run, &params)?;
     Ok(UncertaintyFit {
         model: geometry.uncertainty_model,
         params,
@@ -1334,6 +1610,175 @@ fn fit_coefficient(
         warning,
         diff: None,
     })
+}
+
+/// The coverage at `v` implied by the coverages `facts` (coefficient, coverage) of a
+/// non-decreasing coverage: the one at `v` itself, else one `>= ONE_SIGMA_COVERAGE` at or
+/// below `v`, else one below it at or above `v` (the caller only compares it with
+/// [`ONE_SIGMA_COVERAGE`]); `None` when they do not decide.
+fn known_coverage(facts: &[(f64, f64)], v: f64) -> Option<f64> {
+    if let Some(&(_, c)) = facts.iter().find(|(u, _)| *u == v) {
+        return Some(c);
+    }
+    facts
+        .iter()
+        .find(|(u, c)| *u <= v && *c >= ONE_SIGMA_COVERAGE)
+        .or_else(|| {
+            facts
+                .iter()
+                .find(|(u, c)| *u >= v && *c < ONE_SIGMA_COVERAGE)
+        })
+        .map(|&(_, c)| c)
+}
+
+/// Predicts, from evaluations of one family at coefficients `a` and `b` (`sigma_h` of each,
+/// the horizontal errors being the same), the smallest coefficient whose horizontal 1-sigma
+/// band covers [`ONE_SIGMA_COVERAGE`] of the errors: per point, `sigma_h` is taken as a power
+/// of the coefficient through the two evaluations (exact for the covariance model, `sigma_h^2`
+/// linear in kappa, and for the paper model without `delta_diff`, `sigma_h` linear in delta;
+/// to f32 rounding), which gives the coefficient at which the point becomes covered; the
+/// prediction is their 68.27 % quantile. With one evaluation (`b` = `None`) the power is
+/// `exponent`.
+fn predict_threshold(
+    e: &[f64],
+    ref_sigma: f64,
+    a: (f64, &[f64]),
+    b: Option<(f64, &[f64])>,
+    exponent: f64,
+) -> Option<f64> {
+    let n = e.len();
+    if n == 0 || a.0 <= 0.0 {
+        return None;
+    }
+    let mut need = ONE_SIGMA_COVERAGE * n as f64;
+    need = need.ceil().min(n as f64);
+    let mut k = need as usize;
+    while k > 0 && (k - 1) as f64 / n as f64 >= ONE_SIGMA_COVERAGE {
+        k -= 1;
+    }
+    while k <= n && (k as f64 / n as f64) < ONE_SIGMA_COVERAGE {
+        k += 1;
+    }
+    if k == 0 || k > n {
+        return None;
+    }
+    let (la, sa) = (a.0.ln(), a.1);
+    let mut t: Vec<f64> = (0..n)
+        .map(|i| {
+            let target2 = e[i] * e[i] - ref_sigma * ref_sigma;
+            if target2 <= 0.0 {
+                return 0.0;
+            }
+            let ls = 0.5 * target2.ln();
+            let s0 = sa[i];
+            let p = match b {
+                Some((vb, sb)) if sb[i] > 0.0 && s0 > 0.0 && vb != a.0 => {
+                    (sb[i].ln() - s0.ln()) / (vb.ln() - la)
+                }
+                _ => exponent,
+            };
+            if !(s0 > 0.0 && p > 0.0 && p.is_finite()) {
+                return f64::INFINITY;
+            }
+            (la + (ls - s0.ln()) / p).exp()
+        })
+        .collect();
+    let (_, &mut th, _) = t.select_nth_unstable_by(k - 1, f64::total_cmp);
+    (th.is_finite() && th > 0.0).then_some(th)
+}
+
+/// Brackets the threshold of the coverage criterion before the bisection: evaluations
+/// (`real`, which records its results in `facts`) on either side of the predicted threshold
+/// ([`predict_threshold`], from the latest two evaluations of the family), at a distance of
+/// the bisection's width, widened when a prediction misses. The bisection then finds every
+/// step outside the bracket decided (see [`known_coverage`]): the result is the bisection's,
+/// with a handful of evaluations instead of dozens. Evaluations only; never decides anything.
+#[allow(clippy::too_many_arguments)]
+fn bracket_threshold(
+    restarts: &Restarts,
+    hi: f64,
+    log_tol: f64,
+    family: impl Fn(&ChassisParams) -> bool,
+    ref_sigma: f64,
+    exponent: f64,
+    start: f64,
+    facts: &RefCell<Vec<(f64, f64)>>,
+    real: &dyn Fn(f64) -> Result<f64>,
+) -> Result<()> {
+    let lo = hi * 1e-12;
+    let coefficient = |p: &ChassisParams| match p.uncertainty_model {
+        UncertaintyModel::Paper => f64::from(p.delta_left),
+        UncertaintyModel::Covariance => f64::from(p.kappa_left),
+    };
+    let mut width = log_tol;
+    for _ in 0..8 {
+        let (below, above) = {
+            let f = facts.borrow();
+            let below = f
+                .iter()
+                .filter(|(_, c)| *c < ONE_SIGMA_COVERAGE)
+                .map(|p| p.0)
+                .fold(f64::NEG_INFINITY, f64::max);
+            let above = f
+                .iter()
+                .filter(|(_, c)| *c >= ONE_SIGMA_COVERAGE)
+                .map(|p| p.0)
+                .fold(f64::INFINITY, f64::min);
+            (below, above)
+        };
+        if below > 0.0 && above.is_finite() && (above / below).ln() <= 2.5 * log_tol {
+            return Ok(());
+        }
+        if above <= lo || below >= hi {
+            return Ok(());
+        }
+        let evs = restarts.memo_where(&family);
+        let Some((pa, ea)) = evs.first() else {
+            let v0 = if start > lo && start < hi {
+                start
+            } else {
+                (lo * hi).sqrt()
+            };
+            real(v0)?;
+            continue;
+        };
+        let b = evs
+            .get(1)
+            .map(|(pb, eb)| (coefficient(pb), eb.sigma_h.as_slice()));
+        let Some(pred) = predict_threshold(
+            &ea.horizontal,
+            ref_sigma,
+            (coefficient(pa), &ea.sigma_h),
+            b,
+            exponent,
+        ) else {
+            return Ok(());
+        };
+        // Inside what is known, else bisect what is known.
+        let pred = if pred > below && pred < above {
+            pred
+        } else if below > 0.0 && above.is_finite() {
+            (below * above).sqrt()
+        } else if pred >= above {
+            above * (-width).exp()
+        } else {
+            below * width.exp()
+        };
+        let (l, h) = (
+            (pred * (-width).exp()).clamp(lo, hi),
+            (pred * width.exp()).clamp(lo, hi),
+        );
+        let c_h = known_coverage(&facts.borrow(), h);
+        let c_h = match c_h {
+            Some(c) => c,
+            None => real(h)?,
+        };
+        if c_h >= ONE_SIGMA_COVERAGE && known_coverage(&facts.borrow(), l).is_none() {
+            real(l)?;
+        }
+        width *= 4.0;
+    }
+    Ok(())
 }
 
 /// The `delta_diff` fit of the paper's model (see [`fit_delta_diff`]).
@@ -1404,15 +1849,13 @@ pub fn fit_delta_diff(
     if horizontal.model != UncertaintyModel::Paper {
         return Ok(horizontal);
     }
-    let ev = restarts.evaluate(run, &horizontal.params)?;
+    let ev = restarts.evaluate_memo(run, &horizontal.params)?;
     let points = heading_points(&ev, 0);
     if points == 0 {
         return Ok(horizontal);
     }
-    let scratch = std::cell::RefCell::new(Evaluation::default());
     let cover = |p: &ChassisParams, k: f64| -> Result<f64> {
-        let mut ev = scratch.borrow_mut();
-        restarts.evaluate_into(run, p, &mut ev)?;
+        let ev = restarts.evaluate_memo(run, p)?;
         Ok(heading_coverage(&ev, o.ref_heading_sigma, k, 0))
     };
     let with = |p: &ChassisParams, v: f64| ChassisParams {
@@ -1432,29 +1875,36 @@ pub fn fit_delta_diff(
         progress.set_length(40);
         let base = fit.params;
         let hi = f64::from(ChassisParams::MAX_DELTA);
-        // delta refitted by the horizontal criterion at a given delta_diff.
-        let refit = |v: f64, log_tol: f64| {
-            fit_coefficient(
+        // delta refitted by the horizontal criterion at a given delta_diff (remembered: the
+        // result is refitted again at the end).
+        let refits: RefCell<Vec<(f64, UncertaintyFit)>> = RefCell::default();
+        let refit = |v: f64| -> Result<UncertaintyFit> {
+            if let Some((_, f)) = refits.borrow().iter().find(|(u, _)| *u == v) {
+                return Ok(f.clone());
+            }
+            let f = fit_coefficient(
                 run,
                 restarts,
                 &with(&base, v),
                 initial,
                 o.ref_sigma,
                 o.mode,
-                log_tol,
+                DIFF_LOG_TOL,
                 &ProgressBar::hidden(),
-            )
+            )?;
+            refits.borrow_mut().push((v, f.clone()));
+            Ok(f)
         };
         let (dd, w) = smallest_covering(
             hi,
             true,
             DIFF_LOG_TOL,
-            |v| cover(&refit(v, DIFF_LOG_TOL)?.params, 1.0),
+            |v| cover(&refit(v)?.params, 1.0),
             progress,
         )?;
         // Joint only when delta stays identifiable (not pushed to zero by delta_diff).
         let joint_fit = match w {
-            None => Some(refit(dd, DIFF_LOG_TOL)?).filter(|f| f.warning.is_none()),
+            None => Some(refit(dd)?).filter(|f| f.warning.is_none()),
             Some(_) => None,
         };
         if let Some(f) = joint_fit {
@@ -1469,7 +1919,7 @@ pub fn fit_delta_diff(
                 progress,
             )?;
             fit.params = with(&base, dd);
-            let ev = restarts.evaluate(run, &fit.params)?;
+            let ev = restarts.evaluate_memo(run, &fit.params)?;
             fit.coverage1 = horizontal_coverage(&ev, o.ref_sigma, 1.0);
             fit.coverage3 = horizontal_coverage(&ev, o.ref_sigma, 3.0);
             warning = Some(match w2 {
@@ -1620,6 +2070,75 @@ mod tests {
             segments: simulate::path(kind, length, &mut rng),
             settings,
         })
+    }
+
+    /// The coefficient fits (predicted bracket, then the bisection on known coverages) give
+    /// the plain bisection's coefficient, every coverage evaluated: paper model without and
+    /// with `delta_diff` (sigma then not a power of delta), covariance model, on simulated
+    /// runs; also the refit's coarser width on a memo left by the finer fit.
+    #[test]
+    fn fast_coefficient_fit_matches_the_plain_bisection() {
+        for seed in [1, 2] {
+            let s = sim(PathKind::Random, 150.0, seed);
+            let run = Run::new(
+                &s.samples,
+                &s.reference,
+                match_times(&s.samples, &s.reference),
+            );
+            let geometry = default_truth();
+            let h0 = run.heading_guess(0);
+            for (model, dd) in [
+                (UncertaintyModel::Paper, 0.0f32),
+                (UncertaintyModel::Paper, 2e-8),
+                (UncertaintyModel::Covariance, 0.0),
+            ] {
+                let g = ChassisParams {
+                    uncertainty_model: model,
+                    delta_diff: dd,
+                    ..geometry
+                };
+                let restarts = Restarts::new(&run, &g, h0, 10.0).unwrap();
+                let hi = f64::from(match model {
+                    UncertaintyModel::Paper => ChassisParams::MAX_DELTA,
+                    UncertaintyModel::Covariance => ChassisParams::MAX_KAPPA,
+                });
+                let coef = |p: &ChassisParams| match model {
+                    UncertaintyModel::Paper => p.delta_left,
+                    UncertaintyModel::Covariance => p.kappa_left,
+                };
+                for tol in [COEFFICIENT_LOG_TOL, DIFF_LOG_TOL] {
+                    let mut ev = Evaluation::default();
+                    let (plain, _) = smallest_covering(
+                        hi,
+                        false,
+                        tol,
+                        |v| {
+                            let p = set_coefficient(&g, DeltaMode::Equal, &g, v);
+                            restarts.evaluate_into(&run, &p, &mut ev)?;
+                            Ok(horizontal_coverage(&ev, 0.008, 1.0))
+                        },
+                        &ProgressBar::hidden(),
+                    )
+                    .unwrap();
+                    let fast = fit_coefficient(
+                        &run,
+                        &restarts,
+                        &g,
+                        &g,
+                        0.008,
+                        DeltaMode::Equal,
+                        tol,
+                        &ProgressBar::hidden(),
+                    )
+                    .unwrap();
+                    let (a, b) = (f64::from(coef(&fast.params)), f64::from(plain as f32));
+                    assert!(
+                        (a / b).ln().abs() <= tol,
+                        "seed {seed} {model:?} delta_diff {dd} width {tol}: fast {a:e}, plain {b:e}"
+                    );
+                }
+            }
+        }
     }
 
     /// The analytic Jacobian of the residuals against central differences of the core
