@@ -8,8 +8,8 @@
 use odo_core::odometry::trig;
 use odo_core::odometry::uncertainty::{StepGeometry, StepJacobian};
 use odo_core::odometry::{
-    ChassisParams, CounterExtender, IndexRefs, Integrator, Pose, UncertaintyModel, WheelCounts,
-    WheelHarmonics,
+    ChassisParams, CounterExtender, IndexRefs, Integrator, Pose, PoseSigma, UncertaintyModel,
+    WheelCounts, WheelHarmonics,
 };
 use proptest::prelude::*;
 
@@ -934,6 +934,62 @@ proptest! {
         }
         prop_assert!((one.pose().x - many.pose().x).abs() < 1e-9 * parts as f64);
         prop_assert!((one.pose().y - many.pose().y).abs() < 1e-9 * parts as f64);
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    /// `step_pose` (the host tools' pose-only step) moves the pose exactly as `step` does,
+    /// bit for bit, through over-range samples, counter wrap and per-angle wheel functions
+    /// referenced by moving index latches, leaves the sigmas at zero, and reports the motion
+    /// that moved the pose: the position moved by the chord along its direction (rounded to
+    /// 2^-32 m), the heading by the increment, and `direction = heading + increment / 2`.
+    #[test]
+    fn step_pose_moves_the_pose_as_step_does(
+        dl in 0.1f64..0.6,
+        dr in 0.1f64..0.6,
+        w in 0.3f64..1.5,
+        harmonic in -0.002f32..0.002,
+        a0 in -10.0f64..10.0,
+        base in prop::sample::select(vec![0i64, i64::MAX - 50_000, -(1i64 << 31) + 20_000]),
+        steps in prop::collection::vec((-6000i64..6000, -6000i64..6000, 0u8..8), 1..300),
+    ) {
+        let mut p = ChassisParams { left_diameter: dl, right_diameter: dr, track_width: w, ..ChassisParams::DESIGNED };
+        p.left_wheel.cos[0] = harmonic;
+        p.right_wheel.sin[1] = -harmonic;
+        prop_assume!(p.validate().is_ok());
+        let start = Pose { x: 3.5, y: -7.25, heading: a0 };
+        let mut full = Integrator::new(&p, counts([base, base]), start).unwrap();
+        let mut pose_only = full.clone();
+        let mut g = [base, base];
+        let mut index = IndexRefs::default();
+        for (a, b, event) in steps {
+            // Now and then an over-range jump (2^19 increments), and index latches that move.
+            let jump = if event == 0 { 1i64 << 19 } else { 0 };
+            g = [g[0].wrapping_add(a + jump), g[1].wrapping_add(b)];
+            if event == 1 {
+                index = IndexRefs { left: Some(g[0] - 17), right: Some(g[1] + 5) };
+            }
+            let (fixed0, heading0) = (pose_only.position_fixed(), pose_only.heading_binary());
+            let status = full.step(counts(g), index);
+            let (status_pose, motion) = pose_only.step_pose(counts(g), index);
+            prop_assert_eq!(status, status_pose);
+            prop_assert_eq!(full.pose(), pose_only.pose());
+            prop_assert_eq!(full.position_fixed(), pose_only.position_fixed());
+            prop_assert_eq!(full.heading_binary(), pose_only.heading_binary());
+            prop_assert_eq!(motion.is_none(), status.overrange);
+            if let Some(m) = motion {
+                let moved = |q: i32| ((i128::from(m.chord) * i128::from(q) + (1 << 45)) >> 46) as i64;
+                let (x1, y1) = pose_only.position_fixed();
+                prop_assert_eq!(x1 - fixed0.0, moved(m.sin));
+                prop_assert_eq!(y1 - fixed0.1, moved(m.cos));
+                prop_assert_eq!(pose_only.heading_binary().1, heading0.1.wrapping_add(m.heading_increment as u64));
+                prop_assert_eq!(m.direction, heading0.1.wrapping_add((m.heading_increment >> 1) as u64));
+                prop_assert_eq!((m.sin, m.cos), trig::sin_cos(m.direction));
+            }
+        }
+        prop_assert_eq!(pose_only.sigma(), PoseSigma::default());
     }
 }
 

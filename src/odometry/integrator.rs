@@ -322,6 +322,53 @@ impl Integrator {
     /// propagates the uncertainty (eqs 19-28). `index` holds the counts latched at each
     /// wheel's last index pulse, which reference the per-angle wheel functions.
     pub fn step(&mut self, counts: WheelCounts, index: IndexRefs) -> StepStatus {
+        let (status, motion) = self.advance(counts, index);
+        let Some(m) = motion else {
+            return status;
+        };
+        // Uncertainty, eqs (19)-(28), or the covariance model.
+        let geometry = StepGeometry {
+            abs_counts: [
+                m.counts[0].unsigned_abs() as f32,
+                m.counts[1].unsigned_abs() as f32,
+            ],
+            abs_count_difference: (m.counts[0] - m.counts[1]).unsigned_abs() as f32,
+            wheel_distance: m.wheel_distance,
+            ds: m.ds,
+            dalpha: m.dalpha,
+            chord: m.ds * (1.0 - m.defect),
+            sin: trig::q30_to_f32(m.step.sin),
+            cos: trig::q30_to_f32(m.step.cos),
+            inv_track: self.inv_track,
+        };
+        let jacobian = StepJacobian::of(&geometry);
+        match self.params.uncertainty_model {
+            UncertaintyModel::Paper => self.paper.step(&self.coefficients, &geometry, &jacobian),
+            UncertaintyModel::Covariance => {
+                self.covariance
+                    .step(&self.coefficients, &geometry, &jacobian)
+            }
+        }
+        status
+    }
+
+    /// The pose part of [`Integrator::step`] alone (eqs 1-15, bit for bit the same pose),
+    /// without the uncertainty, which it leaves unchanged: for host tools that run the
+    /// integrator many times over a recording (the calibration's eq (16) fits). Returns what
+    /// the step did, with the step's chord and direction when it was integrated.
+    pub fn step_pose(
+        &mut self,
+        counts: WheelCounts,
+        index: IndexRefs,
+    ) -> (StepStatus, Option<PoseStep>) {
+        let (status, motion) = self.advance(counts, index);
+        (status, motion.map(|m| m.step))
+    }
+
+    /// Eqs (1)-(15): moves the pose to `counts`; the step's motion, `None` when it was not
+    /// integrated (over range).
+    #[inline(always)]
+    fn advance(&mut self, counts: WheelCounts, index: IndexRefs) -> (StepStatus, Option<Motion>) {
         let before = self.counts;
         self.counts = counts;
         let d = [
@@ -332,7 +379,7 @@ impl Integrator {
         if d[0].unsigned_abs() > MAX_STEP_COUNTS || d[1].unsigned_abs() > MAX_STEP_COUNTS {
             status.overrange = true;
             self.periodic = [None; 2];
-            return status;
+            return (status, None);
         }
         let d = [d[0] as i32, d[1] as i32];
 
@@ -366,7 +413,7 @@ impl Integrator {
         if ((s_f[0] - s_f[1]) * self.inv_track).abs() > MAX_STEP_DALPHA {
             status.overrange = true;
             self.periodic = [None; 2];
-            return status;
+            return (status, None);
         }
         // |dalpha| < pi/2: the top 32 bits of the increment fit an i32 (2^-32 turn units).
         let dalpha = (heading_inc >> 32) as i32 as f32 * self.rad_per_binary;
@@ -391,29 +438,58 @@ impl Integrator {
         } else if heading_inc < 0 && !carry {
             self.turns -= 1;
         }
-
-        // Uncertainty, eqs (19)-(28), or the covariance model.
-        let geometry = StepGeometry {
-            abs_counts: [d[0].unsigned_abs() as f32, d[1].unsigned_abs() as f32],
-            abs_count_difference: (d[0] - d[1]).unsigned_abs() as f32,
-            wheel_distance: s_f,
-            ds: ds_f,
-            dalpha,
-            chord: ds_f * (1.0 - defect),
-            sin: trig::q30_to_f32(sin),
-            cos: trig::q30_to_f32(cos),
-            inv_track: self.inv_track,
+        let step = PoseStep {
+            heading_increment: heading_inc,
+            direction: theta,
+            sin,
+            cos,
+            chord,
         };
-        let jacobian = StepJacobian::of(&geometry);
-        match self.params.uncertainty_model {
-            UncertaintyModel::Paper => self.paper.step(&self.coefficients, &geometry, &jacobian),
-            UncertaintyModel::Covariance => {
-                self.covariance
-                    .step(&self.coefficients, &geometry, &jacobian)
-            }
-        }
-        status
+        (
+            status,
+            Some(Motion {
+                counts: d,
+                wheel_distance: s_f,
+                ds: ds_f,
+                dalpha,
+                defect,
+                step,
+            }),
+        )
     }
+}
+
+/// The motion of one integrated step, as the pose update computed it: exactly the integer
+/// quantities that moved the pose.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PoseStep {
+    /// Heading change `dalpha` (eq 8), binary angle: 2^-64 turn, signed.
+    pub heading_increment: i64,
+    /// Chord direction `theta = alpha + dalpha / 2` (eq 11), binary angle (2^-64 turn).
+    pub direction: u64,
+    /// `sin(theta)`, Q30 (the kernel of [`trig::sin_cos`]).
+    pub sin: i32,
+    /// `cos(theta)`, Q30.
+    pub cos: i32,
+    /// Chord `dd` (eqs 9, 10), units of 2^-48 m: the position moved by
+    /// `dd sin(theta)` east and `dd cos(theta)` north, each rounded to 2^-32 m.
+    pub chord: i64,
+}
+
+/// [`PoseStep`] with the f32 quantities the uncertainty step needs.
+#[derive(Debug, Clone, Copy)]
+struct Motion {
+    /// Increments `dGamma_1`, `dGamma_2`.
+    counts: [i32; 2],
+    /// Wheel distances `s_1`, `s_2` (m, f32).
+    wheel_distance: [f32; 2],
+    /// Centre distance `ds` (m, f32).
+    ds: f32,
+    /// Heading change (rad, f32).
+    dalpha: f32,
+    /// `1 - sinc(dalpha / 2)`.
+    defect: f32,
+    step: PoseStep,
 }
 
 /// `round(a * b / 2^46)`: a distance in 2^-48 m times a Q30 factor, in 2^-32 m.

@@ -11,4 +11,4 @@ pub mod uncertainty;
 pub mod wheel;
 
 pub use encoder::CounterExtender;
-pub use integrator::{IndexRefs, Integrator, Pose, PoseSigma, StepStatus, WheelCounts};
+pub use integrator::{IndexRefs, Integrator, Pose, PoseSigma, PoseStep, StepStatus, WheelCounts};
