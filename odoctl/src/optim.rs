@@ -79,6 +79,13 @@ pub struct OptResult {
     pub converged: bool,
 }
 
+/// `sqrt(a^2 + b^2)` without `hypot`'s guard against overflow, which metres and radians never
+/// need (libm's `hypot` takes several times as long, in the calibration's innermost loops).
+#[inline(always)]
+pub fn norm2(a: f64, b: f64) -> f64 {
+    (a * a + b * b).sqrt()
+}
+
 /// The objective of a residual vector.
 pub fn objective(kind: Objective, r: &[f64]) -> f64 {
     match kind {
@@ -127,7 +134,7 @@ pub fn solve(mut a: Vec<f64>, mut b: Vec<f64>) -> Option<Vec<f64>> {
 /// steps and the step test use it). The Jacobian is numerical (central differences, `2n`
 /// extra evaluations per iteration); [`levenberg_marquardt_jac`] takes an analytic one.
 pub fn levenberg_marquardt<F>(
-    mut f: F,
+    f: F,
     x0: &[f64],
     scale: &[f64],
     kind: Objective,
@@ -136,32 +143,20 @@ pub fn levenberg_marquardt<F>(
 where
     F: FnMut(&[f64], &mut Vec<f64>) -> bool,
 {
-    let mut extra = 0;
-    let (mut rp, mut rm) = (Vec::new(), Vec::new());
-    let mut res = lm_core(
-        |x: &[f64], r: &mut Vec<f64>, jac: Option<&mut Vec<f64>>| match jac {
-            // Asked at the current point, whose residuals `r` already holds.
-            Some(jac) => {
-                extra += central_differences(
-                    &mut f,
-                    x,
-                    r,
-                    scale,
-                    opts.diff_step,
-                    (&mut rp, &mut rm),
-                    jac,
-                );
-                true
-            }
-            None => f(x, r),
-        },
-        x0,
+    let mut problem = Numeric {
+        f,
+        acc: NormalAccumulator::new(kind, opts.newton, x0.len()),
+        r: Vec::new(),
+        trial: Vec::new(),
+        plus: Vec::new(),
+        minus: Vec::new(),
+        jac: Vec::new(),
         scale,
-        kind,
-        opts,
-        false,
-    )?;
-    res.evaluations += extra;
+        diff_step: opts.diff_step,
+        extra: 0,
+    };
+    let mut res = lm_core(&mut problem, x0, scale, kind, opts)?;
+    res.evaluations += problem.extra;
     Some(res)
 }
 
@@ -180,7 +175,39 @@ pub fn levenberg_marquardt_jac<F>(
 where
     F: FnMut(&[f64], &mut Vec<f64>, Option<&mut Vec<f64>>) -> bool,
 {
-    lm_core(f, x0, scale, kind, opts, true)
+    let n = x0.len();
+    let mut problem = Analytic {
+        f,
+        acc: NormalAccumulator::new(kind, opts.newton, n),
+        r: Vec::new(),
+        jac: Vec::new(),
+    };
+    lm_core(&mut problem, x0, scale, kind, opts)
+}
+
+/// [`levenberg_marquardt_jac`] for residual functions that never store their residuals or
+/// Jacobian: `f(x, acc)` feeds them, pair by pair or row by row, into the
+/// [`NormalAccumulator`] it is given (cleared, for `kind` and the options' `newton`), which
+/// keeps only the objective and the normal equations. A long run's evaluation then costs no
+/// memory beyond its integrator, and no second pass. The same iterations, step for step, as
+/// [`levenberg_marquardt_jac`] on the same residuals.
+pub fn levenberg_marquardt_streamed<F>(
+    f: F,
+    x0: &[f64],
+    scale: &[f64],
+    kind: Objective,
+    opts: LmOptions,
+) -> Option<OptResult>
+where
+    F: FnMut(&[f64], &mut NormalAccumulator) -> bool,
+{
+    let n = x0.len();
+    let mut problem = Streamed {
+        f,
+        current: NormalAccumulator::new(kind, opts.newton, n),
+        trial: NormalAccumulator::new(kind, opts.newton, n),
+    };
+    lm_core(&mut problem, x0, scale, kind, opts)
 }
 
 /// Central-difference Jacobian of `f` at `x` (residuals `r` there) into `jac` (row-major);
@@ -220,114 +247,300 @@ where
     2 * n
 }
 
-/// The normal equations `J^T W J`, `J^T W r` of `kind`'s weights (1 for squares, `1/|r_k|`
-/// per pair for the sum of norms: the IRLS majoriser).
-fn normal_equations(
+/// Smallest residual norm taken for a sum-of-norms weight `1/|r_k|` (m).
+const NORM_FLOOR: f64 = 1e-9;
+
+/// The objective and the normal equations of residuals given one group at a time (one
+/// residual, or one x/y pair for [`Objective::SumOfNorms`]) with their Jacobian rows:
+/// `J^T W J` and `J^T W r` with `kind`'s weights (1 for squares, `1/|r_k|` per pair for the
+/// sum of norms: the IRLS majoriser), or, with `newton`, the sum of norms' Gauss-Newton
+/// Hessian `J^T (I - u u^T) J / |r|` (`u = r/|r|`) and its gradient. The sums run in the
+/// order the groups come, so a vector fed group by group gives exactly [`objective`] and
+/// the normal equations of the whole vector.
+#[derive(Debug, Clone)]
+pub struct NormalAccumulator {
     kind: Objective,
     newton: bool,
-    r: &[f64],
-    jac: &[f64],
     n: usize,
-) -> (Vec<f64>, Vec<f64>) {
-    let mut jtj = vec![0.0; n * n];
-    let mut jtr = vec![0.0; n];
-    let floor = 1e-9;
-    let pair = match kind {
-        Objective::Squares => 1,
-        Objective::SumOfNorms => 2,
-    };
-    if newton && kind == Objective::SumOfNorms && r.len() % 2 == 0 {
-        // Gradient sum J_k^T u_k; Hessian sum J_k^T (I - u_k u_k^T) J_k / |r_k|, that is
-        // (v v^T) / |r_k| with v = J_k^T t_k, t_k the unit vector across r_k.
-        for (k, rk) in r.chunks(2).enumerate() {
-            let d = rk[0].hypot(rk[1]).max(floor);
-            let (ux, uy) = (rk[0] / d, rk[1] / d);
-            let (rx, ry) = (
-                &jac[2 * k * n..(2 * k + 1) * n],
-                &jac[(2 * k + 1) * n..(2 * k + 2) * n],
-            );
-            let w = 1.0 / d;
-            for a in 0..n {
-                jtr[a] += rx[a] * ux + ry[a] * uy;
-                let va = -rx[a] * uy + ry[a] * ux;
-                for b in a..n {
-                    let vb = -rx[b] * uy + ry[b] * ux;
-                    jtj[a * n + b] += w * va * vb;
+    cost: f64,
+    /// Upper triangle of `J^T W J` (row-major, n x n).
+    jtj: Vec<f64>,
+    jtr: Vec<f64>,
+    residuals: usize,
+}
+
+impl NormalAccumulator {
+    /// Empty sums for `n` unknowns.
+    pub fn new(kind: Objective, newton: bool, n: usize) -> Self {
+        Self {
+            kind,
+            newton,
+            n,
+            cost: 0.0,
+            jtj: vec![0.0; n * n],
+            jtr: vec![0.0; n],
+            residuals: 0,
+        }
+    }
+
+    /// Empties the sums.
+    pub fn clear(&mut self) {
+        self.cost = 0.0;
+        self.jtj.iter_mut().for_each(|v| *v = 0.0);
+        self.jtr.iter_mut().for_each(|v| *v = 0.0);
+        self.residuals = 0;
+    }
+
+    /// The objective of the residuals added so far.
+    pub fn cost(&self) -> f64 {
+        self.cost
+    }
+
+    /// Number of residuals added so far.
+    pub fn residuals(&self) -> usize {
+        self.residuals
+    }
+
+    /// Adds the pair `(rx, ry)` with its Jacobian rows `jx`, `jy` (`n` entries each): for
+    /// [`Objective::Squares`] two residuals, for [`Objective::SumOfNorms`] one norm.
+    #[inline(always)]
+    pub fn add_pair(&mut self, rx: f64, ry: f64, jx: &[f64], jy: &[f64]) {
+        let n = self.n;
+        let (jx, jy) = (&jx[..n], &jy[..n]);
+        self.residuals += 2;
+        match self.kind {
+            Objective::Squares => {
+                self.add_row(rx, jx, 1.0);
+                self.add_row(ry, jy, 1.0);
+            }
+            Objective::SumOfNorms => {
+                let norm = norm2(rx, ry);
+                self.cost += norm;
+                let d = norm.max(NORM_FLOOR);
+                let w = 1.0 / d;
+                if self.newton {
+                    // Gradient sum J_k^T u_k; Hessian sum J_k^T (I - u_k u_k^T) J_k / |r_k|,
+                    // that is (v v^T) / |r_k| with v = J_k^T t_k, t_k the unit vector across r_k.
+                    let (ux, uy) = (rx / d, ry / d);
+                    for a in 0..n {
+                        self.jtr[a] += jx[a] * ux + jy[a] * uy;
+                        let va = -jx[a] * uy + jy[a] * ux;
+                        for b in a..n {
+                            let vb = -jx[b] * uy + jy[b] * ux;
+                            self.jtj[a * n + b] += w * va * vb;
+                        }
+                    }
+                } else {
+                    self.add_weighted(rx, jx, w);
+                    self.add_weighted(ry, jy, w);
                 }
             }
         }
+    }
+
+    /// Adds one residual `r` with its Jacobian row `j`: a squared residual, or, for the sum
+    /// of norms, a group of one (its norm `|r|`, IRLS weight).
+    pub fn add_single(&mut self, r: f64, j: &[f64]) {
+        self.residuals += 1;
+        let j = &j[..self.n];
+        match self.kind {
+            Objective::Squares => self.add_row(r, j, 1.0),
+            Objective::SumOfNorms => {
+                let norm = (r * r).sqrt();
+                self.cost += norm;
+                self.add_weighted(r, j, 1.0 / norm.max(NORM_FLOOR));
+            }
+        }
+    }
+
+    /// A squared residual: cost `r^2`, normal equations with weight `w`.
+    #[inline(always)]
+    fn add_row(&mut self, r: f64, j: &[f64], w: f64) {
+        self.cost += r * r;
+        self.add_weighted(r, j, w);
+    }
+
+    /// `w j^T j` and `w j^T r` into the sums (upper triangle).
+    #[inline(always)]
+    fn add_weighted(&mut self, r: f64, j: &[f64], w: f64) {
+        let n = self.n;
+        for a in 0..n {
+            let wa = w * j[a];
+            self.jtr[a] += wa * r;
+            for (sum, jb) in self.jtj[a * n + a..(a + 1) * n].iter_mut().zip(&j[a..n]) {
+                *sum += wa * jb;
+            }
+        }
+    }
+
+    /// `J^T W J` (full, symmetric, row-major) and `J^T W r`.
+    pub fn equations(&self) -> (Vec<f64>, Vec<f64>) {
+        let n = self.n;
+        let mut jtj = self.jtj.clone();
         for a in 0..n {
             for b in 0..a {
                 jtj[a * n + b] = jtj[b * n + a];
             }
         }
-        return (jtj, jtr);
+        (jtj, self.jtr.clone())
     }
-    for (k, rk) in r.chunks(pair).enumerate() {
-        let w = match kind {
-            Objective::Squares => 1.0,
-            Objective::SumOfNorms => 1.0 / rk.iter().map(|v| v * v).sum::<f64>().sqrt().max(floor),
+
+    /// Adds a whole residual vector `r` with its Jacobian (row-major, `r.len()` rows): in
+    /// groups of `kind` (pairs for the sum of norms; an odd last residual alone); the Newton
+    /// form needs whole pairs, so an odd-length vector is taken with the IRLS weights.
+    pub fn add_all(&mut self, r: &[f64], jac: &[f64]) {
+        let n = self.n;
+        let newton = self.newton;
+        if self.kind == Objective::SumOfNorms && r.len() % 2 == 1 {
+            self.newton = false;
+        }
+        let step = match self.kind {
+            Objective::Squares => 1,
+            Objective::SumOfNorms => 2,
         };
-        for (c, &ri) in rk.iter().enumerate() {
-            let i = k * pair + c;
-            let row = &jac[i * n..(i + 1) * n];
-            for a in 0..n {
-                let wa = w * row[a];
-                jtr[a] += wa * ri;
-                for b in a..n {
-                    jtj[a * n + b] += wa * row[b];
-                }
+        for (k, rk) in r.chunks(step).enumerate() {
+            let i = k * step;
+            if rk.len() == 2 {
+                self.add_pair(rk[0], rk[1], &jac[i * n..], &jac[(i + 1) * n..]);
+            } else {
+                self.add_single(rk[0], &jac[i * n..]);
             }
         }
+        self.newton = newton;
     }
-    for a in 0..n {
-        for b in 0..a {
-            jtj[a * n + b] = jtj[b * n + a];
-        }
-    }
-    (jtj, jtr)
 }
 
-/// The Levenberg-Marquardt iteration. With `jac_at_trials`, `f` is asked for the residuals
-/// and the Jacobian at every trial point and an accepted trial's Jacobian is reused.
-/// Otherwise `f(x, r, None)` evaluates residuals and `f(x, r, Some(jac))` is called once per
-/// iteration at the current point with `r` holding its residuals, and must only fill `jac`
-/// (its evaluations are not counted here).
-fn lm_core<F>(
-    mut f: F,
+/// What [`lm_core`] asks of the problem it minimises.
+trait LmProblem {
+    /// Evaluates `x` as the trial point: its objective, `None` when not admissible.
+    fn trial(&mut self, x: &[f64]) -> Option<f64>;
+    /// The last trial becomes the current point.
+    fn accept(&mut self);
+    /// The normal equations at the current point `x`.
+    fn equations(&mut self, x: &[f64]) -> Option<(Vec<f64>, Vec<f64>)>;
+}
+
+/// Residuals with a central-difference Jacobian, computed once per iteration at the current
+/// point.
+struct Numeric<'s, F> {
+    f: F,
+    acc: NormalAccumulator,
+    r: Vec<f64>,
+    trial: Vec<f64>,
+    plus: Vec<f64>,
+    minus: Vec<f64>,
+    jac: Vec<f64>,
+    scale: &'s [f64],
+    diff_step: f64,
+    /// Evaluations of the differences.
+    extra: usize,
+}
+
+impl<F: FnMut(&[f64], &mut Vec<f64>) -> bool> LmProblem for Numeric<'_, F> {
+    fn trial(&mut self, x: &[f64]) -> Option<f64> {
+        let ok =
+            (self.f)(x, &mut self.trial) && (self.r.is_empty() || self.trial.len() == self.r.len());
+        ok.then(|| objective(self.acc.kind, &self.trial))
+    }
+
+    fn accept(&mut self) {
+        std::mem::swap(&mut self.r, &mut self.trial);
+    }
+
+    fn equations(&mut self, x: &[f64]) -> Option<(Vec<f64>, Vec<f64>)> {
+        self.extra += central_differences(
+            &mut self.f,
+            x,
+            &self.r,
+            self.scale,
+            self.diff_step,
+            (&mut self.plus, &mut self.minus),
+            &mut self.jac,
+        );
+        self.acc.clear();
+        self.acc.add_all(&self.r, &self.jac);
+        Some(self.acc.equations())
+    }
+}
+
+/// Residuals and an analytic Jacobian at every trial, stored.
+struct Analytic<F> {
+    f: F,
+    acc: NormalAccumulator,
+    r: Vec<f64>,
+    jac: Vec<f64>,
+}
+
+impl<F: FnMut(&[f64], &mut Vec<f64>, Option<&mut Vec<f64>>) -> bool> LmProblem for Analytic<F> {
+    fn trial(&mut self, x: &[f64]) -> Option<f64> {
+        let (n, m) = (x.len(), self.acc.residuals());
+        if !(self.f)(x, &mut self.r, Some(&mut self.jac))
+            || self.jac.len() != self.r.len() * n
+            || (m > 0 && self.r.len() != m)
+        {
+            return None;
+        }
+        self.acc.clear();
+        self.acc.add_all(&self.r, &self.jac);
+        Some(self.acc.cost())
+    }
+
+    fn accept(&mut self) {}
+
+    fn equations(&mut self, _: &[f64]) -> Option<(Vec<f64>, Vec<f64>)> {
+        // Only an accepted trial's sums are asked for, and none is evaluated in between.
+        Some(self.acc.equations())
+    }
+}
+
+/// Objective and normal equations accumulated during the evaluation.
+struct Streamed<F> {
+    f: F,
+    current: NormalAccumulator,
+    trial: NormalAccumulator,
+}
+
+impl<F: FnMut(&[f64], &mut NormalAccumulator) -> bool> LmProblem for Streamed<F> {
+    fn trial(&mut self, x: &[f64]) -> Option<f64> {
+        self.trial.clear();
+        let m = self.current.residuals();
+        let ok = (self.f)(x, &mut self.trial) && (m == 0 || self.trial.residuals() == m);
+        ok.then(|| self.trial.cost())
+    }
+
+    fn accept(&mut self) {
+        std::mem::swap(&mut self.current, &mut self.trial);
+    }
+
+    fn equations(&mut self, _: &[f64]) -> Option<(Vec<f64>, Vec<f64>)> {
+        Some(self.current.equations())
+    }
+}
+
+/// The Levenberg-Marquardt iteration over `problem`.
+fn lm_core(
+    problem: &mut impl LmProblem,
     x0: &[f64],
     scale: &[f64],
     kind: Objective,
     opts: LmOptions,
-    jac_at_trials: bool,
-) -> Option<OptResult>
-where
-    F: FnMut(&[f64], &mut Vec<f64>, Option<&mut Vec<f64>>) -> bool,
-{
+) -> Option<OptResult> {
     let n = x0.len();
     let mut x = x0.to_vec();
-    let mut r = Vec::new();
-    let mut jac = Vec::new();
     let mut evals = 1;
-    if !f(&x, &mut r, jac_at_trials.then_some(&mut jac)) {
-        return None;
-    }
-    let mut cost = objective(kind, &r);
+    let mut cost = problem.trial(&x)?;
+    problem.accept();
     let mut lambda = opts.lambda0;
     let mut iterations = 0;
     let mut converged = false;
-    let mut rp = Vec::new();
-    let mut jacp = Vec::new();
-    let mut jac_current = jac_at_trials;
+    let mut current = false;
+    let mut equations = None;
     while iterations < opts.max_iter {
-        let m = r.len();
-        if !jac_current && !f(&x, &mut r, Some(&mut jac)) {
-            return None;
+        if !current {
+            equations = Some(problem.equations(&x)?);
+            current = true;
         }
-        if jac.len() != m * n {
-            return None;
-        }
-        let (jtj, jtr) = normal_equations(kind, opts.newton, &r, &jac, n);
+        let (jtj, jtr) = equations.as_ref()?;
         let mut accepted = false;
         let mut step_small;
         for _ in 0..30 {
@@ -354,7 +567,7 @@ where
                 let quad: f64 = (0..n)
                     .map(|i| dx[i] * (0..n).map(|j| jtj[i * n + j] * dx[j]).sum::<f64>())
                     .sum();
-                let lin: f64 = dx.iter().zip(&jtr).map(|(d, g)| d * g).sum();
+                let lin: f64 = dx.iter().zip(jtr).map(|(d, g)| d * g).sum();
                 let pred = match kind {
                     Objective::Squares => -(2.0 * lin + quad),
                     Objective::SumOfNorms => -(lin + 0.5 * quad),
@@ -367,24 +580,18 @@ where
             let xn: Vec<f64> = x.iter().zip(&dx).map(|(a, b)| a + b).collect();
             step_small = dx.iter().zip(scale).all(|(d, s)| d.abs() <= opts.xtol * s);
             evals += 1;
-            if f(&xn, &mut rp, jac_at_trials.then_some(&mut jacp)) && rp.len() == m {
-                let c = objective(kind, &rp);
-                if c < cost {
-                    let gain = (cost - c) / cost.max(1e-300);
-                    x = xn;
-                    std::mem::swap(&mut r, &mut rp);
-                    if jac_at_trials {
-                        std::mem::swap(&mut jac, &mut jacp);
-                    }
-                    jac_current = jac_at_trials;
-                    cost = c;
-                    lambda = (lambda / 3.0).max(1e-12);
-                    accepted = true;
-                    if gain < opts.ftol || step_small {
-                        converged = true;
-                    }
-                    break;
+            if let Some(c) = problem.trial(&xn).filter(|&c| c < cost) {
+                problem.accept();
+                current = false;
+                let gain = (cost - c) / cost.max(1e-300);
+                x = xn;
+                cost = c;
+                lambda = (lambda / 3.0).max(1e-12);
+                accepted = true;
+                if gain < opts.ftol || step_small {
+                    converged = true;
                 }
+                break;
             }
             if step_small {
                 break;
@@ -628,6 +835,106 @@ mod tests {
             assert!(a.cost <= nm.cost + 1e-7, "newton {newton}: {a:?} {nm:?}");
             assert!((a.x[0] - nm.x[0]).abs() < 1e-4, "newton {newton}: {a:?}");
             assert!((a.x[1] - nm.x[1]).abs() < 1e-4, "newton {newton}: {a:?}");
+            // Streamed into the accumulator instead of stored: the same iterations exactly.
+            let streamed = levenberg_marquardt_streamed(
+                |x: &[f64], acc: &mut NormalAccumulator| {
+                    for p in pts {
+                        acc.add_pair(x[0] - p.0, x[1] - p.1, &[1.0, 0.0], &[0.0, 1.0]);
+                    }
+                    true
+                },
+                &[3.0, 2.0],
+                &[1.0, 1.0],
+                Objective::SumOfNorms,
+                LmOptions {
+                    newton,
+                    pred_tol: 1e-14,
+                    ..LmOptions::default()
+                },
+            )
+            .unwrap();
+            assert_eq!(streamed.x, a.x, "newton {newton}");
+            assert_eq!(streamed.cost, a.cost);
+            assert_eq!(
+                (streamed.iterations, streamed.evaluations),
+                (a.iterations, a.evaluations)
+            );
         }
+    }
+
+    /// The accumulator's sums equal `objective` and the normal equations computed from the
+    /// stored vectors the way the LM did before it streamed (exactly: same order of sums),
+    /// for both objectives and both Hessians; a residual count that changes is refused.
+    #[test]
+    fn accumulated_sums_equal_the_stored_vectors() {
+        let mut rng = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            rng ^= rng << 13;
+            rng ^= rng >> 7;
+            rng ^= rng << 17;
+            (rng >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let n = 3;
+        let r: Vec<f64> = (0..200).map(|_| next()).collect();
+        let jac: Vec<f64> = (0..200 * n).map(|_| next()).collect();
+        for (kind, newton) in [
+            (Objective::Squares, false),
+            (Objective::SumOfNorms, false),
+            (Objective::SumOfNorms, true),
+        ] {
+            let mut pairs = NormalAccumulator::new(kind, newton, n);
+            for k in 0..100 {
+                let (i, j) = (2 * k, 2 * k + 1);
+                pairs.add_pair(r[i], r[j], &jac[i * n..], &jac[j * n..]);
+            }
+            let mut all = NormalAccumulator::new(kind, newton, n);
+            all.add_all(&r, &jac);
+            assert_eq!(pairs.cost(), objective(kind, &r), "{kind:?}");
+            assert_eq!(pairs.equations(), all.equations());
+            assert_eq!(pairs.residuals(), 200);
+            let (jtj, jtr) = pairs.equations();
+            // Symmetric, and the gradient of the objective (central differences along the
+            // residuals' linear model r + J dx).
+            for a in 0..n {
+                for b in 0..n {
+                    assert_eq!(jtj[a * n + b], jtj[b * n + a]);
+                }
+                let h = 1e-6;
+                let moved = |d: f64| {
+                    let rr: Vec<f64> = (0..200).map(|i| r[i] + d * jac[i * n + a]).collect();
+                    objective(kind, &rr)
+                };
+                let g = (moved(h) - moved(-h)) / (2.0 * h);
+                let g_acc = match kind {
+                    Objective::Squares => 2.0 * jtr[a],
+                    Objective::SumOfNorms => jtr[a],
+                };
+                assert!(
+                    (g - g_acc).abs() < 1e-6 * (1.0 + g.abs()),
+                    "{kind:?} {a}: {g} {g_acc}"
+                );
+            }
+            pairs.clear();
+            assert_eq!((pairs.cost(), pairs.residuals()), (0.0, 0));
+            assert_eq!(pairs.equations(), (vec![0.0; n * n], vec![0.0; n]));
+        }
+        // A trial with another number of residuals than the current point is not admissible.
+        let mut calls = 0;
+        let res = levenberg_marquardt_streamed(
+            |x: &[f64], acc: &mut NormalAccumulator| {
+                calls += 1;
+                let pairs = if calls == 1 { 2 } else { 3 };
+                for _ in 0..pairs {
+                    acc.add_pair(x[0] - 1.0, 0.5, &[1.0], &[0.0]);
+                }
+                true
+            },
+            &[0.0],
+            &[1.0],
+            Objective::Squares,
+            LmOptions::default(),
+        )
+        .unwrap();
+        assert_eq!((res.x, res.iterations), (vec![0.0], 0));
     }
 }
