@@ -3,6 +3,6 @@
 
 pub use odo_core::odometry::trig;
 pub use odo_core::odometry::{
-    ChassisParams, IndexRefs, Integrator, ParamError, Pose, PoseSigma, StepStatus,
+    ChassisParams, IndexRefs, Integrator, ParamError, Pose, PoseSigma, PoseStep, StepStatus,
     UncertaintyModel, WheelCounts,
 };

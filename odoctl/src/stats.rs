@@ -88,6 +88,10 @@ pub fn coverage(errors: &[f64], sigmas: &[f64], k: f64) -> f64 {
 
 /// Wraps an angle to (-pi, pi].
 pub fn wrap_angle(a: f64) -> f64 {
+    // Most angles are already in range: returned as they are (exactly), without fmod.
+    if a > -std::f64::consts::PI && a <= std::f64::consts::PI {
+        return a;
+    }
     let tau = std::f64::consts::TAU;
     let mut r = a.rem_euclid(tau);
     if r > std::f64::consts::PI {
