@@ -80,50 +80,57 @@ struct Table<'a> {
     file: &'a str,
     header_line: usize,
     columns: Vec<String>,
-    rows: Vec<(usize, Vec<&'a str>)>,
+    /// 1-based line number of each data row.
+    lines: Vec<usize>,
+    /// The data rows' fields, row after row (`columns.len()` per row: one allocation for
+    /// the whole file).
+    fields: Vec<&'a str>,
 }
 
 impl<'a> Table<'a> {
     fn parse(file: &'a str, text: &'a str) -> Result<Self> {
         let mut header: Option<(usize, Vec<String>)> = None;
-        let mut rows = Vec::new();
+        let mut lines = Vec::new();
+        let mut all = Vec::new();
         for (i, line) in text.lines().enumerate() {
             let lineno = i + 1;
             let line = line.trim_end_matches('\r');
             if line.trim().is_empty() || line.trim_start().starts_with('#') {
                 continue;
             }
-            let fields: Vec<&str> = line.split(',').map(str::trim).collect();
             match &header {
                 None => {
-                    let cols: Vec<String> = fields
-                        .iter()
-                        .map(|f| f.trim_matches('"').to_string())
+                    let cols: Vec<String> = line
+                        .split(',')
+                        .map(|f| f.trim().trim_matches('"').to_string())
                         .collect();
                     header = Some((lineno, cols));
                 }
                 Some((_, cols)) => {
-                    if fields.len() != cols.len() {
+                    let before = all.len();
+                    all.extend(line.split(',').map(str::trim));
+                    let n = all.len() - before;
+                    if n != cols.len() {
                         bail!(
-                            "{file}:{lineno}: {} fields, but the header has {} columns",
-                            fields.len(),
+                            "{file}:{lineno}: {n} fields, but the header has {} columns",
                             cols.len()
                         );
                     }
-                    rows.push((lineno, fields));
+                    lines.push(lineno);
                 }
             }
         }
         let (header_line, columns) =
             header.ok_or_else(|| anyhow!("{file}: empty file (no header row)"))?;
-        if rows.is_empty() {
+        if lines.is_empty() {
             bail!("{file}:{header_line}: no data rows after the header");
         }
         Ok(Self {
             file,
             header_line,
             columns,
-            rows,
+            lines,
+            fields: all,
         })
     }
 
@@ -145,11 +152,14 @@ impl<'a> Table<'a> {
 
     /// The data rows, in file order.
     fn rows(&self) -> impl Iterator<Item = Row<'_>> {
-        self.rows.iter().map(|(line, fields)| Row {
-            file: self.file,
-            line: *line,
-            fields,
-        })
+        self.lines
+            .iter()
+            .zip(self.fields.chunks(self.columns.len().max(1)))
+            .map(|(line, fields)| Row {
+                file: self.file,
+                line: *line,
+                fields,
+            })
     }
 }
 
@@ -249,7 +259,7 @@ pub fn parse_samples(file: &str, text: &str) -> Result<Vec<Sample>> {
         ["x", "y", "heading", "sigma_x", "sigma_y", "sigma_heading"].map(|c| table.column(c));
     let has_pose = pose_cols.iter().all(Option::is_some);
     let cxy = table.column("sigma_xy");
-    let mut out = Vec::with_capacity(table.rows.len());
+    let mut out = Vec::with_capacity(table.lines.len());
     let mut prev = None;
     for row in table.rows() {
         let t = row.time(ct, &mut prev)?;
@@ -294,7 +304,7 @@ pub fn parse_reference(file: &str, text: &str) -> Result<Vec<RefPoint>> {
     let cx = table.required("x")?;
     let cy = table.required("y")?;
     let ch = table.column("heading");
-    let mut out = Vec::with_capacity(table.rows.len());
+    let mut out = Vec::with_capacity(table.lines.len());
     let mut prev = None;
     for row in table.rows() {
         out.push(RefPoint {
