@@ -24,6 +24,8 @@ mod fidelity;
 #[cfg(not(target_os = "none"))]
 fn main() {
     if std::env::args().nth(1).as_deref() == Some("calibrate") {
+        // As odoctl's main does (odoctl::memory), so the in-process figures are odoctl's.
+        odoctl::memory::keep_freed_memory();
         calibration::run();
     } else {
         fidelity::run();

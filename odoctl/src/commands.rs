@@ -257,6 +257,7 @@ pub fn calibrate_run(
     }
     let matches = csvio::match_or_fail(samples, names.0, reference, names.1, 10)?;
     let run = Run::new(samples, reference, matches);
+    let timer = PhaseTimer::new();
     let h0 = run.heading_guess(0);
     let pb = bar(o.quiet, "eq (16) fit");
     let geometry = calib::fit_geometry(
@@ -272,6 +273,7 @@ pub fn calibrate_run(
         &pb,
     )?;
     pb.finish_and_clear();
+    timer.lap("eq (16) fit");
     let mut params = geometry.params;
     let mut uncertainty = Vec::new();
     if o.fit_delta {
@@ -281,6 +283,7 @@ pub fn calibrate_run(
             o.models.clone()
         };
         let restarts = calib::Restarts::new(&run, &params, geometry.heading0, o.delta_window)?;
+        timer.lap("restart headings");
         for &m in &models {
             let pb = bar(o.quiet, &format!("{} model fit", cfg::model_name(m)));
             let mut p = params;
@@ -295,6 +298,7 @@ pub fn calibrate_run(
                 &pb,
             )?;
             pb.finish_and_clear();
+            timer.lap("uncertainty fit");
             if m == UncertaintyModel::Paper {
                 let pb = bar(o.quiet, "delta_diff fit");
                 u = calib::fit_delta_diff(
@@ -311,6 +315,7 @@ pub fn calibrate_run(
                     &pb,
                 )?;
                 pb.finish_and_clear();
+                timer.lap("delta_diff fit");
             }
             params = u.params;
             uncertainty.push(u);
@@ -322,6 +327,7 @@ pub fn calibrate_run(
         };
     }
     let evaluation = calib::evaluate(&run, &params, geometry.heading0)?;
+    timer.lap("final evaluation");
     let windows = if o.windows.is_empty() {
         Vec::new()
     } else {
@@ -342,11 +348,40 @@ pub fn calibrate_run(
     })
 }
 
+/// Wall time of each calibration phase, printed to stderr when `ODOCTL_DEBUG` is set.
+struct PhaseTimer {
+    last: Option<std::cell::Cell<Instant>>,
+}
+
+impl PhaseTimer {
+    fn new() -> Self {
+        Self {
+            last: std::env::var_os("ODOCTL_DEBUG").map(|_| std::cell::Cell::new(Instant::now())),
+        }
+    }
+
+    /// Prints the time since the previous lap (or the start) under `phase`.
+    fn lap(&self, phase: &str) {
+        if let Some(last) = &self.last {
+            let now = Instant::now();
+            eprintln!("time: {phase}: {:.4} s", (now - last.get()).as_secs_f64());
+            last.set(now);
+        }
+    }
+}
+
 /// `odoctl calibrate`.
 pub fn calibrate(o: &CalibrateOptions) -> Result<ExitCode> {
     let started = Instant::now();
-    let samples = csvio::read_samples(&o.samples)?;
-    let reference = csvio::read_reference(&o.reference)?;
+    let timer = PhaseTimer::new();
+    // The two files are independent: read on two cores.
+    let (samples, reference) = std::thread::scope(|scope| {
+        let reference = scope.spawn(|| csvio::read_reference(&o.reference));
+        let samples = csvio::read_samples(&o.samples);
+        (samples, reference.join().expect("CSV reader panicked"))
+    });
+    let (samples, reference) = (samples?, reference?);
+    timer.lap("read CSV");
     let mut initial = match &o.initial {
         Some(p) => cfg::read_params(p, ChassisParams::DESIGNED)?,
         None => ChassisParams::DESIGNED,
@@ -358,6 +393,7 @@ pub fn calibrate(o: &CalibrateOptions) -> Result<ExitCode> {
         o.reference.display().to_string(),
     );
     let c = calibrate_run(&samples, &reference, (&names.0, &names.1), &initial, o)?;
+    timer.lap("calibration");
     let g = &c.geometry;
     let ev = &c.evaluation;
     let h = summarize(&ev.horizontal[1..]);
@@ -641,6 +677,7 @@ pub fn calibrate(o: &CalibrateOptions) -> Result<ExitCode> {
             crate::outln!("wrote {}", f.display());
         }
     }
+    timer.lap("report");
     crate::outln!("done in {:.2} s", started.elapsed().as_secs_f64());
     Ok(ExitCode::SUCCESS)
 }

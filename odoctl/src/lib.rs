@@ -4,7 +4,8 @@
 //!
 //! The library holds everything the binary does, so the tests can reach it; the odometry
 //! itself is always `odo_core`'s integrator, never a copy.
-#![forbid(unsafe_code)]
+// Unsafe code only in `memory` (one allocator setting, through libc).
+#![deny(unsafe_code)]
 #![warn(missing_docs)]
 
 /// `println!` that ignores write errors (a closed pipe, as with `odoctl ... | head`, ends the
@@ -23,6 +24,7 @@ pub mod config;
 pub mod core_api;
 pub mod csvio;
 pub mod link;
+pub mod memory;
 pub mod optim;
 pub mod plots;
 pub mod replay;

@@ -345,6 +345,8 @@ struct SimulateArgs {
 }
 
 fn main() -> ExitCode {
+    // Freed large vectors stay in the heap (see odoctl::memory): before any thread starts.
+    odoctl::memory::keep_freed_memory();
     let cli = Cli::parse();
     match run(cli) {
         Ok(code) => code,
