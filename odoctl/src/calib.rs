@@ -228,6 +228,13 @@ impl SensitivityTracker {
     }
 }
 
+/// The cores this process may run on, asked once (the question reads the scheduler's
+/// affinity and cgroup limits: too slow to ask at every integration).
+pub fn cores() -> usize {
+    static CORES: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
+    *CORES.get_or_init(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+}
+
 /// Shortest stretch (samples) that [`Run::integrate_with_sensitivity`] spreads over two
 /// cores: below it, the thread costs more than it saves.
 pub const PIPELINE_MIN_SAMPLES: usize = 20_000;
@@ -423,8 +430,7 @@ impl<'a> Run<'a> {
         mut visit: impl FnMut(usize, &Pose, &PoseSensitivity),
     ) -> Result<(), crate::core_api::ParamError> {
         let samples = self.matches[b].0 - self.matches[a].0;
-        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-        if samples >= PIPELINE_MIN_SAMPLES && cores > 1 {
+        if samples >= PIPELINE_MIN_SAMPLES && cores() > 1 {
             self.integrate_with_sensitivity_pipelined(params, a, b, heading0, visit)
         } else {
             self.integrate_with_sensitivity_here(params, a, b, heading0, |k, integ, d| {
@@ -1468,9 +1474,7 @@ impl Restarts {
         .map_err(|e| anyhow!("parameters: {e}"))?;
         // The sub-trajectories' fits are independent: spread over the cores (the same fits,
         // in the same order of results, as one after the other).
-        let threads = std::thread::available_parallelism()
-            .map_or(1, |n| n.get())
-            .min(wins.len());
+        let threads = cores().min(wins.len());
         let chunk = wins.len().div_ceil(threads.max(1));
         let headings = std::thread::scope(|scope| {
             let jobs: Vec<_> = wins
@@ -1572,10 +1576,7 @@ impl Restarts {
         full: bool,
     ) -> Result<()> {
         ev.clear();
-        let threads = std::thread::available_parallelism()
-            .map_or(1, |n| n.get())
-            .min(self.windows.len())
-            .max(1);
+        let threads = cores().min(self.windows.len()).max(1);
         let chunk = self.windows.len().div_ceil(threads);
         let jobs: Vec<_> = self
             .windows
