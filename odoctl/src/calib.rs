@@ -377,19 +377,9 @@ impl<'a> Run<'a> {
         a: usize,
         b: usize,
         heading0: f64,
-        mut visit: impl FnMut(usize, &Integrator),
+        visit: impl FnMut(usize, &Integrator),
     ) -> Result<(), crate::core_api::ParamError> {
-        self.drive(
-            params,
-            a,
-            b,
-            heading0,
-            |integ, s| {
-                let _ = integ.step(counts(s), index_refs(s));
-                None
-            },
-            |k, integ, _| visit(k, integ),
-        )
+        self.integrate_steps(params, a, b, heading0, true, visit)
     }
 
     /// [`Run::integrate`] with the pose alone ([`Integrator::step_pose`]: the same poses, bit
@@ -400,6 +390,20 @@ impl<'a> Run<'a> {
         a: usize,
         b: usize,
         heading0: f64,
+        visit: impl FnMut(usize, &Integrator),
+    ) -> Result<(), crate::core_api::ParamError> {
+        self.integrate_steps(params, a, b, heading0, false, visit)
+    }
+
+    /// [`Run::integrate`] (`uncertainty`) or [`Run::integrate_pose`].
+    #[inline(always)]
+    fn integrate_steps(
+        &self,
+        params: &ChassisParams,
+        a: usize,
+        b: usize,
+        heading0: f64,
+        uncertainty: bool,
         mut visit: impl FnMut(usize, &Integrator),
     ) -> Result<(), crate::core_api::ParamError> {
         self.drive(
@@ -408,7 +412,11 @@ impl<'a> Run<'a> {
             b,
             heading0,
             |integ, s| {
-                let _ = integ.step_pose(counts(s), index_refs(s));
+                if uncertainty {
+                    let _ = integ.step(counts(s), index_refs(s));
+                } else {
+                    let _ = integ.step_pose(counts(s), index_refs(s));
+                }
                 None
             },
             |k, integ, _| visit(k, integ),

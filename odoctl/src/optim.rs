@@ -820,18 +820,14 @@ mod tests {
             f(x, r)
         };
         for newton in [false, true] {
-            let a = levenberg_marquardt_jac(
-                fj,
-                &[3.0, 2.0],
-                &[1.0, 1.0],
-                Objective::SumOfNorms,
-                LmOptions {
-                    newton,
-                    pred_tol: 1e-14,
-                    ..LmOptions::default()
-                },
-            )
-            .unwrap();
+            let opts = LmOptions {
+                newton,
+                pred_tol: 1e-14,
+                ..LmOptions::default()
+            };
+            let a =
+                levenberg_marquardt_jac(fj, &[3.0, 2.0], &[1.0, 1.0], Objective::SumOfNorms, opts)
+                    .unwrap();
             assert!(a.cost <= nm.cost + 1e-7, "newton {newton}: {a:?} {nm:?}");
             assert!((a.x[0] - nm.x[0]).abs() < 1e-4, "newton {newton}: {a:?}");
             assert!((a.x[1] - nm.x[1]).abs() < 1e-4, "newton {newton}: {a:?}");
@@ -846,11 +842,7 @@ mod tests {
                 &[3.0, 2.0],
                 &[1.0, 1.0],
                 Objective::SumOfNorms,
-                LmOptions {
-                    newton,
-                    pred_tol: 1e-14,
-                    ..LmOptions::default()
-                },
+                opts,
             )
             .unwrap();
             assert_eq!(streamed.x, a.x, "newton {newton}");
