@@ -28,5 +28,6 @@ pub mod memory;
 pub mod optim;
 pub mod plots;
 pub mod replay;
+pub mod ros;
 pub mod simulate;
 pub mod stats;

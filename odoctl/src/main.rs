@@ -115,6 +115,10 @@ enum Cmd {
         /// Write the CSV here instead of stdout.
         #[arg(long, short)]
         out: Option<PathBuf>,
+        /// Also record the replay as ROS 2 topics (/odom, /tf, /diagnostics) in this MCAP
+        /// file (docs/ROS.md).
+        #[arg(long)]
+        mcap: Option<PathBuf>,
     },
     /// Estimate the chassis parameters from a run and its RTK GNSS reference (eq 16).
     Calibrate(CalibrateArgs),
@@ -410,14 +414,26 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             heading,
             check,
             out,
-        } => c::replay(
-            &samples,
-            params.config.as_deref(),
-            &params.sets,
-            (x, y, heading),
-            check,
-            out.as_deref(),
-        ),
+            mcap,
+        } => {
+            if let Some(m) = &mcap {
+                odoctl::ros::export::replay_hook(
+                    m,
+                    &samples,
+                    params.config.as_deref(),
+                    &params.sets,
+                    (x, y, heading),
+                )?;
+            }
+            c::replay(
+                &samples,
+                params.config.as_deref(),
+                &params.sets,
+                (x, y, heading),
+                check,
+                out.as_deref(),
+            )
+        }
         Cmd::Calibrate(a) => c::calibrate(&c::CalibrateOptions {
             samples: a.samples,
             reference: a.reference,

@@ -1,0 +1,8 @@
+//! Exports to ROS 2 (REP-103/105): MCAP recordings of `/odom`, `/tf` and `/diagnostics` as
+//! ros2msg/CDR. The conversions and their table: docs/ROS.md.
+
+pub mod conventions;
+pub mod export;
+pub mod msgs;
+pub mod recording;
+pub mod stamps;
