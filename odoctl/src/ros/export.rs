@@ -48,7 +48,7 @@ pub fn odom_samples(
         let (prev, s) = (&w[0], &w[1]);
         let status = integ.step(counts(s), index_refs(s));
         let (pose, cov) = state(&integ);
-        let dt = (stamps.nanos[i + 1] as f64 - stamps.nanos[i] as f64) * 1e-9;
+        let dt = stamps.nanos[i + 1].saturating_sub(stamps.nanos[i]) as f64 * 1e-9;
         out.push(OdomSample {
             stamp_ns: stamps.nanos[i + 1],
             pose,

@@ -152,7 +152,8 @@ impl<W: Write + Seek> McapRecording<W> {
         })
     }
 
-    /// Names the uncertainty model in the diagnostics when the samples carry no status word.
+    /// The uncertainty model that filled the covariances (a replay's), named in the
+    /// diagnostics instead of the one the unit's status word names.
     pub fn set_model(&mut self, model: UncertaintyModel) {
         self.model = Some(model);
     }
@@ -291,7 +292,7 @@ impl<W: Write + Seek> McapRecording<W> {
                 format!("reset_pose: the unit's pose jumped by ({dx:.4} m, {dy:.4} m, {da:.5} rad); odom continues"),
             ));
         }
-        let model = flags.map(|f| f.model).or(self.model);
+        let model = self.model.or(flags.map(|f| f.model));
         if let Some(m) = model {
             values.push((
                 "uncertainty_model".into(),

@@ -58,12 +58,14 @@ pub fn leap_seconds(gps_seconds: f64) -> i64 {
     leap
 }
 
-/// Unix UTC nanoseconds of GPS week `week`, `tow` seconds; `None` before 1970 or beyond u64.
-pub fn gps_to_unix_nanos(week: u16, tow: f64) -> Option<u64> {
-    let gps = i64::from(week) as f64 * WEEK_SECONDS as f64 + tow;
-    let unix = gps + (GPS_EPOCH_UNIX - leap_seconds(gps)) as f64;
-    let ns = (unix * 1e9).round();
-    (ns >= 0.0 && ns < u64::MAX as f64).then_some(ns as u64)
+/// Unix UTC nanoseconds of GPS week `week`, `tow_ms` milliseconds plus `sub` seconds
+/// (`0 <= sub`, the sample's place in its second); `None` before 1970.
+pub fn gps_to_unix_nanos(week: u16, tow_ms: u32, sub: f64) -> Option<u64> {
+    let whole_ms = i64::from(week) * WEEK_SECONDS * 1000 + i64::from(tow_ms);
+    let leap = leap_seconds(whole_ms as f64 * 1e-3 + sub);
+    let unix_ms = whole_ms + (GPS_EPOCH_UNIX - leap) * 1000;
+    let ns = u64::try_from(unix_ms).ok()? * 1_000_000;
+    Some(ns + (sub * 1e9).round() as u64)
 }
 
 /// Where the header stamps of a recording come from.
@@ -119,17 +121,17 @@ pub fn stamp(samples: &[Sample]) -> Stamps {
         let valid = s.flags.is_some_and(|f| f & TIME_VALID != 0);
         let tow = f64::from(time.gps_tow_ms) * 1e-3;
         let sub = s.t - tow;
-        (valid && (0.0..1.0 + 1e-9).contains(&sub)).then_some((time.gps_week, tow, sub))
+        (valid && (0.0..1.0 + 1e-9).contains(&sub)).then_some((time.gps_week, time.gps_tow_ms, sub))
     };
     let mcu = |s: &Sample| s.unit.and_then(|u| u.time).map(|t| t.mcu_time_us);
     let first = samples.first();
-    if let Some((week, tow, sub)) = first.and_then(tag) {
-        if let Some(ns0) = gps_to_unix_nanos(week, tow + sub) {
+    if let Some((week, tow_ms, sub)) = first.and_then(tag) {
+        if let Some(ns0) = gps_to_unix_nanos(week, tow_ms, sub) {
             let mut nanos = Vec::with_capacity(samples.len());
             let mut last = (ns0, first.and_then(mcu));
             let mut extrapolated = 0;
             for s in samples {
-                let ns = match tag(s).and_then(|(w, tow, sub)| gps_to_unix_nanos(w, tow + sub)) {
+                let ns = match tag(s).and_then(|(w, tow, sub)| gps_to_unix_nanos(w, tow, sub)) {
                     Some(ns) => ns,
                     None => {
                         extrapolated += 1;
@@ -142,7 +144,7 @@ pub fn stamp(samples: &[Sample]) -> Stamps {
                 last = (ns, mcu(s));
                 nanos.push(ns);
             }
-            let gps = f64::from(week) * WEEK_SECONDS as f64 + tow;
+            let gps = f64::from(week) * WEEK_SECONDS as f64 + f64::from(tow_ms) * 1e-3;
             return Stamps {
                 source: StampSource::Utc,
                 nanos,
@@ -189,7 +191,7 @@ mod tests {
     #[test]
     fn gps_week_to_utc() {
         // GPS week 2296, 0 s = 2024-01-07 00:00:00 GPS = 2024-01-06 23:59:42 UTC.
-        let ns = gps_to_unix_nanos(2296, 0.0).unwrap();
+        let ns = gps_to_unix_nanos(2296, 0, 0.0).unwrap();
         assert_eq!(
             ns,
             (days_from_civil(2024, 1) * 86_400 + 6 * 86_400 - 18) as u64 * 1_000_000_000
@@ -223,10 +225,11 @@ mod tests {
         let st = stamp(&s);
         assert_eq!(st.source, StampSource::Utc);
         assert_eq!(st.extrapolated, 1);
-        let base = gps_to_unix_nanos(2295, 0.0).unwrap();
-        let want = [100.98, 101.0, 101.02, 101.04].map(|t: f64| base + (t * 1e9).round() as u64);
-        for (g, w) in st.nanos.iter().zip(want) {
-            assert!(g.abs_diff(w) < 1000, "{g} {w}");
+        let base = gps_to_unix_nanos(2295, 0, 0.0).unwrap();
+        let ms = [100_980, 101_000, 101_020, 101_040];
+        // The untagged sample continues from the previous one by MCU time (20 ms).
+        for (g, w) in st.nanos.iter().zip(ms) {
+            assert_eq!(*g, base + w * 1_000_000);
         }
     }
 
