@@ -77,6 +77,13 @@ enum Cmd {
         /// `replay --check` can reproduce it bit for bit.
         #[arg(long)]
         reset_pose: bool,
+        /// Also write the unit's poses as ROS 2 topics (/odom, /tf, /diagnostics) to this
+        /// MCAP file once recording ends (docs/ROS.md); the twist needs the unit's parameters
+        /// (`--config`, `--set`).
+        #[arg(long)]
+        mcap: Option<PathBuf>,
+        #[command(flatten)]
+        params: ParamArgs,
     },
     /// Decode a captured raw byte stream to a SAMPLES CSV.
     Decode {
@@ -386,15 +393,23 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             duration,
             count,
             reset_pose,
-        } => c::record(
-            &port.port,
-            port.baud,
-            &out,
-            raw.as_deref(),
-            duration,
-            count,
-            reset_pose,
-        ),
+            mcap,
+            params,
+        } => {
+            let code = c::record(
+                &port.port,
+                port.baud,
+                &out,
+                raw.as_deref(),
+                duration,
+                count,
+                reset_pose,
+            )?;
+            if let Some(m) = &mcap {
+                odoctl::ros::export::record_hook(m, &out, params.config.as_deref(), &params.sets)?;
+            }
+            Ok(code)
+        }
         Cmd::Decode { file, out } => c::decode(&file, out.as_deref()),
         Cmd::Config { port, action } => {
             let action = match action {

@@ -215,3 +215,44 @@ fn bad_output_path_is_an_error_and_leaves_no_csv_half_written() {
     );
     assert!(!dir.join("r.csv").exists());
 }
+
+#[test]
+fn record_mcap_from_a_unit_on_tcp_read_back_independently() {
+    let sim = common::sim(odoctl::simulate::PathKind::Validation, 10.0, 11);
+    let samples: Vec<_> = sim.samples[..300].to_vec();
+    let dir = scratch("ros_mcap_record");
+    let (port, unit) = common::fake_unit(samples, std::time::Duration::from_millis(1));
+    let f = |x: &str| dir.join(format!("rec{x}"));
+    // The unit runs the designed parameters (its defaults): the twist needs them.
+    std::fs::write(f(".toml"), params_toml(&ChassisParams::DESIGNED)).unwrap();
+    let o = odoctl(&[
+        "record",
+        "--port",
+        &format!("tcp:127.0.0.1:{port}"),
+        "--out",
+        f("_samples.csv").to_str().unwrap(),
+        "--count",
+        "200",
+        "--reset-pose",
+        "--mcap",
+        f(".mcap").to_str().unwrap(),
+        "--config",
+        f(".toml").to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("mcap: 200 /odom and /tf"), "{err}");
+    unit.join().unwrap();
+    // The unit's own pose columns are what /odom must carry; the x-y covariance as sent, no
+    // position-heading terms (not on the wire).
+    std::fs::copy(f("_samples.csv"), f("_replay.csv")).unwrap();
+    let rows = odoctl::csvio::read_samples(&f("_samples.csv")).unwrap();
+    let mut e = String::from("t,sigma_xy,cov_x_heading,cov_y_heading\n");
+    for r in &rows {
+        let _ = writeln!(e, "{},{:?},0,0", r.t, r.unit.unwrap().sigma_xy);
+    }
+    std::fs::write(f("_expect.csv"), e).unwrap();
+    if python_ready() {
+        read_back(&dir, "rec", "mcu_time", None);
+    }
+}

@@ -63,6 +63,114 @@ pub fn odom_samples(
     Ok(out)
 }
 
+/// The samples of a recording of the unit's own pose records (`record`): the unit's pose and
+/// sigmas as sent (the x-y covariance as the unit sends it; the position-heading terms are
+/// not on the wire and are 0), the twist of each interval from the counts with `params` (the
+/// unit's parameters). A record whose sigmas are all zero after one with a non-zero sigma is
+/// a `reset_pose` and is marked so, which keeps `odom` continuous in the recording.
+pub fn unit_samples(
+    params: &ChassisParams,
+    samples: &[Sample],
+    stamps: &Stamps,
+) -> Result<Vec<OdomSample>> {
+    let mut out = Vec::with_capacity(samples.len());
+    let mut prev: Option<(&Sample, bool)> = None;
+    for (i, s) in samples.iter().enumerate() {
+        let u = s.unit.ok_or_else(|| {
+            anyhow!(
+                "sample {} (t = {}) carries no unit pose (x, y, heading, sigma_x, sigma_y, sigma_heading)",
+                i + 1,
+                s.t
+            )
+        })?;
+        let zero = u.sigma_x == 0.0 && u.sigma_y == 0.0 && u.sigma_heading == 0.0;
+        let twist = prev.and_then(|(p, _)| {
+            let dt = stamps.nanos[i].saturating_sub(stamps.nanos[i - 1]) as f64 * 1e-9;
+            BaseTwist::from_counts(params, s.left - p.left, s.right - p.right, dt)
+        });
+        out.push(OdomSample {
+            stamp_ns: stamps.nanos[i],
+            pose: Pose {
+                x: u.x,
+                y: u.y,
+                heading: u.heading,
+            },
+            cov: PoseCovariance::from_sigmas(
+                u.sigma_x,
+                u.sigma_y,
+                u.sigma_heading,
+                u.sigma_xy,
+                (0.0, 0.0),
+            ),
+            twist,
+            flags: s.flags.and_then(|f| u32::try_from(f).ok()),
+            sequence: u.seq,
+            overrange: false,
+            reset: zero && prev.is_some_and(|(_, was_zero)| !was_zero),
+        });
+        prev = Some((s, zero));
+    }
+    Ok(out)
+}
+
+/// Records `odom` (with `/odom/path` at the end) into `out`.
+fn write(
+    out: &Path,
+    meta: &BTreeMap<String, String>,
+    odom: &[OdomSample],
+    model: Option<crate::core_api::UncertaintyModel>,
+) -> Result<RecordingSummary> {
+    let mut rec = recording::create(out, meta)?;
+    if let Some(m) = model {
+        rec.set_model(m);
+    }
+    for s in odom {
+        rec.push(s)?;
+    }
+    let path: Vec<(u64, Pose)> = odom.iter().map(|s| (s.stamp_ns, s.pose)).collect();
+    rec.path("/odom/path", &path)?;
+    rec.finish()
+}
+
+/// `odoctl record ... --mcap OUT`: the unit's pose records of the SAMPLES file `csv` just
+/// written (see [`unit_samples`]); `config`/`sets` are the unit's parameters for the twist.
+pub fn record_hook(out: &Path, csv: &Path, config: Option<&Path>, sets: &[String]) -> Result<()> {
+    let params = cfg::load(config, sets)?;
+    let samples = crate::csvio::read_samples(csv)?;
+    let stamps = stamps::stamp(&samples);
+    let odom = unit_samples(&params, &samples, &stamps)?;
+    let sum = write(
+        out,
+        &metadata(&params, &stamps, &csv.display().to_string(), "record"),
+        &odom,
+        None,
+    )?;
+    report(out, &sum);
+    Ok(())
+}
+
+fn report(out: &Path, sum: &RecordingSummary) {
+    eprintln!(
+        "mcap: {} /odom and /tf, {} /diagnostics messages to {}{}{}",
+        sum.odom,
+        sum.diagnostics,
+        out.display(),
+        if sum.overrange > 0 {
+            format!("; {} over-range samples not integrated", sum.overrange)
+        } else {
+            String::new()
+        },
+        if sum.resets > 0 {
+            format!(
+                "; {} reset_pose jumps absorbed, odom kept continuous",
+                sum.resets
+            )
+        } else {
+            String::new()
+        }
+    );
+}
+
 /// The `odoctl` metadata record of a recording.
 pub fn metadata(
     params: &ChassisParams,
@@ -109,14 +217,12 @@ pub fn write_replay(
 ) -> Result<RecordingSummary> {
     let stamps = stamps::stamp(samples);
     let odom = odom_samples(params, samples, initial, &stamps)?;
-    let mut rec = recording::create(out, &metadata(params, &stamps, source, "replay"))?;
-    rec.set_model(params.uncertainty_model);
-    for s in &odom {
-        rec.push(s)?;
-    }
-    let path: Vec<(u64, Pose)> = odom.iter().map(|s| (s.stamp_ns, s.pose)).collect();
-    rec.path("/odom/path", &path)?;
-    rec.finish()
+    write(
+        out,
+        &metadata(params, &stamps, source, "replay"),
+        &odom,
+        Some(params.uncertainty_model),
+    )
 }
 
 /// The one-call hook of `odoctl replay --mcap`: reads the parameters and the samples as
@@ -136,16 +242,64 @@ pub fn replay_hook(
         heading: start.2,
     };
     let sum = write_replay(out, &params, &s, initial, &samples.display().to_string())?;
-    eprintln!(
-        "mcap: {} /odom and /tf, {} /diagnostics messages to {}{}",
-        sum.odom,
-        sum.diagnostics,
-        out.display(),
-        if sum.overrange > 0 {
-            format!(" ({} over-range samples not integrated)", sum.overrange)
-        } else {
-            String::new()
-        }
-    );
+    report(out, &sum);
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::csvio::UnitPose;
+
+    fn unit_row(t: f64, left: i64, x: f64, sigma: f32) -> Sample {
+        Sample {
+            t,
+            left,
+            right: left,
+            unit: Some(UnitPose {
+                x,
+                y: 1.0,
+                heading: 0.25,
+                sigma_x: sigma,
+                sigma_y: sigma,
+                sigma_heading: sigma,
+                ..Default::default()
+            }),
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn a_reset_in_the_unit_records_is_marked_and_odom_stays_continuous() {
+        let p = ChassisParams::DESIGNED;
+        let rows = [
+            unit_row(0.0, 0, 0.0, 0.0),
+            unit_row(0.02, 100, 0.5, 1e-3),
+            unit_row(0.04, 200, 1.0, 2e-3),
+            // reset_pose: the unit jumps to x = 0 with zero sigmas.
+            unit_row(0.06, 300, 0.0, 0.0),
+            unit_row(0.08, 400, 0.5, 1e-3),
+        ];
+        let st = stamps::stamp(&rows);
+        let odom = unit_samples(&p, &rows, &st).unwrap();
+        let resets: Vec<bool> = odom.iter().map(|s| s.reset).collect();
+        assert_eq!(resets, [false, false, false, true, false]);
+        assert!(odom[0].twist.is_none() && odom[1].twist.is_some());
+
+        let mut rec =
+            recording::McapRecording::new(std::io::Cursor::new(Vec::new()), &BTreeMap::new())
+                .unwrap();
+        for s in &odom {
+            rec.push(s).unwrap();
+        }
+        let sum = rec.finish().unwrap();
+        assert_eq!((sum.odom, sum.resets), (5, 1));
+        // Diagnostics: the first sample, the WARN of the reset, back to OK after it.
+        assert_eq!(sum.diagnostics, 3);
+
+        // A file without the unit's pose is refused, naming the sample.
+        let bare = [Sample::default()];
+        let e = unit_samples(&p, &bare, &stamps::stamp(&bare)).unwrap_err();
+        assert!(e.to_string().contains("sample 1"), "{e}");
+    }
 }
