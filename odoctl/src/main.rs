@@ -161,6 +161,10 @@ enum Cmd {
         /// the heading bands widened by it, as `calibrate`'s `delta_diff` criterion uses.
         #[arg(long, default_value_t = 0.5)]
         reference_heading_sigma_deg: f64,
+        /// Also write the reference track and the odometry path (`nav_msgs/Path`) to this
+        /// MCAP file, for Foxglove (docs/ROS.md).
+        #[arg(long)]
+        mcap: Option<PathBuf>,
     },
     /// Write a synthetic run (SAMPLES and REFERENCE CSVs) with known true parameters.
     Simulate(SimulateArgs),
@@ -479,18 +483,31 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             models,
             reference_sigma,
             reference_heading_sigma_deg,
-        } => c::validate(
-            &samples,
-            &reference,
-            params.config.as_deref(),
-            &params.sets,
-            heading,
-            errors.as_deref(),
-            plots.as_deref(),
-            &models.list(),
-            reference_sigma,
-            reference_heading_sigma_deg.to_radians(),
-        ),
+            mcap,
+        } => {
+            if let Some(m) = &mcap {
+                odoctl::ros::tracks::validate_hook(
+                    m,
+                    &samples,
+                    &reference,
+                    params.config.as_deref(),
+                    &params.sets,
+                    heading,
+                )?;
+            }
+            c::validate(
+                &samples,
+                &reference,
+                params.config.as_deref(),
+                &params.sets,
+                heading,
+                errors.as_deref(),
+                plots.as_deref(),
+                &models.list(),
+                reference_sigma,
+                reference_heading_sigma_deg.to_radians(),
+            )
+        }
         Cmd::Simulate(a) => c::simulate(&c::SimulateOptions {
             samples: a.samples,
             reference: a.reference,

@@ -256,3 +256,45 @@ fn record_mcap_from_a_unit_on_tcp_read_back_independently() {
         read_back(&dir, "rec", "mcu_time", None);
     }
 }
+
+#[test]
+fn validate_mcap_tracks_read_back_independently() {
+    let dir = scratch("ros_mcap_validate");
+    let s = simulated(&dir);
+    let r = dir.join("sim_reference.csv");
+    let (m, e) = (dir.join("val.mcap"), dir.join("errors.csv"));
+    let o = odoctl(&[
+        "validate",
+        "--samples",
+        s.to_str().unwrap(),
+        "--reference",
+        r.to_str().unwrap(),
+        "--errors",
+        e.to_str().unwrap(),
+        "--mcap",
+        m.to_str().unwrap(),
+    ]);
+    success_stdout(&o);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("/reference/path") && err.contains("2 paths"),
+        "{err}"
+    );
+    if python_ready() {
+        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/ros/read_tracks.py");
+        let o = Command::new("python3")
+            .arg(script)
+            .args(["--mcap", m.to_str().unwrap()])
+            .args(["--reference", r.to_str().unwrap()])
+            .args(["--errors", e.to_str().unwrap()])
+            .output()
+            .unwrap();
+        let out = String::from_utf8_lossy(&o.stdout);
+        assert!(
+            o.status.success() && out.contains("read_tracks: ok"),
+            "{out}\n{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        eprintln!("{}", out.trim());
+    }
+}

@@ -6,3 +6,4 @@ pub mod export;
 pub mod msgs;
 pub mod recording;
 pub mod stamps;
+pub mod tracks;
