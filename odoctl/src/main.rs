@@ -291,6 +291,10 @@ struct CalibrateArgs {
     /// No progress bars.
     #[arg(long, short)]
     quiet: bool,
+    /// Also write the result as ros2_control diff_drive_controller parameters (YAML:
+    /// wheel_separation, wheel_radius, the wheel radius multipliers; docs/ROS.md).
+    #[arg(long, requires = "out")]
+    export_ros: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -453,26 +457,33 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 out.as_deref(),
             )
         }
-        Cmd::Calibrate(a) => c::calibrate(&c::CalibrateOptions {
-            samples: a.samples,
-            reference: a.reference,
-            initial: a.initial,
-            sets: a.sets,
-            out: a.out,
-            delta_window: a.delta_window,
-            reference_sigma: a.reference_sigma,
-            delta_mode: a.delta_mode,
-            fit_delta: !a.no_delta,
-            fit_delta_diff: !a.no_fit_delta_diff,
-            reference_heading_sigma: a.reference_heading_sigma_deg.to_radians(),
-            models: a.models.list(),
-            polish: a.polish && !a.no_polish,
-            windows: a.windows,
-            window_start: a.window_start,
-            windows_out: a.windows_out,
-            plots: a.plots,
-            quiet: a.quiet,
-        }),
+        Cmd::Calibrate(a) => {
+            let ros = a.export_ros.clone().zip(a.out.clone());
+            let code = c::calibrate(&c::CalibrateOptions {
+                samples: a.samples,
+                reference: a.reference,
+                initial: a.initial,
+                sets: a.sets,
+                out: a.out,
+                delta_window: a.delta_window,
+                reference_sigma: a.reference_sigma,
+                delta_mode: a.delta_mode,
+                fit_delta: !a.no_delta,
+                fit_delta_diff: !a.no_fit_delta_diff,
+                reference_heading_sigma: a.reference_heading_sigma_deg.to_radians(),
+                models: a.models.list(),
+                polish: a.polish && !a.no_polish,
+                windows: a.windows,
+                window_start: a.window_start,
+                windows_out: a.windows_out,
+                plots: a.plots,
+                quiet: a.quiet,
+            })?;
+            if let Some((yaml, result)) = &ros {
+                odoctl::ros::diff_drive::export_hook(yaml, result)?;
+            }
+            Ok(code)
+        }
         Cmd::Validate {
             samples,
             reference,

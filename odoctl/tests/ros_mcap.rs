@@ -298,3 +298,50 @@ fn validate_mcap_tracks_read_back_independently() {
         eprintln!("{}", out.trim());
     }
 }
+
+#[test]
+fn calibrate_export_ros_writes_the_result_as_diff_drive_parameters() {
+    let dir = scratch("ros_export_calibrate");
+    let s = simulated(&dir);
+    let (toml, yaml) = (dir.join("cal.toml"), dir.join("dd.yaml"));
+    let o = odoctl(&[
+        "calibrate",
+        "--samples",
+        s.to_str().unwrap(),
+        "--reference",
+        dir.join("sim_reference.csv").to_str().unwrap(),
+        "--no-delta",
+        "--quiet",
+        "--out",
+        toml.to_str().unwrap(),
+        "--export-ros",
+        yaml.to_str().unwrap(),
+    ]);
+    success_stdout(&o);
+    let p = odoctl::config::read_params(&toml, ChassisParams::DESIGNED).unwrap();
+    let y = std::fs::read_to_string(&yaml).unwrap();
+    let v = |k: &str| -> f64 {
+        y.lines()
+            .find_map(|l| l.trim().strip_prefix(&format!("{k}: ")))
+            .unwrap_or_else(|| panic!("{k}:\n{y}"))
+            .parse()
+            .unwrap()
+    };
+    assert_eq!(v("wheel_separation"), p.track_width);
+    let r = v("wheel_radius");
+    assert!((2.0 * r * v("left_wheel_radius_multiplier") - p.left_diameter).abs() < 1e-15);
+    assert!((2.0 * r * v("right_wheel_radius_multiplier") - p.right_diameter).abs() < 1e-15);
+    // The fit moved the designed diameters: the file holds the calibration, not the defaults.
+    assert_ne!(p.left_diameter, ChassisParams::DESIGNED.left_diameter);
+    // Without --out there is no result to convert: refused by the command line.
+    let o = odoctl(&[
+        "calibrate",
+        "--samples",
+        s.to_str().unwrap(),
+        "--reference",
+        dir.join("sim_reference.csv").to_str().unwrap(),
+        "--export-ros",
+        yaml.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+}

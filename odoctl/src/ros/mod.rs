@@ -2,6 +2,7 @@
 //! ros2msg/CDR. The conversions and their table: docs/ROS.md.
 
 pub mod conventions;
+pub mod diff_drive;
 pub mod export;
 pub mod msgs;
 pub mod recording;
