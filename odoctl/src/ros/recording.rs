@@ -114,7 +114,7 @@ impl<W: Write + Seek> McapRecording<W> {
     /// Starts a recording on `w` with the three standard channels.
     pub fn new(w: W, metadata: &BTreeMap<String, String>) -> Result<Self> {
         let mut writer = mcap::WriteOptions::new()
-            .compression(None)
+            .compression(Some(mcap::Compression::Zstd))
             .profile("ros2")
             .library(concat!("odoctl ", env!("CARGO_PKG_VERSION")))
             .create(w)
