@@ -7,6 +7,7 @@
 mod common;
 
 use std::fmt::Write as _;
+use std::io::Write as _;
 use std::path::Path;
 use std::process::Command;
 
@@ -25,7 +26,11 @@ fn python_ready() -> bool {
             std::env::var("ODO_PY_REQUIRED").as_deref() != Ok("1"),
             "ODO_PY_REQUIRED=1 but python3 with the `mcap` and `mcap-ros2-support` packages is missing"
         );
-        eprintln!("skipped: python3 with `mcap` and `mcap-ros2-support` not found (python3 -m pip install mcap mcap-ros2-support)");
+        // Straight to stderr, past the test harness's capture, so the skip is seen.
+        let _ = writeln!(
+            std::io::stderr(),
+            "ros_mcap: skipped: python3 with `mcap` and `mcap-ros2-support` not found (python3 -m pip install mcap mcap-ros2-support)"
+        );
     }
     ok
 }
