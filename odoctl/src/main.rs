@@ -295,6 +295,10 @@ struct CalibrateArgs {
     /// wheel_separation, wheel_radius, the wheel radius multipliers; docs/ROS.md).
     #[arg(long, requires = "out")]
     export_ros: Option<PathBuf>,
+    /// Also write the reference track and the calibrated odometry path (`nav_msgs/Path`, the
+    /// paper's Fig. 4) to this MCAP file, as `validate --mcap` with the result (docs/ROS.md).
+    #[arg(long, requires = "out")]
+    mcap: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -459,6 +463,8 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         }
         Cmd::Calibrate(a) => {
             let ros = a.export_ros.clone().zip(a.out.clone());
+            let tracks = a.mcap.clone().zip(a.out.clone());
+            let files = (a.samples.clone(), a.reference.clone());
             let code = c::calibrate(&c::CalibrateOptions {
                 samples: a.samples,
                 reference: a.reference,
@@ -481,6 +487,9 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             })?;
             if let Some((yaml, result)) = &ros {
                 odoctl::ros::diff_drive::export_hook(yaml, result)?;
+            }
+            if let Some((m, result)) = &tracks {
+                odoctl::ros::tracks::validate_hook(m, &files.0, &files.1, Some(result), &[], None)?;
             }
             Ok(code)
         }

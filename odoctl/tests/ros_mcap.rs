@@ -321,8 +321,31 @@ fn calibrate_export_ros_writes_the_result_as_diff_drive_parameters() {
         toml.to_str().unwrap(),
         "--export-ros",
         yaml.to_str().unwrap(),
+        "--mcap",
+        dir.join("cal.mcap").to_str().unwrap(),
     ]);
     success_stdout(&o);
+    // The calibrated track (Fig. 4) too: the same as `validate --mcap` with the result.
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("/odom/path"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let o = odoctl(&[
+        "validate",
+        "--samples",
+        s.to_str().unwrap(),
+        "--reference",
+        dir.join("sim_reference.csv").to_str().unwrap(),
+        "--config",
+        toml.to_str().unwrap(),
+        "--mcap",
+        dir.join("val.mcap").to_str().unwrap(),
+    ]);
+    success_stdout(&o);
+    let cal = std::fs::read(dir.join("cal.mcap")).unwrap();
+    assert!(cal.len() > 1000);
+    assert!(cal == std::fs::read(dir.join("val.mcap")).unwrap());
     let p = odoctl::config::read_params(&toml, ChassisParams::DESIGNED).unwrap();
     let y = std::fs::read_to_string(&yaml).unwrap();
     let v = |k: &str| -> f64 {
