@@ -247,6 +247,7 @@ fn record_mcap_from_a_unit_on_tcp_read_back_independently() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
     assert!(err.contains("mcap: 200 /odom and /tf"), "{err}");
+    assert!(!err.contains("do not look like the unit's"), "{err}");
     unit.join().unwrap();
     // The unit's own pose columns are what /odom must carry; the x-y covariance as sent, no
     // position-heading terms (not on the wire).

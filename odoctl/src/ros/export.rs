@@ -113,6 +113,35 @@ pub fn unit_samples(
     Ok(out)
 }
 
+/// Whether `params` look like the unit's own: the heading change the counts give with them
+/// against the one the unit reported over the recording (within 1 % of the turn plus
+/// 0.01 rad, room for per-angle wheel functions). `Some(warning)` when they disagree; `None`
+/// when they agree or the recording cannot tell (a reset, no unit pose).
+pub fn params_mismatch(params: &ChassisParams, samples: &[Sample]) -> Option<String> {
+    let (first, last) = (samples.first()?, samples.last()?);
+    let (u0, u1) = (first.unit?, last.unit?);
+    let stamps = stamps::stamp(samples);
+    if unit_samples(params, samples, &stamps)
+        .ok()?
+        .iter()
+        .any(|s| s.reset)
+    {
+        return None;
+    }
+    let ticks = f64::from(params.ticks_per_rev);
+    let s1 = (last.left - first.left) as f64 * std::f64::consts::PI * params.left_diameter / ticks;
+    let s2 =
+        (last.right - first.right) as f64 * std::f64::consts::PI * params.right_diameter / ticks;
+    let counts_turn = (s1 - s2) / params.track_width;
+    let unit_turn = u1.heading - u0.heading;
+    let tolerance = 0.01 * unit_turn.abs().max(counts_turn.abs()) + 0.01;
+    ((counts_turn - unit_turn).abs() > tolerance).then(|| {
+        format!(
+            "the parameters do not look like the unit's: with them the counts turn {counts_turn:.4} rad, the unit reported {unit_turn:.4} rad; the twist on /odom uses them (pass the unit's with --config/--set)"
+        )
+    })
+}
+
 /// Records `odom` (with `/odom/path` at the end) into `out`.
 fn write(
     out: &Path,
@@ -137,6 +166,9 @@ fn write(
 pub fn record_hook(out: &Path, csv: &Path, config: Option<&Path>, sets: &[String]) -> Result<()> {
     let params = cfg::load(config, sets)?;
     let samples = crate::csvio::read_samples(csv)?;
+    if let Some(w) = params_mismatch(&params, &samples) {
+        eprintln!("warning: {w}");
+    }
     let stamps = stamps::stamp(&samples);
     let odom = unit_samples(&params, &samples, &stamps)?;
     let sum = write(
@@ -297,9 +329,43 @@ mod tests {
         // Diagnostics: the first sample, the WARN of the reset, back to OK after it.
         assert_eq!(sum.diagnostics, 3);
 
+        // A reset: the parameters cannot be checked against the unit's heading.
+        assert_eq!(params_mismatch(&p, &rows), None);
+
         // A file without the unit's pose is refused, naming the sample.
         let bare = [Sample::default()];
         let e = unit_samples(&p, &bare, &stamps::stamp(&bare)).unwrap_err();
         assert!(e.to_string().contains("sample 1"), "{e}");
+    }
+
+    #[test]
+    fn parameters_unlike_the_units_are_noticed() {
+        let p = ChassisParams::DESIGNED;
+        // Turning on the spot: 2000 increments forward left, 2000 back right.
+        let turn = |l: i64, r: i64| {
+            let ticks = f64::from(p.ticks_per_rev);
+            let q = std::f64::consts::PI / ticks;
+            (l as f64 * q * p.left_diameter - r as f64 * q * p.right_diameter) / p.track_width
+        };
+        let row = |t: f64, l: i64, r: i64, heading: f64| Sample {
+            t,
+            left: l,
+            right: r,
+            unit: Some(UnitPose {
+                heading,
+                sigma_x: 1e-3,
+                ..Default::default()
+            }),
+            ..Default::default()
+        };
+        let rows = [
+            row(0.0, 0, 0, 0.0),
+            row(1.0, 2000, -2000, turn(2000, -2000)),
+        ];
+        assert_eq!(params_mismatch(&p, &rows), None);
+        let mut wide = p;
+        wide.track_width *= 1.05;
+        let w = params_mismatch(&wide, &rows).unwrap();
+        assert!(w.contains("--config"), "{w}");
     }
 }
