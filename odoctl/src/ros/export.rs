@@ -184,18 +184,21 @@ pub fn record_hook(out: &Path, csv: &Path, config: Option<&Path>, sets: &[String
 fn report(out: &Path, sum: &RecordingSummary) {
     eprintln!(
         "mcap: {} /odom and /tf, {} /diagnostics messages to {}{}{}",
-        sum.odom,
-        sum.diagnostics,
+        sum.stream.odom,
+        sum.stream.diagnostics,
         out.display(),
-        if sum.overrange > 0 {
-            format!("; {} over-range samples not integrated", sum.overrange)
+        if sum.stream.overrange > 0 {
+            format!(
+                "; {} over-range samples not integrated",
+                sum.stream.overrange
+            )
         } else {
             String::new()
         },
-        if sum.resets > 0 {
+        if sum.stream.resets > 0 {
             format!(
                 "; {} reset_pose jumps absorbed, odom kept continuous",
-                sum.resets
+                sum.stream.resets
             )
         } else {
             String::new()
@@ -325,9 +328,9 @@ mod tests {
             rec.push(s).unwrap();
         }
         let sum = rec.finish().unwrap();
-        assert_eq!((sum.odom, sum.resets), (5, 1));
+        assert_eq!((sum.stream.odom, sum.stream.resets), (5, 1));
         // Diagnostics: the first sample, the WARN of the reset, back to OK after it.
-        assert_eq!(sum.diagnostics, 3);
+        assert_eq!(sum.stream.diagnostics, 3);
 
         // A reset: the parameters cannot be checked against the unit's heading.
         assert_eq!(params_mismatch(&p, &rows), None);

@@ -7,4 +7,5 @@ pub mod export;
 pub mod msgs;
 pub mod recording;
 pub mod stamps;
+pub mod stream;
 pub mod tracks;
