@@ -168,6 +168,24 @@ enum Cmd {
     },
     /// Write a synthetic run (SAMPLES and REFERENCE CSVs) with known true parameters.
     Simulate(SimulateArgs),
+    /// Publish the live pose on ROS 2 (/odom, /tf, /diagnostics) over DDS (docs/ROS.md).
+    Bridge {
+        #[command(flatten)]
+        port: PortArgs,
+        /// The unit's parameters, for the twist from the counts.
+        #[command(flatten)]
+        params: ParamArgs,
+        /// Stop after this many seconds.
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Stop after this many published records.
+        #[arg(long)]
+        count: Option<u64>,
+        /// Seconds between reconnection attempts, and without records before the status
+        /// turns STALE.
+        #[arg(long, default_value_t = 1.0)]
+        retry: f64,
+    },
 }
 
 /// A choice of uncertainty models.
@@ -527,6 +545,26 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 reference_sigma,
                 reference_heading_sigma_deg.to_radians(),
             )
+        }
+        Cmd::Bridge {
+            port,
+            params,
+            duration,
+            count,
+            retry,
+        } => {
+            let secs = |what: &str, v: f64| {
+                std::time::Duration::try_from_secs_f64(v)
+                    .map_err(|_| anyhow::anyhow!("--{what} {v}: not a duration in seconds"))
+            };
+            odoctl::ros::bridge::run(&odoctl::ros::bridge::BridgeOptions {
+                port: port.port,
+                baud: port.baud,
+                params: odoctl::config::load(params.config.as_deref(), &params.sets)?,
+                duration: duration.map(|d| secs("duration", d)).transpose()?,
+                count,
+                retry: secs("retry", retry)?,
+            })
         }
         Cmd::Simulate(a) => c::simulate(&c::SimulateOptions {
             samples: a.samples,
