@@ -22,8 +22,8 @@
 
 use std::f64::consts::PI;
 
-use crate::core_api::ChassisParams;
 use crate::csvio::{RefPoint, Sample};
+use odo_core::odometry::ChassisParams;
 
 /// A piece of the path.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -49,6 +49,17 @@ pub enum PathKind {
     Validation,
     /// Random straights and arcs (seeded).
     Random,
+}
+
+/// The default true chassis of `simulate`: the paper's final estimates (Table 2) with its
+/// designed encoder and uncertainty (Table 3).
+pub fn default_truth() -> ChassisParams {
+    ChassisParams {
+        left_diameter: 0.2608,
+        right_diameter: 0.2607,
+        track_width: 0.5656,
+        ..ChassisParams::DESIGNED
+    }
 }
 
 /// The segments of a built-in path, scaled so the centre travels about `length` metres (the

@@ -43,6 +43,7 @@
 //! For the paper's model with a reference heading, [`fit_delta_diff`] then fits `delta_diff`
 //! on the same sub-trajectories by the heading-change coverage, with delta refitted jointly.
 
+mod calibration;
 mod delta_diff;
 mod evaluation;
 mod geometry;
@@ -53,6 +54,7 @@ mod sensitivity;
 mod stability;
 mod uncertainty;
 
+pub use calibration::*;
 pub use delta_diff::*;
 pub use evaluation::*;
 pub use geometry::*;

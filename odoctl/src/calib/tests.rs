@@ -7,10 +7,9 @@ use super::restarts::*;
 use super::run::*;
 use super::sensitivity::*;
 use super::uncertainty::*;
-use crate::commands::default_truth;
 use crate::csvio::match_times;
 use crate::optim::{self, norm2, LmOptions, NormalAccumulator, Objective};
-use crate::simulate::{self, PathKind, SimOptions, SimRun, SimSettings};
+use crate::simulate::{self, default_truth, PathKind, SimOptions, SimRun, SimSettings};
 use indicatif::ProgressBar;
 use odo_core::odometry::{ChassisParams, UncertaintyModel};
 

@@ -54,7 +54,7 @@ pub fn scratch(name: &str) -> PathBuf {
 
 /// The default true chassis of `simulate`.
 pub fn truth() -> ChassisParams {
-    odoctl::commands::default_truth()
+    simulate::default_truth()
 }
 
 /// A simulated run with the tool's default noise.
