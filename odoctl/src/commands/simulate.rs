@@ -60,7 +60,7 @@ pub fn simulate(o: &SimulateOptions) -> Result<ExitCode> {
         settings: o.settings,
     });
     let mut w = create(&o.samples)?;
-    csvio::write_samples(&mut w, &sim.samples, false)?;
+    csvio::write_samples(&mut w, &sim.samples, csvio::SamplesLayout::Counts)?;
     w.flush()?;
     let mut w = create(&o.reference)?;
     csvio::write_reference(&mut w, &sim.reference)?;
