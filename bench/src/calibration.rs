@@ -16,7 +16,7 @@ use std::time::Instant;
 
 use indicatif::ProgressBar;
 use odo_core::odometry::{ChassisParams, UncertaintyModel};
-use odoctl::calib::{self, CalibrationOptions, DeltaMode, GeomOptions, Run, WindowStart};
+use odoctl::calib::{self, CalibrationOptions, GeomOptions, Run, WindowStart};
 use odoctl::csvio::match_times;
 use odoctl::simulate::{self, default_truth, PathKind, SimOptions, SimRun, SimSettings};
 

@@ -264,11 +264,11 @@ fn stack_of_step(params: &ChassisParams) -> usize {
     };
     stack_used(|| {
         // Inputs generated on the fly: an input array would itself sit in the painted region.
-        let mut rng = crate::inputs::Rng(99);
+        let mut rng = odo_testkit::Rng::new(99);
         let mut g = [0i64; 2];
         for _ in 0..SAMPLES {
-            g[0] += (rng.next() % 2000) as i64 - 500;
-            g[1] += (rng.next() % 2000) as i64 - 500;
+            g[0] += (rng.next_u64() % 2000) as i64 - 500;
+            g[1] += (rng.next_u64() % 2000) as i64 - 500;
             black_box(integ.step(
                 WheelCounts {
                     left: g[0],
