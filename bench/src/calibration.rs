@@ -18,7 +18,7 @@ use indicatif::ProgressBar;
 use odo_core::odometry::{ChassisParams, UncertaintyModel};
 use odoctl::calib::{self, CalibrationOptions, GeomOptions, Run, WindowStart};
 use odoctl::csvio::match_times;
-use odoctl::simulate::{self, default_truth, PathKind, SimOptions, SimRun, SimSettings};
+use odoctl::simulate::{self, default_truth, PathKind, SimRun, SimSettings};
 
 /// Figures measured before issue 11 on the same inputs and machine (commit 0b32b1c:
 /// central-difference Jacobian, IRLS, and the Nelder-Mead polish that was then the default):
@@ -60,24 +60,7 @@ fn poor() -> ChassisParams {
 
 /// The run of `odoctl simulate --path KIND --length LENGTH` with its defaults.
 fn sim(kind: PathKind, length: f64) -> SimRun {
-    let settings = SimSettings {
-        rate: 50.0,
-        speed: 0.5,
-        slip: 0.001,
-        slip_corr: 0.1,
-        slip_turn: 0.0,
-        slip_turn_corr: 1.0,
-        rtk_sigma: 0.008,
-        heading_sigma: Some(0.5f64.to_radians()),
-        start: (0.0, 0.0, 0.3),
-        seed: 1,
-    };
-    let mut rng = simulate::Rng::new(settings.seed ^ 0x5EED);
-    simulate::simulate(&SimOptions {
-        truth: default_truth(),
-        segments: simulate::path(kind, length, &mut rng),
-        settings,
-    })
+    simulate::simulate_path(kind, length, default_truth(), SimSettings::default())
 }
 
 fn median(mut v: Vec<f64>) -> f64 {

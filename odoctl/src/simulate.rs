@@ -171,6 +171,25 @@ pub struct SimSettings {
     pub seed: u64,
 }
 
+impl Default for SimSettings {
+    /// `odoctl simulate`'s defaults: 50 Hz, 0.5 m/s, slip 0.001 over 0.1 m, no turning slip,
+    /// the BD982's 8 mm and 0.5 deg, start at (0, 0) heading 0.3 rad, seed 1.
+    fn default() -> Self {
+        Self {
+            rate: 50.0,
+            speed: 0.5,
+            slip: 0.001,
+            slip_corr: 0.1,
+            slip_turn: 0.0,
+            slip_turn_corr: 1.0,
+            rtk_sigma: 0.008,
+            heading_sigma: Some(0.5f64.to_radians()),
+            start: (0.0, 0.0, 0.3),
+            seed: 1,
+        }
+    }
+}
+
 /// The simulated run.
 #[derive(Debug, Clone)]
 pub struct SimRun {
@@ -180,6 +199,22 @@ pub struct SimRun {
     pub reference: Vec<RefPoint>,
     /// True centre pose at each sample (x, y, cumulative heading).
     pub truth: Vec<(f64, f64, f64)>,
+}
+
+/// The run of `odoctl simulate --path kind --length length`: the path drawn from the seed
+/// (`settings.seed ^ 0x5EED`), then driven by `truth` with `settings`.
+pub fn simulate_path(
+    kind: PathKind,
+    length: f64,
+    truth: ChassisParams,
+    settings: SimSettings,
+) -> SimRun {
+    let mut rng = Rng::new(settings.seed ^ 0x5EED);
+    simulate(&SimOptions {
+        truth,
+        segments: path(kind, length, &mut rng),
+        settings,
+    })
 }
 
 /// Runs the plant. Stand-stills of 1 s open and close the run.

@@ -206,6 +206,12 @@ pub struct PhaseTimer {
     last: Option<std::cell::Cell<Instant>>,
 }
 
+impl Default for PhaseTimer {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 impl PhaseTimer {
     /// Starts the clock when `ODOCTL_DEBUG` is set.
     pub fn new() -> Self {

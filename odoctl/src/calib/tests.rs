@@ -9,29 +9,16 @@ use super::sensitivity::*;
 use super::uncertainty::*;
 use crate::csvio::match_times;
 use crate::optim::{self, norm2, LmOptions, NormalAccumulator, Objective};
-use crate::simulate::{self, default_truth, PathKind, SimOptions, SimRun, SimSettings};
+use crate::simulate::{self, default_truth, PathKind, SimRun, SimSettings};
 use indicatif::ProgressBar;
 use odo_core::odometry::{ChassisParams, UncertaintyModel};
 
 fn sim(kind: PathKind, length: f64, seed: u64) -> SimRun {
     let settings = SimSettings {
-        rate: 50.0,
-        speed: 0.5,
-        slip: 0.001,
-        slip_corr: 0.1,
-        slip_turn: 0.0,
-        slip_turn_corr: 1.0,
-        rtk_sigma: 0.008,
-        heading_sigma: Some(0.5f64.to_radians()),
-        start: (0.0, 0.0, 0.3),
         seed,
+        ..Default::default()
     };
-    let mut rng = simulate::Rng::new(seed ^ 0x5EED);
-    simulate::simulate(&SimOptions {
-        truth: default_truth(),
-        segments: simulate::path(kind, length, &mut rng),
-        settings,
-    })
+    simulate::simulate_path(kind, length, default_truth(), settings)
 }
 
 /// The coefficient fits (predicted bracket, then the bisection on known coverages) give

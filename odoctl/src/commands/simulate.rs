@@ -52,13 +52,7 @@ pub fn simulate(o: &SimulateOptions) -> Result<ExitCode> {
     {
         bail!("--length must be positive, --slip, --slip-turn and --rtk-sigma non-negative");
     }
-    let mut rng = simulate::Rng::new(run.seed ^ 0x5EED);
-    let segments = simulate::path(o.path, o.length, &mut rng);
-    let sim = simulate::simulate(&simulate::SimOptions {
-        truth,
-        segments,
-        settings: o.settings,
-    });
+    let sim = simulate::simulate_path(o.path, o.length, truth, o.settings);
     let mut w = create(&o.samples)?;
     csvio::write_samples(&mut w, &sim.samples, csvio::SamplesLayout::Counts)?;
     w.flush()?;
