@@ -9,13 +9,13 @@ use odo_core::odometry::trig;
 use odo_core::odometry::uncertainty::{StepGeometry, StepJacobian};
 use odo_core::odometry::{
     ChassisParams, CounterExtender, IndexRefs, Integrator, Pose, PoseSigma, UncertaintyModel,
-    WheelCounts, WheelHarmonics,
+    WheelCounts,
 };
 use proptest::prelude::*;
 
 use odo_testkit::drive::drive_increments;
 use odo_testkit::reference::{chord, increments, Reference};
-use odo_testkit::Rng;
+use odo_testkit::{wobbly_wheels, Rng};
 use std::f64::consts::{PI, TAU};
 
 fn counts(c: [i64; 2]) -> WheelCounts {
@@ -413,23 +413,9 @@ fn bad_parameters_are_refused_and_change_nothing() {
 // ---------------------------------------------------------------------------------------
 // Per-angle wheel function, eqs (3)-(5), referenced by the index line.
 
-fn wobbly() -> ChassisParams {
-    ChassisParams {
-        left_wheel: WheelHarmonics {
-            cos: [0.002, -0.0005, 0.0001],
-            sin: [0.001, 0.0003, 0.0],
-        },
-        right_wheel: WheelHarmonics {
-            cos: [-0.001, 0.0, 0.0002],
-            sin: [0.0015, -0.0002, 0.0001],
-        },
-        ..ChassisParams::DESIGNED
-    }
-}
-
 #[test]
 fn wheel_function_needs_the_index_and_matches_eq_5() {
-    let p = wobbly();
+    let p = wobbly_wheels();
     let mut integ = Integrator::new(&p, counts([0, 0]), Pose::default()).unwrap();
     let mut reference = Reference::new(&p, [0, 0], Pose::default());
     let mut g = [0i64; 2];
@@ -467,7 +453,7 @@ fn wheel_function_needs_the_index_and_matches_eq_5() {
 
 #[test]
 fn wheel_function_cancels_over_whole_turns_and_differs_within_one() {
-    let p = wobbly();
+    let p = wobbly_wheels();
     // Straight-ish: both wheels exactly one turn, from a referenced phase.
     let start = [1_234i64, 5_678];
     let index = refs([Some(0), Some(0)]);
@@ -498,7 +484,7 @@ fn wheel_function_cancels_over_whole_turns_and_differs_within_one() {
 fn index_changing_by_non_whole_turns_is_followed() {
     // A re-latched index that moved by counts that are not a whole turn (a fault the firmware
     // flags): the integrator follows the newest latch without a jump beyond the periodic term.
-    let p = wobbly();
+    let p = wobbly_wheels();
     let mut integ = Integrator::new(&p, counts([0, 0]), Pose::default()).unwrap();
     let mut g = 0i64;
     for k in 0..400 {
