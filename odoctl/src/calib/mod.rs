@@ -42,6 +42,13 @@
 //!
 //! For the paper's model with a reference heading, [`fit_delta_diff`] then fits `delta_diff`
 //! on the same sub-trajectories by the heading-change coverage, with delta refitted jointly.
+//!
+//! # Files
+//! `run` (a run matched to its reference, the integrator along it), `sensitivity` (forward
+//! sensitivities), `pipeline` (their two-core pass), `geometry` (the eq 16 fit), `evaluation`
+//! (errors and predicted uncertainty), `restarts` (the restarted sub-trajectories),
+//! `uncertainty` (delta, kappa), `delta_diff`, `stability` (the study on sub-trajectories) and
+//! `calibration` (all of it in memory: [`calibrate`]).
 
 mod calibration;
 mod delta_diff;
