@@ -1,8 +1,10 @@
 //! Wire protocol: message round trips, the documented example frame, bit-error detection,
 //! streaming resynchronisation and a fuzz-style proptest of the frame decoder.
 
+use odo_core::crc;
 use odo_core::odometry::UncertaintyModel;
 use odo_core::protocol::*;
+use odo_core::settings::SettingsSource;
 use proptest::prelude::*;
 
 fn sample_pose() -> PoseRecord {

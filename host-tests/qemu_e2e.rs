@@ -21,8 +21,9 @@
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use odo_core::protocol::{SettingsSource, SyncMode};
+use odo_core::protocol::SyncMode;
 use odo_core::settings::Settings;
+use odo_core::settings::SettingsSource;
 
 mod support;
 use support::qemu::UnitLink;

@@ -16,6 +16,9 @@
 // Errors are returned, never unwrapped, in code that runs on the unit.
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 
+pub(crate) mod bytes;
+pub mod console;
+pub mod crc;
 pub mod decimal;
 pub mod odometry;
 pub mod protocol;

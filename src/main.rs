@@ -48,19 +48,22 @@ mod app {
         Acquisition, ClockSource, GnssRx, Led,
     };
     use heapless::spsc::{Consumer, Producer, Queue};
+    use odo_core::console::{self, Action, LineAssembler, Reply};
+    use odo_core::odometry::index::DEFAULT_TOLERANCE;
     use odo_core::odometry::{
-        ChassisParams, CounterExtender, IndexRefs, Integrator, Pose, WheelCounts,
+        ChassisParams, CounterExtender, IndexCheck, IndexRefs, IndexTracker, Integrator, Pose,
+        WheelCounts,
     };
-    use odo_core::protocol::command::{self, Action, LineAssembler, Reply};
     use odo_core::protocol::{
-        self, CommandReply, DeviceInfo, GnssTime, Message, PoseRecord, SettingsSource, Status,
-        StatusFlags, WheelStatus, PROTOCOL_VERSION,
+        self, CommandReply, DeviceInfo, GnssTime, Message, PoseRecord, Status, StatusFlags,
+        WheelStatus, PROTOCOL_VERSION,
     };
-    use odo_core::settings::{store::SettingsStore, SampleMode, Settings, TimeTagRef};
-    use odo_core::timing::index::DEFAULT_TOLERANCE;
+    use odo_core::settings::{
+        store::SettingsStore, SampleMode, Settings, SettingsSource, TimeTagRef,
+    };
     use odo_core::timing::{
-        Discipline, DisciplineConfig, IndexCheck, IndexTracker, LineBuffer, NmeaError, PpsEvent,
-        PpsStats, Sample, SyncMode, SyncState, TimeTagPps, TimeTagger,
+        Discipline, DisciplineConfig, LineBuffer, NmeaError, PpsEvent, PpsStats, Sample, SyncMode,
+        SyncState, TimeTagPps, TimeTagger,
     };
     use rtic::Mutex;
     use stm32f4xx_hal::pac::Interrupt;
@@ -598,7 +601,7 @@ mod app {
         while let Some(byte) = cx.local.host_rx_out.dequeue() {
             let (mut reply, action) = match c.assembler.push(byte) {
                 None => continue,
-                Some(Ok(line)) => command::execute(line, &mut c.settings),
+                Some(Ok(line)) => console::execute(line, &mut c.settings),
                 Some(Err(e)) => (Reply::error(e), Action::None),
             };
             match action {

@@ -680,7 +680,7 @@ pub fn push_lines(path: &Path) -> Result<Vec<String>> {
         .map(|k| format!("{k} {}", cfg::get_key(&params, k).expect("known key")))
         .collect();
     Ok(pairs
-        .chunks(odo_core::protocol::command::MAX_SET_PAIRS)
+        .chunks(odo_core::console::MAX_SET_PAIRS)
         .map(|c| format!("set {}", c.join(" ")))
         .collect())
 }

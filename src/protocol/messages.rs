@@ -4,9 +4,10 @@
 //! longer than the layout it knows (fields appended by a later minor revision) and ignores the
 //! extra bytes; a shorter body is an error.
 
-use super::bytes::{Reader, Writer};
 use super::{DecodeError, EncodeError, MsgType};
+use crate::bytes::{Reader, Writer};
 use crate::odometry::UncertaintyModel;
+use crate::settings::SettingsSource;
 use heapless::String;
 
 /// How the sample clock is disciplined (bits 0-1 of [`StatusFlags`]).
@@ -215,7 +216,7 @@ impl PoseRecord {
         let mut r = Reader::new(body);
         let sequence = r.u32().map_err(|_| short)?;
         let flags = r.u32().map_err(|_| short)?;
-        let mut rest = || -> Result<Self, super::bytes::OutOfSpace> {
+        let mut rest = || -> Result<Self, crate::bytes::OutOfSpace> {
             Ok(Self {
                 sequence,
                 flags: StatusFlags::default(),
@@ -245,29 +246,20 @@ impl PoseRecord {
     }
 }
 
-/// Where the settings in use came from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum SettingsSource {
-    /// No valid settings record in flash: the built-in defaults (code 0).
-    #[default]
-    Defaults,
-    /// Loaded from the flash settings store (code 1).
-    Flash,
+/// Wire code of a [`SettingsSource`] (0 defaults, 1 flash).
+fn settings_source_code(s: SettingsSource) -> u8 {
+    match s {
+        SettingsSource::Defaults => 0,
+        SettingsSource::Flash => 1,
+    }
 }
 
-impl SettingsSource {
-    fn code(self) -> u8 {
-        match self {
-            Self::Defaults => 0,
-            Self::Flash => 1,
-        }
-    }
-    fn from_code(c: u8) -> Result<Self, DecodeError> {
-        match c {
-            0 => Ok(Self::Defaults),
-            1 => Ok(Self::Flash),
-            _ => Err(DecodeError::BadField("settings source")),
-        }
+/// The [`SettingsSource`] of wire code `c`.
+fn settings_source_from_code(c: u8) -> Result<SettingsSource, DecodeError> {
+    match c {
+        0 => Ok(SettingsSource::Defaults),
+        1 => Ok(SettingsSource::Flash),
+        _ => Err(DecodeError::BadField("settings source")),
     }
 }
 
@@ -326,7 +318,7 @@ impl Status {
             w.u32(self.pps_edges)?;
             w.u32(self.pps_rejected)?;
             w.u32(self.rx_errors)?;
-            w.u8(self.settings_source.code())?;
+            w.u8(settings_source_code(self.settings_source))?;
             w.u8(self.settings_dirty as u8)?;
             w.u16(0)?;
             w.u32(self.samples_lost)?;
@@ -354,7 +346,7 @@ impl Status {
         let pps_edges = r.u32().map_err(short)?;
         let pps_rejected = r.u32().map_err(short)?;
         let rx_errors = r.u32().map_err(short)?;
-        let settings_source = SettingsSource::from_code(r.u8().map_err(short)?)?;
+        let settings_source = settings_source_from_code(r.u8().map_err(short)?)?;
         let settings_dirty = match r.u8().map_err(short)? {
             0 => false,
             1 => true,
@@ -410,7 +402,7 @@ impl DeviceInfo {
         let mut w = Writer::new(out);
         (|| {
             w.u8(self.protocol_version)?;
-            w.u8(self.settings_source.code())?;
+            w.u8(settings_source_code(self.settings_source))?;
             w.u16(0)?;
             w.u32(self.settings_checksum)?;
             w.bytes(&self.uid)?;
@@ -426,7 +418,7 @@ impl DeviceInfo {
         let short = |_| DecodeError::BodyTooShort(MsgType::DeviceInfo as u8);
         let mut r = Reader::new(body);
         let protocol_version = r.u8().map_err(short)?;
-        let settings_source = SettingsSource::from_code(r.u8().map_err(short)?)?;
+        let settings_source = settings_source_from_code(r.u8().map_err(short)?)?;
         r.u16().map_err(short)?;
         let settings_checksum = r.u32().map_err(short)?;
         let mut uid = [0u8; 12];
