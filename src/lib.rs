@@ -24,3 +24,4 @@ pub mod odometry;
 pub mod protocol;
 pub mod settings;
 pub mod timing;
+pub mod unit;

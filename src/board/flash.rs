@@ -54,6 +54,12 @@ pub use board::SettingsFlash;
 #[cfg(feature = "qemu")]
 pub use ram::SettingsFlash;
 
+impl odo_core::unit::StallingFlash for SettingsFlash {
+    fn max_stall_ms(&self) -> u32 {
+        SettingsFlash::max_stall_ms(self)
+    }
+}
+
 fn check(sector: usize, offset: usize, len: usize, size: usize) -> Result<(), FlashError> {
     if sector > 1 || offset.checked_add(len).is_none_or(|end| end > size) {
         return Err(FlashError::Range);

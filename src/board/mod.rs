@@ -35,7 +35,15 @@ pub mod sim;
 pub mod sim_gnss;
 pub mod stack;
 
+use odo_core::unit::{IndexCapture, RawCounts};
 use stm32f4xx_hal::{pac, rcc::Config};
+
+/// Unit of [`cycles`] in `status`.
+#[cfg(not(feature = "qemu"))]
+pub const CYCLES_UNIT: &str = "cycles";
+/// Unit of [`cycles`] in `status`.
+#[cfg(feature = "qemu")]
+pub const CYCLES_UNIT: &str = "instructions (QEMU)";
 
 /// Baud rate of the GNSS receiver's NMEA output (USART1).
 pub const GNSS_BAUD: u32 = 38_400;
@@ -68,20 +76,7 @@ pub fn watchdog_feed() {
     unsafe { (*pac::IWDG::ptr()).kr().write(|w| w.bits(0xAAAA)) };
 }
 
-/// Where the system clock comes from after [`start_clocks`].
-#[derive(Clone, Copy, PartialEq, Eq, defmt::Format)]
-pub enum ClockSource {
-    /// PLL from the HSE ([`HSE_HZ`]): crystal or external clock accuracy.
-    #[cfg_attr(any(feature = "qemu", not(feature = "hse")), allow(dead_code))]
-    Hse,
-    /// PLL from the 16 MHz HSI (+-1 % at 25 C, +-4 % over temperature): a build without
-    /// the `hse` feature, or QEMU.
-    #[cfg_attr(all(not(feature = "qemu"), feature = "hse"), allow(dead_code))]
-    Hsi,
-    /// The build asked for the HSE but it did not start within [`HSE_STARTUP_MS`], or the
-    /// clock security system saw it fail later: PLL from the HSI, reported in `status`.
-    HsiFallback,
-}
+pub use odo_core::timing::ClockSource;
 
 /// How long start-up waits for the HSE to become ready, milliseconds (a crystal takes about
 /// 2 ms; an external clock is ready at once).
@@ -98,15 +93,6 @@ pub fn clock_source(at_start: ClockSource) -> ClockSource {
         ClockSource::HsiFallback
     } else {
         at_start
-    }
-}
-
-/// Largest frequency error of the timer clock for `source`, ppm: what the PPS discipline
-/// must accept to lock ([`odo_core::timing`]'s tolerance constants).
-pub fn clock_tolerance_ppm(source: ClockSource) -> u32 {
-    match source {
-        ClockSource::Hse => odo_core::timing::HSE_CRYSTAL_TOLERANCE_PPM,
-        ClockSource::Hsi | ClockSource::HsiFallback => odo_core::timing::HSI_TOLERANCE_PPM,
     }
 }
 
@@ -191,7 +177,7 @@ pub fn hsi_config() -> Config {
 /// external clock on OSC_IN in bypass mode, as a Nucleo-64's ST-LINK provides; a board with
 /// an 8 MHz crystal builds with `--no-default-features --features hse`; without either, the
 /// PLL runs from the 16 MHz HSI, +-1 % at 25 C and +-4 % over temperature: the PPS
-/// discipline still locks (its tolerance follows the clock, [`clock_tolerance_ppm`]), but
+/// discipline still locks (its tolerance follows the clock, [`ClockSource::tolerance_ppm`]), but
 /// free-running (indoor) timing is only that good and the UART baud rates may leave the
 /// receivers' tolerance (docs/HARDWARE.md). APB1 = 42 MHz, so TIM2-5 count at 84 MHz;
 /// APB2 = 84 MHz.
@@ -356,7 +342,7 @@ impl Acquisition {
     /// Both counters now, read first thing in the sample interrupt (the board's timers);
     /// `None` in QEMU, whose drive is sampled at the sample's tick ([`Self::snapshot`]).
     #[inline(always)]
-    pub fn snapshot_now(&self) -> Option<encoders::Snapshot> {
+    pub fn snapshot_now(&self) -> Option<RawCounts> {
         #[cfg(not(feature = "qemu"))]
         {
             Some(self.encoders.snapshot())
@@ -369,7 +355,7 @@ impl Acquisition {
 
     /// Both counters at the sample instant `tick`.
     #[inline(always)]
-    pub fn snapshot(&mut self, tick: u64) -> encoders::Snapshot {
+    pub fn snapshot(&mut self, tick: u64) -> RawCounts {
         #[cfg(not(feature = "qemu"))]
         {
             let _ = tick;
@@ -384,7 +370,7 @@ impl Acquisition {
     /// The index pulse of `wheel` (0 left, 1 right) latched by its timer since the last
     /// call (the timer's capture interrupt); never one in QEMU, whose drive reports its
     /// pulses with the samples ([`Self::simulated_index`]).
-    pub fn take_index(&self, wheel: usize) -> Option<encoders::IndexCapture> {
+    pub fn take_index(&self, wheel: usize) -> Option<IndexCapture> {
         #[cfg(not(feature = "qemu"))]
         {
             if wheel == 0 {

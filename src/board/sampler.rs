@@ -259,7 +259,7 @@ impl Sampler {
     /// After the clock security system fell back to the HSI (`super::clock_source`), widens
     /// the PPS lock range to the HSI's tolerance, once; a few instructions otherwise.
     pub fn follow_clock(&mut self) {
-        let tolerance = super::clock_tolerance_ppm(super::clock_source(super::ClockSource::Hse));
+        let tolerance = super::clock_source(super::ClockSource::Hse).tolerance_ppm();
         let cfg = *self.disc.config();
         if cfg.max_offset_ppm < tolerance {
             let _ = self.set_config(DisciplineConfig {

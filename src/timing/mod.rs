@@ -19,8 +19,8 @@ pub mod tag;
 pub use clock::{catch_up, CatchUp, TimerExtender};
 pub use nmea::{GpsTime, LineBuffer, NmeaError, TimeMessage, UtcDateTime, GPS_UTC_LEAP_SECONDS};
 pub use pps::{
-    resolve_capture, ConfigError, Discipline, DisciplineConfig, PpsEvent, PpsStats, Sample,
-    SyncMode, SyncState, DIRECT_LOCK_MAX_PPM, HSE_CRYSTAL_TOLERANCE_PPM, HSI_TOLERANCE_PPM,
+    resolve_capture, ClockSource, ConfigError, Discipline, DisciplineConfig, PpsEvent, PpsStats,
+    Sample, SyncMode, SyncState, DIRECT_LOCK_MAX_PPM, HSE_CRYSTAL_TOLERANCE_PPM, HSI_TOLERANCE_PPM,
     MAX_OFFSET_LIMIT_PPM, RATE_RANGE,
 };
 pub use tag::{TimeTagPps, TimeTagger};
