@@ -1,7 +1,7 @@
 //! The unit's events ([`odo_core::unit::Event`]) as defmt log lines.
 
 use odo_core::timing::SyncState;
-use odo_core::unit::Event;
+use odo_core::unit::{Event, Log};
 
 fn state_name(s: SyncState) -> &'static str {
     match s {
@@ -11,41 +11,49 @@ fn state_name(s: SyncState) -> &'static str {
     }
 }
 
-/// Logs `event` (warnings for lost data and faults, info for state changes).
-pub fn event(event: Event) {
-    match event {
-        Event::SampleLate { latency, merged } => defmt::warn!(
-            "sample interrupt late by {} ticks: {} samples merged",
-            latency,
-            merged
-        ),
-        Event::PpsOvercapture => defmt::warn!("PPS: over-capture (two edges in one interrupt)"),
-        Event::IndexLost { wheel } => {
-            defmt::warn!("wheel {}: index pulse lost (over-capture)", wheel)
-        }
-        Event::FirstIndex { wheel } => defmt::info!("wheel {}: first index pulse", wheel),
-        Event::IndexMismatch { wheel, error } => defmt::warn!(
-            "wheel {}: index count mismatch of {} increments",
-            wheel,
-            error
-        ),
-        Event::ParamsRejected => defmt::error!("chassis parameters rejected by the integrator"),
-        Event::IntegratorRejected => defmt::error!("integrator rejected the designed parameters"),
-        Event::PoseReset => defmt::info!("pose reset"),
-        Event::Overrange { sequence } => defmt::warn!(
-            "sample {}: motion beyond one sample's limits, not integrated",
-            sequence
-        ),
-        Event::PpsLocked => defmt::info!("PPS: locked"),
-        Event::PpsReacquired { missed } => {
-            defmt::info!("PPS: reacquired after {} lost pulses", missed)
-        }
-        Event::PpsGlitch => defmt::warn!("PPS: glitch rejected"),
-        Event::SyncChanged { from, to } => {
-            defmt::info!("sampling: {} -> {}", state_name(from), state_name(to))
-        }
-        Event::FaultLines { left, right } => {
-            defmt::warn!("encoder fault lines: left {}, right {}", left, right)
+/// The defmt log: warnings for lost data and faults, info for state changes.
+pub struct Defmt;
+
+impl Log for Defmt {
+    /// Inlined, so that each call site keeps only its own line.
+    #[inline(always)]
+    fn event(&mut self, event: Event) {
+        match event {
+            Event::SampleLate { latency, merged } => defmt::warn!(
+                "sample interrupt late by {} ticks: {} samples merged",
+                latency,
+                merged
+            ),
+            Event::PpsOvercapture => defmt::warn!("PPS: over-capture (two edges in one interrupt)"),
+            Event::IndexLost { wheel } => {
+                defmt::warn!("wheel {}: index pulse lost (over-capture)", wheel)
+            }
+            Event::FirstIndex { wheel } => defmt::info!("wheel {}: first index pulse", wheel),
+            Event::IndexMismatch { wheel, error } => defmt::warn!(
+                "wheel {}: index count mismatch of {} increments",
+                wheel,
+                error
+            ),
+            Event::ParamsRejected => defmt::error!("chassis parameters rejected by the integrator"),
+            Event::IntegratorRejected => {
+                defmt::error!("integrator rejected the designed parameters")
+            }
+            Event::PoseReset => defmt::info!("pose reset"),
+            Event::Overrange { sequence } => defmt::warn!(
+                "sample {}: motion beyond one sample's limits, not integrated",
+                sequence
+            ),
+            Event::PpsLocked => defmt::info!("PPS: locked"),
+            Event::PpsReacquired { missed } => {
+                defmt::info!("PPS: reacquired after {} lost pulses", missed)
+            }
+            Event::PpsGlitch => defmt::warn!("PPS: glitch rejected"),
+            Event::SyncChanged { from, to } => {
+                defmt::info!("sampling: {} -> {}", state_name(from), state_name(to))
+            }
+            Event::FaultLines { left, right } => {
+                defmt::warn!("encoder fault lines: left {}, right {}", left, right)
+            }
         }
     }
 }

@@ -424,7 +424,7 @@ mod app {
     )]
     fn process(mut cx: process::Context) {
         let p = cx.local.processor;
-        let log = &mut crate::log::event;
+        let log = &mut crate::log::Defmt;
         while let Some(byte) = cx.local.gnss_out.dequeue() {
             p.on_nmea_byte(byte);
         }

@@ -103,6 +103,7 @@ impl<F: StallingFlash> Commands<F> {
     /// One byte from the host: at the end of a line, its reply and effect. `clock` says
     /// which clock runs now; `moving` whether the wheels turned within the last second
     /// (asked only for a `save` that would erase a sector).
+    #[inline(never)]
     pub fn on_byte(
         &mut self,
         byte: u8,

@@ -66,3 +66,14 @@ pub enum Event {
         right: bool,
     },
 }
+
+/// Where the unit's events go (the firmware's defmt log; a list in tests).
+pub trait Log {
+    /// Records `event`.
+    fn event(&mut self, event: Event);
+}
+
+/// Events dropped (nothing to log to).
+impl Log for () {
+    fn event(&mut self, _: Event) {}
+}

@@ -17,7 +17,7 @@ pub mod sample;
 pub mod status;
 
 pub use commands::{Commands, Effect, StallingFlash};
-pub use event::Event;
+pub use event::{Event, Log};
 pub use processor::{Live, Processor, Requests, StoreState};
 pub use sample::{IndexCapture, RawCounts, RawSample};
 pub use status::BoardReport;

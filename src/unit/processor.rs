@@ -1,7 +1,7 @@
 //! The processing task's work: one sample's counts to a pose record, with the drop,
 //! index-mismatch and motion accounting, the time tag and the Status heartbeat.
 
-use super::event::Event;
+use super::event::{Event, Log};
 use super::sample::{IndexCapture, RawSample};
 use super::time_tag;
 use crate::odometry::index::DEFAULT_TOLERANCE;
@@ -148,15 +148,10 @@ impl Processor {
     }
 
     /// An index pulse of `wheel` (0 left, 1 right) latched by its timer.
-    pub fn on_index_capture(
-        &mut self,
-        wheel: usize,
-        capture: IndexCapture,
-        log: &mut impl FnMut(Event),
-    ) {
+    pub fn on_index_capture(&mut self, wheel: usize, capture: IndexCapture, log: &mut impl Log) {
         if capture.overcapture {
             self.index_lost[wheel] = self.index_lost[wheel].wrapping_add(1);
-            log(Event::IndexLost { wheel });
+            log.event(Event::IndexLost { wheel });
         }
         self.on_index(wheel, capture.raw, log);
     }
@@ -177,7 +172,7 @@ impl Processor {
         }
     }
 
-    fn on_index(&mut self, wheel: usize, raw: u32, log: &mut impl FnMut(Event)) {
+    fn on_index(&mut self, wheel: usize, raw: u32, log: &mut impl Log) {
         let Some(ext) = &self.extenders else {
             return;
         };
@@ -185,19 +180,19 @@ impl Processor {
         match self.trackers[wheel].on_index(count) {
             IndexCheck::Mismatch { error } => {
                 self.mismatch[wheel] = true;
-                log(Event::IndexMismatch { wheel, error });
+                log.event(Event::IndexMismatch { wheel, error });
             }
-            IndexCheck::First => log(Event::FirstIndex { wheel }),
+            IndexCheck::First => log.event(Event::FirstIndex { wheel }),
             IndexCheck::Whole { .. } => {}
         }
     }
 
     /// Applies the command task's requests (new settings, a pose reset at the next sample).
-    pub fn apply(&mut self, requests: Requests, log: &mut impl FnMut(Event)) {
+    pub fn apply(&mut self, requests: Requests, log: &mut impl Log) {
         if let Some(settings) = requests.settings {
             if let Some(integrator) = &mut self.integrator {
                 if integrator.set_params(&settings.chassis).is_err() {
-                    log(Event::ParamsRejected);
+                    log.event(Event::ParamsRejected);
                 }
             }
             for t in &mut self.trackers {
@@ -249,7 +244,7 @@ impl Processor {
         &mut self,
         counts: WheelCounts,
         refs: IndexRefs,
-        log: &mut impl FnMut(Event),
+        log: &mut impl Log,
     ) -> StepStatus {
         let mut step = StepStatus::default();
         match &mut self.integrator {
@@ -259,21 +254,21 @@ impl Processor {
                     .or_else(|_| Integrator::new(&ChassisParams::DESIGNED, counts, pose));
                 match integrator {
                     Ok(i) => self.integrator = Some(i),
-                    Err(_) => log(Event::IntegratorRejected),
+                    Err(_) => log.event(Event::IntegratorRejected),
                 }
             }
             Some(integrator) => {
                 if let Some(pose) = self.reset.take() {
                     integrator.rebase_counts(counts);
                     integrator.reset_pose(pose);
-                    log(Event::PoseReset);
+                    log.event(Event::PoseReset);
                 } else {
                     step = integrator.step(counts, refs);
                 }
             }
         }
         if step.overrange {
-            log(Event::Overrange {
+            log.event(Event::Overrange {
                 sequence: self.sequence,
             });
         }
@@ -281,24 +276,24 @@ impl Processor {
     }
 
     /// Timing of `raw`: its PPS edge, a state change, the fault lines.
-    fn follow_timing(&mut self, raw: &RawSample, log: &mut impl FnMut(Event)) {
+    fn follow_timing(&mut self, raw: &RawSample, log: &mut impl Log) {
         if let Some((tick, event)) = raw.pps {
             match event {
                 PpsEvent::Locked { second } => {
-                    log(Event::PpsLocked);
+                    log.event(Event::PpsLocked);
                     self.tagger.on_edge(tick, second);
                 }
                 PpsEvent::Accepted { second, .. } => self.tagger.on_edge(tick, second),
                 PpsEvent::Reacquired { second, missed, .. } => {
-                    log(Event::PpsReacquired { missed });
+                    log.event(Event::PpsReacquired { missed });
                     self.tagger.on_edge(tick, second);
                 }
-                PpsEvent::Glitch => log(Event::PpsGlitch),
+                PpsEvent::Glitch => log.event(Event::PpsGlitch),
                 PpsEvent::Ignored | PpsEvent::Candidate => {}
             }
         }
         if raw.state != self.last_state {
-            log(Event::SyncChanged {
+            log.event(Event::SyncChanged {
                 from: self.last_state,
                 to: raw.state,
             });
@@ -308,7 +303,7 @@ impl Processor {
             self.last_state = raw.state;
         }
         if raw.faults != self.last_faults {
-            log(Event::FaultLines {
+            log.event(Event::FaultLines {
                 left: raw.faults.0,
                 right: raw.faults.1,
             });
@@ -319,14 +314,10 @@ impl Processor {
 
     /// Integrates one sample. `None` when nothing was integrated (never, today);
     /// `Some(None)` when the record is not sent (`output_divider`).
-    pub fn on_sample(
-        &mut self,
-        raw: &RawSample,
-        log: &mut impl FnMut(Event),
-    ) -> Option<Option<PoseRecord>> {
+    pub fn on_sample(&mut self, raw: &RawSample, log: &mut impl Log) -> Option<Option<PoseRecord>> {
         if raw.merged > 0 {
             self.merged_samples = self.merged_samples.wrapping_add(raw.merged);
-            log(Event::SampleLate {
+            log.event(Event::SampleLate {
                 latency: raw.latency,
                 merged: raw.merged,
             });
@@ -334,7 +325,7 @@ impl Processor {
         self.latency_max = self.latency_max.max(raw.latency);
         if raw.pps_overcapture {
             self.pps_overcaptures = self.pps_overcaptures.wrapping_add(1);
-            log(Event::PpsOvercapture);
+            log.event(Event::PpsOvercapture);
         }
         let counts_now = (raw.counts.left, raw.counts.right);
         if self.last_counts != Some(counts_now) {
