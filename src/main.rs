@@ -32,10 +32,6 @@ mod board;
 #[cfg(target_os = "none")]
 mod log;
 
-#[cfg(all(target_os = "none", not(feature = "qemu")))]
-use defmt_rtt as _;
-#[cfg(all(target_os = "none", feature = "qemu"))]
-use defmt_semihosting as _;
 #[cfg(target_os = "none")]
 use panic_probe as _;
 
@@ -44,7 +40,6 @@ use panic_probe as _;
 mod app {
     use crate::board::{
         self,
-        encoders::{LEFT_BITS, RIGHT_BITS},
         flash::SettingsFlash,
         sampler::Sampler,
         serial::{GnssUart, HostUart, RxErrors},
@@ -135,10 +130,7 @@ mod app {
         let pins = board::pins(dp.GPIOA, dp.GPIOB, dp.GPIOC, &mut rcc);
 
         // Settings: the newest valid record in flash, else the defaults.
-        #[cfg(not(feature = "qemu"))]
         let flash = SettingsFlash::new(dp.FLASH);
-        #[cfg(feature = "qemu")]
-        let flash = SettingsFlash::new();
         let mut store = SettingsStore::new(flash);
         let loaded = store.load_or_defaults();
         let mut settings = loaded.settings;
@@ -159,19 +151,12 @@ mod app {
             }
         }
 
-        #[cfg(not(feature = "qemu"))]
-        let mut acq = Acquisition::new(
-            board::encoders::Encoders::new(dp.TIM2, dp.TIM3, &mut rcc),
-            pins.faults,
-        );
-        #[cfg(feature = "qemu")]
-        let mut acq = Acquisition::new(pins.faults);
+        let mut acq = Acquisition::new(dp.TIM2, dp.TIM3, pins.faults, &mut rcc);
 
         let host = HostUart::new(dp.USART2, &mut rcc, clocks.pclk1().raw(), settings.baud);
         let gnss = GnssUart::new(dp.USART1, &mut rcc, clocks.pclk2().raw(), board::GNSS_BAUD);
-        // QEMU: PPS captures and NMEA bytes from the simulated receiver (src/board/sim_gnss.rs).
-        #[cfg(feature = "qemu")]
-        let (gnss, gnss_sim) = board::sim_gnss::attach(gnss);
+        // QEMU: PPS captures and NMEA bytes from the simulated receiver (board/qemu/gnss.rs).
+        let (gnss, sampler_extra) = board::attach_gnss(gnss);
 
         let (mut samples_in, samples_out) = cx.local.samples_q.split();
         let (index_in_left, index_out_left) = cx.local.index_left_q.split();
@@ -194,10 +179,7 @@ mod app {
                 }
             }
         };
-        #[cfg(not(feature = "qemu"))]
-        let (sampler, s0) = Sampler::start(dp.TIM5, &mut rcc, disc);
-        #[cfg(feature = "qemu")]
-        let (sampler, s0) = Sampler::start(dp.TIM5, &mut rcc, disc, gnss_sim);
+        let (sampler, s0) = Sampler::start(dp.TIM5, &mut rcc, disc, sampler_extra);
         // Sample 0 is now: snapshot it as the starting point of the integration.
         let first = RawSample {
             sample: s0,
@@ -230,7 +212,7 @@ mod app {
             mode
         );
 
-        let processor = Processor::new(&settings, timer_hz, [LEFT_BITS, RIGHT_BITS]);
+        let processor = Processor::new(&settings, timer_hz, board::COUNTER_BITS);
         let commands = Commands::new(settings, loaded.source, store, timer_hz, clock);
         let shared = Shared {
             acq,
@@ -309,7 +291,7 @@ mod app {
         };
         let (counts, faults, index_pulses) = cx.shared.acq.lock(|acq| {
             let counts = entry_counts.unwrap_or_else(|| acq.snapshot(sample.tick));
-            (counts, acq.faults(sample.tick), acq.simulated_index())
+            (counts, acq.faults(sample.tick), acq.sample_index())
         });
         while let Some(cfg) = cx.local.cfg_out.dequeue() {
             // A rejected configuration keeps the running one; the command task validated
