@@ -1,7 +1,44 @@
-//! The unit's events ([`odo_core::unit::Event`]) as defmt log lines.
+//! The unit's log lines (defmt): start-up, and the events of [`odo_core::unit::Event`].
 
-use odo_core::timing::SyncState;
-use odo_core::unit::{Event, Log};
+use odo_core::settings::store::Loaded;
+use odo_core::settings::SettingsSource;
+use odo_core::timing::{DisciplineConfig, SyncMode, SyncState};
+use odo_core::unit::{Event, Log, Start};
+
+/// What start-up made of the stored settings and the sampler configuration.
+pub fn start(loaded: &Loaded, start: &Start) {
+    if start.settings_replaced {
+        defmt::error!("settings: rate/mode unusable by the sampler, using the defaults");
+    }
+    match loaded.source {
+        SettingsSource::Flash => defmt::info!(
+            "settings loaded from flash, generation {}",
+            loaded.generation
+        ),
+        SettingsSource::Defaults => {
+            defmt::info!("settings: defaults (flash empty or unreadable)")
+        }
+    }
+    if start.sampler_fallback {
+        defmt::error!("sampler configuration invalid: free-running at 50 Hz");
+    }
+}
+
+/// The boot line: version, timer frequency, sample rate and mode.
+pub fn booted(timer_hz: u32, cfg: &DisciplineConfig) {
+    let mode = if cfg.mode == SyncMode::Pps {
+        "pps"
+    } else {
+        "free"
+    };
+    defmt::info!(
+        "odo-unit {} booted: timer {} Hz, {} Hz {}",
+        env!("CARGO_PKG_VERSION"),
+        timer_hz,
+        cfg.rate_hz,
+        mode
+    );
+}
 
 fn state_name(s: SyncState) -> &'static str {
     match s {

@@ -5,8 +5,8 @@
 //! from the PPS discipline, `odo_core::timing::pps`); the TIM5 interrupt (priority 4)
 //! snapshots both encoder counters as its first action, then the fault lines, labels the
 //! instant (`odo_core::timing::catch_up`, which also merges the points a stall passed over)
-//! and hands an `odo_core::unit::RawSample` to the processing task through a lock-free queue. The processing task (priority 2) extends the
-//! counters to 64 bits, applies index pulses, integrates, tags GNSS time, builds the pose
+//! and hands an `odo_core::unit::RawSample` to the processing task through a lock-free
+//! queue. The processing task (priority 2) extends the counters to 64 bits, applies index pulses, integrates, tags GNSS time, builds the pose
 //! record and queues its frame for the host link whole, or drops it and counts it. The
 //! USART2 interrupt (priority 3) moves queued bytes to the UART and received bytes to the
 //! command task (priority 1), which parses and executes command lines, saves settings to
@@ -30,6 +30,8 @@ fn main() {
 #[cfg(target_os = "none")]
 mod board;
 #[cfg(target_os = "none")]
+mod host_link;
+#[cfg(target_os = "none")]
 mod log;
 
 #[cfg(target_os = "none")]
@@ -45,29 +47,18 @@ mod app {
         serial::{GnssUart, HostUart, RxErrors},
         Acquisition, GnssRx, Led,
     };
+    use crate::host_link::{send, send_blocking, Link, RECORD_RESERVE};
     use heapless::spsc::{Consumer, Producer, Queue};
-    use odo_core::protocol::{self, CommandReply, Message, TxRing};
-    use odo_core::settings::{store::SettingsStore, Settings, SettingsSource};
-    use odo_core::timing::{Discipline, DisciplineConfig, PpsEvent, SyncMode, SyncState};
+    use odo_core::protocol::{CommandReply, Message};
+    use odo_core::settings::store::SettingsStore;
+    use odo_core::timing::{DisciplineConfig, SyncState};
     use odo_core::unit::{
-        self, BoardReport, Commands, Effect, IndexCapture, Live, Processor, RawSample, Requests,
+        self, Commands, Effect, IndexCapture, Live, PpsLatch, Processor, RawSample, Requests,
         StoreState,
     };
-    use rtic::Mutex;
     use stm32f4xx_hal::pac::Interrupt;
     use stm32f4xx_hal::prelude::*;
     use stm32f4xx_hal::watchdog::IndependentWatchdog;
-
-    /// Host link transmit buffer, bytes.
-    const TX_BUF: usize = 4096;
-    /// Transmit space a pose record leaves free for command replies, bytes.
-    const RECORD_RESERVE: usize = 1024;
-
-    /// The host link's transmit side: the byte ring and the frame sequence number.
-    pub struct Link {
-        ring: TxRing<TX_BUF>,
-        next_seq: u32,
-    }
 
     #[shared]
     struct Shared {
@@ -87,8 +78,7 @@ mod app {
         samples_out: Consumer<'static, RawSample>,
         index_in_left: Producer<'static, IndexCapture>,
         index_in_right: Producer<'static, IndexCapture>,
-        index_out_left: Consumer<'static, IndexCapture>,
-        index_out_right: Consumer<'static, IndexCapture>,
+        index_out: [Consumer<'static, IndexCapture>; 2],
         host: HostUart,
         host_rx_in: Producer<'static, u8>,
         host_rx_out: Consumer<'static, u8>,
@@ -133,23 +123,12 @@ mod app {
         let flash = SettingsFlash::new(dp.FLASH);
         let mut store = SettingsStore::new(flash);
         let loaded = store.load_or_defaults();
-        let mut settings = loaded.settings;
         let clock_now = board::clock_source(clock);
-        let mut cfg = unit::discipline_config(&settings, timer_hz, clock_now);
-        if cfg.validate().is_err() {
-            defmt::error!("settings: rate/mode unusable by the sampler, using the defaults");
-            settings = Settings::DEFAULT;
-            cfg = unit::discipline_config(&settings, timer_hz, clock_now);
-        }
-        match loaded.source {
-            SettingsSource::Flash => defmt::info!(
-                "settings loaded from flash, generation {}",
-                loaded.generation
-            ),
-            SettingsSource::Defaults => {
-                defmt::info!("settings: defaults (flash empty or unreadable)")
-            }
-        }
+        let Ok(start) = unit::start(loaded.settings, timer_hz, clock_now, clock) else {
+            panic!("default sampler configuration rejected")
+        };
+        crate::log::start(&loaded, &start);
+        let settings = start.settings;
 
         let mut acq = Acquisition::new(dp.TIM2, dp.TIM3, pins.faults, &mut rcc);
 
@@ -165,61 +144,21 @@ mod app {
         let (gnss_in, gnss_out) = cx.local.gnss_q.split();
         let (cfg_in, cfg_out) = cx.local.cfg_q.split();
 
-        let disc = match Discipline::new(cfg, 0) {
-            Ok(d) => d,
-            Err(_) => {
-                defmt::error!("sampler configuration invalid: free-running at 50 Hz");
-                let mut c = DisciplineConfig::for_clock(timer_hz, clock.tolerance_ppm());
-                c.mode = SyncMode::Free;
-                c.rate_hz = 50;
-                cfg = c;
-                match Discipline::new(c, 0) {
-                    Ok(d) => d,
-                    Err(_) => panic!("default sampler configuration rejected"),
-                }
-            }
-        };
-        let (sampler, s0) = Sampler::start(dp.TIM5, &mut rcc, disc, sampler_extra);
+        let cfg = *start.discipline.config();
+        let (sampler, s0) = Sampler::start(dp.TIM5, &mut rcc, start.discipline, sampler_extra);
         // Sample 0 is now: snapshot it as the starting point of the integration.
-        let first = RawSample {
-            sample: s0,
-            counts: acq.snapshot(s0.tick),
-            faults: acq.faults(s0.tick),
-            pps: None,
-            state: sampler.discipline().state(),
-            stats: sampler.discipline().stats(),
-            period: sampler.discipline().period(),
-            index_pulses: [None, None],
-            isr_cycles: 0,
-            merged: 0,
-            latency: 0,
-            pps_overcapture: false,
-            queue_lost: 0,
-        };
+        let (counts, faults) = (acq.snapshot(s0.tick), acq.faults(s0.tick));
+        let first = RawSample::first(s0, counts, faults, sampler.discipline());
         let _ = samples_in.enqueue(first);
         rtic::pend(Interrupt::SPI2);
 
-        let mode = if cfg.mode == SyncMode::Pps {
-            "pps"
-        } else {
-            "free"
-        };
-        defmt::info!(
-            "odo-unit {} booted: timer {} Hz, {} Hz {}",
-            env!("CARGO_PKG_VERSION"),
-            timer_hz,
-            cfg.rate_hz,
-            mode
-        );
+        crate::log::booted(timer_hz, &cfg);
 
         let processor = Processor::new(&settings, timer_hz, board::COUNTER_BITS);
         let commands = Commands::new(settings, loaded.source, store, timer_hz, clock);
         let shared = Shared {
             acq,
-            link: Link {
-                ring: TxRing::new(),
-                next_seq: 0,
-            },
+            link: Link::new(),
             requests: Requests::default(),
             live: Live::default(),
             host_errors: RxErrors::default(),
@@ -232,8 +171,7 @@ mod app {
             samples_out,
             index_in_left,
             index_in_right,
-            index_out_left,
-            index_out_right,
+            index_out: [index_out_left, index_out_right],
             host,
             host_rx_in,
             host_rx_out,
@@ -265,8 +203,7 @@ mod app {
         local = [
             sampler, samples_in, cfg_out,
             lost: u32 = 0,
-            pps: Option<(u64, PpsEvent)> = None,
-            overcapture: bool = false,
+            pps: PpsLatch = PpsLatch::new(),
         ],
         shared = [acq]
     )]
@@ -277,15 +214,8 @@ mod app {
         let entry = board::cycles();
         let sampler = cx.local.sampler;
         let event = sampler.on_interrupt();
-        if let Some(pps) = event.pps {
-            // Reported with the next sample; a glitch does not hide an accepted edge.
-            let keep = matches!(cx.local.pps, Some((_, e)) if *e != PpsEvent::Glitch)
-                && pps.1 == PpsEvent::Glitch;
-            if !keep {
-                *cx.local.pps = Some(pps);
-            }
-        }
-        *cx.local.overcapture |= event.overcapture;
+        // Reported with the next sample.
+        cx.local.pps.on_interrupt(event.pps, event.overcapture);
         let Some(sample) = event.sample else {
             return;
         };
@@ -299,11 +229,12 @@ mod app {
             let _ = sampler.set_config(cfg);
         }
         sampler.follow_clock();
+        let (pps, pps_overcapture) = cx.local.pps.take();
         let raw = RawSample {
             sample,
             counts,
             faults,
-            pps: cx.local.pps.take(),
+            pps,
             state: sampler.discipline().state(),
             stats: sampler.discipline().stats(),
             period: sampler.discipline().period(),
@@ -311,7 +242,7 @@ mod app {
             isr_cycles: board::cycles().wrapping_sub(entry),
             merged: event.merged,
             latency: event.latency,
-            pps_overcapture: core::mem::take(cx.local.overcapture),
+            pps_overcapture,
             queue_lost: *cx.local.lost,
         };
         if cx.local.samples_in.enqueue(raw).is_err() {
@@ -359,41 +290,9 @@ mod app {
         let host = cx.local.host;
         let rx = cx.local.host_rx_in;
         let received = (cx.shared.link, cx.shared.host_errors)
-            .lock(|link, errors| host.on_interrupt(&mut link.ring, rx, errors));
+            .lock(|link, errors| host.on_interrupt(link.ring(), rx, errors));
         if received {
             rtic::pend(Interrupt::SPI3);
-        }
-    }
-
-    /// Encodes `msg` as the next frame and queues it whole if it fits with `reserve` bytes to
-    /// spare; false when it did not fit (nothing queued, sequence number unchanged). The
-    /// frame is encoded outside the lock; if another task sent a frame meanwhile, it is
-    /// encoded again with the new sequence number.
-    fn send(link: &mut impl Mutex<T = Link>, msg: &Message, reserve: usize) -> bool {
-        let mut buf = [0u8; protocol::MAX_ENCODED_FRAME];
-        loop {
-            let seq = link.lock(|l| l.next_seq);
-            let Ok(n) = protocol::encode_frame(msg, seq, &mut buf) else {
-                return false;
-            };
-            let queued = link.lock(|l| {
-                if l.next_seq != seq {
-                    None
-                } else if l.ring.push_frame(&buf[..n], reserve) {
-                    l.next_seq = seq.wrapping_add(1);
-                    Some(true)
-                } else {
-                    Some(false)
-                }
-            });
-            match queued {
-                Some(true) => {
-                    rtic::pend(Interrupt::USART2);
-                    return true;
-                }
-                Some(false) => return false,
-                None => continue,
-            }
         }
     }
 
@@ -401,7 +300,7 @@ mod app {
     #[task(
         binds = SPI2,
         priority = 2,
-        local = [samples_out, index_out_left, index_out_right, gnss_out, processor, led, watchdog],
+        local = [samples_out, index_out, gnss_out, processor, led, watchdog],
         shared = [link, requests, live, host_errors, gnss_errors, store_state]
     )]
     fn process(mut cx: process::Context) {
@@ -412,11 +311,10 @@ mod app {
         }
         while let Some(raw) = cx.local.samples_out.dequeue() {
             let start = board::cycles();
-            while let Some(l) = cx.local.index_out_left.dequeue() {
-                p.on_index_capture(0, l, log);
-            }
-            while let Some(r) = cx.local.index_out_right.dequeue() {
-                p.on_index_capture(1, r, log);
+            for (wheel, captures) in cx.local.index_out.iter_mut().enumerate() {
+                while let Some(capture) = captures.dequeue() {
+                    p.on_index_capture(wheel, capture, log);
+                }
             }
             let requests = cx.shared.requests.lock(core::mem::take);
             p.apply(requests, log);
@@ -483,11 +381,7 @@ mod app {
                     let live = cx.shared.live.lock(|l| *l);
                     let rx_lost = cx.shared.host_errors.lock(|e| e.lost);
                     let gnss_lost = cx.shared.gnss_errors.lock(|e| e.lost);
-                    let board = BoardReport {
-                        clock: board::clock_source(c.clock_at_start()),
-                        stack: board::stack::high_water(),
-                        cycles_unit: board::CYCLES_UNIT,
-                    };
+                    let board = board::report(c.clock_at_start());
                     c.status(&mut reply, &live, rx_lost, gnss_lost, &board);
                 }
                 Effect::Version => {
@@ -498,14 +392,6 @@ mod app {
             for chunk in CommandReply::chunks(reply.ok, &reply.text) {
                 send_blocking(&mut cx.shared.link, &Message::Reply(chunk));
             }
-        }
-    }
-
-    /// Sends a reply frame, waiting for room (only the command task, the lowest priority,
-    /// waits; the ring drains in the USART2 interrupt meanwhile).
-    fn send_blocking(link: &mut impl Mutex<T = Link>, msg: &Message) {
-        while !send(link, msg, 0) {
-            cortex_m::asm::nop();
         }
     }
 }

@@ -20,7 +20,6 @@
 //! The board's driver is `real/flash.rs`; the `qemu` build keeps the two sectors in RAM
 //! (`qemu/flash.rs`, 4 KiB each): QEMU's flash is read-only.
 
-
 /// Why a flash operation failed.
 #[derive(Clone, Copy, PartialEq, Eq, defmt::Format)]
 #[cfg_attr(feature = "qemu", allow(dead_code))]

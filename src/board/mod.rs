@@ -73,6 +73,15 @@ pub fn clock_source(at_start: ClockSource) -> ClockSource {
     }
 }
 
+/// What `status` reports of the board, `at_start` being the clock source start-up found.
+pub fn report(at_start: ClockSource) -> odo_core::unit::BoardReport {
+    odo_core::unit::BoardReport {
+        clock: clock_source(at_start),
+        stack: stack::high_water(),
+        cycles_unit: CYCLES_UNIT,
+    }
+}
+
 /// Pins kept after configuration: the ones the firmware reads or drives.
 pub struct Pins {
     /// Status LED.

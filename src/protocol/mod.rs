@@ -19,7 +19,7 @@ pub use messages::{
     CommandReply, DeviceInfo, GnssTime, PoseRecord, ReplyChunks, Status, StatusFlags, SyncMode,
     WheelStatus, MAX_FIRMWARE_VERSION, MAX_REPLY_TEXT,
 };
-pub use tx_ring::TxRing;
+pub use tx_ring::{Queued, TxLink, TxRing};
 
 /// Protocol version carried in every header. Bumped on any incompatible change; appending
 /// fields at the end of a body keeps the version (readers ignore extra bytes).

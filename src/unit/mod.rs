@@ -5,6 +5,7 @@
 //! - [`processor`]: one sample to a pose record and the Status heartbeat ([`Processor`]).
 //! - [`commands`]: command lines to settings changes, saves, pose resets ([`Commands`]).
 //! - [`status`]: the text of the `status` command.
+//! - [`start`]: the settings and sampler configuration the unit starts with.
 //! - [`event`]: what the unit logs ([`Event`]).
 //!
 //! `src/main.rs` holds the tasks, resources and queues around these; host tests in
@@ -14,12 +15,14 @@ pub mod commands;
 pub mod event;
 pub mod processor;
 pub mod sample;
+pub mod start;
 pub mod status;
 
 pub use commands::{Commands, Effect, StallingFlash};
 pub use event::{Event, Log};
 pub use processor::{Live, Processor, Requests, StoreState};
-pub use sample::{IndexCapture, RawCounts, RawSample};
+pub use sample::{IndexCapture, PpsLatch, RawCounts, RawSample};
+pub use start::{start, Start};
 pub use status::BoardReport;
 
 use crate::settings::{SampleMode, Settings, TimeTagRef};

@@ -1,6 +1,6 @@
 //! What the sample interrupt hands to the processing task.
 
-use crate::timing::{PpsEvent, PpsStats, Sample, SyncState};
+use crate::timing::{Discipline, PpsEvent, PpsStats, Sample, SyncState};
 
 /// Both wheels' raw counters, read together.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -50,4 +50,67 @@ pub struct RawSample {
     pub pps_overcapture: bool,
     /// Samples lost so far because the queue to the processing task was full.
     pub queue_lost: u32,
+}
+
+impl RawSample {
+    /// Sample 0, taken when the sampler started (`disc`): the integration's starting point.
+    pub fn first(
+        sample: Sample,
+        counts: RawCounts,
+        faults: (bool, bool),
+        disc: &Discipline,
+    ) -> Self {
+        Self {
+            sample,
+            counts,
+            faults,
+            pps: None,
+            state: disc.state(),
+            stats: disc.stats(),
+            period: disc.period(),
+            index_pulses: [None, None],
+            isr_cycles: 0,
+            merged: 0,
+            latency: 0,
+            pps_overcapture: false,
+            queue_lost: 0,
+        }
+    }
+}
+
+/// The PPS edge and over-capture seen by sample interrupts that carried no sample, kept for
+/// the next sample.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct PpsLatch {
+    edge: Option<(u64, PpsEvent)>,
+    overcapture: bool,
+}
+
+impl PpsLatch {
+    /// Nothing seen.
+    pub const fn new() -> Self {
+        Self {
+            edge: None,
+            overcapture: false,
+        }
+    }
+
+    /// One interrupt's PPS `edge` (tick and event) and over-capture flag. A newer edge
+    /// replaces the kept one, except that a glitch does not hide an accepted edge.
+    pub fn on_interrupt(&mut self, edge: Option<(u64, PpsEvent)>, overcapture: bool) {
+        if let Some(pps) = edge {
+            let keep = matches!(self.edge, Some((_, e)) if e != PpsEvent::Glitch)
+                && pps.1 == PpsEvent::Glitch;
+            if !keep {
+                self.edge = Some(pps);
+            }
+        }
+        self.overcapture |= overcapture;
+    }
+
+    /// The kept edge and whether an edge was lost, for the sample being handed on; clears
+    /// both.
+    pub fn take(&mut self) -> (Option<(u64, PpsEvent)>, bool) {
+        (self.edge.take(), core::mem::take(&mut self.overcapture))
+    }
 }
