@@ -2,11 +2,15 @@
 
 use odo_core::settings::store::Loaded;
 use odo_core::settings::SettingsSource;
-use odo_core::timing::{DisciplineConfig, SyncMode, SyncState};
+use odo_core::timing::{ClockSource, DisciplineConfig, SyncMode, SyncState};
 use odo_core::unit::{Event, Log, Start};
 
-/// What start-up made of the stored settings and the sampler configuration.
-pub fn start(loaded: &Loaded, start: &Start) {
+/// What start-up made of the clock (`clock`), the stored settings and the sampler
+/// configuration.
+pub fn start(clock: ClockSource, loaded: &Loaded, start: &Start) {
+    if clock == ClockSource::HsiFallback {
+        defmt::error!("HSE did not start: running from the HSI (+-4 %)");
+    }
     if start.settings_replaced {
         defmt::error!("settings: rate/mode unusable by the sampler, using the defaults");
     }

@@ -113,9 +113,6 @@ mod app {
         let (mut rcc, clock) = board::start_clocks(dp.RCC);
         let clocks = rcc.clocks;
         let timer_hz = board::timer_hz(&clocks);
-        if clock == board::ClockSource::HsiFallback {
-            defmt::error!("HSE did not start: running from the HSI (+-4 %)");
-        }
 
         let pins = board::pins(dp.GPIOA, dp.GPIOB, dp.GPIOC, &mut rcc);
 
@@ -127,7 +124,7 @@ mod app {
         let Ok(start) = unit::start(loaded.settings, timer_hz, clock_now, clock) else {
             panic!("default sampler configuration rejected")
         };
-        crate::log::start(&loaded, &start);
+        crate::log::start(clock, &loaded, &start);
         let settings = start.settings;
 
         let mut acq = Acquisition::new(dp.TIM2, dp.TIM3, pins.faults, &mut rcc);
@@ -351,9 +348,8 @@ mod app {
     fn commands_task(mut cx: commands_task::Context) {
         let c = cx.local.commands;
         while let Some(byte) = cx.local.host_rx_out.dequeue() {
-            let at_start = c.clock_at_start();
+            let (at_start, live) = (c.clock_at_start(), &mut cx.shared.live);
             let clock = move || board::clock_source(at_start);
-            let live = &mut cx.shared.live;
             let Some((mut reply, effect)) = c.on_byte(byte, clock, || live.lock(|l| l.moving))
             else {
                 continue;

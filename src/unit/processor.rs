@@ -79,9 +79,11 @@ pub struct Live {
 /// State of the processing task: counts to records.
 pub struct Processor {
     timer_hz: u32,
-    counter_bits: [u32; 2],
     settings: Settings,
-    extenders: Option<[CounterExtender; 2]>,
+    /// The counters' extensions, valid once `started` (the widths are kept before).
+    extenders: [CounterExtender; 2],
+    /// The first sample started the extensions.
+    started: bool,
     integrator: Option<Integrator>,
     trackers: [IndexTracker; 2],
     /// Index mismatch not yet reported in a sent record.
@@ -117,9 +119,12 @@ impl Processor {
         let tpr = settings.chassis.ticks_per_rev;
         Self {
             timer_hz,
-            counter_bits,
             settings: *settings,
-            extenders: None,
+            extenders: [
+                CounterExtender::new(counter_bits[0], 0),
+                CounterExtender::new(counter_bits[1], 0),
+            ],
+            started: false,
             integrator: None,
             trackers: [IndexTracker::new(tpr, DEFAULT_TOLERANCE); 2],
             mismatch: [false; 2],
@@ -173,10 +178,10 @@ impl Processor {
     }
 
     fn on_index(&mut self, wheel: usize, raw: u32, log: &mut impl Log) {
-        let Some(ext) = &self.extenders else {
+        if !self.started {
             return;
-        };
-        let count = ext[wheel].absolute_of(raw);
+        }
+        let count = self.extenders[wheel].absolute_of(raw);
         match self.trackers[wheel].on_index(count) {
             IndexCheck::Mismatch { error } => {
                 self.mismatch[wheel] = true;
@@ -214,27 +219,18 @@ impl Processor {
 
     /// The counters of `raw` extended to 64 bits (the first sample starts the extension).
     fn extend(&mut self, raw: &RawSample) -> WheelCounts {
-        match &mut self.extenders {
-            Some(ext) => {
-                ext[0].update(raw.counts.left);
-                ext[1].update(raw.counts.right);
-                WheelCounts {
-                    left: ext[0].absolute(),
-                    right: ext[1].absolute(),
-                }
-            }
-            None => {
-                let ext = [
-                    CounterExtender::new(self.counter_bits[0], raw.counts.left),
-                    CounterExtender::new(self.counter_bits[1], raw.counts.right),
-                ];
-                let counts = WheelCounts {
-                    left: ext[0].absolute(),
-                    right: ext[1].absolute(),
-                };
-                self.extenders = Some(ext);
-                counts
-            }
+        let ext = &mut self.extenders;
+        if self.started {
+            ext[0].update(raw.counts.left);
+            ext[1].update(raw.counts.right);
+        } else {
+            ext[0] = CounterExtender::new(ext[0].bits(), raw.counts.left);
+            ext[1] = CounterExtender::new(ext[1].bits(), raw.counts.right);
+            self.started = true;
+        }
+        WheelCounts {
+            left: ext[0].absolute(),
+            right: ext[1].absolute(),
         }
     }
 
