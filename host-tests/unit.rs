@@ -6,7 +6,7 @@
 
 use odo_core::console::Reply;
 use odo_core::odometry::Pose;
-use odo_core::protocol::{Queued, SyncMode as WireSync, TxLink, TxRing};
+use odo_core::protocol::{Queued, TxLink, TxRing};
 use odo_core::settings::store::{Flash, SettingsStore, SLOT_LEN};
 use odo_core::settings::{Settings, SettingsSource};
 use odo_core::timing::{
@@ -76,7 +76,7 @@ fn first_sample_starts_the_counts_and_the_pose() {
     assert_eq!((rec.gamma_left, rec.gamma_right), (5, -1));
     assert_eq!((rec.x, rec.y, rec.heading), (0.0, 0.0, 0.0));
     assert_eq!(rec.dropped, 0);
-    assert_eq!(rec.flags.sync, WireSync::FreeRunning);
+    assert_eq!(rec.flags.sync, SyncState::FreeRunning);
     assert!(!rec.flags.time_valid);
     assert!(log.0.is_empty(), "{:?}", log.0);
     // The right counter wraps: 0xFFFF -> 0x0010 is 17 increments forward.
@@ -294,7 +294,7 @@ fn sync_state_changes_are_logged_and_flagged() {
     r.state = SyncState::Locked;
     r.pps = Some((HZ as u64, PpsEvent::Locked { second: 1 }));
     let rec = record(&mut p, &r, &mut log).unwrap();
-    assert_eq!(rec.flags.sync, WireSync::PpsLocked);
+    assert_eq!(rec.flags.sync, SyncState::Locked);
     assert!(!rec.flags.time_valid, "no GNSS time message yet");
     assert_eq!(
         log.0,
@@ -312,7 +312,7 @@ fn sync_state_changes_are_logged_and_flagged() {
     r.pps_overcapture = true;
     r.faults = (true, false);
     let rec = record(&mut p, &r, &mut log).unwrap();
-    assert_eq!(rec.flags.sync, WireSync::Holdover);
+    assert_eq!(rec.flags.sync, SyncState::Holdover);
     assert!(rec.flags.left.fault && !rec.flags.right.fault);
     assert_eq!(
         log.0[2..],

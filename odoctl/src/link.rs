@@ -14,7 +14,8 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, bail, Context, Result};
-use odo_core::protocol::{DecoderStats, Frame, FrameDecoder, Message, PoseRecord, SyncMode};
+use odo_core::protocol::{DecoderStats, Frame, FrameDecoder, Message, PoseRecord};
+use odo_core::timing::SyncState;
 
 use crate::config as cfg;
 use crate::csvio::fmt_t;
@@ -247,11 +248,11 @@ impl Session {
 
 const REPLY_TIMEOUT: Duration = Duration::from_secs(5);
 
-fn sync_name(m: SyncMode) -> &'static str {
+fn sync_name(m: SyncState) -> &'static str {
     match m {
-        SyncMode::FreeRunning => "free",
-        SyncMode::PpsLocked => "pps",
-        SyncMode::Holdover => "hold",
+        SyncState::FreeRunning => "free",
+        SyncState::Locked => "pps",
+        SyncState::Holdover => "hold",
     }
 }
 

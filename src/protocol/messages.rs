@@ -8,37 +8,26 @@ use super::{DecodeError, EncodeError, MsgType};
 use crate::bytes::{Reader, Writer};
 use crate::odometry::UncertaintyModel;
 use crate::settings::SettingsSource;
+use crate::timing::SyncState;
 use heapless::String;
 
-/// How the sample clock is disciplined (bits 0-1 of [`StatusFlags`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum SyncMode {
-    /// Samples are timed by the MCU clock alone (code 0).
-    #[default]
-    FreeRunning,
-    /// Samples are locked to the GNSS 1-PPS edges (code 1).
-    PpsLocked,
-    /// PPS was lost; samples continue on the MCU clock disciplined by the last PPS (code 2).
-    Holdover,
+/// Wire code of the sample schedule's state (bits 0-1 of [`StatusFlags`]): free-running 0,
+/// PPS-locked 1, holdover 2.
+fn sync_code(s: SyncState) -> u32 {
+    match s {
+        SyncState::FreeRunning => 0,
+        SyncState::Locked => 1,
+        SyncState::Holdover => 2,
+    }
 }
 
-impl SyncMode {
-    /// Wire code (0, 1, 2).
-    pub fn code(self) -> u32 {
-        match self {
-            Self::FreeRunning => 0,
-            Self::PpsLocked => 1,
-            Self::Holdover => 2,
-        }
-    }
-    /// From the wire code; 3 is reserved and gives `None`.
-    pub fn from_code(code: u32) -> Option<Self> {
-        match code {
-            0 => Some(Self::FreeRunning),
-            1 => Some(Self::PpsLocked),
-            2 => Some(Self::Holdover),
-            _ => None,
-        }
+/// The state of wire code `code`; 3 is reserved and gives `None`.
+fn sync_from_code(code: u32) -> Option<SyncState> {
+    match code {
+        0 => Some(SyncState::FreeRunning),
+        1 => Some(SyncState::Locked),
+        2 => Some(SyncState::Holdover),
+        _ => None,
     }
 }
 
@@ -77,13 +66,13 @@ impl WheelStatus {
 
 /// The 32-bit status word of a [`PoseRecord`] and a [`Status`] message.
 ///
-/// Bits: 0-1 [`SyncMode`] code; 2 time tag valid; 3-6 left wheel (fault, index seen, index
+/// Bits: 0-1 [`SyncState`] code; 2 time tag valid; 3-6 left wheel (fault, index seen, index
 /// mismatch, calibrated); 7-10 right wheel (same order); 11 uncertainty model (0 = paper,
 /// 1 = covariance); 12-31 reserved, sent as 0, ignored by readers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct StatusFlags {
     /// Sample clock discipline.
-    pub sync: SyncMode,
+    pub sync: SyncState,
     /// The GNSS time fields hold the time of the sample.
     pub time_valid: bool,
     /// Wheel 1 (left).
@@ -100,7 +89,7 @@ impl StatusFlags {
 
     /// The wire word.
     pub fn to_bits(&self) -> u32 {
-        self.sync.code()
+        sync_code(self.sync)
             | (self.time_valid as u32) << 2
             | self.left.bits() << 3
             | self.right.bits() << 7
@@ -110,7 +99,7 @@ impl StatusFlags {
     /// From the wire word; reserved bits are ignored, the reserved sync code 3 is an error.
     pub fn from_bits(bits: u32) -> Result<Self, DecodeError> {
         Ok(Self {
-            sync: SyncMode::from_code(bits & 3).ok_or(DecodeError::BadField("sync mode"))?,
+            sync: sync_from_code(bits & 3).ok_or(DecodeError::BadField("sync mode"))?,
             time_valid: bits & (1 << 2) != 0,
             left: WheelStatus::from_bits((bits >> 3) & 0xF),
             right: WheelStatus::from_bits((bits >> 7) & 0xF),

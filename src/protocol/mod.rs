@@ -16,8 +16,8 @@ pub mod tx_ring;
 
 pub use decoder::{DecoderStats, FrameDecoder};
 pub use messages::{
-    CommandReply, DeviceInfo, GnssTime, PoseRecord, ReplyChunks, Status, StatusFlags, SyncMode,
-    WheelStatus, MAX_FIRMWARE_VERSION, MAX_REPLY_TEXT,
+    CommandReply, DeviceInfo, GnssTime, PoseRecord, ReplyChunks, Status, StatusFlags, WheelStatus,
+    MAX_FIRMWARE_VERSION, MAX_REPLY_TEXT,
 };
 pub use tx_ring::{Queued, TxLink, TxRing};
 

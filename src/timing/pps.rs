@@ -108,9 +108,10 @@ pub enum SyncMode {
 }
 
 /// The state of the sample schedule, reported in every record.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum SyncState {
     /// Off the MCU clock alone (nominal timer frequency).
+    #[default]
     FreeRunning,
     /// On the PPS: grid anchored at the last captured edge, period measured.
     Locked,

@@ -9,7 +9,7 @@ use crate::odometry::{
     ChassisParams, CounterExtender, IndexCheck, IndexRefs, IndexTracker, Integrator, Pose,
     StepStatus, WheelCounts,
 };
-use crate::protocol::{self, GnssTime, PoseRecord, Status, StatusFlags, WheelStatus};
+use crate::protocol::{GnssTime, PoseRecord, Status, StatusFlags, WheelStatus};
 use crate::settings::{Settings, SettingsSource};
 use crate::timing::{LineBuffer, NmeaError, PpsEvent, PpsStats, SyncState, TimeTagger};
 
@@ -354,11 +354,7 @@ impl Processor {
             calibrated,
         };
         self.flags = StatusFlags {
-            sync: match raw.state {
-                SyncState::FreeRunning => protocol::SyncMode::FreeRunning,
-                SyncState::Locked => protocol::SyncMode::PpsLocked,
-                SyncState::Holdover => protocol::SyncMode::Holdover,
-            },
+            sync: raw.state,
             time_valid: gps.is_some(),
             left: status(0, raw.faults.0, step.left_referenced),
             right: status(1, raw.faults.1, step.right_referenced),

@@ -2,9 +2,8 @@
 
 use super::Live;
 use crate::console::Reply;
-use crate::protocol;
 use crate::settings::SettingsSource;
-use crate::timing::ClockSource;
+use crate::timing::{ClockSource, SyncState};
 
 /// What only the board knows for `status`.
 #[derive(Debug, Clone, Copy)]
@@ -32,9 +31,9 @@ pub(crate) struct StatusInputs<'a> {
 pub(crate) fn write(reply: &mut Reply, s: &StatusInputs<'_>) {
     let live = s.live;
     let sync = match live.flags.sync {
-        protocol::SyncMode::FreeRunning => "free",
-        protocol::SyncMode::PpsLocked => "locked",
-        protocol::SyncMode::Holdover => "holdover",
+        SyncState::FreeRunning => "free",
+        SyncState::Locked => "locked",
+        SyncState::Holdover => "holdover",
     };
     let on = |b: bool| if b { "yes" } else { "no" };
     let clock = match s.board.clock {
