@@ -1,5 +1,5 @@
 //! End-to-end test of calibration mode (`mode pps`) in QEMU, against the simulated GNSS
-//! receiver of the `qemu` build (`src/board/sim_gnss.rs`, docs/HARDWARE.md): PPS captures
+//! receiver of the `qemu` build (`src/board/qemu/gnss.rs`, docs/HARDWARE.md): PPS captures
 //! from a receiver whose second is 1,000,037,000 MCU ticks (the MCU clock 37 ppm fast) with
 //! up to 40 ns of jitter, ZDA and RMC 100 ms after each edge naming 2026-11-21 12:00:00 UTC +
 //! `n` s, and a 20 s script: a corrupted RMC at lap second 5, a glitch edge 300 ms after the
@@ -35,7 +35,7 @@ use odo_core::timing::UtcDateTime;
 mod support;
 use support::qemu::UnitLink;
 
-// The simulated receiver, as documented in src/board/sim_gnss.rs (MCU ticks are ns in QEMU).
+// The simulated receiver, as documented in src/board/qemu/gnss.rs (MCU ticks are ns in QEMU).
 /// One GNSS second in MCU ticks: the MCU clock is 37 ppm fast.
 const SECOND_NS: u64 = 1_000_037_000;
 /// MCU time of the nominal edge of receiver second 0.

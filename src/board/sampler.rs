@@ -6,7 +6,7 @@
 //! [`TimerExtender`] makes the 64-bit tick timeline of the discipline from it, which needs a
 //! reading at least every 2^31 ticks (25 s): every sample interrupt reads it, and the
 //! slowest rate is 1 Hz. Each compare interrupt reads the counter as its first action
-//! (after the encoders, see `src/board/encoders.rs`), and [`catch_up`] labels that instant
+//! (after the encoders, see `src/board/real/encoders.rs`), and [`catch_up`] labels that instant
 //! with the latest grid point it has reached. Normally that is the point just due; after a
 //! stall (a flash sector erase stops the CPU for up to [`super::flash::MAX_ERASE_MS`]) it is
 //! the last of the points the stall passed over, which are merged into it: their motion is
