@@ -3,17 +3,17 @@
 //! same counter.
 //!
 //! TIM5 counts timer ticks (84 MHz on the board) from 0 to 2^32 - 1 and wraps (every 51 s);
-//! [`TimerExtender`] makes the 64-bit tick timeline of the discipline from it, which needs a
-//! reading at least every 2^31 ticks (25 s): every sample interrupt reads it, and the
-//! slowest rate is 1 Hz. Each compare interrupt reads the counter as its first action
-//! (after the encoders, see `src/board/real/encoders.rs`), and [`catch_up`] labels that instant
-//! with the latest grid point it has reached. Normally that is the point just due; after a
-//! stall (a flash sector erase stops the CPU for up to [`super::flash::MAX_ERASE_MS`]) it is
-//! the last of the points the stall passed over, which are merged into it: their motion is
-//! in the counts (the encoder timers keep counting), the time labels stay those of the grid,
-//! the GNSS seconds stay right, and the next compare goes on the first future grid point.
-//! A compare value that the counter passed while it was being written is caught by reading
-//! the counter back and forcing the compare event (EGR CC2G).
+//! [`TimerExtender`](odo_core::timing::TimerExtender) makes the 64-bit tick timeline of the
+//! discipline from it, which needs a reading at least every 2^31 ticks (25 s): every sample
+//! interrupt reads it, and the slowest rate is 1 Hz. Each compare interrupt reads the counter as
+//! its first action (after the encoders, see `src/board/real/encoders.rs`), and [`catch_up`] labels
+//! that instant with the latest grid point it has reached. Normally that is the point just due;
+//! after a stall (a flash sector erase stops the CPU for up to [`super::flash::MAX_ERASE_MS`]) it
+//! is the last of the points the stall passed over, which are merged into it: their motion is in
+//! the counts (the encoder timers keep counting), the time labels stay those of the grid, the GNSS
+//! seconds stay right, and the next compare goes on the first future grid point. A compare value
+//! that the counter passed while it was being written is caught by reading the counter back and
+//! forcing the compare event (EGR CC2G).
 //!
 //! The PPS capture (CH1, rising edge, input filter [`PPS_FILTER`]) latches the counter at
 //! the edge; a second edge before the interrupt reads it sets the over-capture flag (one

@@ -5,13 +5,13 @@
 //! [`crate::protocol::CommandReply`] frames whose text starts with `ok` or `error: <what was wrong>`.
 //! A command that fails changes nothing.
 //!
-//! The firmware feeds UART bytes to a [`LineAssembler`], passes each line to [`execute`]
-//! together with its working [`Settings`], performs the returned [`Action`] (which may
+//! The firmware feeds UART bytes to a [`LineAssembler`], passes each line to [`execute()`]
+//! together with its working [`Settings`](crate::settings::Settings), performs the returned [`Action`] (which may
 //! rewrite the reply, for example when `save` fails) and sends the reply with
 //! [`crate::protocol::CommandReply::chunks`].
 //!
-//! - [`line`]: bytes to lines ([`LineAssembler`]).
-//! - [`parse`]: a line to a [`Command`].
+//! - [`line`](mod@line): bytes to lines ([`LineAssembler`]).
+//! - [`parse`](mod@parse): a line to a [`Command`].
 //! - [`execute`](mod@execute): a command applied to the working [`Settings`](crate::settings::Settings),
 //!   with its [`Reply`] and the [`Action`] left to the firmware.
 

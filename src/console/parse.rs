@@ -38,7 +38,7 @@ pub enum Command<'a> {
 /// Why a command line was rejected (nothing was changed).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum CommandError<'a> {
-    /// The line was dropped by the [`LineAssembler`].
+    /// The line was dropped by the [`LineAssembler`](super::LineAssembler).
     Line(LineError),
     /// The first word is not a command.
     UnknownCommand(&'a str),

@@ -5,7 +5,7 @@
 //! - [`processor`]: one sample to a pose record and the Status heartbeat ([`Processor`]).
 //! - [`commands`]: command lines to settings changes, saves, pose resets ([`Commands`]).
 //! - [`status`]: the text of the `status` command.
-//! - [`start`]: the settings and sampler configuration the unit starts with.
+//! - [`start`](mod@start): the settings and sampler configuration the unit starts with.
 //! - [`event`]: what the unit logs ([`Event`]).
 //!
 //! `src/main.rs` holds the tasks, resources and queues around these; host tests in

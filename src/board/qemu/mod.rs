@@ -1,7 +1,7 @@
 //! QEMU's `netduinoplus2`: HSI 16 MHz, the timers count at 1 GHz of emulated time, the
-//! encoders, index pulses and fault lines come from the deterministic simulated [`drive`],
-//! the PPS captures and NMEA bytes from the simulated GNSS receiver [`gnss`], the settings
-//! flash is RAM ([`flash`]), the sample compare is TIM5's update event ([`sampler`]),
+//! encoders, index pulses and fault lines come from the deterministic simulated drive
+//! (`drive`), the PPS captures and NMEA bytes from the simulated GNSS receiver (`gnss`), the
+//! settings flash is RAM (`flash`), the sample compare is TIM5's update event (`sampler`),
 //! logging goes over semihosting.
 
 pub mod drive;
