@@ -13,7 +13,8 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, bail, Context, Result};
-use odo_core::protocol::{DecoderStats, Frame, FrameDecoder, Message, PoseRecord, SyncMode};
+use odo_core::protocol::{DecoderStats, Frame, FrameDecoder, Message, PoseRecord};
+use odo_core::timing::SyncState;
 
 use crate::config as cfg;
 use crate::csvio::{RecordFields, Sample, SamplesLayout, UnitPose};
@@ -246,11 +247,11 @@ impl Session {
 
 const REPLY_TIMEOUT: Duration = Duration::from_secs(5);
 
-fn sync_name(m: SyncMode) -> &'static str {
+fn sync_name(m: SyncState) -> &'static str {
     match m {
-        SyncMode::FreeRunning => "free",
-        SyncMode::PpsLocked => "pps",
-        SyncMode::Holdover => "hold",
+        SyncState::FreeRunning => "free",
+        SyncState::Locked => "pps",
+        SyncState::Holdover => "hold",
     }
 }
 
@@ -677,7 +678,7 @@ pub fn push_lines(path: &Path) -> Result<Vec<String>> {
         .map(|k| format!("{k} {}", cfg::get_key(&params, k).expect("known key")))
         .collect();
     Ok(pairs
-        .chunks(odo_core::protocol::command::MAX_SET_PAIRS)
+        .chunks(odo_core::console::MAX_SET_PAIRS)
         .map(|c| format!("set {}", c.join(" ")))
         .collect())
 }

@@ -10,8 +10,8 @@ use std::process::{Command, Output};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
+use odo_core::console::{execute, Action, LineAssembler};
 use odo_core::odometry::{ChassisParams, IndexRefs, Integrator, Pose, WheelCounts};
-use odo_core::protocol::command::{execute, Action, LineAssembler};
 use odo_core::protocol::{
     CommandReply, FrameEncoder, Message, PoseRecord, StatusFlags, WheelStatus, MAX_ENCODED_FRAME,
 };
