@@ -72,7 +72,7 @@ impl Default for ReceiverSim {
 /// The receiver's epochs for a run: `times` are the samples' times (s from the run's start),
 /// `truth` the true centre pose at each (x east, y north, heading clockwise from north).
 pub fn receiver_epochs(times: &[f64], truth: &[(f64, f64, f64)], sim: &ReceiverSim) -> Vec<Epoch> {
-    let mut rng = Rng::new(sim.seed ^ 0x5EED_0F_A7E7);
+    let mut rng = Rng::new(sim.seed ^ 0x05EE_D0FA_7E77);
     let frame = LocalFrame::new(sim.origin);
     let mut block = -1i64;
     let mut float = false;
