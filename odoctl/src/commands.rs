@@ -15,6 +15,7 @@ use crate::calib::{self, DeltaMode, Run, WindowStart};
 use crate::config::{self as cfg, FitValue};
 use crate::core_api::{ChassisParams, Pose, UncertaintyModel};
 use crate::csvio;
+use crate::reference::cli::{read_reference, reference_for_samples, ReceiverArgs, ReferenceArgs};
 use crate::replay as rp;
 use crate::simulate::{self, PathKind};
 use crate::stats::{coverage, summarize};
@@ -112,7 +113,7 @@ pub fn default_truth() -> ChassisParams {
 }
 
 /// `odoctl simulate`.
-pub fn simulate(o: &SimulateOptions) -> Result<ExitCode> {
+pub fn simulate(o: &SimulateOptions, logs: &ReceiverArgs) -> Result<ExitCode> {
     let mut truth = match &o.truth {
         Some(p) => cfg::read_params(p, default_truth())?,
         None => default_truth(),
@@ -134,11 +135,14 @@ pub fn simulate(o: &SimulateOptions) -> Result<ExitCode> {
     }
     let mut rng = simulate::Rng::new(run.seed ^ 0x5EED);
     let segments = simulate::path(o.path, o.length, &mut rng);
-    let sim = simulate::simulate(&simulate::SimOptions {
+    let receiver = logs.receiver(run.rtk_sigma, run.heading_sigma, run.seed)?;
+    let mut sim = simulate::simulate(&simulate::SimOptions {
         truth,
         segments,
         settings: o.settings,
     });
+    logs.prepare(&mut sim, &receiver);
+    logs.write(&sim, &receiver)?;
     let mut w = create(&o.samples)?;
     csvio::write_samples(&mut w, &sim.samples, false)?;
     w.flush()?;
@@ -162,7 +166,7 @@ pub fn simulate(o: &SimulateOptions) -> Result<ExitCode> {
     crate::outln!(
         "simulated {} samples over {:.1} s: {:.1} m travelled, {:.0} deg turned; true left_diameter {}, right_diameter {}, track_width {}",
         sim.samples.len(),
-        sim.samples.last().map_or(0.0, |s| s.t),
+        sim.samples.last().map_or(0.0, |s| s.t - sim.samples[0].t),
         travelled,
         turned.to_degrees(),
         truth.left_diameter,
@@ -371,16 +375,17 @@ impl PhaseTimer {
 }
 
 /// `odoctl calibrate`.
-pub fn calibrate(o: &CalibrateOptions) -> Result<ExitCode> {
+pub fn calibrate(o: &CalibrateOptions, input: &ReferenceArgs) -> Result<ExitCode> {
     let started = Instant::now();
     let timer = PhaseTimer::new();
     // The two files are independent: read on two cores.
     let (samples, reference) = std::thread::scope(|scope| {
-        let reference = scope.spawn(|| csvio::read_reference(&o.reference));
+        let reference = scope.spawn(|| read_reference(&o.reference, input));
         let samples = csvio::read_samples(&o.samples);
         (samples, reference.join().expect("CSV reader panicked"))
     });
     let (samples, reference) = (samples?, reference?);
+    let reference = reference_for_samples(&reference, &samples)?;
     timer.lap("read CSV");
     let mut initial = match &o.initial {
         Some(p) => cfg::read_params(p, ChassisParams::DESIGNED)?,
@@ -799,6 +804,7 @@ pub fn validate(
     models: &[UncertaintyModel],
     reference_sigma: f64,
     reference_heading_sigma: f64,
+    input: &ReferenceArgs,
 ) -> Result<ExitCode> {
     if !(reference_sigma >= 0.0 && reference_heading_sigma >= 0.0) {
         bail!("--reference-sigma and --reference-heading-sigma-deg must be non-negative");
@@ -808,7 +814,7 @@ pub fn validate(
         params.uncertainty_model = *one;
     }
     let samples = csvio::read_samples(samples_path)?;
-    let reference = csvio::read_reference(reference_path)?;
+    let reference = reference_for_samples(&read_reference(reference_path, input)?, &samples)?;
     let matches = csvio::match_or_fail(
         &samples,
         &samples_path.display().to_string(),

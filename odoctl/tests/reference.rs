@@ -460,3 +460,227 @@ fn load_detects_the_format_from_the_content() {
         .to_string();
     assert!(e.contains("missing.nmea: cannot read"), "{e}");
 }
+
+/// `calibrate --out` of a run from one reference file: (left, right, track) estimates and
+/// their standard errors, and stdout.
+fn calibrate_cli(
+    samples: &std::path::Path,
+    reference: &std::path::Path,
+    extra: &[&str],
+) -> ([f64; 3], [f64; 3], String) {
+    let out = reference.with_extension("toml");
+    let mut args = vec![
+        "calibrate",
+        "--samples",
+        samples.to_str().unwrap(),
+        "--reference",
+        reference.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--no-delta",
+        "--quiet",
+    ];
+    args.extend_from_slice(extra);
+    let stdout = common::success_stdout(&common::odoctl(&args));
+    let t: toml::Table = common::read(&out).parse().unwrap();
+    let fit = t["fit"].as_table().unwrap();
+    let num = |tab: &toml::Table, k: &str| tab[k].as_float().unwrap_or_else(|| panic!("{k}"));
+    (
+        ["left_diameter", "right_diameter", "track_width"].map(|k| num(&t, k)),
+        ["left_diameter_se", "right_diameter_se", "track_width_se"].map(|k| num(fit, k)),
+        stdout,
+    )
+}
+
+#[test]
+fn cli_simulate_logs_then_calibrate_from_each_format() {
+    let d = common::scratch("reference_cli");
+    let p = |n: &str| d.join(n);
+    let s = |n: &str| p(n).to_str().unwrap().to_string();
+    let out = common::success_stdout(&common::odoctl(&[
+        "simulate",
+        "--samples",
+        &s("s.csv"),
+        "--reference",
+        &s("r.csv"),
+        "--nmea",
+        &s("r.nmea"),
+        "--pos",
+        &s("r.pos"),
+        "--pos-time",
+        "week-tow",
+        "--seed",
+        "8",
+    ]));
+    assert!(
+        out.contains("receiver log: ") && out.contains("RTK float"),
+        "{out}"
+    );
+    // The samples carry GPS time of week (week 2400, 302,400 s by default).
+    let samples = common::read(&p("s.csv"));
+    assert!(
+        samples
+            .lines()
+            .nth(1)
+            .unwrap()
+            .starts_with("302400.000000,"),
+        "{samples:.200}"
+    );
+    let truth = [0.2608, 0.2607, 0.5656];
+    let (csv, csv_se, _) = calibrate_cli(&p("s.csv"), &p("r.csv"), &[]);
+    for file in ["r.nmea", "r.pos"] {
+        let (est, se, stdout) = calibrate_cli(&p("s.csv"), &p(file), &[]);
+        assert!(
+            stdout.contains("left out for their fix quality (--min-fix):"),
+            "{stdout}"
+        );
+        for k in 0..3 {
+            // A fifth of the CSV's points (10 Hz against 50 Hz, float epochs left out):
+            // standard errors about sqrt(5) larger.
+            assert!(
+                se[k] < 3.0 * csv_se[k] && se[k] > csv_se[k],
+                "{file} {k}: {se:?} {csv_se:?}"
+            );
+            // The accuracy reached from the CSV: the run's slip, not the reference noise,
+            // dominates the error to the truth (the standard errors, which take the residuals
+            // as independent, do not show it); the log's estimate is no further from the truth
+            // than the CSV's plus 10 of its standard errors.
+            let (e, e_csv) = ((est[k] - truth[k]).abs(), (csv[k] - truth[k]).abs());
+            assert!(
+                e < e_csv + 10.0 * se[k],
+                "{file} {k}: {est:?} (CSV {csv:?}, se {se:?})"
+            );
+        }
+        eprintln!(
+            "{file}: errors {:.1} {:.1} {:.1} um (CSV {:.1} {:.1} {:.1} um)",
+            (est[0] - truth[0]) * 1e6,
+            (est[1] - truth[1]) * 1e6,
+            (est[2] - truth[2]) * 1e6,
+            (csv[0] - truth[0]) * 1e6,
+            (csv[1] - truth[1]) * 1e6,
+            (csv[2] - truth[2]) * 1e6
+        );
+    }
+    // The same log, forced and with float epochs: used counts in the summary.
+    let (_, _, stdout) = calibrate_cli(
+        &p("s.csv"),
+        &p("r.nmea"),
+        &[
+            "--reference-format",
+            "nmea",
+            "--min-fix",
+            "float",
+            "--origin",
+            "49.2,16.6,300",
+        ],
+    );
+    assert!(
+        stdout.contains("(given)") && !stdout.contains("left out for their fix"),
+        "{stdout}"
+    );
+
+    // Samples on another time base (the MCU clock, t from 0): refused, naming both ranges.
+    common::success_stdout(&common::odoctl(&[
+        "simulate",
+        "--samples",
+        &s("mcu.csv"),
+        "--reference",
+        &s("mcu_r.csv"),
+    ]));
+    let o = common::odoctl(&[
+        "calibrate",
+        "--samples",
+        &s("mcu.csv"),
+        "--reference",
+        &s("r.nmea"),
+        "--quiet",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        err.contains("does not overlap")
+            && err.contains("TOW 302400.000 s")
+            && err.contains("samples t = 0.000 .."),
+        "{err}"
+    );
+    // Bad options.
+    for (flag, value) in [
+        ("--origin", "91,0,0"),
+        ("--leap-seconds", "-3"),
+        ("--reference-format", "gpx"),
+    ] {
+        let o = common::odoctl(&[
+            "validate",
+            "--samples",
+            &s("s.csv"),
+            "--reference",
+            &s("r.nmea"),
+            flag,
+            value,
+        ]);
+        assert_ne!(o.status.code(), Some(0), "{flag} {value}");
+    }
+}
+
+#[test]
+fn cli_simulated_antenna_moves_every_reference() {
+    let d = common::scratch("reference_cli_antenna");
+    let s = |n: &str| d.join(n).to_str().unwrap().to_string();
+    for (name, antenna) in [("a", None), ("b", Some("0.35,-0.1"))] {
+        let mut args = vec![
+            "simulate".to_string(),
+            "--samples".into(),
+            s(&format!("{name}.csv")),
+            "--reference".into(),
+            s(&format!("{name}_r.csv")),
+            "--nmea".into(),
+            s(&format!("{name}.nmea")),
+            "--rtk-sigma".into(),
+            "0".into(),
+        ];
+        if let Some(a) = antenna {
+            args.extend(["--antenna".to_string(), a.to_string()]);
+        }
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        common::success_stdout(&common::odoctl(&args));
+    }
+    let csv = |n: &str| odoctl::csvio::read_reference(std::path::Path::new(&s(n))).unwrap();
+    let (a, b) = (csv("a_r.csv"), csv("b_r.csv"));
+    // Same run, same noise-free centre: the offset is R(heading) (0.35, -0.1), 0.364 m long.
+    for (p, q) in a.iter().zip(&b) {
+        let d = (q.x - p.x).hypot(q.y - p.y);
+        assert!((d - 0.35f64.hypot(0.1)).abs() < 1e-9, "{p:?} {q:?}");
+        let h = p.heading.unwrap();
+        let (ex, ey) = antenna_position(p.x, p.y, h, 0.35, -0.1);
+        // The CSV heading carries 0.5 degree noise: 0.36 m x 5 sigma = 16 mm at worst.
+        assert!((ex - q.x).hypot(ey - q.y) < 0.02, "{p:?} {q:?}");
+    }
+    // The NMEA log of b is b's CSV at 10 Hz (to the log's resolution).
+    let o = ReferenceOptions {
+        min_fix: MinFix::Float,
+        origin: OriginChoice::Given(ReceiverSim::default().origin),
+        ..ReferenceOptions::default()
+    };
+    let r = reference::load(std::path::Path::new(&s("b.nmea")), &o).unwrap();
+    let pts = r.ref_points((b[0].t, b.last().unwrap().t)).unwrap();
+    let mut j = 0;
+    let mut worst = 0.0f64;
+    for p in pts.iter().filter(|_| true) {
+        while (b[j].t - p.t).abs() > 1e-4 {
+            j += 1;
+        }
+        worst = worst.max((b[j].x - p.x).hypot(b[j].y - p.y));
+    }
+    // Float epochs carry 5 cm noise; fixed ones none (--rtk-sigma 0).
+    let fixed_worst = pts
+        .iter()
+        .zip(&r.epochs)
+        .filter(|(_, e)| e.fix == FixQuality::RtkFixed)
+        .map(|(p, _)| {
+            let q = b.iter().find(|q| (q.t - p.t).abs() < 1e-4).unwrap();
+            (q.x - p.x).hypot(q.y - p.y)
+        })
+        .fold(0.0f64, f64::max);
+    assert!(fixed_worst < 2e-4, "{fixed_worst}");
+    assert!(worst > 0.01, "{worst}");
+}
