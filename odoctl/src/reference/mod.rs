@@ -47,9 +47,10 @@ impl fmt::Display for Format {
     }
 }
 
-/// Recognises the format from the first non-blank lines: a `$` sentence with a `*hh` checksum
-/// is NMEA; a `%` header or a data row starting `yyyy/mm/dd` or `week tow` with at least 14
-/// columns is RTKLIB; anything else is taken as CSV (whose own parser then names what is wrong).
+/// Recognises the format from the first 50 non-blank lines: a `$` sentence with a `*hh`
+/// checksum is NMEA (binary data before it, as in a receiver's mixed log, is passed over); a `%`
+/// header or a data row starting `yyyy/mm/dd` or `week tow` with at least 14 columns is
+/// RTKLIB; anything else is taken as CSV (whose own parser then names what is wrong).
 pub fn detect(text: &str) -> Format {
     for line in text
         .lines()
@@ -79,10 +80,6 @@ pub fn detect(text: &str) -> Format {
                 return Format::Rtklib;
             }
         }
-        if line.starts_with('#') {
-            continue;
-        }
-        return Format::Csv;
     }
     Format::Csv
 }
@@ -609,6 +606,10 @@ mod tests {
         let table = [
             ("$GPGGA,1*00\n", Format::Nmea),
             ("\n\n junk\u{fffd}$GNRMC,x*11\n", Format::Nmea),
+            (
+                "\u{b5}b\u{1}\u{7}\u{fffd}\n\u{fffd}\u{fffd}\n$GNGGA,x*11\n",
+                Format::Nmea,
+            ),
             ("% program : RTKPOST\n", Format::Rtklib),
             (
                 "2024/02/04 00:00:00.000 49.2 16.6 300 1 12 0.01 0.01 0.02 0 0 0 1.0 99.9\n",
