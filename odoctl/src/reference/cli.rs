@@ -78,6 +78,11 @@ pub fn reference_for_samples(r: &Reference, samples: &[Sample]) -> Result<Vec<Re
             };
             crate::outln!("  local origin {o} ({how}); x east, y north (m)");
         }
+        if let Some(s) = r.median_horizontal_sigma() {
+            crate::outln!(
+                "  the log's own sigmas: median horizontal {s:.4} m (compare --reference-sigma)"
+            );
+        }
     }
     Ok(points)
 }

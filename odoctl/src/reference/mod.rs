@@ -488,6 +488,23 @@ impl Reference {
         })
     }
 
+    /// The median over the used epochs of the horizontal RMS sigma `hypot(sigma_x, sigma_y)`
+    /// (m) the log reports (GST, `.pos` sdn/sde), when it reports any: what
+    /// `--reference-sigma` means.
+    pub fn median_horizontal_sigma(&self) -> Option<f64> {
+        let mut v: Vec<f64> = self
+            .epochs
+            .iter()
+            .filter_map(|e| e.sigma_xy.map(|s| s[0].hypot(s[1])))
+            .filter(|s| s.is_finite())
+            .collect();
+        if v.is_empty() {
+            return None;
+        }
+        v.sort_by(f64::total_cmp);
+        Some(v[v.len() / 2])
+    }
+
     /// The time span (s) on the reference's own scale.
     pub fn span(&self) -> (f64, f64) {
         (
@@ -708,6 +725,7 @@ mod tests {
         assert!(ys[..3].iter().sum::<f64>().abs() < 1e-6, "{ys:?}");
         assert!((ys[3] - 2.0).abs() < 0.01, "{ys:?}");
         assert_eq!(r.epochs[0].sigma_xy, Some([0.02, 0.01]));
+        assert_eq!(r.median_horizontal_sigma(), Some(0.02f64.hypot(0.01)));
         let text = r.report.to_string();
         assert!(
             text.contains("6 epochs read, 4 used") && text.contains("1 RTK float"),
