@@ -359,6 +359,33 @@ mod tests {
     }
 
     #[test]
+    fn published_receiver_sentences() {
+        // GGA and GST as printed (with their checksums) in Trimble's NMEA-0183 message
+        // reference (the BD982's family); the date from a ZDA of ours.
+        let log = [
+            zda("172813.00", 12, 7, 2024),
+            "$GPGGA,172814.0,3723.46587704,N,12202.26957864,W,2,6,1.2,18.893,M,-25.669,M,2.0,0031*4F".to_string(),
+            "$GPGST,172814.0,0.006,0.023,0.020,273.6,0.023,0.020,0.031*6A".to_string(),
+        ]
+        .join("\r\n");
+        let l = parse("t.nmea", &log, 18).unwrap();
+        let e = &l.epochs[0];
+        assert!((e.position.lat_deg - (37.0 + 23.465_877_04 / 60.0)).abs() < 1e-12);
+        assert!((e.position.lon_deg + (122.0 + 2.269_578_64 / 60.0)).abs() < 1e-12);
+        assert!((e.position.height - (18.893 - 25.669)).abs() < 1e-4);
+        assert_eq!(e.fix, FixQuality::Dgps);
+        let s = e.sigma.unwrap();
+        assert!(
+            (s[0] - 0.023).abs() < 1e-6
+                && (s[1] - 0.020).abs() < 1e-6
+                && (s[2] - 0.031).abs() < 1e-6
+        );
+        let want = gps_time::utc_to_gps(days_from_civil(2024, 7, 12), 62_894.0, 18).unwrap();
+        assert_eq!(e.gps_time, want);
+        assert_eq!((l.report.corrupt, l.report.unusable), (0, 0));
+    }
+
+    #[test]
     fn hemispheres_and_talkers() {
         // (talker, N/S, E/W) -> signs.
         for (talker, ns, ew, sn, se) in [
