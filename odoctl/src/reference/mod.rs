@@ -170,6 +170,9 @@ pub struct ReadReport {
     /// Well-formed lines without what they should carry (a GGA without a position, an RMC
     /// with status V, an epoch whose time is not after the previous one...): skipped.
     pub unusable: usize,
+    /// Lines with stray bytes before the `$` (binary messages between the sentences): read
+    /// from the `$`.
+    pub stray_bytes: usize,
     /// The first problems (at most [`ReadReport::KEPT`]), `FILE:LINE: ...`.
     pub problems: Vec<String>,
 }
@@ -187,6 +190,12 @@ impl ReadReport {
     /// Counts an unusable line.
     pub fn unusable(&mut self, msg: String) {
         self.unusable += 1;
+        self.problem(msg);
+    }
+
+    /// Counts a line read after stray bytes.
+    pub fn stray_bytes(&mut self, msg: String) {
+        self.stray_bytes += 1;
         self.problem(msg);
     }
 
@@ -224,6 +233,13 @@ impl fmt::Display for ReadReport {
             "; {} corrupt and {} unusable lines skipped",
             self.corrupt, self.unusable
         )?;
+        if self.stray_bytes > 0 {
+            write!(
+                f,
+                "; {} lines read from the `$` after stray bytes",
+                self.stray_bytes
+            )?;
+        }
         for p in &self.problems {
             write!(f, "\n    {p}")?;
         }

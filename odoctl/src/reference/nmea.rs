@@ -5,8 +5,9 @@
 //! (`odo_core::timing::nmea::parse_sentence`: `$`, `*hh` checksum, any talker), which also
 //! reads RMC and ZDA (date and time, the same code as on the unit). GGA, HDT and GST are
 //! read by the `nmea` crate. Other sentences are counted by type and skipped; corrupt lines
-//! (checksum, syntax, binary data between sentences) are counted and skipped; only a log with
-//! no usable epoch is an error.
+//! (checksum, syntax, binary data between sentences) are counted and skipped; a line with
+//! stray bytes before its `$` is read from the `$` and counted; only a log with no usable
+//! epoch is an error.
 //!
 //! Times: GGA carries the UTC time of day only. Each epoch is dated by the nearest earlier
 //! date (an RMC with status A, a ZDA, or the previous dated epoch), taking the day that puts
@@ -103,7 +104,7 @@ pub fn parse(file: &str, text: &str, leap_seconds: i32) -> Result<GeodeticLog> {
             continue;
         };
         if start > 0 {
-            report.corrupt(format!(
+            report.stray_bytes(format!(
                 "{file}:{line}: {start} bytes before the `$` (read from the `$`)"
             ));
         }
@@ -502,9 +503,10 @@ mod tests {
         let l = parse("c.nmea", &log, 18).unwrap();
         assert_eq!(l.epochs.len(), 1, "{:?}", l.report);
         assert_eq!(l.epochs[0].line, 5);
-        // 2, 3, 4, 5 (junk before `$`, still read), 9 corrupt; 8 and 10 (time not after
-        // line 5's) unusable.
-        assert_eq!(l.report.corrupt, 5, "{}", l.report);
+        // 2, 3, 4, 9 corrupt; 5 read after its stray bytes; 8 and 10 (time not after line
+        // 5's) unusable.
+        assert_eq!(l.report.corrupt, 4, "{}", l.report);
+        assert_eq!(l.report.stray_bytes, 1, "{}", l.report);
         assert_eq!(l.report.unusable, 2, "{}", l.report);
         assert_eq!(l.report.other["GSV"], 1);
         assert_eq!(l.report.other["PUBX"], 1);
