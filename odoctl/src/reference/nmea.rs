@@ -16,9 +16,10 @@
 //! time with the leap seconds (`--leap-seconds`, 18 by default). A leap second 23:59:60 is
 //! skipped (the `nmea` crate does not represent it).
 //!
-//! Association: a GST belongs to the GGA of the same time of day (before or after it); an
-//! HDT, which carries no time, to the GGA just before it (receivers send the epoch's GGA
-//! first).
+//! Association: a GST belongs to the GGA of the same time of day (before or after it). An
+//! HDT carries no time: it belongs to the epoch being sent, the time of the last sentence
+//! that carries one (GGA, GST, RMC, ZDA), whether its GGA came before or comes after it; an
+//! HDT sent first in its epoch, before any timed sentence, is taken for the previous epoch's.
 
 use anyhow::{bail, Result};
 use chrono::Timelike;
@@ -93,6 +94,17 @@ pub fn parse(file: &str, text: &str, leap_seconds: i32) -> Result<GeodeticLog> {
     let mut pending_gst: Vec<(i64, [f64; 3])> = Vec::new();
     // The epoch an HDT would belong to (the last GGA, until an HDT takes it).
     let mut hdt_target: Option<usize> = None;
+    // Time of day (ms) of the last sentence that carries one: the epoch being sent.
+    let mut epoch_time: Option<i64> = None;
+    // An HDT sent in an epoch before its GGA: (time of day in ms, heading in rad, line).
+    let mut pending_hdt: Option<(i64, f64, usize)> = None;
+    let drop_hdt = |report: &mut ReadReport, p: Option<(i64, f64, usize)>| {
+        if let Some((_, _, l)) = p {
+            report.unusable(format!(
+                "{file}:{l}: HDT without a GGA of its epoch (or a second HDT): skipped"
+            ));
+        }
+    };
     for (i, raw) in text.lines().enumerate() {
         let line = i + 1;
         let raw = raw.trim();
@@ -118,12 +130,14 @@ pub fn parse(file: &str, text: &str, leap_seconds: i32) -> Result<GeodeticLog> {
             }
             Ok(m) => {
                 let t = m.time();
+                let sod = f64::from(t.hour) * 3600.0
+                    + f64::from(t.minute) * 60.0
+                    + f64::from(t.second)
+                    + f64::from(t.millis) * 1e-3;
+                epoch_time = Some(ms(sod));
                 dates.push(DateMark {
                     days: days_from_civil(i64::from(t.year), u32::from(t.month), u32::from(t.day)),
-                    sod: f64::from(t.hour) * 3600.0
-                        + f64::from(t.minute) * 60.0
-                        + f64::from(t.second)
-                        + f64::from(t.millis) * 1e-3,
+                    sod,
                     line,
                 });
                 report.used(sentence_type(s));
@@ -190,7 +204,17 @@ pub fn parse(file: &str, text: &str, leap_seconds: i32) -> Result<GeodeticLog> {
                     .position(|(k, _)| *k == ms(sod))
                     .map(|p| pending_gst.swap_remove(p).1);
                 report.used("GGA");
+                epoch_time = Some(ms(sod));
+                let mut heading = None;
                 hdt_target = Some(undated.len());
+                match pending_hdt.take() {
+                    Some((k, h, _)) if k == ms(sod) => {
+                        heading = Some(h);
+                        hdt_target = None;
+                        report.used("HDT");
+                    }
+                    other => drop_hdt(&mut report, other),
+                }
                 undated.push(Undated {
                     sod,
                     position: Geodetic {
@@ -200,23 +224,33 @@ pub fn parse(file: &str, text: &str, leap_seconds: i32) -> Result<GeodeticLog> {
                         height: f64::from(alt) + f64::from(g.geoid_separation.unwrap_or(0.0)),
                     },
                     fix: fix_quality(g.fix_type),
-                    heading: None,
+                    heading,
                     sigma,
                     line,
                     date: dates.len().checked_sub(1),
                 });
             }
-            nmea::ParseResult::HDT(h) => match (h.heading, hdt_target.take()) {
-                (Some(deg), Some(k)) if f64::from(deg).is_finite() => {
-                    undated[k].heading =
-                        Some(crate::stats::wrap_angle(f64::from(deg).to_radians()));
-                    report.used("HDT");
+            nmea::ParseResult::HDT(h) => {
+                let Some(deg) = h.heading.map(f64::from).filter(|d| d.is_finite()) else {
+                    report.unusable(format!("{file}:{line}: HDT without a heading"));
+                    continue;
+                };
+                let heading = crate::stats::wrap_angle(deg.to_radians());
+                match (hdt_target, epoch_time) {
+                    // After the GGA of the epoch being sent.
+                    (Some(k), Some(t)) if ms(undated[k].sod) == t => {
+                        undated[k].heading = Some(heading);
+                        hdt_target = None;
+                        report.used("HDT");
+                    }
+                    // Before it: waits for the GGA of that time.
+                    (_, Some(t)) => {
+                        let old = pending_hdt.replace((t, heading, line));
+                        drop_hdt(&mut report, old);
+                    }
+                    (_, None) => drop_hdt(&mut report, Some((0, heading, line))),
                 }
-                (None, _) => report.unusable(format!("{file}:{line}: HDT without a heading")),
-                _ => report.unusable(format!(
-                    "{file}:{line}: HDT without a GGA of its epoch before it: skipped"
-                )),
-            },
+            }
             nmea::ParseResult::GST(g) => {
                 let (Some(t), Some(n), Some(e)) = (g.time, g.lat_sd, g.long_sd) else {
                     report.unusable(format!(
@@ -230,6 +264,7 @@ pub fn parse(file: &str, text: &str, leap_seconds: i32) -> Result<GeodeticLog> {
                     g.alt_sd.map_or(f64::NAN, f64::from),
                 ];
                 let key = ms(seconds_of_day(t));
+                epoch_time = Some(key);
                 report.used("GST");
                 let recent = undated.len().saturating_sub(20);
                 match undated[recent..]
@@ -249,6 +284,7 @@ pub fn parse(file: &str, text: &str, leap_seconds: i32) -> Result<GeodeticLog> {
             _ => report.other(kind),
         }
     }
+    drop_hdt(&mut report, pending_hdt);
     let epochs = date_epochs(file, undated, &dates, leap_seconds, &mut report)?;
     if epochs.is_empty() {
         bail!("{file}: no usable position (no GGA with a position): {report}");
@@ -566,6 +602,46 @@ mod tests {
         assert!((e[1].heading.unwrap() - std::f64::consts::FRAC_PI_2).abs() < 1e-6);
         assert_eq!(e[2].heading, None);
         assert_eq!(l.report.unusable, 1);
+    }
+
+    #[test]
+    fn hdt_before_its_gga_goes_with_the_epoch_being_sent() {
+        let hdt = |h: f64| with_checksum(&format!("GNHDT,{h:.3},T"));
+        let rmc = |t: &str| {
+            with_checksum(&format!(
+                "GNRMC,{t},A,4912.0,N,01636.0,E,0.0,0.0,020226,,,R"
+            ))
+        };
+        let gga = |t: &str| gga("GN", t, "4912.0", "N", "01636.0", "E", 4);
+        // Each epoch: RMC, HDT, GGA (a receiver that sends HDT before GGA).
+        let log = [
+            rmc("100000.00"),
+            hdt(10.0),
+            gga("100000.00"),
+            rmc("100000.10"),
+            hdt(20.0),
+            gga("100000.10"),
+            rmc("100000.20"),
+            hdt(30.0),
+            rmc("100000.30"), // the epoch of 10:00:00.20 had no GGA: its HDT is dropped
+            hdt(40.0),
+            gga("100000.30"),
+        ]
+        .join("\n");
+        let l = parse("b.nmea", &log, 18).unwrap();
+        let deg: Vec<f64> = l
+            .epochs
+            .iter()
+            .map(|e| (e.heading.unwrap().to_degrees() * 1000.0).round() / 1000.0)
+            .collect();
+        assert_eq!(deg, vec![10.0, 20.0, 40.0]);
+        assert_eq!(
+            (l.report.used["HDT"], l.report.unusable),
+            (3, 1),
+            "{}",
+            l.report
+        );
+        assert!(l.report.problems[0].starts_with("b.nmea:8: HDT without a GGA"));
     }
 
     #[test]
