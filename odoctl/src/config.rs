@@ -11,7 +11,7 @@ use std::path::Path;
 
 use anyhow::{anyhow, bail, Context, Result};
 
-use crate::core_api::{ChassisParams, UncertaintyModel};
+use odo_core::odometry::{ChassisParams, UncertaintyModel};
 
 /// Every shared key, in the order files list them.
 pub const KEYS: &[&str] = &[

@@ -4,14 +4,14 @@
 
 pub mod store;
 
+use crate::bytes::{OutOfSpace, Reader, Writer};
+use crate::crc::crc32;
 use crate::decimal::{self, DecimalError, Shortest};
 use crate::odometry::integrator::MAX_STEP_COUNTS;
 use crate::odometry::{ChassisParams, UncertaintyModel, WHEEL_HARMONICS};
-use crate::protocol::bytes::{OutOfSpace, Reader, Writer};
-use crate::protocol::crc::crc32;
 use core::fmt::{self, Write};
 
-pub use crate::protocol::SettingsSource;
+pub use store::SettingsSource;
 
 /// How samples are timed (`mode`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]

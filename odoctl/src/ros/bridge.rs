@@ -23,8 +23,8 @@ use super::conventions::{BaseTwist, PoseCovariance};
 use super::msgs::{self, level};
 use super::stamps::gps_to_unix_nanos;
 use super::stream::{OdomSample, OdomStream};
-use crate::core_api::{ChassisParams, Pose};
 use crate::link::{self, Session};
+use odo_core::odometry::{ChassisParams, Pose};
 
 /// What `odoctl bridge` does.
 #[derive(Debug, Clone)]

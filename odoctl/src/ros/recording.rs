@@ -18,7 +18,7 @@ use super::conventions::ODOM_FRAME;
 use super::msgs::{self, MsgType};
 pub use super::stream::OdomSample;
 use super::stream::{header, ros_pose, OdomStream, StreamCounts};
-use crate::core_api::{Pose, UncertaintyModel};
+use odo_core::odometry::{Pose, UncertaintyModel};
 
 /// What a finished recording holds: the stream's counts and the paths written.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]

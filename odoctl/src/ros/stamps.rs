@@ -2,6 +2,8 @@
 //! the leap seconds), else the unit's MCU time; one source per recording, named in the file's
 //! metadata.
 
+use odo_core::timing::GPS_UTC_LEAP_SECONDS;
+
 use crate::csvio::Sample;
 
 /// GPS time of the GPS epoch (1980-01-06 00:00:00 UTC) as Unix time, seconds.
@@ -9,61 +11,15 @@ pub const GPS_EPOCH_UNIX: i64 = 315_964_800;
 /// Seconds per GPS week.
 pub const WEEK_SECONDS: i64 = 604_800;
 
-/// UTC dates (year, month) from which GPS - UTC grew by one second (IERS Bulletin C; the
-/// last is 2017-01-01, GPS - UTC = 18 s). A leap second announced later needs this table
-/// extended.
-const LEAP_DATES: [(i64, u32); 18] = [
-    (1981, 7),
-    (1982, 7),
-    (1983, 7),
-    (1985, 7),
-    (1988, 1),
-    (1990, 1),
-    (1991, 1),
-    (1992, 7),
-    (1993, 7),
-    (1994, 7),
-    (1996, 1),
-    (1997, 7),
-    (1999, 1),
-    (2006, 1),
-    (2009, 1),
-    (2012, 7),
-    (2015, 7),
-    (2017, 1),
-];
-
-/// Days from 1970-01-01 to the first of `month` in `year` (proleptic Gregorian).
-fn days_from_civil(year: i64, month: u32) -> i64 {
-    let y = if month <= 2 { year - 1 } else { year };
-    let era = y.div_euclid(400);
-    let yoe = y - era * 400;
-    let m = i64::from(month);
-    let doy = (153 * (m + if m > 2 { -3 } else { 9 }) + 2) / 5;
-    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
-    era * 146_097 + doe - 719_468
-}
-
-/// GPS - UTC (s) at GPS time `gps_seconds` since the GPS epoch.
-pub fn leap_seconds(gps_seconds: f64) -> i64 {
-    let mut leap = 0;
-    for (i, &(y, m)) in LEAP_DATES.iter().enumerate() {
-        let n = i as i64 + 1;
-        // At that UTC midnight GPS time reads UTC + n.
-        let at = days_from_civil(y, m) * 86_400 - GPS_EPOCH_UNIX + n;
-        if gps_seconds >= at as f64 {
-            leap = n;
-        }
-    }
-    leap
-}
+/// GPS - UTC (s): the core's figure (18 since 2017-01-01; no leap second since), the one
+/// the firmware and the reference readers use.
+pub const LEAP_SECONDS: i64 = GPS_UTC_LEAP_SECONDS as i64;
 
 /// Unix UTC nanoseconds of GPS week `week`, `tow_ms` milliseconds plus `sub` seconds
 /// (`0 <= sub`, the sample's place in its second); `None` before 1970.
 pub fn gps_to_unix_nanos(week: u16, tow_ms: u32, sub: f64) -> Option<u64> {
     let whole_ms = i64::from(week) * WEEK_SECONDS * 1000 + i64::from(tow_ms);
-    let leap = leap_seconds(whole_ms as f64 * 1e-3 + sub);
-    let unix_ms = whole_ms + (GPS_EPOCH_UNIX - leap) * 1000;
+    let unix_ms = whole_ms + (GPS_EPOCH_UNIX - LEAP_SECONDS) * 1000;
     let ns = u64::try_from(unix_ms).ok()? * 1_000_000;
     Some(ns + (sub * 1e9).round() as u64)
 }
@@ -144,12 +100,11 @@ pub fn stamp(samples: &[Sample]) -> Stamps {
                 last = (ns, mcu(s));
                 nanos.push(ns);
             }
-            let gps = f64::from(week) * WEEK_SECONDS as f64 + f64::from(tow_ms) * 1e-3;
             return Stamps {
                 source: StampSource::Utc,
                 nanos,
                 extrapolated,
-                leap_seconds: Some(leap_seconds(gps)),
+                leap_seconds: Some(LEAP_SECONDS),
             };
         }
     }
@@ -178,14 +133,10 @@ mod tests {
     use crate::csvio::{RecordTime, UnitPose};
 
     #[test]
-    fn leap_second_table() {
-        // GPS time at the epoch: 0; GPS-UTC was 0 until 1981-07-01, 18 since 2017-01-01.
-        assert_eq!(leap_seconds(0.0), 0);
-        let at_2017 = (days_from_civil(2017, 1) * 86_400 - GPS_EPOCH_UNIX) as f64;
-        assert_eq!(leap_seconds(at_2017 + 17.0), 17);
-        assert_eq!(leap_seconds(at_2017 + 18.0), 18);
-        assert_eq!(leap_seconds(2.0e9), 18);
-        assert_eq!(days_from_civil(1980, 1) + 5, GPS_EPOCH_UNIX / 86_400);
+    fn gps_epoch() {
+        let days = odo_core::timing::nmea::days_from_civil(1980, 1, 6);
+        assert_eq!(days * 86_400, GPS_EPOCH_UNIX);
+        assert_eq!(LEAP_SECONDS, 18);
     }
 
     #[test]
@@ -194,7 +145,8 @@ mod tests {
         let ns = gps_to_unix_nanos(2296, 0, 0.0).unwrap();
         assert_eq!(
             ns,
-            (days_from_civil(2024, 1) * 86_400 + 6 * 86_400 - 18) as u64 * 1_000_000_000
+            (odo_core::timing::nmea::days_from_civil(2024, 1, 7) * 86_400 - 18) as u64
+                * 1_000_000_000
         );
     }
 

@@ -2,13 +2,14 @@
 //! the live bridge (`/odom`, `/tf`, `/diagnostics` on the rules of docs/ROS.md).
 
 use anyhow::{anyhow, Result};
-use odo_core::protocol::{StatusFlags, SyncMode};
+use odo_core::protocol::StatusFlags;
+use odo_core::timing::SyncState;
 
 use super::conventions::{
     quaternion_of_heading, BaseTwist, ContinuousOdom, PoseCovariance, BASE_FRAME, ODOM_FRAME,
 };
 use super::msgs::{self, level};
-use crate::core_api::{Pose, UncertaintyModel};
+use odo_core::odometry::{Pose, UncertaintyModel};
 
 /// One sample to publish or record: the unit's pose (ours), its covariance, the interval's twist.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -198,15 +199,15 @@ impl OdomStream {
                 ));
                 values.push((format!("{name}_calibrated"), w.calibrated.to_string()));
             }
-            if f.sync == SyncMode::Holdover {
+            if f.sync == SyncState::Holdover {
                 problems.push((level::WARN, "PPS lost (holdover)".into()));
             }
             values.push((
                 "sync".into(),
                 match f.sync {
-                    SyncMode::FreeRunning => "free_running",
-                    SyncMode::PpsLocked => "pps_locked",
-                    SyncMode::Holdover => "holdover",
+                    SyncState::FreeRunning => "free_running",
+                    SyncState::Locked => "pps_locked",
+                    SyncState::Holdover => "holdover",
                 }
                 .into(),
             ));

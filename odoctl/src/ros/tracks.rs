@@ -9,8 +9,9 @@ use anyhow::Result;
 use super::recording::{self, RecordingSummary};
 use crate::calib::{self, Evaluation, Run};
 use crate::config as cfg;
-use crate::core_api::Pose;
 use crate::csvio::{self, RefPoint};
+use crate::reference::cli::{read_reference, ReferenceArgs};
+use odo_core::odometry::Pose;
 
 /// Nanoseconds of a CSV time (s); the files' own time base (metadata `stamp_source` =
 /// `samples_t`).
@@ -68,18 +69,24 @@ pub fn write_tracks(
 }
 
 /// The one-call hook of `odoctl validate --mcap`: the same evaluation as `validate` (the
-/// parameters, the given or eq (16)-fitted initial heading) written as two paths.
+/// reference in any format `--reference` takes, the parameters, the given or eq (16)-fitted
+/// initial heading) written as two paths.
 pub fn validate_hook(
     out: &Path,
     samples_path: &Path,
     reference_path: &Path,
+    reference_input: &ReferenceArgs,
     config: Option<&Path>,
     sets: &[String],
     heading: Option<f64>,
 ) -> Result<()> {
     let params = cfg::load(config, sets)?;
     let samples = csvio::read_samples(samples_path)?;
-    let reference = csvio::read_reference(reference_path)?;
+    let range = (
+        samples.first().map_or(f64::NAN, |s| s.t),
+        samples.last().map_or(f64::NAN, |s| s.t),
+    );
+    let reference = read_reference(reference_path, reference_input)?.ref_points(range)?;
     let matches = csvio::match_or_fail(
         &samples,
         &samples_path.display().to_string(),
