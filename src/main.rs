@@ -56,7 +56,7 @@ mod app {
         self, CommandReply, DeviceInfo, GnssTime, Message, PoseRecord, SettingsSource, Status,
         StatusFlags, WheelStatus, PROTOCOL_VERSION,
     };
-    use odo_core::settings::{store::SettingsStore, SampleMode, Settings, TimeTagRef};
+    use odo_core::settings::{store::SettingsStore, Settings};
     use odo_core::timing::index::DEFAULT_TOLERANCE;
     use odo_core::timing::{
         Discipline, DisciplineConfig, IndexCheck, IndexTracker, LineBuffer, NmeaError, PpsEvent,
@@ -200,18 +200,12 @@ mod app {
         let tolerance = board::clock_tolerance_ppm(board::clock_source(clock));
         let mut cfg = DisciplineConfig::for_clock(timer_hz, tolerance);
         cfg.rate_hz = settings.rate;
-        cfg.mode = match settings.mode {
-            SampleMode::Pps => SyncMode::Pps,
-            SampleMode::Free => SyncMode::Free,
-        };
+        cfg.mode = settings.mode;
         cfg
     }
 
     fn time_tag(settings: &Settings) -> TimeTagPps {
-        match settings.time_tag_pps {
-            TimeTagRef::Previous => TimeTagPps::Previous,
-            TimeTagRef::Next => TimeTagPps::Next,
-        }
+        settings.time_tag_pps
     }
 
     fn state_name(s: SyncState) -> &'static str {

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{bail, Context, Result};
 use odo_core::protocol::{DecoderStats, Frame, FrameDecoder, Message, PoseRecord, SyncMode};
 
 use crate::config as cfg;
@@ -654,37 +654,6 @@ pub enum ConfigAction {
     Raw(String),
 }
 
-/// The `set` lines that send a parameter file: all its top-level shared keys (in groups of
-/// at most 16 pairs per atomic `set`).
-pub fn push_lines(path: &Path) -> Result<Vec<String>> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("{}: cannot read", path.display()))?;
-    // Validate as a whole first (names file and line on error).
-    let params = cfg::parse_params(
-        &path.display().to_string(),
-        &text,
-        odo_core::odometry::ChassisParams::DESIGNED,
-    )?;
-    let table: toml::Table =
-        toml::from_str(&text).map_err(|e| anyhow!("{}: {e}", path.display()))?;
-    let keys: Vec<&str> = cfg::KEYS
-        .iter()
-        .copied()
-        .filter(|k| table.contains_key(*k))
-        .collect();
-    if keys.is_empty() {
-        bail!("{}: no parameter keys to send", path.display());
-    }
-    let pairs: Vec<String> = keys
-        .iter()
-        .map(|k| format!("{k} {}", cfg::get_key(&params, k).expect("known key")))
-        .collect();
-    Ok(pairs
-        .chunks(odo_core::protocol::command::MAX_SET_PAIRS)
-        .map(|c| format!("set {}", c.join(" ")))
-        .collect())
-}
-
 /// `odoctl config`: prints the unit's replies; exit code 1 on an error reply.
 pub fn config(port: &str, baud: u32, action: ConfigAction) -> Result<ExitCode> {
     let lines: Vec<String> = match &action {
@@ -693,7 +662,7 @@ pub fn config(port: &str, baud: u32, action: ConfigAction) -> Result<ExitCode> {
         ConfigAction::Set(k, v) => vec![format!("set {k} {v}")],
         ConfigAction::Save => vec!["save".into()],
         ConfigAction::Push(p, save) => {
-            let mut l = push_lines(p)?;
+            let mut l = cfg::push_lines(p)?;
             if *save {
                 l.push("save".into());
             }
