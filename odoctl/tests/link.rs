@@ -107,7 +107,8 @@ fn config_against_a_unit_on_tcp() {
     let out = success_stdout(&o);
     assert!(
         out.contains(
-            "> set left_diameter 0.2611 right_diameter 0.2605 track_width 0.565 delta_left 2e-8"
+            // Values in the unit's own text form (what `get` prints).
+            "> set left_diameter 0.2611 right_diameter 0.2605 track_width 0.565 delta_left 0.00000002"
         ),
         "{out}"
     );
