@@ -650,6 +650,8 @@ pub enum ConfigAction {
     Save,
     /// Send a parameter file; then `save` when true.
     Push(PathBuf, bool),
+    /// `get`, written to a TOML file.
+    Pull(PathBuf),
     /// Any command line.
     Raw(String),
 }
@@ -668,6 +670,7 @@ pub fn config(port: &str, baud: u32, action: ConfigAction) -> Result<ExitCode> {
             }
             l
         }
+        ConfigAction::Pull(_) => vec!["get".into()],
         ConfigAction::Raw(l) => vec![l.clone()],
     };
     if lines.iter().any(|l| l.contains('\n') || l.contains('\r')) {
@@ -683,6 +686,14 @@ pub fn config(port: &str, baud: u32, action: ConfigAction) -> Result<ExitCode> {
         if !ok {
             eprintln!("odoctl: the unit rejected `{line}`");
             return Ok(ExitCode::FAILURE);
+        }
+        if let ConfigAction::Pull(path) = &action {
+            let (settings, keys) = cfg::parse_get_reply(&text)?;
+            let toml =
+                cfg::render_settings(&settings, &keys, "odoctl config pull: the unit's settings");
+            std::fs::write(path, toml)
+                .with_context(|| format!("{}: cannot write", path.display()))?;
+            crate::outln!("wrote {}", path.display());
         }
     }
     Ok(ExitCode::SUCCESS)
