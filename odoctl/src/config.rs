@@ -15,7 +15,9 @@ use std::fmt::{self, Write as _};
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use odo_core::settings::{validate_chassis, Choice, Group, Key, SettingError, Settings};
+use odo_core::settings::{
+    validate_chassis, Choice, Group, Key, SettingError, Settings, RELATED_KEYS,
+};
 
 use crate::core_api::{ChassisParams, UncertaintyModel};
 
@@ -314,13 +316,18 @@ pub fn load(config: Option<&Path>, sets: &[String]) -> Result<ChassisParams> {
 }
 
 /// The `set` lines that send a TOML text of any keys to the unit: every key the file gives,
-/// in the table's order, in the unit's text form, at most
+/// the related keys ([`RELATED_KEYS`]) first, then in the table's order, in the unit's text
+/// form, at most
 /// [`odo_core::protocol::command::MAX_SET_PAIRS`] pairs per (atomic) `set`. The values are
 /// checked first as in [`parse_settings`] (over the defaults).
 pub fn push_lines_of(origin: &str, text: &str) -> Result<Vec<String>> {
     let (s, given) = parse_settings(origin, text, Settings::DEFAULT)?;
-    let pairs: Vec<String> = Key::ALL
+    // The keys checked against each other first, so that they share one atomic `set` (at
+    // most 9 of the 16 pairs): no intermediate combination of old and new values is refused.
+    let order = RELATED_KEYS
         .into_iter()
+        .chain(Key::ALL.into_iter().filter(|k| !RELATED_KEYS.contains(k)));
+    let pairs: Vec<String> = order
         .filter(|k| given.contains(k))
         .map(|k| format!("{} {}", k.name(), value_text(&s, k)))
         .collect();

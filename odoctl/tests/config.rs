@@ -163,7 +163,11 @@ fn odoctl_and_the_unit_know_the_same_keys() {
                 .collect::<Vec<_>>()
         })
         .collect();
-    assert_eq!(sent, names);
+    let mut sent_sorted = sent.clone();
+    sent_sorted.sort();
+    let mut names_sorted: Vec<String> = names.iter().map(|n| n.to_string()).collect();
+    names_sorted.sort();
+    assert_eq!(sent_sorted, names_sorted);
     // Parameter files: exactly the chassis keys, the unit options refused by name.
     let chassis: Vec<Key> = config::chassis_keys().collect();
     assert_eq!(chassis.len(), 22);
@@ -212,4 +216,31 @@ fn push_refuses_bad_files() {
         matches!(e.downcast_ref(), Some(ConfigError::NothingToSend(_))),
         "{e}"
     );
+}
+
+/// Keys that are only valid together reach the unit in one atomic `set`: the finest encoder
+/// needs 79 Hz; pushed onto a unit at 50 Hz, `ticks_per_rev` and `rate` must arrive together.
+#[test]
+fn related_keys_share_one_set() {
+    let mut a = Settings::DEFAULT;
+    let (r, _) = execute("set ticks_per_rev 1048576 rate 79", &mut a);
+    assert!(r.ok, "{}", r.text);
+    let (get, _) = execute("get", &mut a);
+    let (s, keys) = config::parse_get_reply(&get.text).unwrap();
+    let lines = config::push_lines_of("a.toml", &config::render_settings(&s, &keys, "")).unwrap();
+    let mut b = Settings::DEFAULT;
+    for l in &lines {
+        let (r, _) = execute(l, &mut b);
+        assert!(r.ok, "{l}: {}", r.text);
+    }
+    assert_eq!(b, a);
+    // The opposite direction: back to the defaults from there.
+    let mut d = Settings::DEFAULT;
+    let (get, _) = execute("get", &mut d);
+    let (s, keys) = config::parse_get_reply(&get.text).unwrap();
+    for l in &config::push_lines_of("d.toml", &config::render_settings(&s, &keys, "")).unwrap() {
+        let (r, _) = execute(l, &mut b);
+        assert!(r.ok, "{l}: {}", r.text);
+    }
+    assert_eq!(b, Settings::DEFAULT);
 }

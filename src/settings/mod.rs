@@ -284,6 +284,21 @@ impl Default for Settings {
     }
 }
 
+/// The keys that [`Settings::validate`] checks against each other (chassis relations, pps
+/// rate, records per baud, the counts rule), in table order: a host sending many keys puts
+/// these in one atomic `set` so that no intermediate combination is refused.
+pub const RELATED_KEYS: [Key; 9] = [
+    Key::LeftDiameter,
+    Key::RightDiameter,
+    Key::TrackWidth,
+    Key::TicksPerRev,
+    Key::Mode,
+    Key::Rate,
+    Key::OutputDivider,
+    Key::Baud,
+    Key::MaxWheelSpeed,
+];
+
 /// Checks chassis parameters alone, as [`Settings::validate`] checks them: each chassis key's
 /// range ([`Group::Chassis`]), then the relations between them (`ChassisParams::validate`).
 /// For host tools that handle the chassis without the unit's options.
