@@ -1064,3 +1064,79 @@ fn docs_list_the_table_keys() {
         assert!(!k.doc().is_empty());
     }
 }
+
+/// Errors are values naming the key: callers match on them instead of their text.
+#[test]
+fn errors_are_values_naming_the_key() {
+    let mut s = Settings::DEFAULT;
+    let cases: &[(Key, &str, SettingError)] = &[
+        (Key::Rate, "abc", SettingError::BadNumber(Key::Rate)),
+        (Key::Rate, "-1", SettingError::OutOfRange(Key::Rate)),
+        (
+            Key::TrackWidth,
+            "nan",
+            SettingError::NotFinite(Key::TrackWidth),
+        ),
+        (
+            Key::TrackWidth,
+            "1e999",
+            SettingError::NotFinite(Key::TrackWidth),
+        ),
+        (
+            Key::DeltaRight,
+            "1e39",
+            SettingError::OutOfRange(Key::DeltaRight),
+        ),
+        (Key::Mode, "gps", SettingError::BadChoice(Key::Mode)),
+        (Key::Baud, "1000", SettingError::OutOfRange(Key::Baud)),
+    ];
+    for (k, text, e) in cases {
+        assert_eq!(s.set(*k, text), Err(*e), "{} {text}", k.name());
+        assert_eq!(e.key(), Some(*k));
+        assert_eq!(
+            parse_value(*k, text).and_then(|v| check_value(*k, v)),
+            Err(*e)
+        );
+    }
+    assert_eq!(s, Settings::DEFAULT);
+    let relation = |pairs: &[(&'static str, &'static str)]| {
+        let mut t = Settings::DEFAULT;
+        match t.set_many(pairs.iter().copied()) {
+            Err(SetManyError::Value(e)) => e,
+            r => panic!("{pairs:?}: {r:?}"),
+        }
+    };
+    assert_eq!(
+        relation(&[("ticks_per_rev", "100")]),
+        SettingError::Chassis(Key::TicksPerRev)
+    );
+    assert_eq!(
+        relation(&[("mode", "pps"), ("rate", "7")]),
+        SettingError::PpsRate
+    );
+    assert_eq!(relation(&[("rate", "1000")]), SettingError::RecordsOverBaud);
+    assert!(matches!(
+        relation(&[("rate", "1")]),
+        SettingError::CountsPerSample { counts: 48_971 }
+    ));
+    assert_eq!(
+        Settings::from_bytes_version(3, &Settings::DEFAULT.to_bytes()),
+        Err(SettingError::UnknownFormatVersion(3))
+    );
+    assert_eq!(
+        Settings::from_bytes(&[0; 115]),
+        Err(SettingError::BadRecord)
+    );
+    // Chassis parameters alone, as odoctl checks them.
+    let mut c = ChassisParams::DESIGNED;
+    assert_eq!(validate_chassis(&c), Ok(()));
+    c.left_wheel.sin[1] = 0.06;
+    assert_eq!(
+        validate_chassis(&c),
+        Err(SettingError::OutOfRange(Key::LeftSin2))
+    );
+    // The default of every key is in its range, and the table's defaults validate.
+    for k in Key::ALL {
+        check_value(k, Settings::DEFAULT.get(k)).unwrap();
+    }
+}

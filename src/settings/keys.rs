@@ -232,7 +232,7 @@ const HARM: Kind = Kind::F32 {
 };
 const D: ChassisParams = ChassisParams::DESIGNED;
 
-/// Generates [`Key`], its table, `Settings::get_value`/`put_value` and
+/// Generates [`Key`], its tables, `Settings::get`/`put` and
 /// [`Settings::DEFAULT`] from one entry per key.
 macro_rules! key_table {
     ($(
