@@ -163,18 +163,42 @@ impl Choice for TimeTagPps {
 /// A field of [`Settings`] that a key reads and writes.
 trait Field: Copy {
     fn to_value(self) -> Value;
-    fn from_value(v: Value) -> Option<Self>;
+    fn slot(&mut self) -> Slot<'_>;
+}
+
+/// A field of [`Settings`] to store a [`Value`] into (one `match` on the key finds it; the
+/// storing is shared by all keys of a type).
+enum Slot<'a> {
+    F64(&'a mut f64),
+    F32(&'a mut f32),
+    U32(&'a mut u32),
+    Word(&'a mut dyn WordField),
+}
+
+/// A [`Choice`] field set by the position of its word.
+trait WordField {
+    /// Sets the variant at `index` of [`Choice::VARIANTS`]; false when there is none.
+    fn set_index(&mut self, index: usize) -> bool;
+}
+
+impl<T: Choice> WordField for T {
+    fn set_index(&mut self, index: usize) -> bool {
+        match T::VARIANTS.get(index) {
+            Some(v) => {
+                *self = *v;
+                true
+            }
+            None => false,
+        }
+    }
 }
 
 impl Field for f64 {
     fn to_value(self) -> Value {
         Value::F64(self)
     }
-    fn from_value(v: Value) -> Option<Self> {
-        match v {
-            Value::F64(x) => Some(x),
-            _ => None,
-        }
+    fn slot(&mut self) -> Slot<'_> {
+        Slot::F64(self)
     }
 }
 
@@ -182,11 +206,8 @@ impl Field for f32 {
     fn to_value(self) -> Value {
         Value::F32(self)
     }
-    fn from_value(v: Value) -> Option<Self> {
-        match v {
-            Value::F32(x) => Some(x),
-            _ => None,
-        }
+    fn slot(&mut self) -> Slot<'_> {
+        Slot::F32(self)
     }
 }
 
@@ -194,11 +215,8 @@ impl Field for u32 {
     fn to_value(self) -> Value {
         Value::U32(self)
     }
-    fn from_value(v: Value) -> Option<Self> {
-        match v {
-            Value::U32(x) => Some(x),
-            _ => None,
-        }
+    fn slot(&mut self) -> Slot<'_> {
+        Slot::U32(self)
     }
 }
 
@@ -206,11 +224,8 @@ impl<T: Choice> Field for T {
     fn to_value(self) -> Value {
         Value::Word(self.word())
     }
-    fn from_value(v: Value) -> Option<Self> {
-        match v {
-            Value::Word(w) => T::from_word(w),
-            _ => None,
-        }
+    fn slot(&mut self) -> Slot<'_> {
+        Slot::Word(self)
     }
 }
 
@@ -313,8 +328,21 @@ macro_rules! key_table {
             /// Stores `value` (of the key's type, unchecked) as `key`; `None` when the value
             /// has another type or names no variant.
             pub(super) fn put(&mut self, key: Key, value: Value) -> Option<()> {
-                match key {
-                    $( Key::$variant => self.$($field)+ = Field::from_value(value)?, )+
+                let slot = match key {
+                    $( Key::$variant => Field::slot(&mut self.$($field)+), )+
+                };
+                match (slot, value) {
+                    (Slot::F64(p), Value::F64(v)) => *p = v,
+                    (Slot::F32(p), Value::F32(v)) => *p = v,
+                    (Slot::U32(p), Value::U32(v)) => *p = v,
+                    (Slot::Word(p), Value::Word(w)) => {
+                        let Kind::Word(words) = key.info().kind else {
+                            return None;
+                        };
+                        let i = words.iter().position(|x| *x == w)?;
+                        p.set_index(i).then_some(())?;
+                    }
+                    _ => return None,
                 }
                 Some(())
             }
