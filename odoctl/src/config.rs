@@ -160,12 +160,6 @@ pub fn model_name(m: UncertaintyModel) -> &'static str {
     m.word()
 }
 
-/// Sets one key of `s` from its text, parsed and range-checked as the unit does; relations
-/// between keys are not checked.
-fn set_value(s: &mut Settings, key: Key, text: &str) -> Result<(), SettingError> {
-    s.set(key, text)
-}
-
 /// Applies `KEY=VALUE` assignments (from `--set`) to chassis parameters; each value is
 /// parsed and range-checked as the unit does (relations: [`validated`]).
 pub fn apply_sets(p: &mut ChassisParams, sets: &[String]) -> Result<()> {
@@ -176,7 +170,7 @@ pub fn apply_sets(p: &mut ChassisParams, sets: &[String]) -> Result<()> {
             .ok_or_else(|| ConfigError::NotAnAssignment(a.clone()))?;
         let origin = format!("--set {a}");
         let key = chassis_key(&origin, 0, k.trim())?;
-        set_value(&mut s, key, v.trim()).map_err(|error| ConfigError::Setting {
+        s.set(key, v.trim()).map_err(|error| ConfigError::Setting {
             origin,
             line: 0,
             error,
@@ -272,11 +266,12 @@ pub fn parse_settings(
     let entries = entries(origin, text)?;
     let mut s = base;
     for e in &entries {
-        set_value(&mut s, e.key, &e.text).map_err(|error| ConfigError::Setting {
-            origin: origin.into(),
-            line: e.line,
-            error,
-        })?;
+        s.set(e.key, &e.text)
+            .map_err(|error| ConfigError::Setting {
+                origin: origin.into(),
+                line: e.line,
+                error,
+            })?;
     }
     validate_chassis(&s.chassis).map_err(|error| ConfigError::Setting {
         origin: origin.into(),
@@ -364,7 +359,7 @@ pub fn parse_get_reply(reply: &str) -> Result<(Settings, Vec<Key>), ConfigError>
             line: i + 1,
             key: name.into(),
         })?;
-        set_value(&mut s, key, value).map_err(|error| ConfigError::Setting {
+        s.set(key, value).map_err(|error| ConfigError::Setting {
             origin: "get reply".into(),
             line: i + 1,
             error,
