@@ -1,7 +1,7 @@
 //! Text commands: line assembly, parsing, execution against the settings (atomic, errors
 //! change nothing), and fuzz-style proptests of both.
 
-use odo_core::protocol::command::*;
+use odo_core::console::*;
 use odo_core::protocol::{CommandReply, MAX_REPLY_TEXT};
 use odo_core::settings::{Key, Settings};
 use proptest::prelude::*;

@@ -1,15 +1,18 @@
 //! Wire protocol: message round trips, the documented example frame, bit-error detection,
 //! streaming resynchronisation and a fuzz-style proptest of the frame decoder.
 
+use odo_core::crc;
 use odo_core::odometry::UncertaintyModel;
 use odo_core::protocol::*;
+use odo_core::settings::SettingsSource;
+use odo_core::timing::SyncState;
 use proptest::prelude::*;
 
 fn sample_pose() -> PoseRecord {
     PoseRecord {
         sequence: 123_456,
         flags: StatusFlags {
-            sync: SyncMode::PpsLocked,
+            sync: SyncState::Locked,
             time_valid: true,
             left: WheelStatus {
                 fault: false,
@@ -74,7 +77,7 @@ fn status_round_trip() {
     let msg = Message::Status(Status {
         uptime_us: 1 << 40,
         flags: StatusFlags {
-            sync: SyncMode::Holdover,
+            sync: SyncState::Holdover,
             ..Default::default()
         },
         rate_hz: 50,
@@ -100,7 +103,7 @@ fn status_layout_and_short_bodies() {
     let st = Status {
         uptime_us: 0x0102_0304_0506_0708,
         flags: StatusFlags {
-            sync: SyncMode::PpsLocked,
+            sync: SyncState::Locked,
             time_valid: true,
             ..Default::default()
         },
@@ -245,7 +248,7 @@ fn example_pose() -> Message {
     Message::Pose(PoseRecord {
         sequence: 1000,
         flags: StatusFlags {
-            sync: SyncMode::PpsLocked,
+            sync: SyncState::Locked,
             time_valid: true,
             left: WheelStatus {
                 index_seen: true,
@@ -490,7 +493,7 @@ fn versioning_rules() {
 fn flag_bits_positions() {
     let mut f = StatusFlags::default();
     assert_eq!(f.to_bits(), 0);
-    f.sync = SyncMode::Holdover;
+    f.sync = SyncState::Holdover;
     assert_eq!(f.to_bits(), 2);
     f.time_valid = true;
     f.left.fault = true;

@@ -21,8 +21,9 @@
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use odo_core::protocol::{SettingsSource, SyncMode};
 use odo_core::settings::Settings;
+use odo_core::settings::SettingsSource;
+use odo_core::timing::SyncState;
 
 mod support;
 use support::qemu::UnitLink;
@@ -177,7 +178,7 @@ fn qemu_end_to_end() {
     assert!(records.iter().all(|r| r.dropped == 0));
     assert!(records
         .iter()
-        .all(|r| r.flags.sync == SyncMode::FreeRunning && !r.flags.time_valid));
+        .all(|r| r.flags.sync == SyncState::FreeRunning && !r.flags.time_valid));
 
     // The simulated drive: reversing, both counters wrapped (left 32-bit near its wrap at
     // boot, right 16-bit every few seconds), fault line and index mismatch on the right.

@@ -1,5 +1,5 @@
 //! End-to-end test of calibration mode (`mode pps`) in QEMU, against the simulated GNSS
-//! receiver of the `qemu` build (`src/board/sim_gnss.rs`, docs/HARDWARE.md): PPS captures
+//! receiver of the `qemu` build (`src/board/qemu/gnss.rs`, docs/HARDWARE.md): PPS captures
 //! from a receiver whose second is 1,000,037,000 MCU ticks (the MCU clock 37 ppm fast) with
 //! up to 40 ns of jitter, ZDA and RMC 100 ms after each edge naming 2026-11-21 12:00:00 UTC +
 //! `n` s, and a 20 s script: a corrupted RMC at lap second 5, a glitch edge 300 ms after the
@@ -12,7 +12,7 @@
 //!
 //! It boots the image (free-running, as always), sends a `reset_pose` and `mode pps`, reads
 //! records over more than one lap of the script after the lock and checks: the sync state goes
-//! FreeRunning -> PpsLocked, then Holdover for the 3 s outage and PpsLocked again; from the
+//! FreeRunning -> Locked, then Holdover for the 3 s outage and Locked again; from the
 //! first time-tagged record on, every record carries GPS week/time of week of the simulated
 //! date (odo_core's own UTC-to-GPS conversion) with `sample_in_second` stepping 0..49 and
 //! wrapping at each second; sample `k` of GNSS second `n` falls on the receiver's edge plus
@@ -27,14 +27,15 @@
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use odo_core::protocol::{PoseRecord, Status, SyncMode};
+use odo_core::protocol::{PoseRecord, Status};
 use odo_core::settings::Settings;
+use odo_core::timing::SyncState;
 use odo_core::timing::UtcDateTime;
 
 mod support;
 use support::qemu::UnitLink;
 
-// The simulated receiver, as documented in src/board/sim_gnss.rs (MCU ticks are ns in QEMU).
+// The simulated receiver, as documented in src/board/qemu/gnss.rs (MCU ticks are ns in QEMU).
 /// One GNSS second in MCU ticks: the MCU clock is 37 ppm fast.
 const SECOND_NS: u64 = 1_000_037_000;
 /// MCU time of the nominal edge of receiver second 0.
@@ -153,7 +154,7 @@ fn qemu_pps_calibration_mode() {
         let first = recs.iter().find_map(receiver_second);
         let last = recs.last().and_then(receiver_second);
         let reacquired = recs.windows(2).any(|w| {
-            w[0].flags.sync == SyncMode::Holdover && w[1].flags.sync == SyncMode::PpsLocked
+            w[0].flags.sync == SyncState::Holdover && w[1].flags.sync == SyncState::Locked
         });
         if let (Some(a), Some(b)) = (first, last) {
             if b >= a + LAP + 2 && reacquired {
@@ -191,8 +192,8 @@ fn qemu_pps_calibration_mode() {
     }
     assert!(records.iter().all(|r| r.dropped == 0));
 
-    // Sync state: FreeRunning -> PpsLocked, then Holdover <-> PpsLocked only.
-    let mut runs: Vec<(SyncMode, usize, usize)> = Vec::new(); // (mode, first index, length)
+    // Sync state: FreeRunning -> Locked, then Holdover <-> Locked only.
+    let mut runs: Vec<(SyncState, usize, usize)> = Vec::new(); // (mode, first index, length)
     for (i, r) in records.iter().enumerate() {
         match runs.last_mut() {
             Some((m, _, len)) if *m == r.flags.sync => *len += 1,
@@ -201,14 +202,13 @@ fn qemu_pps_calibration_mode() {
     }
     let names: Vec<String> = runs.iter().map(|(m, _, l)| format!("{m:?} x{l}")).collect();
     println!("sync runs: {}", names.join(" -> "));
-    assert_eq!(runs[0].0, SyncMode::FreeRunning, "boots free-running");
-    assert_eq!(runs[1].0, SyncMode::PpsLocked, "FreeRunning -> PpsLocked");
+    assert_eq!(runs[0].0, SyncState::FreeRunning, "boots free-running");
+    assert_eq!(runs[1].0, SyncState::Locked, "FreeRunning -> Locked");
     for w in runs[1..].windows(2) {
         assert!(
             matches!(
                 (w[0].0, w[1].0),
-                (SyncMode::PpsLocked, SyncMode::Holdover)
-                    | (SyncMode::Holdover, SyncMode::PpsLocked)
+                (SyncState::Locked, SyncState::Holdover) | (SyncState::Holdover, SyncState::Locked)
             ),
             "transition {:?} -> {:?}",
             w[0].0,
@@ -223,7 +223,7 @@ fn qemu_pps_calibration_mode() {
     // the edge's window closed) to the reacquired edge of lap second 15.
     let mut holdovers = 0;
     for (m, i, len) in &runs {
-        if *m != SyncMode::Holdover || i + len >= records.len() {
+        if *m != SyncState::Holdover || i + len >= records.len() {
             continue;
         }
         let (first, after) = (&records[*i], &records[i + len]);
@@ -262,7 +262,7 @@ fn qemu_pps_calibration_mode() {
     let mut one_second_deltas = Vec::new();
     for (i, r) in span.iter().enumerate() {
         assert!(r.flags.time_valid, "record {}: time lost", r.sequence);
-        assert_ne!(r.flags.sync, SyncMode::FreeRunning);
+        assert_ne!(r.flags.sync, SyncState::FreeRunning);
         assert_eq!(r.gnss.tow_ms % 1000, 0);
         assert!(u64::from(r.gnss.sample_in_second) < RATE);
         let n = receiver_second(r).expect("tagged");

@@ -1,9 +1,9 @@
 //! Settings: key access and text round trips, boundary tables, atomic multi-key changes,
 //! serialisation, and the flash store under a power cut at every erase/program step.
 
+use odo_core::crc::crc32;
 use odo_core::odometry::integrator::MAX_STEP_COUNTS;
 use odo_core::odometry::ChassisParams;
-use odo_core::protocol::crc::crc32;
 use odo_core::settings::store::{
     encode_record, Flash, SettingsStore, MAGIC, RECORD_LEN, SLOT_LEN, WORD,
 };

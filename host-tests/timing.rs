@@ -1,5 +1,5 @@
 //! Host tests of `odo_core::timing`: the PPS discipline against simulated crystals, jitter,
-//! lost and spurious pulses; the NMEA parser; the time tag; the index tracker.
+//! lost and spurious pulses; the NMEA parser; the time tag.
 
 use std::collections::VecDeque;
 
@@ -1645,90 +1645,4 @@ fn time_tag_follows_the_discipline_through_holdover() {
     }
     assert!(checked > 20);
     assert_eq!(tag.mismatches(), 0);
-}
-
-// ---------------------------------------------------------------- index pulses
-
-#[test]
-fn index_boundary_table() {
-    let tpr = 20_000i64;
-    for (diff, expected) in [
-        (0, IndexCheck::Whole { turns: 0 }),
-        (tpr, IndexCheck::Whole { turns: 1 }),
-        (-tpr, IndexCheck::Whole { turns: -1 }),
-        (tpr + 4, IndexCheck::Whole { turns: 1 }),
-        (tpr - 4, IndexCheck::Whole { turns: 1 }),
-        (-tpr - 4, IndexCheck::Whole { turns: -1 }),
-        (tpr + 5, IndexCheck::Mismatch { error: 5 }),
-        (tpr - 5, IndexCheck::Mismatch { error: -5 }),
-        (3 * tpr + 1_000, IndexCheck::Mismatch { error: 1_000 }),
-        (tpr / 2, IndexCheck::Mismatch { error: tpr / 2 }),
-        (
-            tpr / 2 + 1,
-            IndexCheck::Mismatch {
-                error: -tpr / 2 + 1,
-            },
-        ),
-        (-7 * tpr + 3, IndexCheck::Whole { turns: -7 }),
-    ] {
-        let mut t = IndexTracker::new(20_000, index::DEFAULT_TOLERANCE);
-        assert_eq!(t.on_index(123_456), IndexCheck::First);
-        assert_eq!(t.on_index(123_456 + diff), expected, "diff {diff}");
-        assert_eq!(t.reference(), Some(123_456 + diff));
-        assert_eq!(
-            t.take_mismatch(),
-            matches!(expected, IndexCheck::Mismatch { .. })
-        );
-        assert!(!t.take_mismatch());
-    }
-}
-
-#[test]
-fn extend_near_table() {
-    for (bits, ref_raw, ref_abs, raw, abs) in [
-        (16, 65_530u32, 100i64, 5u32, 111i64),
-        (16, 5, 100, 65_530, 89),
-        (16, 0, 0, 32_767, 32_767),
-        (16, 0, 0, 32_768, -32_768),
-        (32, u32::MAX, -1, 0, 0),
-        (32, 0, 1 << 40, u32::MAX, (1 << 40) - 1),
-        (32, 0, 0, 0x7fff_ffff, 0x7fff_ffff),
-    ] {
-        assert_eq!(
-            extend_near(bits, ref_raw, ref_abs, raw),
-            abs,
-            "{bits} {ref_raw} {raw}"
-        );
-    }
-}
-
-proptest! {
-    #![proptest_config(ProptestConfig::with_cases(1000))]
-
-    /// Whole turns plus an error: flagged exactly when the error exceeds the tolerance.
-    #[test]
-    fn index_whole_turns(
-        tpr in 4u32..1_048_576,
-        turns in -1000i64..1000,
-        err in -20i64..20,
-        start in -1_000_000_000i64..1_000_000_000,
-    ) {
-        let mut t = IndexTracker::new(tpr, index::DEFAULT_TOLERANCE);
-        t.on_index(start);
-        let err = if tpr < 64 { 0 } else { err };
-        let r = t.on_index(start + turns * i64::from(tpr) + err);
-        if err.unsigned_abs() <= u64::from(index::DEFAULT_TOLERANCE) {
-            prop_assert_eq!(r, IndexCheck::Whole { turns });
-        } else {
-            prop_assert_eq!(r, IndexCheck::Mismatch { error: err });
-        }
-    }
-
-    /// Extending a raw reading near a reference gives back the true absolute count.
-    #[test]
-    fn extend_near_recovers(bits in prop::sample::select(vec![16u32, 32]), abs in -(1i64 << 50)..(1i64 << 50), step in -30_000i64..30_000) {
-        let mask = if bits == 32 { u64::from(u32::MAX) } else { (1u64 << bits) - 1 };
-        let raw_of = |a: i64| (a as u64 & mask) as u32;
-        prop_assert_eq!(extend_near(bits, raw_of(abs), abs, raw_of(abs + step)), abs + step);
-    }
 }

@@ -16,8 +16,12 @@
 // Errors are returned, never unwrapped, in code that runs on the unit.
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 
+pub(crate) mod bytes;
+pub mod console;
+pub mod crc;
 pub mod decimal;
 pub mod odometry;
 pub mod protocol;
 pub mod settings;
 pub mod timing;
+pub mod unit;

@@ -1,11 +1,12 @@
-//! The RTIC application of the odometry unit (STM32F401): thin wiring around `odo_core`.
+//! The RTIC application of the odometry unit (STM32F401): tasks, resources and queues
+//! around `odo_core` (what each task decides lives in `odo_core::unit`).
 //!
 //! Data path of one sample: a TIM5 compare match is the sample instant (the grid comes
 //! from the PPS discipline, `odo_core::timing::pps`); the TIM5 interrupt (priority 4)
 //! snapshots both encoder counters as its first action, then the fault lines, labels the
 //! instant (`odo_core::timing::catch_up`, which also merges the points a stall passed over)
-//! and hands a [`app::RawSample`] to the processing task through a lock-free queue. The processing task (priority 2) extends the
-//! counters to 64 bits, applies index pulses, integrates, tags GNSS time, builds the pose
+//! and hands an `odo_core::unit::RawSample` to the processing task through a lock-free
+//! queue. The processing task (priority 2) extends the counters to 64 bits, applies index pulses, integrates, tags GNSS time, builds the pose
 //! record and queues its frame for the host link whole, or drops it and counts it. The
 //! USART2 interrupt (priority 3) moves queued bytes to the UART and received bytes to the
 //! command task (priority 1), which parses and executes command lines, saves settings to
@@ -28,11 +29,11 @@ fn main() {
 
 #[cfg(target_os = "none")]
 mod board;
+#[cfg(target_os = "none")]
+mod host_link;
+#[cfg(target_os = "none")]
+mod log;
 
-#[cfg(all(target_os = "none", not(feature = "qemu")))]
-use defmt_rtt as _;
-#[cfg(all(target_os = "none", feature = "qemu"))]
-use defmt_semihosting as _;
 #[cfg(target_os = "none")]
 use panic_probe as _;
 
@@ -41,120 +42,23 @@ use panic_probe as _;
 mod app {
     use crate::board::{
         self,
-        encoders::{IndexCapture, Snapshot, LEFT_BITS, RIGHT_BITS},
         flash::SettingsFlash,
         sampler::Sampler,
-        serial::{GnssUart, HostUart, RxErrors, TxRing},
-        Acquisition, ClockSource, GnssRx, Led,
+        serial::{GnssUart, HostUart, RxErrors},
+        Acquisition, GnssRx, Led,
     };
+    use crate::host_link::{send, send_blocking, Link, RECORD_RESERVE};
     use heapless::spsc::{Consumer, Producer, Queue};
-    use odo_core::odometry::{
-        ChassisParams, CounterExtender, IndexRefs, Integrator, Pose, WheelCounts,
+    use odo_core::protocol::{CommandReply, Message};
+    use odo_core::settings::store::SettingsStore;
+    use odo_core::timing::{DisciplineConfig, SyncState};
+    use odo_core::unit::{
+        self, Commands, Effect, IndexCapture, Live, PpsLatch, Processor, RawSample, Requests,
+        StoreState,
     };
-    use odo_core::protocol::command::{self, Action, LineAssembler, Reply};
-    use odo_core::protocol::{
-        self, CommandReply, DeviceInfo, GnssTime, Message, PoseRecord, SettingsSource, Status,
-        StatusFlags, WheelStatus, PROTOCOL_VERSION,
-    };
-    use odo_core::settings::{store::SettingsStore, Settings};
-    use odo_core::timing::index::DEFAULT_TOLERANCE;
-    use odo_core::timing::{
-        Discipline, DisciplineConfig, IndexCheck, IndexTracker, LineBuffer, NmeaError, PpsEvent,
-        PpsStats, Sample, SyncMode, SyncState, TimeTagPps, TimeTagger,
-    };
-    use rtic::Mutex;
     use stm32f4xx_hal::pac::Interrupt;
     use stm32f4xx_hal::prelude::*;
     use stm32f4xx_hal::watchdog::IndependentWatchdog;
-
-    /// Host link transmit buffer, bytes.
-    const TX_BUF: usize = 4096;
-    /// Transmit space a pose record leaves free for command replies, bytes.
-    const RECORD_RESERVE: usize = 1024;
-
-    /// One sample, from the TIM5 interrupt to the processing task.
-    #[derive(Clone, Copy)]
-    pub struct RawSample {
-        /// The schedule's sample.
-        sample: Sample,
-        /// Raw counters.
-        counts: Snapshot,
-        /// Fault lines (left, right).
-        faults: (bool, bool),
-        /// A PPS edge seen in this interrupt.
-        pps: Option<(u64, PpsEvent)>,
-        /// Discipline state and counters after this interrupt.
-        state: SyncState,
-        stats: PpsStats,
-        /// Length of a second in use, ticks.
-        period: u64,
-        /// Index pulses of the simulated drive (QEMU build only; EXTI on the board).
-        sim_index: [Option<u32>; 2],
-        /// Cycles (instructions in QEMU) the sample interrupt took up to the hand-over.
-        isr_cycles: u32,
-        /// Grid points merged into this sample because the interrupt ran late (a stall).
-        merged: u32,
-        /// Timer ticks from the sample's grid point to the interrupt's counter reading.
-        latency: u32,
-        /// A PPS edge was lost to an over-capture before this sample.
-        pps_overcapture: bool,
-        /// Samples lost so far because the queue to the processing task was full.
-        queue_lost: u32,
-    }
-
-    /// The host link's transmit side: the byte ring and the frame sequence number.
-    pub struct Link {
-        ring: TxRing<TX_BUF>,
-        next_seq: u32,
-    }
-
-    /// Changes the command task asks the processing task to apply at the next sample.
-    #[derive(Default)]
-    pub struct Requests {
-        settings: Option<Settings>,
-        reset: Option<Pose>,
-    }
-
-    /// Where the settings in use came from and whether they differ from the stored ones
-    /// (kept by the command task, reported by the heartbeat).
-    #[derive(Clone, Copy)]
-    pub struct StoreState {
-        source: SettingsSource,
-        dirty: bool,
-    }
-
-    /// What the processing task last knew, for `status`.
-    #[derive(Clone, Copy, Default)]
-    pub struct Live {
-        samples: u32,
-        dropped_total: u32,
-        flags: StatusFlags,
-        stats: PpsStats,
-        period: u64,
-        index_mismatches: [u32; 2],
-        nmea_errors: u32,
-        time_messages: u32,
-        mcu_time_us: u64,
-        /// Most cycles of one sample interrupt, and of processing one sample.
-        isr_cycles_max: u32,
-        process_cycles_max: u32,
-        /// Cycles of the last sample interrupt and of processing the last sample.
-        isr_cycles_last: u32,
-        process_cycles_last: u32,
-        /// Samples lost between the sample interrupt and the processing task (queue full).
-        samples_lost: u32,
-        /// Grid points merged into later samples (late sample interrupts: flash stalls).
-        merged_samples: u32,
-        /// Largest latency from a sample's grid point to the interrupt's counter reading,
-        /// timer ticks.
-        latency_max: u32,
-        /// Index pulses lost to an over-capture (left, right).
-        index_lost: [u32; 2],
-        /// PPS edges lost to an over-capture.
-        pps_overcaptures: u32,
-        /// The wheels moved within the last second.
-        moving: bool,
-    }
 
     #[shared]
     struct Shared {
@@ -174,8 +78,7 @@ mod app {
         samples_out: Consumer<'static, RawSample>,
         index_in_left: Producer<'static, IndexCapture>,
         index_in_right: Producer<'static, IndexCapture>,
-        index_out_left: Consumer<'static, IndexCapture>,
-        index_out_right: Consumer<'static, IndexCapture>,
+        index_out: [Consumer<'static, IndexCapture>; 2],
         host: HostUart,
         host_rx_in: Producer<'static, u8>,
         host_rx_out: Consumer<'static, u8>,
@@ -185,35 +88,9 @@ mod app {
         cfg_in: Producer<'static, DisciplineConfig>,
         cfg_out: Consumer<'static, DisciplineConfig>,
         processor: Processor,
-        commands: Commands,
+        commands: Commands<SettingsFlash>,
         led: Led,
         watchdog: IndependentWatchdog,
-    }
-
-    /// The discipline configuration that `settings` ask for, with the PPS lock range of
-    /// the clock running now.
-    fn discipline_config(
-        settings: &Settings,
-        timer_hz: u32,
-        clock: ClockSource,
-    ) -> DisciplineConfig {
-        let tolerance = board::clock_tolerance_ppm(board::clock_source(clock));
-        let mut cfg = DisciplineConfig::for_clock(timer_hz, tolerance);
-        cfg.rate_hz = settings.rate;
-        cfg.mode = settings.mode;
-        cfg
-    }
-
-    fn time_tag(settings: &Settings) -> TimeTagPps {
-        settings.time_tag_pps
-    }
-
-    fn state_name(s: SyncState) -> &'static str {
-        match s {
-            SyncState::FreeRunning => "free-running",
-            SyncState::Locked => "pps-locked",
-            SyncState::Holdover => "holdover",
-        }
     }
 
     #[init(local = [
@@ -236,156 +113,76 @@ mod app {
         let (mut rcc, clock) = board::start_clocks(dp.RCC);
         let clocks = rcc.clocks;
         let timer_hz = board::timer_hz(&clocks);
-        if clock == ClockSource::HsiFallback {
-            defmt::error!("HSE did not start: running from the HSI (+-4 %)");
-        }
 
         let pins = board::pins(dp.GPIOA, dp.GPIOB, dp.GPIOC, &mut rcc);
 
         // Settings: the newest valid record in flash, else the defaults.
-        #[cfg(not(feature = "qemu"))]
         let flash = SettingsFlash::new(dp.FLASH);
-        #[cfg(feature = "qemu")]
-        let flash = SettingsFlash::new();
         let mut store = SettingsStore::new(flash);
         let loaded = store.load_or_defaults();
-        let mut settings = loaded.settings;
-        let mut cfg = discipline_config(&settings, timer_hz, clock);
-        if cfg.validate().is_err() {
-            defmt::error!("settings: rate/mode unusable by the sampler, using the defaults");
-            settings = Settings::DEFAULT;
-            cfg = discipline_config(&settings, timer_hz, clock);
-        }
-        match loaded.source {
-            SettingsSource::Flash => defmt::info!(
-                "settings loaded from flash, generation {}",
-                loaded.generation
-            ),
-            SettingsSource::Defaults => {
-                defmt::info!("settings: defaults (flash empty or unreadable)")
-            }
-        }
+        let clock_now = board::clock_source(clock);
+        let Ok(start) = unit::start(loaded.settings, timer_hz, clock_now, clock) else {
+            panic!("default sampler configuration rejected")
+        };
+        crate::log::start(clock, &loaded, &start);
+        let settings = start.settings;
 
-        #[cfg(not(feature = "qemu"))]
-        let mut acq = Acquisition::new(
-            board::encoders::Encoders::new(dp.TIM2, dp.TIM3, &mut rcc),
-            pins.faults,
-        );
-        #[cfg(feature = "qemu")]
-        let mut acq = Acquisition::new(pins.faults);
+        let mut acq = Acquisition::new(dp.TIM2, dp.TIM3, pins.faults, &mut rcc);
 
         let host = HostUart::new(dp.USART2, &mut rcc, clocks.pclk1().raw(), settings.baud);
         let gnss = GnssUart::new(dp.USART1, &mut rcc, clocks.pclk2().raw(), board::GNSS_BAUD);
-        // QEMU: PPS captures and NMEA bytes from the simulated receiver (src/board/sim_gnss.rs).
-        #[cfg(feature = "qemu")]
-        let (gnss, gnss_sim) = board::sim_gnss::attach(gnss);
+        // QEMU: PPS captures and NMEA bytes from the simulated receiver (board/qemu/gnss.rs).
+        let (gnss, sampler_extra) = board::attach_gnss(gnss);
 
-        let (samples_in, samples_out) = cx.local.samples_q.split();
+        let (mut samples_in, samples_out) = cx.local.samples_q.split();
         let (index_in_left, index_out_left) = cx.local.index_left_q.split();
         let (index_in_right, index_out_right) = cx.local.index_right_q.split();
         let (host_rx_in, host_rx_out) = cx.local.host_rx_q.split();
         let (gnss_in, gnss_out) = cx.local.gnss_q.split();
         let (cfg_in, cfg_out) = cx.local.cfg_q.split();
 
-        let disc = match Discipline::new(cfg, 0) {
-            Ok(d) => d,
-            Err(_) => {
-                defmt::error!("sampler configuration invalid: free-running at 50 Hz");
-                let mut c =
-                    DisciplineConfig::for_clock(timer_hz, board::clock_tolerance_ppm(clock));
-                c.mode = SyncMode::Free;
-                c.rate_hz = 50;
-                cfg = c;
-                match Discipline::new(c, 0) {
-                    Ok(d) => d,
-                    Err(_) => panic!("default sampler configuration rejected"),
-                }
-            }
-        };
-        #[cfg(not(feature = "qemu"))]
-        let (sampler, s0) = Sampler::start(dp.TIM5, &mut rcc, disc);
-        #[cfg(feature = "qemu")]
-        let (sampler, s0) = Sampler::start(dp.TIM5, &mut rcc, disc, gnss_sim);
+        let cfg = *start.discipline.config();
+        let (sampler, s0) = Sampler::start(dp.TIM5, &mut rcc, start.discipline, sampler_extra);
         // Sample 0 is now: snapshot it as the starting point of the integration.
-        let first = RawSample {
-            sample: s0,
-            counts: acq.snapshot(s0.tick),
-            faults: acq.faults(s0.tick),
-            pps: None,
-            state: sampler.discipline().state(),
-            stats: sampler.discipline().stats(),
-            period: sampler.discipline().period(),
-            sim_index: [None, None],
-            isr_cycles: 0,
-            merged: 0,
-            latency: 0,
-            pps_overcapture: false,
-            queue_lost: 0,
-        };
-        let mut samples_in = samples_in;
+        let (counts, faults) = (acq.snapshot(s0.tick), acq.faults(s0.tick));
+        let first = RawSample::first(s0, counts, faults, sampler.discipline());
         let _ = samples_in.enqueue(first);
         rtic::pend(Interrupt::SPI2);
 
-        defmt::info!(
-            "odo-unit {} booted: timer {} Hz, {} Hz {}",
-            env!("CARGO_PKG_VERSION"),
-            timer_hz,
-            cfg.rate_hz,
-            if cfg.mode == SyncMode::Pps {
-                "pps"
-            } else {
-                "free"
-            }
-        );
+        crate::log::booted(timer_hz, &cfg);
 
-        let processor = Processor::new(&settings, timer_hz);
-        let commands = Commands {
-            assembler: LineAssembler::new(),
-            settings,
-            store,
-            source: loaded.source,
-            dirty: false,
-            timer_hz,
-            clock,
+        let processor = Processor::new(&settings, timer_hz, board::COUNTER_BITS);
+        let commands = Commands::new(settings, loaded.source, store, timer_hz, clock);
+        let shared = Shared {
+            acq,
+            link: Link::new(),
+            requests: Requests::default(),
+            live: Live::default(),
+            host_errors: RxErrors::default(),
+            gnss_errors: RxErrors::default(),
+            store_state: commands.store_state(),
         };
-        (
-            Shared {
-                acq,
-                link: Link {
-                    ring: TxRing::new(),
-                    next_seq: 0,
-                },
-                requests: Requests::default(),
-                live: Live::default(),
-                host_errors: RxErrors::default(),
-                gnss_errors: RxErrors::default(),
-                store_state: StoreState {
-                    source: loaded.source,
-                    dirty: false,
-                },
-            },
-            Local {
-                sampler,
-                samples_in,
-                samples_out,
-                index_in_left,
-                index_in_right,
-                index_out_left,
-                index_out_right,
-                host,
-                host_rx_in,
-                host_rx_out,
-                gnss,
-                gnss_in,
-                gnss_out,
-                cfg_in,
-                cfg_out,
-                processor,
-                commands,
-                led: pins.led,
-                watchdog,
-            },
-        )
+        let local = Local {
+            sampler,
+            samples_in,
+            samples_out,
+            index_in_left,
+            index_in_right,
+            index_out: [index_out_left, index_out_right],
+            host,
+            host_rx_in,
+            host_rx_out,
+            gnss,
+            gnss_in,
+            gnss_out,
+            cfg_in,
+            cfg_out,
+            processor,
+            commands,
+            led: pins.led,
+            watchdog,
+        };
+        (shared, local)
     }
 
     #[idle]
@@ -403,8 +200,7 @@ mod app {
         local = [
             sampler, samples_in, cfg_out,
             lost: u32 = 0,
-            pps: Option<(u64, PpsEvent)> = None,
-            overcapture: bool = false,
+            pps: PpsLatch = PpsLatch::new(),
         ],
         shared = [acq]
     )]
@@ -415,21 +211,14 @@ mod app {
         let entry = board::cycles();
         let sampler = cx.local.sampler;
         let event = sampler.on_interrupt();
-        if let Some(pps) = event.pps {
-            // Reported with the next sample; a glitch does not hide an accepted edge.
-            let keep = matches!(cx.local.pps, Some((_, e)) if *e != PpsEvent::Glitch)
-                && pps.1 == PpsEvent::Glitch;
-            if !keep {
-                *cx.local.pps = Some(pps);
-            }
-        }
-        *cx.local.overcapture |= event.overcapture;
+        // Reported with the next sample.
+        cx.local.pps.on_interrupt(event.pps, event.overcapture);
         let Some(sample) = event.sample else {
             return;
         };
-        let (counts, faults, sim_index) = cx.shared.acq.lock(|acq| {
+        let (counts, faults, index_pulses) = cx.shared.acq.lock(|acq| {
             let counts = entry_counts.unwrap_or_else(|| acq.snapshot(sample.tick));
-            (counts, acq.faults(sample.tick), acq.simulated_index())
+            (counts, acq.faults(sample.tick), acq.sample_index())
         });
         while let Some(cfg) = cx.local.cfg_out.dequeue() {
             // A rejected configuration keeps the running one; the command task validated
@@ -437,19 +226,20 @@ mod app {
             let _ = sampler.set_config(cfg);
         }
         sampler.follow_clock();
+        let (pps, pps_overcapture) = cx.local.pps.take();
         let raw = RawSample {
             sample,
             counts,
             faults,
-            pps: cx.local.pps.take(),
+            pps,
             state: sampler.discipline().state(),
             stats: sampler.discipline().stats(),
             period: sampler.discipline().period(),
-            sim_index,
+            index_pulses,
             isr_cycles: board::cycles().wrapping_sub(entry),
             merged: event.merged,
             latency: event.latency,
-            pps_overcapture: core::mem::take(cx.local.overcapture),
+            pps_overcapture,
             queue_lost: *cx.local.lost,
         };
         if cx.local.samples_in.enqueue(raw).is_err() {
@@ -497,41 +287,9 @@ mod app {
         let host = cx.local.host;
         let rx = cx.local.host_rx_in;
         let received = (cx.shared.link, cx.shared.host_errors)
-            .lock(|link, errors| host.on_interrupt(&mut link.ring, rx, errors));
+            .lock(|link, errors| host.on_interrupt(link.ring(), rx, errors));
         if received {
             rtic::pend(Interrupt::SPI3);
-        }
-    }
-
-    /// Encodes `msg` as the next frame and queues it whole if it fits with `reserve` bytes to
-    /// spare; false when it did not fit (nothing queued, sequence number unchanged). The
-    /// frame is encoded outside the lock; if another task sent a frame meanwhile, it is
-    /// encoded again with the new sequence number.
-    fn send(link: &mut impl Mutex<T = Link>, msg: &Message, reserve: usize) -> bool {
-        let mut buf = [0u8; protocol::MAX_ENCODED_FRAME];
-        loop {
-            let seq = link.lock(|l| l.next_seq);
-            let Ok(n) = protocol::encode_frame(msg, seq, &mut buf) else {
-                return false;
-            };
-            let queued = link.lock(|l| {
-                if l.next_seq != seq {
-                    None
-                } else if l.ring.push_frame(&buf[..n], reserve) {
-                    l.next_seq = seq.wrapping_add(1);
-                    Some(true)
-                } else {
-                    Some(false)
-                }
-            });
-            match queued {
-                Some(true) => {
-                    rtic::pend(Interrupt::USART2);
-                    return true;
-                }
-                Some(false) => return false,
-                None => continue,
-            }
         }
     }
 
@@ -539,25 +297,25 @@ mod app {
     #[task(
         binds = SPI2,
         priority = 2,
-        local = [samples_out, index_out_left, index_out_right, gnss_out, processor, led, watchdog],
+        local = [samples_out, index_out, gnss_out, processor, led, watchdog],
         shared = [link, requests, live, host_errors, gnss_errors, store_state]
     )]
     fn process(mut cx: process::Context) {
         let p = cx.local.processor;
+        let log = &mut crate::log::Defmt;
         while let Some(byte) = cx.local.gnss_out.dequeue() {
             p.on_nmea_byte(byte);
         }
         while let Some(raw) = cx.local.samples_out.dequeue() {
             let start = board::cycles();
-            while let Some(l) = cx.local.index_out_left.dequeue() {
-                p.on_index_capture(0, l);
-            }
-            while let Some(r) = cx.local.index_out_right.dequeue() {
-                p.on_index_capture(1, r);
+            for (wheel, captures) in cx.local.index_out.iter_mut().enumerate() {
+                while let Some(capture) = captures.dequeue() {
+                    p.on_index_capture(wheel, capture, log);
+                }
             }
             let requests = cx.shared.requests.lock(core::mem::take);
-            p.apply(requests);
-            let Some(record) = p.on_sample(&raw) else {
+            p.apply(requests, log);
+            let Some(record) = p.on_sample(&raw, log) else {
                 continue;
             };
             cx.local.watchdog.feed();
@@ -590,559 +348,45 @@ mod app {
     fn commands_task(mut cx: commands_task::Context) {
         let c = cx.local.commands;
         while let Some(byte) = cx.local.host_rx_out.dequeue() {
-            let (mut reply, action) = match c.assembler.push(byte) {
-                None => continue,
-                Some(Ok(line)) => command::execute(line, &mut c.settings),
-                Some(Err(e)) => (Reply::error(e), Action::None),
+            let (at_start, live) = (c.clock_at_start(), &mut cx.shared.live);
+            let clock = move || board::clock_source(at_start);
+            let Some((mut reply, effect)) = c.on_byte(byte, clock, || live.lock(|l| l.moving))
+            else {
+                continue;
             };
-            match action {
-                Action::None => {}
-                Action::SettingsChanged => {
-                    c.dirty = true;
+            match effect {
+                Effect::None => {}
+                Effect::SettingsChanged {
+                    settings,
+                    discipline,
+                } => {
                     cx.shared.store_state.lock(|s| s.dirty = true);
-                    let cfg = discipline_config(&c.settings, c.timer_hz, c.clock);
-                    if cx.local.cfg_in.enqueue(cfg).is_err() {
+                    if cx.local.cfg_in.enqueue(discipline).is_err() {
                         defmt::warn!("sampler configuration queue full");
                     }
-                    let settings = c.settings;
                     cx.shared.requests.lock(|r| r.settings = Some(settings));
                 }
-                Action::Save
-                    if cx.shared.live.lock(|l| l.moving)
-                        && !c.settings.survives_stall(c.store.flash().max_stall_ms())
-                        && c.store.next_save_erases().unwrap_or(true) =>
-                {
-                    reply = Reply::error(format_args!(
-                        "save refused while the wheels turn: a flash erase stops the CPU for up to {} ms, longer than the right counter can go unread at max_wheel_speed; save at rest",
-                        c.store.flash().max_stall_ms()
-                    ));
+                Effect::Saved { generation } => {
+                    let state = c.store_state();
+                    cx.shared.store_state.lock(|s| *s = state);
+                    defmt::info!("settings saved, generation {}", generation);
                 }
-                Action::Save => match c.store.save(&c.settings) {
-                    Ok(generation) => {
-                        c.dirty = false;
-                        c.source = SettingsSource::Flash;
-                        cx.shared.store_state.lock(|s| {
-                            *s = StoreState {
-                                source: SettingsSource::Flash,
-                                dirty: false,
-                            }
-                        });
-                        defmt::info!("settings saved, generation {}", generation);
-                        reply.push_line(format_args!("saved (generation {generation})"));
-                    }
-                    Err(e) => {
-                        defmt::error!("settings save failed");
-                        reply = Reply::error(format_args!("save failed: {e}"));
-                    }
-                },
-                Action::ResetPose { x, y, heading } => {
-                    cx.shared
-                        .requests
-                        .lock(|r| r.reset = Some(Pose { x, y, heading }));
-                }
-                Action::Status => {
+                Effect::SaveFailed => defmt::error!("settings save failed"),
+                Effect::ResetPose(pose) => cx.shared.requests.lock(|r| r.reset = Some(pose)),
+                Effect::Status => {
                     let live = cx.shared.live.lock(|l| *l);
                     let rx_lost = cx.shared.host_errors.lock(|e| e.lost);
                     let gnss_lost = cx.shared.gnss_errors.lock(|e| e.lost);
-                    c.status(&mut reply, &live, rx_lost, gnss_lost);
+                    let board = board::report(c.clock_at_start());
+                    c.status(&mut reply, &live, rx_lost, gnss_lost, &board);
                 }
-                Action::Version => {
-                    reply.push_line(format_args!(
-                        "firmware = odo-unit {}",
-                        env!("CARGO_PKG_VERSION")
-                    ));
-                    reply.push_line(format_args!("protocol = {PROTOCOL_VERSION}"));
-                    let mut info = DeviceInfo {
-                        protocol_version: PROTOCOL_VERSION,
-                        settings_source: c.source,
-                        settings_checksum: c.settings.checksum(),
-                        uid: board::unique_id(),
-                        firmware_version: heapless::String::new(),
-                    };
-                    let _ = info.firmware_version.push_str(env!("CARGO_PKG_VERSION"));
+                Effect::Version => {
+                    let info = c.version(&mut reply, board::unique_id());
                     send_blocking(&mut cx.shared.link, &Message::DeviceInfo(info));
                 }
             }
             for chunk in CommandReply::chunks(reply.ok, &reply.text) {
                 send_blocking(&mut cx.shared.link, &Message::Reply(chunk));
-            }
-        }
-    }
-
-    /// Sends a reply frame, waiting for room (only the command task, the lowest priority,
-    /// waits; the ring drains in the USART2 interrupt meanwhile).
-    fn send_blocking(link: &mut impl Mutex<T = Link>, msg: &Message) {
-        while !send(link, msg, 0) {
-            cortex_m::asm::nop();
-        }
-    }
-
-    /// State of the command task.
-    pub struct Commands {
-        assembler: LineAssembler,
-        settings: Settings,
-        store: SettingsStore<SettingsFlash>,
-        source: SettingsSource,
-        dirty: bool,
-        timer_hz: u32,
-        /// The clock source found at start.
-        clock: ClockSource,
-    }
-
-    impl Commands {
-        fn status(&self, reply: &mut Reply, live: &Live, rx_lost: u32, gnss_lost: u32) {
-            let sync = match live.flags.sync {
-                protocol::SyncMode::FreeRunning => "free",
-                protocol::SyncMode::PpsLocked => "locked",
-                protocol::SyncMode::Holdover => "holdover",
-            };
-            let on = |b: bool| if b { "yes" } else { "no" };
-            let clock = match board::clock_source(self.clock) {
-                ClockSource::Hse => "hse",
-                ClockSource::Hsi => "hsi",
-                ClockSource::HsiFallback => "hsi-fallback (HSE failed)",
-            };
-            reply.push_line(format_args!("clock = {clock}"));
-            reply.push_line(format_args!("sync = {sync}"));
-            reply.push_line(format_args!("time_valid = {}", on(live.flags.time_valid)));
-            reply.push_line(format_args!("samples = {}", live.samples));
-            reply.push_line(format_args!("mcu_time_us = {}", live.mcu_time_us));
-            reply.push_line(format_args!("records_dropped = {}", live.dropped_total));
-            reply.push_line(format_args!(
-                "samples_lost = {}, merged_samples = {}",
-                live.samples_lost, live.merged_samples
-            ));
-            let latency_ns = u64::from(live.latency_max) * 1_000_000_000 / u64::from(self.timer_hz);
-            reply.push_line(format_args!("sample_latency_max = {latency_ns} ns"));
-            reply.push_line(format_args!("second_ticks = {}", live.period));
-            reply.push_line(format_args!(
-                "pps_accepted = {}, pps_glitches = {}, pps_missed = {}, pps_locks = {}, pps_overcaptures = {}",
-                live.stats.accepted,
-                live.stats.glitches,
-                live.stats.missed,
-                live.stats.locks,
-                live.pps_overcaptures
-            ));
-            reply.push_line(format_args!(
-                "nmea_time_messages = {}, nmea_errors = {}, gnss_rx_lost = {gnss_lost}",
-                live.time_messages, live.nmea_errors
-            ));
-            for (name, w, m, lost) in [
-                (
-                    "left",
-                    live.flags.left,
-                    live.index_mismatches[0],
-                    live.index_lost[0],
-                ),
-                (
-                    "right",
-                    live.flags.right,
-                    live.index_mismatches[1],
-                    live.index_lost[1],
-                ),
-            ] {
-                reply.push_line(format_args!(
-                    "{name}: fault = {}, index_seen = {}, index_mismatches = {m}, index_lost = {lost}",
-                    on(w.fault),
-                    on(w.index_seen)
-                ));
-            }
-            reply.push_line(format_args!("host_rx_lost = {rx_lost}"));
-            let unit = if cfg!(feature = "qemu") {
-                "instructions (QEMU)"
-            } else {
-                "cycles"
-            };
-            reply.push_line(format_args!(
-                "sample_isr_max = {} {unit}, process_max = {} {unit}",
-                live.isr_cycles_max, live.process_cycles_max
-            ));
-            reply.push_line(format_args!(
-                "sample_isr_last = {} {unit}, process_last = {} {unit}",
-                live.isr_cycles_last, live.process_cycles_last
-            ));
-            let (used, size) = board::stack::high_water();
-            reply.push_line(format_args!("stack_used = {used} of {size} bytes"));
-            let source = match self.source {
-                SettingsSource::Flash => "flash",
-                SettingsSource::Defaults => "defaults",
-            };
-            reply.push_line(format_args!(
-                "settings = {source}, unsaved_changes = {}",
-                on(self.dirty)
-            ));
-        }
-    }
-
-    /// State of the processing task: counts to records.
-    pub struct Processor {
-        timer_hz: u32,
-        settings: Settings,
-        extenders: Option<[CounterExtender; 2]>,
-        integrator: Option<Integrator>,
-        trackers: [IndexTracker; 2],
-        /// Index mismatch not yet reported in a sent record.
-        mismatch: [bool; 2],
-        tagger: TimeTagger,
-        nmea: LineBuffer,
-        nmea_errors: u32,
-        time_messages: u32,
-        last_tick: u64,
-        sequence: u32,
-        dropped_since: u32,
-        dropped_total: u32,
-        last_state: SyncState,
-        last_faults: (bool, bool),
-        reset: Option<Pose>,
-        flags: StatusFlags,
-        mcu_time_us: u64,
-        isr_cycles_max: u32,
-        process_cycles_max: u32,
-        merged_samples: u32,
-        latency_max: u32,
-        index_lost: [u32; 2],
-        pps_overcaptures: u32,
-        /// Counts of the last sample, and the sample sequence at which they last changed.
-        last_counts: Option<(u32, u32)>,
-        last_motion: u32,
-    }
-
-    impl Processor {
-        fn new(settings: &Settings, timer_hz: u32) -> Self {
-            let tpr = settings.chassis.ticks_per_rev;
-            Self {
-                timer_hz,
-                settings: *settings,
-                extenders: None,
-                integrator: None,
-                trackers: [IndexTracker::new(tpr, DEFAULT_TOLERANCE); 2],
-                mismatch: [false; 2],
-                tagger: TimeTagger::new(time_tag(settings), u64::from(timer_hz)),
-                nmea: LineBuffer::new(),
-                nmea_errors: 0,
-                time_messages: 0,
-                last_tick: 0,
-                sequence: 0,
-                dropped_since: 0,
-                dropped_total: 0,
-                last_state: SyncState::FreeRunning,
-                last_faults: (false, false),
-                reset: None,
-                flags: StatusFlags::default(),
-                mcu_time_us: 0,
-                isr_cycles_max: 0,
-                process_cycles_max: 0,
-                merged_samples: 0,
-                latency_max: 0,
-                index_lost: [0; 2],
-                pps_overcaptures: 0,
-                last_counts: None,
-                last_motion: 0,
-            }
-        }
-
-        /// An index pulse latched by the wheel's timer.
-        fn on_index_capture(&mut self, wheel: usize, capture: IndexCapture) {
-            if capture.overcapture {
-                self.index_lost[wheel] = self.index_lost[wheel].wrapping_add(1);
-                defmt::warn!("wheel {}: index pulse lost (over-capture)", wheel);
-            }
-            self.on_index(wheel, capture.raw);
-        }
-
-        fn on_nmea_byte(&mut self, byte: u8) {
-            match self.nmea.push(byte) {
-                None | Some(Err(NmeaError::Unsupported)) => {}
-                Some(Err(_)) => self.nmea_errors = self.nmea_errors.wrapping_add(1),
-                Some(Ok(msg)) if msg.valid() => match msg.time().gps_seconds() {
-                    Ok(gps) => {
-                        self.time_messages = self.time_messages.wrapping_add(1);
-                        self.tagger.on_message(gps, self.last_tick);
-                    }
-                    Err(_) => self.nmea_errors = self.nmea_errors.wrapping_add(1),
-                },
-                Some(Ok(_)) => {}
-            }
-        }
-
-        fn on_index(&mut self, wheel: usize, raw: u32) {
-            let Some(ext) = &self.extenders else {
-                return;
-            };
-            let count = ext[wheel].absolute_of(raw);
-            match self.trackers[wheel].on_index(count) {
-                IndexCheck::Mismatch { error } => {
-                    self.mismatch[wheel] = true;
-                    defmt::warn!(
-                        "wheel {}: index count mismatch of {} increments",
-                        wheel,
-                        error
-                    );
-                }
-                IndexCheck::First => defmt::info!("wheel {}: first index pulse", wheel),
-                IndexCheck::Whole { .. } => {}
-            }
-        }
-
-        fn apply(&mut self, requests: Requests) {
-            if let Some(settings) = requests.settings {
-                if let Some(integrator) = &mut self.integrator {
-                    if integrator.set_params(&settings.chassis).is_err() {
-                        defmt::error!("chassis parameters rejected by the integrator");
-                    }
-                }
-                for t in &mut self.trackers {
-                    t.set_ticks_per_rev(settings.chassis.ticks_per_rev);
-                }
-                self.tagger.set_assoc(time_tag(&settings));
-                self.settings = settings;
-            }
-            if requests.reset.is_some() {
-                self.reset = requests.reset;
-            }
-        }
-
-        fn mcu_time_us(&self, tick: u64) -> u64 {
-            let hz = u64::from(self.timer_hz);
-            tick / hz * 1_000_000 + tick % hz * 1_000_000 / hz
-        }
-
-        /// Integrates one sample. `None` when nothing was integrated (never, today);
-        /// `Some(None)` when the record is not sent (`output_divider`).
-        fn on_sample(&mut self, raw: &RawSample) -> Option<Option<PoseRecord>> {
-            if raw.merged > 0 {
-                self.merged_samples = self.merged_samples.wrapping_add(raw.merged);
-                defmt::warn!(
-                    "sample interrupt late by {} ticks: {} samples merged",
-                    raw.latency,
-                    raw.merged
-                );
-            }
-            self.latency_max = self.latency_max.max(raw.latency);
-            if raw.pps_overcapture {
-                self.pps_overcaptures = self.pps_overcaptures.wrapping_add(1);
-                defmt::warn!("PPS: over-capture (two edges in one interrupt)");
-            }
-            let counts_now = (raw.counts.left, raw.counts.right);
-            if self.last_counts != Some(counts_now) {
-                self.last_counts = Some(counts_now);
-                self.last_motion = self.sequence;
-            }
-            let counts = match &mut self.extenders {
-                Some(ext) => {
-                    ext[0].update(raw.counts.left);
-                    ext[1].update(raw.counts.right);
-                    WheelCounts {
-                        left: ext[0].absolute(),
-                        right: ext[1].absolute(),
-                    }
-                }
-                None => {
-                    let ext = [
-                        CounterExtender::new(LEFT_BITS, raw.counts.left),
-                        CounterExtender::new(RIGHT_BITS, raw.counts.right),
-                    ];
-                    let counts = WheelCounts {
-                        left: ext[0].absolute(),
-                        right: ext[1].absolute(),
-                    };
-                    self.extenders = Some(ext);
-                    counts
-                }
-            };
-            for (wheel, pulse) in raw.sim_index.iter().enumerate() {
-                if let Some(r) = pulse {
-                    self.on_index(wheel, *r);
-                }
-            }
-            let refs = IndexRefs {
-                left: self.trackers[0].reference(),
-                right: self.trackers[1].reference(),
-            };
-            let mut step = Default::default();
-            match &mut self.integrator {
-                None => {
-                    let pose = self.reset.take().unwrap_or_default();
-                    let integrator = Integrator::new(&self.settings.chassis, counts, pose)
-                        .or_else(|_| Integrator::new(&ChassisParams::DESIGNED, counts, pose));
-                    match integrator {
-                        Ok(i) => self.integrator = Some(i),
-                        Err(_) => defmt::error!("integrator rejected the designed parameters"),
-                    }
-                }
-                Some(integrator) => {
-                    if let Some(pose) = self.reset.take() {
-                        integrator.rebase_counts(counts);
-                        integrator.reset_pose(pose);
-                        defmt::info!("pose reset");
-                    } else {
-                        step = integrator.step(counts, refs);
-                    }
-                }
-            }
-            if step.overrange {
-                defmt::warn!(
-                    "sample {}: motion beyond one sample's limits, not integrated",
-                    self.sequence
-                );
-            }
-
-            // Timing: PPS edges, state changes, GNSS time of the sample.
-            if let Some((tick, event)) = raw.pps {
-                match event {
-                    PpsEvent::Locked { second } => {
-                        defmt::info!("PPS: locked");
-                        self.tagger.on_edge(tick, second);
-                    }
-                    PpsEvent::Accepted { second, .. } => self.tagger.on_edge(tick, second),
-                    PpsEvent::Reacquired { second, missed, .. } => {
-                        defmt::info!("PPS: reacquired after {} lost pulses", missed);
-                        self.tagger.on_edge(tick, second);
-                    }
-                    PpsEvent::Glitch => defmt::warn!("PPS: glitch rejected"),
-                    PpsEvent::Ignored | PpsEvent::Candidate => {}
-                }
-            }
-            if raw.state != self.last_state {
-                defmt::info!(
-                    "sampling: {} -> {}",
-                    state_name(self.last_state),
-                    state_name(raw.state)
-                );
-                if raw.state == SyncState::FreeRunning {
-                    self.tagger.invalidate();
-                }
-                self.last_state = raw.state;
-            }
-            if raw.faults != self.last_faults {
-                defmt::warn!(
-                    "encoder fault lines: left {}, right {}",
-                    raw.faults.0,
-                    raw.faults.1
-                );
-                self.last_faults = raw.faults;
-            }
-            self.last_tick = raw.sample.tick;
-            let gps = match raw.state {
-                SyncState::FreeRunning => None,
-                _ => self.tagger.gps_time(raw.sample.second),
-            };
-
-            let sequence = self.sequence;
-            self.sequence = self.sequence.wrapping_add(1);
-            let status = |wheel: usize, fault: bool, calibrated: bool| WheelStatus {
-                fault,
-                index_seen: self.trackers[wheel].seen(),
-                index_mismatch: self.mismatch[wheel],
-                calibrated,
-            };
-            self.flags = StatusFlags {
-                sync: match raw.state {
-                    SyncState::FreeRunning => protocol::SyncMode::FreeRunning,
-                    SyncState::Locked => protocol::SyncMode::PpsLocked,
-                    SyncState::Holdover => protocol::SyncMode::Holdover,
-                },
-                time_valid: gps.is_some(),
-                left: status(0, raw.faults.0, step.left_referenced),
-                right: status(1, raw.faults.1, step.right_referenced),
-                model: self.settings.chassis.uncertainty_model,
-            };
-            self.mcu_time_us = self.mcu_time_us(raw.sample.tick);
-            if sequence % self.settings.output_divider.max(1) != 0 {
-                return Some(None);
-            }
-            let integrator = self.integrator.as_ref()?;
-            let pose = integrator.pose();
-            let sigma = integrator.sigma();
-            Some(Some(PoseRecord {
-                sequence,
-                flags: self.flags,
-                mcu_time_us: self.mcu_time_us,
-                gnss: gps.map_or(GnssTime::default(), |g| GnssTime {
-                    week: g.week,
-                    tow_ms: g.tow * 1000,
-                    sample_in_second: raw.sample.index as u16,
-                }),
-                x: pose.x,
-                y: pose.y,
-                heading: pose.heading,
-                sigma_x: sigma.x,
-                sigma_y: sigma.y,
-                sigma_heading: sigma.heading,
-                sigma_xy: sigma.xy,
-                gamma_left: counts.left,
-                gamma_right: counts.right,
-                index_left: refs.left.unwrap_or(0),
-                index_right: refs.right.unwrap_or(0),
-                dropped: self.dropped_since,
-            }))
-        }
-
-        /// True when the sample just processed starts a new second of samples: time for the
-        /// once-a-second Status heartbeat.
-        fn heartbeat_due(&self) -> bool {
-            self.sequence.wrapping_sub(1) % self.settings.rate.max(1) == 0
-        }
-
-        /// The Status heartbeat after sample `raw`.
-        fn heartbeat(
-            &self,
-            raw: &RawSample,
-            store: StoreState,
-            rx_errors: u32,
-            gnss_lost: u32,
-        ) -> Status {
-            Status {
-                uptime_us: self.mcu_time_us,
-                flags: self.flags,
-                rate_hz: self.settings.rate,
-                samples: self.sequence,
-                dropped_total: self.dropped_total,
-                pps_edges: raw.stats.accepted,
-                pps_rejected: raw.stats.glitches,
-                rx_errors,
-                settings_source: store.source,
-                settings_dirty: store.dirty,
-                samples_lost: raw.queue_lost,
-                gnss_rx_lost: gnss_lost,
-                merged_samples: self.merged_samples,
-            }
-        }
-
-        /// The record was queued (true) or dropped for lack of room (false).
-        fn sent(&mut self, sent: bool) {
-            if sent {
-                self.dropped_since = 0;
-                self.mismatch = [false; 2];
-            } else {
-                self.dropped_since = self.dropped_since.saturating_add(1);
-                self.dropped_total = self.dropped_total.saturating_add(1);
-            }
-        }
-
-        fn live(&mut self, raw: &RawSample, process_cycles: u32) -> Live {
-            self.isr_cycles_max = self.isr_cycles_max.max(raw.isr_cycles);
-            self.process_cycles_max = self.process_cycles_max.max(process_cycles);
-            Live {
-                isr_cycles_max: self.isr_cycles_max,
-                process_cycles_max: self.process_cycles_max,
-                isr_cycles_last: raw.isr_cycles,
-                process_cycles_last: process_cycles,
-                samples: self.sequence,
-                dropped_total: self.dropped_total,
-                flags: self.flags,
-                stats: raw.stats,
-                period: raw.period,
-                index_mismatches: [self.trackers[0].mismatches(), self.trackers[1].mismatches()],
-                nmea_errors: self.nmea_errors,
-                time_messages: self.time_messages,
-                mcu_time_us: self.mcu_time_us,
-                samples_lost: raw.queue_lost,
-                merged_samples: self.merged_samples,
-                latency_max: self.latency_max,
-                index_lost: self.index_lost,
-                pps_overcaptures: self.pps_overcaptures,
-                moving: self.sequence.wrapping_sub(self.last_motion) <= self.settings.rate.max(1),
             }
         }
     }

@@ -3,7 +3,7 @@
 
 use core::hint::black_box;
 use cortex_m_semihosting::hprintln;
-use odo_core::protocol::command::{execute, parse};
+use odo_core::console::{execute, parse};
 use odo_core::protocol::{encode_frame, FrameDecoder, Message, PoseRecord, MAX_ENCODED_FRAME};
 use odo_core::settings::Settings;
 

@@ -19,7 +19,7 @@ use odo_core::settings::{
     validate_chassis, Choice, Group, Key, SettingError, Settings, RELATED_KEYS,
 };
 
-use crate::core_api::{ChassisParams, UncertaintyModel};
+use odo_core::odometry::{ChassisParams, UncertaintyModel};
 
 /// Why a file, an assignment or a value was refused. `origin` names the file (or `--set`).
 #[derive(Debug, Clone, PartialEq)]
@@ -313,7 +313,7 @@ pub fn load(config: Option<&Path>, sets: &[String]) -> Result<ChassisParams> {
 /// The `set` lines that send a TOML text of any keys to the unit: every key the file gives,
 /// the related keys ([`RELATED_KEYS`]) first, then in the table's order, in the unit's text
 /// form, at most
-/// [`odo_core::protocol::command::MAX_SET_PAIRS`] pairs per (atomic) `set`. The values are
+/// [`odo_core::console::MAX_SET_PAIRS`] pairs per (atomic) `set`. The values are
 /// checked first as in [`parse_settings`] (over the defaults).
 pub fn push_lines_of(origin: &str, text: &str) -> Result<Vec<String>> {
     let (s, given) = parse_settings(origin, text, Settings::DEFAULT)?;
@@ -330,7 +330,7 @@ pub fn push_lines_of(origin: &str, text: &str) -> Result<Vec<String>> {
         return Err(ConfigError::NothingToSend(origin.into()).into());
     }
     Ok(pairs
-        .chunks(odo_core::protocol::command::MAX_SET_PAIRS)
+        .chunks(odo_core::console::MAX_SET_PAIRS)
         .map(|c| format!("set {}", c.join(" ")))
         .collect())
 }

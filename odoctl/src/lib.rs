@@ -21,7 +21,6 @@ macro_rules! outln {
 pub mod calib;
 pub mod commands;
 pub mod config;
-pub mod core_api;
 pub mod csvio;
 pub mod link;
 pub mod memory;

@@ -5,7 +5,6 @@
 //! Subcommands `monitor`, `record`, `decode` and `config`.
 
 use std::collections::VecDeque;
-use std::fmt::Write as _;
 use std::fs::File;
 use std::io::{BufWriter, ErrorKind, Read, Write};
 use std::net::TcpStream;
@@ -14,10 +13,11 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
-use odo_core::protocol::{DecoderStats, Frame, FrameDecoder, Message, PoseRecord, SyncMode};
+use odo_core::protocol::{DecoderStats, Frame, FrameDecoder, Message, PoseRecord};
+use odo_core::timing::SyncState;
 
 use crate::config as cfg;
-use crate::csvio::fmt_t;
+use crate::csvio::{RecordFields, Sample, SamplesLayout, UnitPose};
 
 /// A byte stream to the unit.
 pub trait Link: Read + Write + Send {}
@@ -247,11 +247,11 @@ impl Session {
 
 const REPLY_TIMEOUT: Duration = Duration::from_secs(5);
 
-fn sync_name(m: SyncMode) -> &'static str {
+fn sync_name(m: SyncState) -> &'static str {
     match m {
-        SyncMode::FreeRunning => "free",
-        SyncMode::PpsLocked => "pps",
-        SyncMode::Holdover => "hold",
+        SyncState::FreeRunning => "free",
+        SyncState::Locked => "pps",
+        SyncState::Holdover => "hold",
     }
 }
 
@@ -378,10 +378,6 @@ impl TimeBase {
     }
 }
 
-/// Header of the CSV that `record` and `decode` write: the SAMPLES columns, then the unit's
-/// own record.
-pub const RECORD_HEADER: &str = "t,left,right,left_index,right_index,seq,x,y,heading,sigma_x,sigma_y,sigma_heading,sigma_xy,flags,mcu_time_us,gps_week,gps_tow_ms,sample_in_second,dropped";
-
 /// Writes pose records as SAMPLES CSV rows; skips rows whose time does not increase.
 struct RecordWriter<W: Write> {
     w: W,
@@ -394,7 +390,7 @@ struct RecordWriter<W: Write> {
 
 impl<W: Write> RecordWriter<W> {
     fn new(mut w: W, time: TimeBase) -> Result<Self> {
-        writeln!(w, "{RECORD_HEADER}")?;
+        writeln!(w, "{}", SamplesLayout::Record.header())?;
         Ok(Self {
             w,
             time,
@@ -412,31 +408,33 @@ impl<W: Write> RecordWriter<W> {
             return Ok(());
         }
         self.last_t = Some(t);
-        let idx = |seen: bool, v: i64| if seen { v.to_string() } else { String::new() };
-        self.buf.clear();
-        let _ = writeln!(
-            self.buf,
-            "{},{},{},{},{},{},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{},{},{},{},{},{}",
-            fmt_t(t),
-            r.gamma_left,
-            r.gamma_right,
-            idx(r.flags.left.index_seen, r.index_left),
-            idx(r.flags.right.index_seen, r.index_right),
-            r.sequence,
-            r.x,
-            r.y,
-            r.heading,
-            r.sigma_x,
-            r.sigma_y,
-            r.sigma_heading,
-            r.sigma_xy,
-            r.flags.to_bits(),
+        let sample = Sample {
+            t,
+            left: r.gamma_left,
+            right: r.gamma_right,
+            left_index: r.flags.left.index_seen.then_some(r.index_left),
+            right_index: r.flags.right.index_seen.then_some(r.index_right),
+            flags: Some(u64::from(r.flags.to_bits())),
+            unit: Some(UnitPose {
+                seq: Some(u64::from(r.sequence)),
+                x: r.x,
+                y: r.y,
+                heading: r.heading,
+                sigma_x: r.sigma_x,
+                sigma_y: r.sigma_y,
+                sigma_heading: r.sigma_heading,
+                sigma_xy: r.sigma_xy,
+            }),
+        };
+        let clocks: RecordFields = [
             r.mcu_time_us,
-            r.gnss.week,
-            r.gnss.tow_ms,
-            r.gnss.sample_in_second,
-            r.dropped
-        );
+            u64::from(r.gnss.week),
+            u64::from(r.gnss.tow_ms),
+            u64::from(r.gnss.sample_in_second),
+            u64::from(r.dropped),
+        ];
+        self.buf.clear();
+        SamplesLayout::Record.push_row(&mut self.buf, &sample, Some(&clocks));
         self.w.write_all(self.buf.as_bytes())?;
         self.rows += 1;
         Ok(())
@@ -545,7 +543,7 @@ pub fn record(
         }
         None => {
             if let Some(mut f) = file.take() {
-                writeln!(f, "{RECORD_HEADER}")?;
+                writeln!(f, "{}", SamplesLayout::Record.header())?;
                 f.flush()?;
             }
             (0, 0)

@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use clap::{Args, Parser, Subcommand};
 
 use odo_core::odometry::UncertaintyModel;
-use odoctl::calib::{DeltaMode, WindowStart};
+use odoctl::calib::{CalibrationOptions, DeltaMode, WindowStart};
 use odoctl::simulate::{PathKind, SimSettings};
 
 #[derive(Parser)]
@@ -431,19 +431,21 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             initial: a.initial,
             sets: a.sets,
             out: a.out,
-            delta_window: a.delta_window,
-            reference_sigma: a.reference_sigma,
-            delta_mode: a.delta_mode,
-            fit_delta: !a.no_delta,
-            fit_delta_diff: !a.no_fit_delta_diff,
-            reference_heading_sigma: a.reference_heading_sigma_deg.to_radians(),
-            models: a.models.list(),
-            polish: a.polish && !a.no_polish,
-            windows: a.windows,
-            window_start: a.window_start,
             windows_out: a.windows_out,
             plots: a.plots,
-            quiet: a.quiet,
+            calibration: CalibrationOptions {
+                delta_window: a.delta_window,
+                reference_sigma: a.reference_sigma,
+                delta_mode: a.delta_mode,
+                fit_delta: !a.no_delta,
+                fit_delta_diff: !a.no_fit_delta_diff,
+                reference_heading_sigma: a.reference_heading_sigma_deg.to_radians(),
+                models: a.models.list(),
+                polish: a.polish && !a.no_polish,
+                windows: a.windows,
+                window_start: a.window_start,
+                quiet: a.quiet,
+            },
         }),
         Cmd::Validate {
             samples,

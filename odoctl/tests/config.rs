@@ -2,7 +2,7 @@
 //! and its `config push` lines carry every key bit for bit, and both sides know the same
 //! keys.
 
-use odo_core::protocol::command::{execute, MAX_SET_PAIRS};
+use odo_core::console::{execute, MAX_SET_PAIRS};
 use odo_core::settings::{Key, Kind, Settings, Value};
 use odo_core::timing::{SyncMode, TimeTagPps};
 use odoctl::config::{self, ConfigError};

@@ -241,10 +241,7 @@ fn config_pull_writes_what_push_sends_back() {
     back.chassis.track_width = 0.7;
     back.rate = 100;
     for l in &lines {
-        assert!(
-            odo_core::protocol::command::execute(l, &mut back).0.ok,
-            "{l}"
-        );
+        assert!(odo_core::console::execute(l, &mut back).0.ok, "{l}");
     }
     assert_eq!(back.to_bytes(), unit.to_bytes());
     assert_eq!(

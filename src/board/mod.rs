@@ -21,33 +21,30 @@
 //!
 //! The `qemu` feature builds the same application for QEMU's `netduinoplus2`: HSI 16 MHz, the
 //! timers count at 1 GHz of emulated time, the encoders, index pulses and fault lines come
-//! from the deterministic [`sim`] drive, the PPS captures and NMEA bytes from the simulated
-//! GNSS receiver [`sim_gnss`], the settings flash is RAM ([`flash`]).
+//! from a deterministic simulated drive, the PPS captures and NMEA bytes from a simulated
+//! GNSS receiver, the settings flash is RAM. What differs between the two lives in
+//! [`variant`] (`real/` or `qemu/`).
 
-#[cfg_attr(feature = "qemu", allow(dead_code))]
-pub mod encoders;
 pub mod flash;
 pub mod sampler;
 pub mod serial;
-#[cfg(feature = "qemu")]
-pub mod sim;
-#[cfg(feature = "qemu")]
-pub mod sim_gnss;
 pub mod stack;
 
-use stm32f4xx_hal::{pac, rcc::Config};
+/// The board this build runs on: the STM32F401 board (`real/`) or QEMU's `netduinoplus2`
+/// (`qemu/`, feature `qemu`). Both offer the same items.
+#[cfg_attr(not(feature = "qemu"), path = "real/mod.rs")]
+#[cfg_attr(feature = "qemu", path = "qemu/mod.rs")]
+pub mod variant;
+
+pub use variant::{
+    attach_gnss, cycles, start_clocks, start_cycle_counter, timer_hz, unique_id, Acquisition,
+    GnssRx, SamplerExtra, COUNTER_BITS, CYCLES_UNIT,
+};
+
+use stm32f4xx_hal::pac;
 
 /// Baud rate of the GNSS receiver's NMEA output (USART1).
 pub const GNSS_BAUD: u32 = 38_400;
-
-/// Where the USART1 interrupt takes NMEA bytes from: the UART on the board; in the `qemu`
-/// build the simulated receiver's wire ([`sim_gnss::SimUart`]).
-#[cfg(not(feature = "qemu"))]
-pub type GnssRx = serial::GnssUart;
-/// Where the USART1 interrupt takes NMEA bytes from: the UART on the board; in the `qemu`
-/// build the simulated receiver's wire ([`sim_gnss::SimUart`]).
-#[cfg(feature = "qemu")]
-pub type GnssRx = sim_gnss::SimUart;
 
 /// Watchdog timeout, milliseconds, at the LSI's nominal 32 kHz. The LSI runs anywhere
 /// from 17 to 47 kHz (datasheet DS9716), so the real timeout lies between 2.7 s and 7.5 s:
@@ -60,36 +57,11 @@ pub const WATCHDOG_MIN_MS: u32 = WATCHDOG_MS * 32 / 47;
 
 const _: () = assert!(WATCHDOG_MIN_MS > 3 * flash::MAX_ERASE_MS);
 
-/// Reloads the independent watchdog from anywhere (the flash driver, just before an erase).
-#[cfg_attr(feature = "qemu", allow(dead_code))]
-pub fn watchdog_feed() {
-    // Note(unsafe): a write of the reload key 0xAAAA to IWDG_KR, a write-only register whose
-    // only effect is the reload; atomic, and harmless before the watchdog is started.
-    unsafe { (*pac::IWDG::ptr()).kr().write(|w| w.bits(0xAAAA)) };
-}
-
-/// Where the system clock comes from after [`start_clocks`].
-#[derive(Clone, Copy, PartialEq, Eq, defmt::Format)]
-pub enum ClockSource {
-    /// PLL from the HSE ([`HSE_HZ`]): crystal or external clock accuracy.
-    #[cfg_attr(any(feature = "qemu", not(feature = "hse")), allow(dead_code))]
-    Hse,
-    /// PLL from the 16 MHz HSI (+-1 % at 25 C, +-4 % over temperature): a build without
-    /// the `hse` feature, or QEMU.
-    #[cfg_attr(all(not(feature = "qemu"), feature = "hse"), allow(dead_code))]
-    Hsi,
-    /// The build asked for the HSE but it did not start within [`HSE_STARTUP_MS`], or the
-    /// clock security system saw it fail later: PLL from the HSI, reported in `status`.
-    HsiFallback,
-}
-
-/// How long start-up waits for the HSE to become ready, milliseconds (a crystal takes about
-/// 2 ms; an external clock is ready at once).
-#[cfg_attr(any(feature = "qemu", not(feature = "hse")), allow(dead_code))]
-pub const HSE_STARTUP_MS: u32 = 100;
+pub use odo_core::timing::ClockSource;
 
 /// Set by the clock security system's NMI when the HSE failed after start-up.
-static HSE_FAILED: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
+pub(crate) static HSE_FAILED: core::sync::atomic::AtomicBool =
+    core::sync::atomic::AtomicBool::new(false);
 
 /// The clock source now: [`ClockSource::HsiFallback`] once the clock security system has
 /// switched away from a failed HSE.
@@ -101,154 +73,12 @@ pub fn clock_source(at_start: ClockSource) -> ClockSource {
     }
 }
 
-/// Largest frequency error of the timer clock for `source`, ppm: what the PPS discipline
-/// must accept to lock ([`odo_core::timing`]'s tolerance constants).
-pub fn clock_tolerance_ppm(source: ClockSource) -> u32 {
-    match source {
-        ClockSource::Hse => odo_core::timing::HSE_CRYSTAL_TOLERANCE_PPM,
-        ClockSource::Hsi | ClockSource::HsiFallback => odo_core::timing::HSI_TOLERANCE_PPM,
-    }
-}
-
-/// Starts the clocks ([`clock_config`]) without ever hanging: with the `hse` feature, the
-/// HSE is started first and waited for at most [`HSE_STARTUP_MS`] (at the reset clock, the
-/// 16 MHz HSI); if it is not ready the PLL runs from the HSI instead and the result says
-/// so. With the HSE running, the clock security system is enabled: an HSE failure then
-/// raises the NMI, which restarts the PLL from the HSI at the same 84 MHz.
-pub fn start_clocks(rcc: pac::RCC) -> (stm32f4xx_hal::rcc::Rcc, ClockSource) {
-    use stm32f4xx_hal::rcc::RccExt;
-    #[cfg(all(not(feature = "qemu"), feature = "hse"))]
-    {
-        rcc.cr().modify(|_, w| {
-            #[cfg(feature = "hse-bypass")]
-            w.hsebyp().set_bit();
-            w.hseon().set_bit()
-        });
-        // About 10 cycles per poll at 16 MHz.
-        let polls = HSE_STARTUP_MS * (16_000_000 / 1000 / 10);
-        let mut ready = false;
-        for _ in 0..polls {
-            if rcc.cr().read().hserdy().bit_is_set() {
-                ready = true;
-                break;
-            }
-        }
-        if ready {
-            let rcc = rcc.freeze(clock_config());
-            // Note(unsafe): RCC_CR CSSON (bit 19): the clock security system watches the
-            // HSE from now on; a failure raises the NMI (handler below).
-            unsafe {
-                (*pac::RCC::ptr())
-                    .cr()
-                    .modify(|r, w| w.bits(r.bits() | 1 << 19))
-            };
-            return (rcc, ClockSource::Hse);
-        }
-        rcc.cr()
-            .modify(|_, w| w.hseon().clear_bit().hsebyp().clear_bit());
-        (rcc.freeze(hsi_config()), ClockSource::HsiFallback)
-    }
-    #[cfg(any(feature = "qemu", not(feature = "hse")))]
-    {
-        (rcc.freeze(clock_config()), ClockSource::Hsi)
-    }
-}
-
-/// The clock security system's NMI: the HSE failed, the hardware switched the system clock
-/// to the HSI and stopped the PLL. Restarts the PLL from the HSI at the same 84 MHz (so the
-/// timers, UARTs and flash wait states stay right) and flags the fallback.
-#[cfg(all(not(feature = "qemu"), feature = "hse"))]
-#[cortex_m_rt::exception]
-unsafe fn NonMaskableInt() {
-    // Note(unsafe): raw RCC registers, RM0368 sec. 6.3: CIR CSSC (bit 23) clears the CSS
-    // flag; PLLCFGR = HSI source, M = 16, N = 336, P = /4, Q = 7 (1 MHz VCO input, 336 MHz
-    // VCO, 84 MHz SYSCLK, 48 MHz Q); PLLON (bit 24) and wait for PLLRDY (bit 25, the HSI
-    // always runs); CFGR SW = PLL (0b10) and wait for SWS. Nothing else touches RCC after
-    // start-up, and the NMI preempts everything, so these read-modify-writes are not raced.
-    unsafe {
-        let rcc = &*pac::RCC::ptr();
-        rcc.cir().modify(|r, w| w.bits(r.bits() | 1 << 23));
-        rcc.pllcfgr()
-            .write(|w| w.bits(16 | 336 << 6 | 0b01 << 16 | 7 << 24));
-        rcc.cr().modify(|r, w| w.bits(r.bits() | 1 << 24));
-        while rcc.cr().read().bits() & 1 << 25 == 0 {}
-        rcc.cfgr().modify(|r, w| w.bits((r.bits() & !0b11) | 0b10));
-        while rcc.cfgr().read().bits() >> 2 & 0b11 != 0b10 {}
-    }
-    HSE_FAILED.store(true, core::sync::atomic::Ordering::Relaxed);
-}
-
-/// The HSI variant of [`clock_config`]: the same 84 MHz from the 16 MHz HSI.
-#[cfg_attr(feature = "qemu", allow(dead_code))]
-pub fn hsi_config() -> Config {
-    use stm32f4xx_hal::prelude::*;
-    Config::hsi().sysclk(84.MHz()).pclk1(42.MHz())
-}
-
-/// Clock configuration.
-///
-/// Board: 84 MHz from the PLL. The default build (feature `hse-bypass`) takes an 8 MHz
-/// external clock on OSC_IN in bypass mode, as a Nucleo-64's ST-LINK provides; a board with
-/// an 8 MHz crystal builds with `--no-default-features --features hse`; without either, the
-/// PLL runs from the 16 MHz HSI, +-1 % at 25 C and +-4 % over temperature: the PPS
-/// discipline still locks (its tolerance follows the clock, [`clock_tolerance_ppm`]), but
-/// free-running (indoor) timing is only that good and the UART baud rates may leave the
-/// receivers' tolerance (docs/HARDWARE.md). APB1 = 42 MHz, so TIM2-5 count at 84 MHz;
-/// APB2 = 84 MHz.
-///
-/// QEMU: the HSI at 16 MHz without PLL (QEMU's RCC never reports the PLL locked).
-pub fn clock_config() -> Config {
-    #[cfg(feature = "qemu")]
-    {
-        Config::hsi()
-    }
-    #[cfg(all(not(feature = "qemu"), feature = "hse"))]
-    {
-        use stm32f4xx_hal::prelude::*;
-        let config = Config::hse(HSE_HZ.Hz()).sysclk(84.MHz()).pclk1(42.MHz());
-        // A Nucleo-64 has no crystal: its ST-LINK feeds an 8 MHz clock (MCO) into OSC_IN,
-        // which the HSE must take in bypass mode.
-        #[cfg(feature = "hse-bypass")]
-        let config = config.bypass_hse_oscillator();
-        config
-    }
-    #[cfg(all(not(feature = "qemu"), not(feature = "hse")))]
-    {
-        hsi_config()
-    }
-}
-
-/// Frequency of the HSE crystal with the `hse` feature, Hz.
-#[cfg_attr(any(feature = "qemu", not(feature = "hse")), allow(dead_code))]
-pub const HSE_HZ: u32 = 8_000_000;
-
-/// Frequency of the TIM5 sample timer's ticks, Hz: TIM2-5 in QEMU count at 1 GHz of emulated
-/// time whatever the clock tree says; on the board the APB1 timer clock.
-pub fn timer_hz(clocks: &stm32f4xx_hal::rcc::Clocks) -> u32 {
-    if cfg!(feature = "qemu") {
-        1_000_000_000
-    } else {
-        clocks.timclk1().raw()
-    }
-}
-
-/// The unit's 96-bit unique ID (zeros in QEMU, which does not map that system memory).
-pub fn unique_id() -> [u8; 12] {
-    #[cfg(not(feature = "qemu"))]
-    {
-        let mut id = [0u8; 12];
-        let uid = stm32f4xx_hal::signature::Uid::get();
-        id[0..2].copy_from_slice(&uid.x().to_le_bytes());
-        id[2..4].copy_from_slice(&uid.y().to_le_bytes());
-        id[4] = uid.waf_num();
-        let lot = uid.lot_num().as_bytes();
-        let n = lot.len().min(7);
-        id[5..5 + n].copy_from_slice(&lot[..n]);
-        id
-    }
-    #[cfg(feature = "qemu")]
-    {
-        [0u8; 12]
+/// What `status` reports of the board, `at_start` being the clock source start-up found.
+pub fn report(at_start: ClockSource) -> odo_core::unit::BoardReport {
+    odo_core::unit::BoardReport {
+        clock: clock_source(at_start),
+        stack: stack::high_water(),
+        cycles_unit: CYCLES_UNIT,
     }
 }
 
@@ -324,136 +154,5 @@ impl FaultLines {
     /// (left, right): true when the encoder reports a fault.
     pub fn read(&self) -> (bool, bool) {
         (self.left.is_low(), self.right.is_low())
-    }
-}
-
-/// Where the counts, index pulses and fault lines come from: the timers and GPIOs on the
-/// board, the simulated drive in the `qemu` build.
-pub struct Acquisition {
-    #[cfg(not(feature = "qemu"))]
-    encoders: encoders::Encoders,
-    #[cfg(not(feature = "qemu"))]
-    faults: FaultLines,
-    #[cfg(feature = "qemu")]
-    sim: sim::SimDrive,
-}
-
-impl Acquisition {
-    /// From the encoder timers and the fault lines.
-    #[cfg(not(feature = "qemu"))]
-    pub fn new(encoders: encoders::Encoders, faults: FaultLines) -> Self {
-        Self { encoders, faults }
-    }
-
-    /// From the simulated drive (the timers and fault lines are not used in QEMU).
-    #[cfg(feature = "qemu")]
-    pub fn new(_faults: FaultLines) -> Self {
-        Self {
-            sim: sim::SimDrive::new(),
-        }
-    }
-
-    /// Both counters now, read first thing in the sample interrupt (the board's timers);
-    /// `None` in QEMU, whose drive is sampled at the sample's tick ([`Self::snapshot`]).
-    #[inline(always)]
-    pub fn snapshot_now(&self) -> Option<encoders::Snapshot> {
-        #[cfg(not(feature = "qemu"))]
-        {
-            Some(self.encoders.snapshot())
-        }
-        #[cfg(feature = "qemu")]
-        {
-            None
-        }
-    }
-
-    /// Both counters at the sample instant `tick`.
-    #[inline(always)]
-    pub fn snapshot(&mut self, tick: u64) -> encoders::Snapshot {
-        #[cfg(not(feature = "qemu"))]
-        {
-            let _ = tick;
-            self.encoders.snapshot()
-        }
-        #[cfg(feature = "qemu")]
-        {
-            self.sim.snapshot(tick)
-        }
-    }
-
-    /// The index pulse of `wheel` (0 left, 1 right) latched by its timer since the last
-    /// call (the timer's capture interrupt); never one in QEMU, whose drive reports its
-    /// pulses with the samples ([`Self::simulated_index`]).
-    pub fn take_index(&self, wheel: usize) -> Option<encoders::IndexCapture> {
-        #[cfg(not(feature = "qemu"))]
-        {
-            if wheel == 0 {
-                self.encoders.take_index_left()
-            } else {
-                self.encoders.take_index_right()
-            }
-        }
-        #[cfg(feature = "qemu")]
-        {
-            let _ = wheel;
-            None
-        }
-    }
-
-    /// Index pulses of the simulated drive since the last snapshot (none on the board,
-    /// where the timers latch them).
-    pub fn simulated_index(&mut self) -> [Option<u32>; 2] {
-        #[allow(unused_mut)]
-        let mut out = [None, None];
-        #[cfg(feature = "qemu")]
-        for pulse in self.sim.take_index() {
-            out[pulse.wheel] = Some(pulse.raw);
-        }
-        out
-    }
-
-    /// The fault lines (left, right) at `tick`.
-    pub fn faults(&self, tick: u64) -> (bool, bool) {
-        #[cfg(not(feature = "qemu"))]
-        {
-            let _ = tick;
-            self.faults.read()
-        }
-        #[cfg(feature = "qemu")]
-        {
-            self.sim.faults(tick)
-        }
-    }
-}
-
-/// A free-running cycle count for measuring code: the DWT cycle counter on the board (CPU
-/// cycles at 84 MHz); in QEMU, TIM2's counter, which the `qemu` build leaves untouched and
-/// which under `-icount shift=0` counts executed instructions.
-#[inline(always)]
-pub fn cycles() -> u32 {
-    #[cfg(not(feature = "qemu"))]
-    {
-        cortex_m::peripheral::DWT::cycle_count()
-    }
-    #[cfg(feature = "qemu")]
-    {
-        // Note(unsafe): a read of TIM2 CNT, a register no other code of the qemu build uses
-        // (the encoders are simulated); reads have no side effect.
-        unsafe { (*pac::TIM2::ptr()).cnt().read().bits() }
-    }
-}
-
-/// Starts what [`cycles`] reads.
-pub fn start_cycle_counter(core: &mut cortex_m::Peripherals) {
-    #[cfg(not(feature = "qemu"))]
-    {
-        core.DCB.enable_trace();
-        core.DWT.enable_cycle_counter();
-    }
-    #[cfg(feature = "qemu")]
-    {
-        let _ = core;
-        // Note(unsafe): TIM2 CR1 = CEN; QEMU's TIM2 then counts at 1 GHz of emulated time.
-        unsafe { (*pac::TIM2::ptr()).cr1().write(|w| w.bits(1)) };
     }
 }

@@ -1,10 +1,10 @@
 //! The UARTs: the host link on USART2 (commands in, frames out) and the GNSS NMEA input on
 //! USART1 (receive only).
 //!
-//! Transmission is interrupt-driven from [`TxRing`], a byte ring that producers fill with
-//! whole frames only ([`TxRing::push_frame`] refuses a frame that does not fit, so a record
-//! the link cannot carry is dropped whole and counted by the caller). The USART2 interrupt
-//! moves bytes to the data register while TXE is set and the ring is not empty; TXEIE is on
+//! Transmission is interrupt-driven from [`TxRing`] (`odo_core::protocol::tx_ring`), a byte
+//! ring that producers fill with whole frames only ([`TxRing::push_frame`] refuses a frame
+//! that does not fit, so a record the link cannot carry is dropped whole and counted by the
+//! caller). The USART2 interrupt moves bytes to the data register while TXE is set and the ring is not empty; TXEIE is on
 //! only while bytes wait. Nothing here ever waits for the UART, so sampling is never
 //! blocked. Reception puts each byte into a lock-free queue for the command task.
 //!
@@ -12,6 +12,7 @@
 //! ring.
 
 use heapless::spsc::Producer;
+use odo_core::protocol::TxRing;
 use stm32f4xx_hal::pac;
 use stm32f4xx_hal::rcc::Enable;
 
@@ -23,65 +24,6 @@ const CR1_TE: u16 = 1 << 3;
 const CR1_RXNEIE: u16 = 1 << 5;
 const CR1_TXEIE: u16 = 1 << 7;
 const CR1_UE: u16 = 1 << 13;
-
-/// A byte ring of `N` bytes.
-pub struct TxRing<const N: usize> {
-    buf: [u8; N],
-    head: usize,
-    len: usize,
-}
-
-impl<const N: usize> Default for TxRing<N> {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
-impl<const N: usize> TxRing<N> {
-    /// An empty ring.
-    pub const fn new() -> Self {
-        Self {
-            buf: [0; N],
-            head: 0,
-            len: 0,
-        }
-    }
-
-    /// Free bytes.
-    pub fn free(&self) -> usize {
-        N - self.len
-    }
-
-    /// Appends `frame` whole if it fits in the free space less `reserve`; false otherwise
-    /// (nothing is written).
-    pub fn push_frame(&mut self, frame: &[u8], reserve: usize) -> bool {
-        if frame.len() + reserve > self.free() {
-            return false;
-        }
-        let tail = (self.head + self.len) % N;
-        let first = frame.len().min(N - tail);
-        self.buf[tail..tail + first].copy_from_slice(&frame[..first]);
-        self.buf[..frame.len() - first].copy_from_slice(&frame[first..]);
-        self.len += frame.len();
-        true
-    }
-
-    /// Takes the oldest byte.
-    pub fn pop(&mut self) -> Option<u8> {
-        if self.len == 0 {
-            return None;
-        }
-        let b = self.buf[self.head];
-        self.head = (self.head + 1) % N;
-        self.len -= 1;
-        Some(b)
-    }
-
-    /// True when no byte waits.
-    pub fn is_empty(&self) -> bool {
-        self.len == 0
-    }
-}
 
 /// USARTDIV for 16x oversampling (the BRR value), rounded.
 fn brr(pclk: u32, baud: u32) -> u16 {

@@ -4,40 +4,30 @@
 //! longer than the layout it knows (fields appended by a later minor revision) and ignores the
 //! extra bytes; a shorter body is an error.
 
-use super::bytes::{Reader, Writer};
 use super::{DecodeError, EncodeError, MsgType};
+use crate::bytes::{Reader, Writer};
 use crate::odometry::UncertaintyModel;
+use crate::settings::SettingsSource;
+use crate::timing::SyncState;
 use heapless::String;
 
-/// How the sample clock is disciplined (bits 0-1 of [`StatusFlags`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum SyncMode {
-    /// Samples are timed by the MCU clock alone (code 0).
-    #[default]
-    FreeRunning,
-    /// Samples are locked to the GNSS 1-PPS edges (code 1).
-    PpsLocked,
-    /// PPS was lost; samples continue on the MCU clock disciplined by the last PPS (code 2).
-    Holdover,
+/// Wire code of the sample schedule's state (bits 0-1 of [`StatusFlags`]): free-running 0,
+/// PPS-locked 1, holdover 2.
+fn sync_code(s: SyncState) -> u32 {
+    match s {
+        SyncState::FreeRunning => 0,
+        SyncState::Locked => 1,
+        SyncState::Holdover => 2,
+    }
 }
 
-impl SyncMode {
-    /// Wire code (0, 1, 2).
-    pub fn code(self) -> u32 {
-        match self {
-            Self::FreeRunning => 0,
-            Self::PpsLocked => 1,
-            Self::Holdover => 2,
-        }
-    }
-    /// From the wire code; 3 is reserved and gives `None`.
-    pub fn from_code(code: u32) -> Option<Self> {
-        match code {
-            0 => Some(Self::FreeRunning),
-            1 => Some(Self::PpsLocked),
-            2 => Some(Self::Holdover),
-            _ => None,
-        }
+/// The state of wire code `code`; 3 is reserved and gives `None`.
+fn sync_from_code(code: u32) -> Option<SyncState> {
+    match code {
+        0 => Some(SyncState::FreeRunning),
+        1 => Some(SyncState::Locked),
+        2 => Some(SyncState::Holdover),
+        _ => None,
     }
 }
 
@@ -76,13 +66,13 @@ impl WheelStatus {
 
 /// The 32-bit status word of a [`PoseRecord`] and a [`Status`] message.
 ///
-/// Bits: 0-1 [`SyncMode`] code; 2 time tag valid; 3-6 left wheel (fault, index seen, index
+/// Bits: 0-1 [`SyncState`] code; 2 time tag valid; 3-6 left wheel (fault, index seen, index
 /// mismatch, calibrated); 7-10 right wheel (same order); 11 uncertainty model (0 = paper,
 /// 1 = covariance); 12-31 reserved, sent as 0, ignored by readers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct StatusFlags {
     /// Sample clock discipline.
-    pub sync: SyncMode,
+    pub sync: SyncState,
     /// The GNSS time fields hold the time of the sample.
     pub time_valid: bool,
     /// Wheel 1 (left).
@@ -99,7 +89,7 @@ impl StatusFlags {
 
     /// The wire word.
     pub fn to_bits(&self) -> u32 {
-        self.sync.code()
+        sync_code(self.sync)
             | (self.time_valid as u32) << 2
             | self.left.bits() << 3
             | self.right.bits() << 7
@@ -109,7 +99,7 @@ impl StatusFlags {
     /// From the wire word; reserved bits are ignored, the reserved sync code 3 is an error.
     pub fn from_bits(bits: u32) -> Result<Self, DecodeError> {
         Ok(Self {
-            sync: SyncMode::from_code(bits & 3).ok_or(DecodeError::BadField("sync mode"))?,
+            sync: sync_from_code(bits & 3).ok_or(DecodeError::BadField("sync mode"))?,
             time_valid: bits & (1 << 2) != 0,
             left: WheelStatus::from_bits((bits >> 3) & 0xF),
             right: WheelStatus::from_bits((bits >> 7) & 0xF),
@@ -215,7 +205,7 @@ impl PoseRecord {
         let mut r = Reader::new(body);
         let sequence = r.u32().map_err(|_| short)?;
         let flags = r.u32().map_err(|_| short)?;
-        let mut rest = || -> Result<Self, super::bytes::OutOfSpace> {
+        let mut rest = || -> Result<Self, crate::bytes::OutOfSpace> {
             Ok(Self {
                 sequence,
                 flags: StatusFlags::default(),
@@ -245,29 +235,20 @@ impl PoseRecord {
     }
 }
 
-/// Where the settings in use came from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum SettingsSource {
-    /// No valid settings record in flash: the built-in defaults (code 0).
-    #[default]
-    Defaults,
-    /// Loaded from the flash settings store (code 1).
-    Flash,
+/// Wire code of a [`SettingsSource`] (0 defaults, 1 flash).
+fn settings_source_code(s: SettingsSource) -> u8 {
+    match s {
+        SettingsSource::Defaults => 0,
+        SettingsSource::Flash => 1,
+    }
 }
 
-impl SettingsSource {
-    fn code(self) -> u8 {
-        match self {
-            Self::Defaults => 0,
-            Self::Flash => 1,
-        }
-    }
-    fn from_code(c: u8) -> Result<Self, DecodeError> {
-        match c {
-            0 => Ok(Self::Defaults),
-            1 => Ok(Self::Flash),
-            _ => Err(DecodeError::BadField("settings source")),
-        }
+/// The [`SettingsSource`] of wire code `c`.
+fn settings_source_from_code(c: u8) -> Result<SettingsSource, DecodeError> {
+    match c {
+        0 => Ok(SettingsSource::Defaults),
+        1 => Ok(SettingsSource::Flash),
+        _ => Err(DecodeError::BadField("settings source")),
     }
 }
 
@@ -326,7 +307,7 @@ impl Status {
             w.u32(self.pps_edges)?;
             w.u32(self.pps_rejected)?;
             w.u32(self.rx_errors)?;
-            w.u8(self.settings_source.code())?;
+            w.u8(settings_source_code(self.settings_source))?;
             w.u8(self.settings_dirty as u8)?;
             w.u16(0)?;
             w.u32(self.samples_lost)?;
@@ -354,7 +335,7 @@ impl Status {
         let pps_edges = r.u32().map_err(short)?;
         let pps_rejected = r.u32().map_err(short)?;
         let rx_errors = r.u32().map_err(short)?;
-        let settings_source = SettingsSource::from_code(r.u8().map_err(short)?)?;
+        let settings_source = settings_source_from_code(r.u8().map_err(short)?)?;
         let settings_dirty = match r.u8().map_err(short)? {
             0 => false,
             1 => true,
@@ -410,7 +391,7 @@ impl DeviceInfo {
         let mut w = Writer::new(out);
         (|| {
             w.u8(self.protocol_version)?;
-            w.u8(self.settings_source.code())?;
+            w.u8(settings_source_code(self.settings_source))?;
             w.u16(0)?;
             w.u32(self.settings_checksum)?;
             w.bytes(&self.uid)?;
@@ -426,7 +407,7 @@ impl DeviceInfo {
         let short = |_| DecodeError::BodyTooShort(MsgType::DeviceInfo as u8);
         let mut r = Reader::new(body);
         let protocol_version = r.u8().map_err(short)?;
-        let settings_source = SettingsSource::from_code(r.u8().map_err(short)?)?;
+        let settings_source = settings_source_from_code(r.u8().map_err(short)?)?;
         r.u16().map_err(short)?;
         let settings_checksum = r.u32().map_err(short)?;
         let mut uid = [0u8; 12];

@@ -1,26 +1,25 @@
 //! Wire protocol between the unit and its host (byte layouts in `docs/PROTOCOL.md`).
 //!
 //! Unit -> host: binary frames. A frame is `header (8) | body | CRC-32 (4)`, COBS-encoded and
-//! followed by one 0x00 delimiter. The CRC is CRC-32/ISO-HDLC ([`crc`]) over header and body,
+//! followed by one 0x00 delimiter. The CRC is CRC-32/ISO-HDLC ([`crate::crc`]) over header and body,
 //! little-endian. The header is `version u8 | type u8 | body length u16 | sequence u32`,
 //! little-endian; the sequence counts every frame the unit sends (all types, wrapping), so a
 //! receiver can count lost frames.
 //!
-//! Host -> unit: plain text command lines (see [`command`]); each line is answered by one or
+//! Host -> unit: plain text command lines (see [`crate::console`]); each line is answered by one or
 //! more [`CommandReply`] frames.
 
-pub(crate) mod bytes;
 pub mod cobs;
-pub mod command;
-pub mod crc;
 mod decoder;
 mod messages;
+pub mod tx_ring;
 
 pub use decoder::{DecoderStats, FrameDecoder};
 pub use messages::{
-    CommandReply, DeviceInfo, GnssTime, PoseRecord, ReplyChunks, SettingsSource, Status,
-    StatusFlags, SyncMode, WheelStatus, MAX_FIRMWARE_VERSION, MAX_REPLY_TEXT,
+    CommandReply, DeviceInfo, GnssTime, PoseRecord, ReplyChunks, Status, StatusFlags, WheelStatus,
+    MAX_FIRMWARE_VERSION, MAX_REPLY_TEXT,
 };
+pub use tx_ring::{Queued, TxLink, TxRing};
 
 /// Protocol version carried in every header. Bumped on any incompatible change; appending
 /// fields at the end of a body keeps the version (readers ignore extra bytes).
@@ -217,7 +216,7 @@ pub fn encode_frame(msg: &Message, seq: u32, out: &mut [u8]) -> Result<usize, En
     raw[2..4].copy_from_slice(&(body_len as u16).to_le_bytes());
     raw[4..8].copy_from_slice(&seq.to_le_bytes());
     let crc_at = HEADER_LEN + body_len;
-    let crc = crc::crc32(&raw[..crc_at]);
+    let crc = crate::crc::crc32(&raw[..crc_at]);
     raw[crc_at..crc_at + CRC_LEN].copy_from_slice(&crc.to_le_bytes());
     let raw_len = crc_at + CRC_LEN;
     let n = cobs::encode(&raw[..raw_len], out).map_err(|_| EncodeError::BufferTooSmall)?;
@@ -235,7 +234,7 @@ pub fn parse_raw_frame(raw: &[u8]) -> Result<(Header, &[u8]), DecodeError> {
     let crc_at = raw.len() - CRC_LEN;
     let mut crc_bytes = [0u8; 4];
     crc_bytes.copy_from_slice(&raw[crc_at..]);
-    if crc::crc32(&raw[..crc_at]) != u32::from_le_bytes(crc_bytes) {
+    if crate::crc::crc32(&raw[..crc_at]) != u32::from_le_bytes(crc_bytes) {
         return Err(DecodeError::Crc);
     }
     let header = Header {

@@ -2,7 +2,7 @@
 //! meaning, place in [`Settings`], text form and record encoding.
 //!
 //! Everything else derives from this table: `get`/`set`/`help` on the unit
-//! ([`crate::protocol::command`]), the flash record codec ([`super::record`]), and the host
+//! ([`crate::console`]), the flash record codec ([`super::record`]), and the host
 //! tool's TOML files and `config push`. Adding a key: a field in [`Settings`] and one entry
 //! below (a new record offset means a new format version, [`super::SETTINGS_FORMAT_VERSION`]),
 //! plus its row in `docs/PROTOCOL.md` (a test checks the docs name every key).

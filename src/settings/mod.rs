@@ -11,16 +11,16 @@ pub mod keys;
 pub mod record;
 pub mod store;
 
+use crate::crc::crc32;
 use crate::decimal::{self, DecimalError, Shortest};
 use crate::odometry::integrator::MAX_STEP_COUNTS;
 use crate::odometry::{ChassisParams, ParamError, UncertaintyModel, WheelHarmonics};
-use crate::protocol::crc::crc32;
 use crate::timing::{SyncMode, TimeTagPps};
 use core::fmt::{self, Write};
 
-pub use crate::protocol::SettingsSource;
 pub use keys::{Choice, Group, Key, KeyInfo, Kind, RecordField, Value, KEY_TABLE};
 pub use record::{serialized_len, SETTINGS_FORMAT_VERSION};
+pub use store::SettingsSource;
 
 /// Baud rates accepted by `baud`.
 pub const BAUD_RATES: [u32; 8] = [

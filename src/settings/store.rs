@@ -26,9 +26,9 @@
 //! firmware before `max_wheel_speed` existed: they load with that key at its default. The
 //! version and length must be one of these two pairs, else the record is skipped.
 
-use super::{Settings, SettingsSource, SETTINGS_FORMAT_VERSION};
-use crate::protocol::bytes::Reader;
-use crate::protocol::crc::crc32;
+use super::{Settings, SETTINGS_FORMAT_VERSION};
+use crate::bytes::Reader;
+use crate::crc::crc32;
 
 /// Record magic ("ODOS" in memory order).
 pub const MAGIC: u32 = 0x534F_444F;
@@ -89,6 +89,16 @@ impl<E: core::fmt::Debug> core::fmt::Display for StoreError<E> {
             Self::Geometry => f.write_str("bad flash geometry"),
         }
     }
+}
+
+/// Where the settings in use came from (sent in `Status` and `DeviceInfo`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum SettingsSource {
+    /// No valid settings record in flash: the built-in defaults (code 0).
+    #[default]
+    Defaults,
+    /// Loaded from the flash settings store (code 1).
+    Flash,
 }
 
 /// What [`SettingsStore::load`] found.

@@ -5,7 +5,6 @@
 //! - [`nmea`]: ZDA/RMC parsing with checksum, UTC to GPS week and time of week.
 //! - [`tag`]: which PPS edge a time message names (`time_tag_pps`), and the GNSS second of
 //!   each grid second.
-//! - [`index`]: index-pulse tracking and the whole-turn check of the counts between pulses.
 //! - [`clock`]: the free-running 32-bit sample timer: counter and capture extension to 64
 //!   bits, and the catch-up of the grid after a CPU stall.
 //!
@@ -13,17 +12,15 @@
 //! captures and bytes.
 
 pub mod clock;
-pub mod index;
 pub mod nmea;
 pub mod pps;
 pub mod tag;
 
 pub use clock::{catch_up, CatchUp, TimerExtender};
-pub use index::{extend_near, IndexCheck, IndexTracker};
 pub use nmea::{GpsTime, LineBuffer, NmeaError, TimeMessage, UtcDateTime, GPS_UTC_LEAP_SECONDS};
 pub use pps::{
-    resolve_capture, ConfigError, Discipline, DisciplineConfig, PpsEvent, PpsStats, Sample,
-    SyncMode, SyncState, DIRECT_LOCK_MAX_PPM, HSE_CRYSTAL_TOLERANCE_PPM, HSI_TOLERANCE_PPM,
+    resolve_capture, ClockSource, ConfigError, Discipline, DisciplineConfig, PpsEvent, PpsStats,
+    Sample, SyncMode, SyncState, DIRECT_LOCK_MAX_PPM, HSE_CRYSTAL_TOLERANCE_PPM, HSI_TOLERANCE_PPM,
     MAX_OFFSET_LIMIT_PPM, RATE_RANGE,
 };
 pub use tag::{TimeTagPps, TimeTagger};

@@ -65,6 +65,30 @@ pub const HSE_CRYSTAL_TOLERANCE_PPM: u32 = 500;
 /// plus a 1 % margin.
 pub const HSI_TOLERANCE_PPM: u32 = 50_000;
 
+/// Where the MCU's clock (and so the sample timer's) comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ClockSource {
+    /// PLL from the HSE: crystal or external clock accuracy.
+    Hse,
+    /// PLL from the 16 MHz HSI (+-1 % at 25 C, +-4 % over temperature): a build without
+    /// the `hse` feature, or QEMU.
+    Hsi,
+    /// The build asked for the HSE but it did not start, or the clock security system saw
+    /// it fail later: PLL from the HSI, reported in `status`.
+    HsiFallback,
+}
+
+impl ClockSource {
+    /// Largest frequency error of the timer clock, ppm: what the PPS discipline must accept
+    /// to lock ([`HSE_CRYSTAL_TOLERANCE_PPM`], [`HSI_TOLERANCE_PPM`]).
+    pub fn tolerance_ppm(self) -> u32 {
+        match self {
+            Self::Hse => HSE_CRYSTAL_TOLERANCE_PPM,
+            Self::Hsi | Self::HsiFallback => HSI_TOLERANCE_PPM,
+        }
+    }
+}
+
 /// Largest `max_offset_ppm` [`DisciplineConfig::validate`] accepts, ppm (10 %): beyond it
 /// whole seconds could no longer be told apart reliably from one interval.
 pub const MAX_OFFSET_LIMIT_PPM: u32 = 100_000;
@@ -84,9 +108,10 @@ pub enum SyncMode {
 }
 
 /// The state of the sample schedule, reported in every record.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum SyncState {
     /// Off the MCU clock alone (nominal timer frequency).
+    #[default]
     FreeRunning,
     /// On the PPS: grid anchored at the last captured edge, period measured.
     Locked,

@@ -45,8 +45,8 @@ use heapless::spsc::{Consumer, Producer, Queue};
 use odo_core::timing::UtcDateTime;
 use stm32f4xx_hal::pac::Interrupt;
 
-use super::serial::{GnssUart, RxErrors};
-use super::GNSS_BAUD;
+use crate::board::serial::{GnssUart, RxErrors};
+use crate::board::GNSS_BAUD;
 
 /// Ticks of the MCU timeline per nominal second (QEMU's timers: 1 GHz).
 const HZ: u64 = 1_000_000_000;

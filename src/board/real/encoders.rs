@@ -17,6 +17,7 @@
 //! has to read it before the next index pulse (one wheel turn later). Two pulses before the
 //! read set the over-capture flag, reported as a lost pulse.
 
+use odo_core::unit::{IndexCapture, RawCounts};
 use stm32f4xx_hal::pac;
 use stm32f4xx_hal::rcc::Enable;
 
@@ -42,24 +43,6 @@ const SR_CC3IF: u32 = 1 << 3;
 const SR_CC4IF: u32 = 1 << 4;
 const SR_CC3OF: u32 = 1 << 11;
 const SR_CC4OF: u32 = 1 << 12;
-
-/// One latched index pulse.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct IndexCapture {
-    /// The wheel's raw counter at the index edge.
-    pub raw: u32,
-    /// An earlier pulse was overwritten before it was read (lost).
-    pub overcapture: bool,
-}
-
-/// Raw counter values read together.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, defmt::Format)]
-pub struct Snapshot {
-    /// TIM2 CNT (left).
-    pub left: u32,
-    /// TIM3 CNT (right, 16 bits).
-    pub right: u32,
-}
 
 /// The two encoder timers.
 pub struct Encoders {
@@ -105,10 +88,10 @@ impl Encoders {
 
     /// Both counters, left first (see the module documentation for the skew).
     #[inline(always)]
-    pub fn snapshot(&self) -> Snapshot {
+    pub fn snapshot(&self) -> RawCounts {
         let left = self.left.cnt().read().bits();
         let right = self.right.cnt().read().bits() & 0xFFFF;
-        Snapshot { left, right }
+        RawCounts { left, right }
     }
 
     /// The left index pulse latched by TIM2 CH3, if one came since the last call (TIM2

@@ -1,0 +1,122 @@
+//! QEMU's `netduinoplus2`: HSI 16 MHz, the timers count at 1 GHz of emulated time, the
+//! encoders, index pulses and fault lines come from the deterministic simulated drive
+//! (`drive`), the PPS captures and NMEA bytes from the simulated GNSS receiver (`gnss`), the
+//! settings flash is RAM (`flash`), the sample compare is TIM5's update event (`sampler`),
+//! logging goes over semihosting.
+
+pub mod drive;
+pub mod flash;
+pub mod gnss;
+pub mod sampler;
+
+use super::serial::GnssUart;
+use super::FaultLines;
+use defmt_semihosting as _;
+use odo_core::timing::ClockSource;
+use odo_core::unit::{IndexCapture, RawCounts};
+use stm32f4xx_hal::{pac, rcc::Config};
+
+/// Widths of the raw counters (left, right), bits: the simulated drive's, as the board's
+/// TIM2 and TIM3.
+pub const COUNTER_BITS: [u32; 2] = [32, 16];
+
+/// Unit of [`cycles`] in `status`.
+pub const CYCLES_UNIT: &str = "instructions (QEMU)";
+
+/// Where the USART1 interrupt takes NMEA bytes from: the simulated receiver's wire.
+pub type GnssRx = gnss::SimUart;
+
+/// What the sampler needs besides TIM5: the simulated receiver (PPS captures and NMEA).
+pub type SamplerExtra = gnss::SimGnss;
+
+/// The simulated receiver, wired to the GNSS UART's interrupt.
+pub fn attach_gnss(uart: GnssUart) -> (GnssRx, SamplerExtra) {
+    gnss::attach(uart)
+}
+
+/// Starts the clocks: the HSI at 16 MHz without PLL (QEMU's RCC never reports the PLL
+/// locked).
+pub fn start_clocks(rcc: pac::RCC) -> (stm32f4xx_hal::rcc::Rcc, ClockSource) {
+    use stm32f4xx_hal::rcc::RccExt;
+    (rcc.freeze(Config::hsi()), ClockSource::Hsi)
+}
+
+/// Frequency of the TIM5 sample timer's ticks, Hz: TIM2-5 in QEMU count at 1 GHz of emulated
+/// time whatever the clock tree says.
+pub fn timer_hz(_clocks: &stm32f4xx_hal::rcc::Clocks) -> u32 {
+    1_000_000_000
+}
+
+/// The unit's 96-bit unique ID: zeros (QEMU does not map that system memory).
+pub fn unique_id() -> [u8; 12] {
+    [0u8; 12]
+}
+
+/// Where the counts, index pulses and fault lines come from: the simulated drive.
+pub struct Acquisition {
+    sim: drive::SimDrive,
+}
+
+impl Acquisition {
+    /// The simulated drive (the timers and fault lines are not used: TIM2 is the cycle
+    /// counter, [`cycles`]).
+    pub fn new(
+        _tim2: pac::TIM2,
+        _tim3: pac::TIM3,
+        _faults: FaultLines,
+        _rcc: &mut stm32f4xx_hal::rcc::Rcc,
+    ) -> Self {
+        Self {
+            sim: drive::SimDrive::new(),
+        }
+    }
+
+    /// `None`: the drive is sampled at the sample's tick ([`Self::snapshot`]).
+    #[inline(always)]
+    pub fn snapshot_now(&self) -> Option<RawCounts> {
+        None
+    }
+
+    /// Both counters at the sample instant `tick`.
+    #[inline(always)]
+    pub fn snapshot(&mut self, tick: u64) -> RawCounts {
+        self.sim.snapshot(tick)
+    }
+
+    /// Never a latched pulse: the drive reports its pulses with the samples
+    /// ([`Self::sample_index`]).
+    pub fn take_index(&self, wheel: usize) -> Option<IndexCapture> {
+        let _ = wheel;
+        None
+    }
+
+    /// Index pulses of the simulated drive since the last snapshot.
+    pub fn sample_index(&mut self) -> [Option<u32>; 2] {
+        let mut out = [None, None];
+        for pulse in self.sim.take_index() {
+            out[pulse.wheel] = Some(pulse.raw);
+        }
+        out
+    }
+
+    /// The fault lines (left, right) at `tick`.
+    pub fn faults(&self, tick: u64) -> (bool, bool) {
+        self.sim.faults(tick)
+    }
+}
+
+/// A free-running count for measuring code: TIM2's counter, which the qemu build leaves
+/// untouched and which under `-icount shift=0` counts executed instructions.
+#[inline(always)]
+pub fn cycles() -> u32 {
+    // Note(unsafe): a read of TIM2 CNT, a register no other code of the qemu build uses
+    // (the encoders are simulated); reads have no side effect.
+    unsafe { (*pac::TIM2::ptr()).cnt().read().bits() }
+}
+
+/// Starts what [`cycles`] reads.
+pub fn start_cycle_counter(core: &mut cortex_m::Peripherals) {
+    let _ = core;
+    // Note(unsafe): TIM2 CR1 = CEN; QEMU's TIM2 then counts at 1 GHz of emulated time.
+    unsafe { (*pac::TIM2::ptr()).cr1().write(|w| w.bits(1)) };
+}

@@ -1,0 +1,79 @@
+//! TIM5 in QEMU, which models neither output compare nor input capture: the update event
+//! stands for the compare, the simulated receiver's edge for the capture
+//! (`src/board/sampler.rs`).
+
+use super::gnss::SimGnss;
+use crate::board::sampler::{Event, Sampler};
+use odo_core::timing::{Sample, SyncMode};
+use stm32f4xx_hal::pac;
+
+const SR_UIF: u32 = 1 << 0;
+
+/// The restarting counter's timeline and the simulated receiver.
+pub struct Timeline {
+    /// The tick at which the counter last restarted (the last sample instant).
+    base: u64,
+    /// The ARR value last written.
+    arr: u32,
+    /// The simulated GNSS receiver: PPS captures and NMEA bytes (QEMU has neither).
+    gnss: SimGnss,
+}
+
+impl Timeline {
+    /// DIER bit of the sample interrupt: UIE (the update event).
+    pub const DIER_SAMPLE: u32 = 1 << 0;
+
+    /// ARR puts the first update at sample `s1`.
+    pub fn program(tim: &pac::TIM5, s0: Sample, s1: Sample, gnss: SimGnss) -> Self {
+        tim.arr().write(|w| w.set((s1.tick - 1) as u32));
+        Self {
+            base: s0.tick,
+            arr: (s1.tick - s0.tick - 1) as u32,
+            gnss,
+        }
+    }
+}
+
+impl Sampler {
+    /// Handles the TIM5 interrupt (QEMU: the update event stands for the compare, the
+    /// simulated receiver's edge of the period just ended for the capture).
+    pub fn on_interrupt(&mut self) -> Event {
+        let sr = self.tim.sr().read().bits();
+        let mut event = Event::default();
+        if sr & SR_UIF == 0 {
+            return event;
+        }
+        // Note(unsafe): SR is rc_w0: clear UIF alone.
+        unsafe { self.tim.sr().write(|w| w.bits(!SR_UIF & 0xFFFF)) };
+        let start = self.timeline.base;
+        // QEMU raises the update at the programmed instant and never runs late (no flash
+        // stall); its CNT counts from the last ARR write, so the instant is taken as is.
+        self.timeline.base = self.next.tick;
+        let now = self.timeline.base;
+        if self.disc.config().mode == SyncMode::Pps {
+            if let Some(ccr) = self.timeline.gnss.capture(start, now - start) {
+                // The CC1 interrupt the board takes at the edge, before this sample.
+                let edge = start + u64::from(ccr);
+                event.pps = Some((edge, self.disc.on_pps(edge)));
+            }
+        }
+        self.sample_due(now, &mut event);
+        self.arm();
+        self.timeline.gnss.transmit(now);
+        event
+    }
+
+    /// ARR, which QEMU applies at once (restarting the period), puts the next update
+    /// `self.next - base` ticks on. It is written only when it changes: in free mode at a
+    /// rate that divides the tick frequency never after start, so the emulated instants
+    /// stay exact; in PPS mode each change restarts QEMU's period at the write, a few
+    /// hundred emulated nanoseconds after the update, and everything (the simulated drive
+    /// and receiver included) runs on the software's timeline.
+    fn arm(&mut self) {
+        let arr = (self.next.tick - self.timeline.base - 1) as u32;
+        if arr != self.timeline.arr {
+            self.tim.arr().write(|w| w.set(arr));
+            self.timeline.arr = arr;
+        }
+    }
+}

@@ -1,0 +1,215 @@
+//! A parsed command applied to the working settings: the reply and what is left to the
+//! firmware.
+
+use super::parse::{parse, Command, CommandError};
+use super::MAX_REPLY;
+use crate::settings::{Key, SetManyError, Settings};
+use core::fmt::Write;
+use heapless::String;
+
+/// What the firmware must do after [`execute`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Action {
+    /// Nothing (the reply is complete).
+    None,
+    /// The working settings changed (already applied to the `Settings` passed in); apply
+    /// them to the running integrator/timing. The reply is complete.
+    SettingsChanged,
+    /// Save the working settings to flash; on failure replace the reply by an error.
+    Save,
+    /// Set the pose to (x, y, heading) (metres, metres, radians); the reply is `ok`.
+    ResetPose {
+        /// x (east), metres.
+        x: f64,
+        /// y (north), metres.
+        y: f64,
+        /// Heading, radians.
+        heading: f64,
+    },
+    /// Append `key = value` status lines to the reply (it holds `ok`).
+    Status,
+    /// Append the firmware and protocol version to the reply (it holds `ok`) and send a
+    /// DeviceInfo frame.
+    Version,
+}
+
+/// A reply being built: `ok` and its text.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct Reply {
+    /// Success.
+    pub ok: bool,
+    /// Text, first line `ok` or `error: ...`, lines separated by `\n`.
+    pub text: String<MAX_REPLY>,
+}
+
+impl Reply {
+    /// A reply `ok`.
+    pub fn ok() -> Self {
+        let mut text = String::new();
+        let _ = text.push_str("ok");
+        Self { ok: true, text }
+    }
+
+    /// A reply `error: <what>` (cut with `...` if longer than [`MAX_REPLY`]).
+    pub fn error(what: impl core::fmt::Display) -> Self {
+        let mut r = Self {
+            ok: false,
+            text: String::new(),
+        };
+        if write!(Truncating(&mut r.text), "error: {what}").is_err() {
+            r.ellipsis();
+        }
+        r
+    }
+
+    fn ellipsis(&mut self) {
+        while self.text.len() > MAX_REPLY - 3 {
+            self.text.pop();
+        }
+        let _ = self.text.push_str("...");
+    }
+
+    /// Appends `\n` and a line; a line that does not fit is cut and the reply ends with
+    /// `...`.
+    pub fn push_line(&mut self, line: core::fmt::Arguments<'_>) {
+        let mut w = Truncating(&mut self.text);
+        if w.write_str("\n").and_then(|_| w.write_fmt(line)).is_err() {
+            self.ellipsis();
+        }
+    }
+}
+
+/// `fmt::Write` into a heapless string that fails (keeping what fitted) when full.
+struct Truncating<'a, const N: usize>(&'a mut String<N>);
+
+impl<const N: usize> Write for Truncating<'_, N> {
+    fn write_str(&mut self, s: &str) -> core::fmt::Result {
+        for c in s.chars() {
+            self.0.push(c).map_err(|_| core::fmt::Error)?;
+        }
+        Ok(())
+    }
+}
+
+/// Parses and executes `line` against the working `settings`.
+///
+/// `get`, `set`, `mode`, `rate`, `defaults` and `help` are complete here; `save`, `status`,
+/// `version` and `reset_pose` return an [`Action`] for the firmware. On any error the
+/// reply starts with `error:` and `settings` is unchanged.
+pub fn execute(line: &str, settings: &mut Settings) -> (Reply, Action) {
+    let cmd = match parse(line) {
+        Ok(c) => c,
+        Err(e) => return (Reply::error(e), Action::None),
+    };
+    match cmd {
+        Command::Help => (help(), Action::None),
+        Command::Version => (Reply::ok(), Action::Version),
+        Command::Status => (Reply::ok(), Action::Status),
+        Command::Save => (Reply::ok(), Action::Save),
+        Command::ResetPose { x, y, heading } => (Reply::ok(), Action::ResetPose { x, y, heading }),
+        Command::Get(key) => {
+            let mut r = Reply::ok();
+            match key {
+                Some(k) => r.push_line(format_args!("{} = {}", k.name(), settings.get(k))),
+                None => {
+                    for k in Key::ALL {
+                        r.push_line(format_args!("{} = {}", k.name(), settings.get(k)));
+                    }
+                }
+            }
+            (r, Action::None)
+        }
+        Command::Defaults => {
+            let changed = *settings != Settings::DEFAULT;
+            *settings = Settings::DEFAULT;
+            let mut r = Reply::ok();
+            r.push_line(format_args!("defaults loaded (not saved; use save)"));
+            (
+                r,
+                if changed {
+                    Action::SettingsChanged
+                } else {
+                    Action::None
+                },
+            )
+        }
+        Command::Set(pairs) => {
+            let before = *settings;
+            match settings.set_many(pairs.iter().map(|(k, v)| (k.name(), *v))) {
+                Ok(()) => {
+                    let mut r = Reply::ok();
+                    for (k, _) in &pairs {
+                        r.push_line(format_args!("{} = {}", k.name(), settings.get(*k)));
+                    }
+                    let action = if *settings != before {
+                        Action::SettingsChanged
+                    } else {
+                        Action::None
+                    };
+                    (r, action)
+                }
+                Err(SetManyError::UnknownKey(k)) => {
+                    (Reply::error(CommandError::UnknownKey(k)), Action::None)
+                }
+                Err(SetManyError::Value(e)) => (
+                    Reply::error(format_args!("{e}; nothing changed")),
+                    Action::None,
+                ),
+            }
+        }
+    }
+}
+
+fn help() -> Reply {
+    let mut r = Reply::ok();
+    for line in [
+        "commands (one per line; replies start with ok or error):",
+        "  help | version | status",
+        "  get [KEY]                      show one key or all",
+        "  set KEY VALUE [KEY VALUE ...]  change keys together, all or none",
+        "  mode pps|free                  = set mode ...",
+        "  rate HZ                        = set rate ...",
+        "  save                           store the working settings in flash",
+        "  defaults                       load the defaults (then save to keep)",
+        "  reset_pose [X Y HEADING]       metres, metres, radians (default 0 0 0)",
+        "keys (unit, range):",
+    ] {
+        r.push_line(format_args!("{line}"));
+    }
+    for k in Key::ALL {
+        let info = k.info();
+        r.push_line(format_args!(
+            "  {} {} {}",
+            info.name,
+            info.unit,
+            RangeText(info.kind)
+        ));
+    }
+    r
+}
+
+/// Displays the accepted values of a key kind.
+struct RangeText(crate::settings::Kind);
+
+impl core::fmt::Display for RangeText {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        use crate::settings::{Kind, Value};
+        match self.0 {
+            Kind::F64 { min, max } => write!(f, "{}..={}", Value::F64(min), Value::F64(max)),
+            Kind::F32 { min, max } => write!(f, "{}..={}", Value::F32(min), Value::F32(max)),
+            Kind::U32 { min, max } => write!(f, "{min}..={max}"),
+            Kind::U32Set(set) => {
+                for (i, v) in set.iter().enumerate() {
+                    write!(f, "{}{v}", if i == 0 { "" } else { "|" })?;
+                }
+                Ok(())
+            }
+            Kind::Word(words) => {
+                for (i, w) in words.iter().enumerate() {
+                    write!(f, "{}{w}", if i == 0 { "" } else { "|" })?;
+                }
+                Ok(())
+            }
+        }
+    }
+}

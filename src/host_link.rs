@@ -1,0 +1,43 @@
+//! Frames from the tasks to the host link: encoded outside the lock, queued whole.
+
+use odo_core::protocol::{self, Message, Queued, TxLink};
+use rtic::Mutex;
+use stm32f4xx_hal::pac::Interrupt;
+
+/// Host link transmit buffer, bytes.
+pub const TX_BUF: usize = 4096;
+/// Transmit space a pose record leaves free for command replies, bytes.
+pub const RECORD_RESERVE: usize = 1024;
+
+/// The host link's transmit side.
+pub type Link = TxLink<TX_BUF>;
+
+/// Encodes `msg` as the next frame and queues it whole if it fits with `reserve` bytes to
+/// spare; false when it did not fit (nothing queued, sequence number unchanged). The
+/// frame is encoded outside the lock; if another task sent a frame meanwhile, it is
+/// encoded again with the new sequence number.
+pub fn send(link: &mut impl Mutex<T = Link>, msg: &Message, reserve: usize) -> bool {
+    let mut buf = [0u8; protocol::MAX_ENCODED_FRAME];
+    loop {
+        let seq = link.lock(|l| l.next_seq());
+        let Ok(n) = protocol::encode_frame(msg, seq, &mut buf) else {
+            return false;
+        };
+        match link.lock(|l| l.queue(seq, &buf[..n], reserve)) {
+            Queued::Queued => {
+                rtic::pend(Interrupt::USART2);
+                return true;
+            }
+            Queued::NoRoom => return false,
+            Queued::Stale => {}
+        }
+    }
+}
+
+/// Sends a reply frame, waiting for room (only the command task, the lowest priority,
+/// waits; the ring drains in the USART2 interrupt meanwhile).
+pub fn send_blocking(link: &mut impl Mutex<T = Link>, msg: &Message) {
+    while !send(link, msg, 0) {
+        cortex_m::asm::nop();
+    }
+}

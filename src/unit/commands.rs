@@ -1,0 +1,210 @@
+//! The command task's decisions: a command line from the host to a reply and to what the
+//! other tasks must do (new settings, a pose reset), the settings saved to flash.
+
+use super::discipline_config;
+use crate::console::{self, Action, LineAssembler, Reply};
+use crate::odometry::Pose;
+use crate::protocol::{DeviceInfo, PROTOCOL_VERSION};
+use crate::settings::store::{Flash, SettingsStore};
+use crate::settings::{Settings, SettingsSource};
+use crate::timing::{ClockSource, DisciplineConfig};
+
+/// The settings flash as the command task sees it: a [`Flash`] whose erase stalls the CPU.
+pub trait StallingFlash: Flash {
+    /// Longest CPU stall of one sector erase, milliseconds (0 when erasing does not stall).
+    fn max_stall_ms(&self) -> u32;
+}
+
+/// What the other tasks must do after a command line (the reply aside).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Effect {
+    /// Nothing.
+    None,
+    /// The working settings changed (and are now unsaved): the processing task takes
+    /// `settings`, the sampler `discipline`.
+    SettingsChanged {
+        /// The new working settings.
+        settings: Settings,
+        /// The sampler's configuration for them.
+        discipline: DisciplineConfig,
+    },
+    /// The settings were saved as record `generation`: they now come from flash and
+    /// match it.
+    Saved {
+        /// Generation of the record written.
+        generation: u32,
+    },
+    /// Saving failed (the reply says why); nothing changed.
+    SaveFailed,
+    /// Set the pose at the next sample.
+    ResetPose(Pose),
+    /// `status`: the caller fills the reply with [`Commands::status`].
+    Status,
+    /// `version`: the caller sends [`Commands::version`]'s device information.
+    Version,
+}
+
+/// State of the command task.
+pub struct Commands<F> {
+    assembler: LineAssembler,
+    settings: Settings,
+    store: SettingsStore<F>,
+    source: SettingsSource,
+    dirty: bool,
+    timer_hz: u32,
+    /// The clock source found at start.
+    clock: ClockSource,
+}
+
+impl<F: StallingFlash> Commands<F> {
+    /// Working on `settings` (from `source`, kept in `store`), the sample timer at
+    /// `timer_hz` from the clock found at start, `clock`.
+    pub fn new(
+        settings: Settings,
+        source: SettingsSource,
+        store: SettingsStore<F>,
+        timer_hz: u32,
+        clock: ClockSource,
+    ) -> Self {
+        Self {
+            assembler: LineAssembler::new(),
+            settings,
+            store,
+            source,
+            dirty: false,
+            timer_hz,
+            clock,
+        }
+    }
+
+    /// The working settings.
+    pub fn settings(&self) -> &Settings {
+        &self.settings
+    }
+
+    /// The settings store.
+    pub fn store(&self) -> &SettingsStore<F> {
+        &self.store
+    }
+
+    /// The clock source found at start.
+    pub fn clock_at_start(&self) -> ClockSource {
+        self.clock
+    }
+
+    /// Where the settings came from and whether they are unsaved.
+    pub fn store_state(&self) -> super::StoreState {
+        super::StoreState {
+            source: self.source,
+            dirty: self.dirty,
+        }
+    }
+
+    /// One byte from the host: at the end of a line, its reply and effect. `clock` says
+    /// which clock runs now; `moving` whether the wheels turned within the last second
+    /// (asked only for a `save` that would erase a sector).
+    #[inline(never)]
+    pub fn on_byte(
+        &mut self,
+        byte: u8,
+        clock: impl FnOnce() -> ClockSource,
+        moving: impl FnOnce() -> bool,
+    ) -> Option<(Reply, Effect)> {
+        let (reply, action) = match self.assembler.push(byte)? {
+            Ok(line) => console::execute(line, &mut self.settings),
+            Err(e) => (Reply::error(e), Action::None),
+        };
+        Some(self.perform(reply, action, clock, moving))
+    }
+
+    fn perform(
+        &mut self,
+        mut reply: Reply,
+        action: Action,
+        clock: impl FnOnce() -> ClockSource,
+        moving: impl FnOnce() -> bool,
+    ) -> (Reply, Effect) {
+        let effect = match action {
+            Action::None => Effect::None,
+            Action::SettingsChanged => {
+                self.dirty = true;
+                Effect::SettingsChanged {
+                    settings: self.settings,
+                    discipline: discipline_config(&self.settings, self.timer_hz, clock()),
+                }
+            }
+            Action::Save
+                if moving()
+                    && !self
+                        .settings
+                        .survives_stall(self.store.flash().max_stall_ms())
+                    && self.store.next_save_erases().unwrap_or(true) =>
+            {
+                reply = Reply::error(format_args!(
+                    "save refused while the wheels turn: a flash erase stops the CPU for up to {} ms, longer than the right counter can go unread at max_wheel_speed; save at rest",
+                    self.store.flash().max_stall_ms()
+                ));
+                Effect::None
+            }
+            Action::Save => match self.store.save(&self.settings) {
+                Ok(generation) => {
+                    self.dirty = false;
+                    self.source = SettingsSource::Flash;
+                    reply.push_line(format_args!("saved (generation {generation})"));
+                    Effect::Saved { generation }
+                }
+                Err(e) => {
+                    reply = Reply::error(format_args!("save failed: {e}"));
+                    Effect::SaveFailed
+                }
+            },
+            Action::ResetPose { x, y, heading } => Effect::ResetPose(Pose { x, y, heading }),
+            Action::Status => Effect::Status,
+            Action::Version => Effect::Version,
+        };
+        (reply, effect)
+    }
+
+    /// `version`: the reply lines, and the device information frame for the unit with
+    /// unique ID `uid`.
+    pub fn version(&self, reply: &mut Reply, uid: [u8; 12]) -> DeviceInfo {
+        reply.push_line(format_args!(
+            "firmware = odo-unit {}",
+            env!("CARGO_PKG_VERSION")
+        ));
+        reply.push_line(format_args!("protocol = {PROTOCOL_VERSION}"));
+        let mut info = DeviceInfo {
+            protocol_version: PROTOCOL_VERSION,
+            settings_source: self.source,
+            settings_checksum: self.settings.checksum(),
+            uid,
+            firmware_version: heapless::String::new(),
+        };
+        let _ = info.firmware_version.push_str(env!("CARGO_PKG_VERSION"));
+        info
+    }
+
+    /// `status`: the unit's counters (`live`, host and receiver bytes lost) and the
+    /// board's figures (`board`).
+    pub fn status(
+        &self,
+        reply: &mut Reply,
+        live: &super::Live,
+        rx_lost: u32,
+        gnss_lost: u32,
+        board: &super::BoardReport,
+    ) {
+        super::status::write(
+            reply,
+            &super::status::StatusInputs {
+                live,
+                rx_lost,
+                gnss_lost,
+                board,
+                timer_hz: self.timer_hz,
+                source: self.source,
+                dirty: self.dirty,
+            },
+        );
+    }
+}

@@ -1,0 +1,463 @@
+//! The processing task's work: one sample's counts to a pose record, with the drop,
+//! index-mismatch and motion accounting, the time tag and the Status heartbeat.
+
+use super::event::{Event, Log};
+use super::sample::{IndexCapture, RawSample};
+use super::time_tag;
+use crate::odometry::index::DEFAULT_TOLERANCE;
+use crate::odometry::{
+    ChassisParams, CounterExtender, IndexCheck, IndexRefs, IndexTracker, Integrator, Pose,
+    StepStatus, WheelCounts,
+};
+use crate::protocol::{GnssTime, PoseRecord, Status, StatusFlags, WheelStatus};
+use crate::settings::{Settings, SettingsSource};
+use crate::timing::{LineBuffer, NmeaError, PpsEvent, PpsStats, SyncState, TimeTagger};
+
+/// Changes the command task asks the processing task to apply at the next sample.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Requests {
+    /// New working settings.
+    pub settings: Option<Settings>,
+    /// A new pose (the counts go on from where they are).
+    pub reset: Option<Pose>,
+}
+
+/// Where the settings in use came from and whether they differ from the stored ones
+/// (kept by the command task, reported by the heartbeat).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct StoreState {
+    /// Flash or defaults.
+    pub source: SettingsSource,
+    /// The working settings differ from the stored ones.
+    pub dirty: bool,
+}
+
+/// What the processing task last knew, for `status`.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Live {
+    /// Samples processed.
+    pub samples: u32,
+    /// Pose records dropped for lack of room on the link.
+    pub dropped_total: u32,
+    /// Status word of the latest sample.
+    pub flags: StatusFlags,
+    /// PPS discipline counters.
+    pub stats: PpsStats,
+    /// Length of a second in use, ticks.
+    pub period: u64,
+    /// Index pulses whose counts missed a whole turn (left, right).
+    pub index_mismatches: [u32; 2],
+    /// NMEA sentences rejected.
+    pub nmea_errors: u32,
+    /// NMEA time messages used.
+    pub time_messages: u32,
+    /// MCU time of the latest sample, microseconds.
+    pub mcu_time_us: u64,
+    /// Most cycles of one sample interrupt.
+    pub isr_cycles_max: u32,
+    /// Most cycles of processing one sample.
+    pub process_cycles_max: u32,
+    /// Cycles of the last sample interrupt.
+    pub isr_cycles_last: u32,
+    /// Cycles of processing the last sample.
+    pub process_cycles_last: u32,
+    /// Samples lost between the sample interrupt and the processing task (queue full).
+    pub samples_lost: u32,
+    /// Grid points merged into later samples (late sample interrupts: flash stalls).
+    pub merged_samples: u32,
+    /// Largest latency from a sample's grid point to the interrupt's counter reading,
+    /// timer ticks.
+    pub latency_max: u32,
+    /// Index pulses lost to an over-capture (left, right).
+    pub index_lost: [u32; 2],
+    /// PPS edges lost to an over-capture.
+    pub pps_overcaptures: u32,
+    /// The wheels moved within the last second.
+    pub moving: bool,
+}
+
+/// State of the processing task: counts to records.
+pub struct Processor {
+    timer_hz: u32,
+    settings: Settings,
+    /// The counters' extensions, valid once `started` (the widths are kept before).
+    extenders: [CounterExtender; 2],
+    /// The first sample started the extensions.
+    started: bool,
+    integrator: Option<Integrator>,
+    trackers: [IndexTracker; 2],
+    /// Index mismatch not yet reported in a sent record.
+    mismatch: [bool; 2],
+    tagger: TimeTagger,
+    nmea: LineBuffer,
+    nmea_errors: u32,
+    time_messages: u32,
+    last_tick: u64,
+    sequence: u32,
+    dropped_since: u32,
+    dropped_total: u32,
+    last_state: SyncState,
+    last_faults: (bool, bool),
+    reset: Option<Pose>,
+    flags: StatusFlags,
+    mcu_time_us: u64,
+    isr_cycles_max: u32,
+    process_cycles_max: u32,
+    merged_samples: u32,
+    latency_max: u32,
+    index_lost: [u32; 2],
+    pps_overcaptures: u32,
+    /// Counts of the last sample, and the sample sequence at which they last changed.
+    last_counts: Option<(u32, u32)>,
+    last_motion: u32,
+}
+
+impl Processor {
+    /// Before the first sample: `settings` in use, the sample timer at `timer_hz`, raw
+    /// counters `counter_bits` wide (left, right).
+    pub fn new(settings: &Settings, timer_hz: u32, counter_bits: [u32; 2]) -> Self {
+        let tpr = settings.chassis.ticks_per_rev;
+        Self {
+            timer_hz,
+            settings: *settings,
+            extenders: [
+                CounterExtender::new(counter_bits[0], 0),
+                CounterExtender::new(counter_bits[1], 0),
+            ],
+            started: false,
+            integrator: None,
+            trackers: [IndexTracker::new(tpr, DEFAULT_TOLERANCE); 2],
+            mismatch: [false; 2],
+            tagger: TimeTagger::new(time_tag(settings), u64::from(timer_hz)),
+            nmea: LineBuffer::new(),
+            nmea_errors: 0,
+            time_messages: 0,
+            last_tick: 0,
+            sequence: 0,
+            dropped_since: 0,
+            dropped_total: 0,
+            last_state: SyncState::FreeRunning,
+            last_faults: (false, false),
+            reset: None,
+            flags: StatusFlags::default(),
+            mcu_time_us: 0,
+            isr_cycles_max: 0,
+            process_cycles_max: 0,
+            merged_samples: 0,
+            latency_max: 0,
+            index_lost: [0; 2],
+            pps_overcaptures: 0,
+            last_counts: None,
+            last_motion: 0,
+        }
+    }
+
+    /// An index pulse of `wheel` (0 left, 1 right) latched by its timer.
+    pub fn on_index_capture(&mut self, wheel: usize, capture: IndexCapture, log: &mut impl Log) {
+        if capture.overcapture {
+            self.index_lost[wheel] = self.index_lost[wheel].wrapping_add(1);
+            log.event(Event::IndexLost { wheel });
+        }
+        self.on_index(wheel, capture.raw, log);
+    }
+
+    /// One byte from the GNSS receiver's NMEA output.
+    pub fn on_nmea_byte(&mut self, byte: u8) {
+        match self.nmea.push(byte) {
+            None | Some(Err(NmeaError::Unsupported)) => {}
+            Some(Err(_)) => self.nmea_errors = self.nmea_errors.wrapping_add(1),
+            Some(Ok(msg)) if msg.valid() => match msg.time().gps_seconds() {
+                Ok(gps) => {
+                    self.time_messages = self.time_messages.wrapping_add(1);
+                    self.tagger.on_message(gps, self.last_tick);
+                }
+                Err(_) => self.nmea_errors = self.nmea_errors.wrapping_add(1),
+            },
+            Some(Ok(_)) => {}
+        }
+    }
+
+    fn on_index(&mut self, wheel: usize, raw: u32, log: &mut impl Log) {
+        if !self.started {
+            return;
+        }
+        let count = self.extenders[wheel].absolute_of(raw);
+        match self.trackers[wheel].on_index(count) {
+            IndexCheck::Mismatch { error } => {
+                self.mismatch[wheel] = true;
+                log.event(Event::IndexMismatch { wheel, error });
+            }
+            IndexCheck::First => log.event(Event::FirstIndex { wheel }),
+            IndexCheck::Whole { .. } => {}
+        }
+    }
+
+    /// Applies the command task's requests (new settings, a pose reset at the next sample).
+    pub fn apply(&mut self, requests: Requests, log: &mut impl Log) {
+        if let Some(settings) = requests.settings {
+            if let Some(integrator) = &mut self.integrator {
+                if integrator.set_params(&settings.chassis).is_err() {
+                    log.event(Event::ParamsRejected);
+                }
+            }
+            for t in &mut self.trackers {
+                t.set_ticks_per_rev(settings.chassis.ticks_per_rev);
+            }
+            self.tagger.set_assoc(time_tag(&settings));
+            self.settings = settings;
+        }
+        if requests.reset.is_some() {
+            self.reset = requests.reset;
+        }
+    }
+
+    /// MCU time of timer tick `tick`, microseconds.
+    fn mcu_time_us(&self, tick: u64) -> u64 {
+        let hz = u64::from(self.timer_hz);
+        tick / hz * 1_000_000 + tick % hz * 1_000_000 / hz
+    }
+
+    /// The counters of `raw` extended to 64 bits (the first sample starts the extension).
+    fn extend(&mut self, raw: &RawSample) -> WheelCounts {
+        let ext = &mut self.extenders;
+        if self.started {
+            ext[0].update(raw.counts.left);
+            ext[1].update(raw.counts.right);
+        } else {
+            ext[0] = CounterExtender::new(ext[0].bits(), raw.counts.left);
+            ext[1] = CounterExtender::new(ext[1].bits(), raw.counts.right);
+            self.started = true;
+        }
+        WheelCounts {
+            left: ext[0].absolute(),
+            right: ext[1].absolute(),
+        }
+    }
+
+    /// Integrates `counts` (the first sample creates the integrator, a requested reset
+    /// rebases it).
+    fn integrate(
+        &mut self,
+        counts: WheelCounts,
+        refs: IndexRefs,
+        log: &mut impl Log,
+    ) -> StepStatus {
+        let mut step = StepStatus::default();
+        match &mut self.integrator {
+            None => {
+                let pose = self.reset.take().unwrap_or_default();
+                let integrator = Integrator::new(&self.settings.chassis, counts, pose)
+                    .or_else(|_| Integrator::new(&ChassisParams::DESIGNED, counts, pose));
+                match integrator {
+                    Ok(i) => self.integrator = Some(i),
+                    Err(_) => log.event(Event::IntegratorRejected),
+                }
+            }
+            Some(integrator) => {
+                if let Some(pose) = self.reset.take() {
+                    integrator.rebase_counts(counts);
+                    integrator.reset_pose(pose);
+                    log.event(Event::PoseReset);
+                } else {
+                    step = integrator.step(counts, refs);
+                }
+            }
+        }
+        if step.overrange {
+            log.event(Event::Overrange {
+                sequence: self.sequence,
+            });
+        }
+        step
+    }
+
+    /// Timing of `raw`: its PPS edge, a state change, the fault lines.
+    fn follow_timing(&mut self, raw: &RawSample, log: &mut impl Log) {
+        if let Some((tick, event)) = raw.pps {
+            match event {
+                PpsEvent::Locked { second } => {
+                    log.event(Event::PpsLocked);
+                    self.tagger.on_edge(tick, second);
+                }
+                PpsEvent::Accepted { second, .. } => self.tagger.on_edge(tick, second),
+                PpsEvent::Reacquired { second, missed, .. } => {
+                    log.event(Event::PpsReacquired { missed });
+                    self.tagger.on_edge(tick, second);
+                }
+                PpsEvent::Glitch => log.event(Event::PpsGlitch),
+                PpsEvent::Ignored | PpsEvent::Candidate => {}
+            }
+        }
+        if raw.state != self.last_state {
+            log.event(Event::SyncChanged {
+                from: self.last_state,
+                to: raw.state,
+            });
+            if raw.state == SyncState::FreeRunning {
+                self.tagger.invalidate();
+            }
+            self.last_state = raw.state;
+        }
+        if raw.faults != self.last_faults {
+            log.event(Event::FaultLines {
+                left: raw.faults.0,
+                right: raw.faults.1,
+            });
+            self.last_faults = raw.faults;
+        }
+        self.last_tick = raw.sample.tick;
+    }
+
+    /// Integrates one sample. `None` when nothing was integrated (never, today);
+    /// `Some(None)` when the record is not sent (`output_divider`).
+    pub fn on_sample(&mut self, raw: &RawSample, log: &mut impl Log) -> Option<Option<PoseRecord>> {
+        if raw.merged > 0 {
+            self.merged_samples = self.merged_samples.wrapping_add(raw.merged);
+            log.event(Event::SampleLate {
+                latency: raw.latency,
+                merged: raw.merged,
+            });
+        }
+        self.latency_max = self.latency_max.max(raw.latency);
+        if raw.pps_overcapture {
+            self.pps_overcaptures = self.pps_overcaptures.wrapping_add(1);
+            log.event(Event::PpsOvercapture);
+        }
+        let counts_now = (raw.counts.left, raw.counts.right);
+        if self.last_counts != Some(counts_now) {
+            self.last_counts = Some(counts_now);
+            self.last_motion = self.sequence;
+        }
+        let counts = self.extend(raw);
+        for (wheel, pulse) in raw.index_pulses.iter().enumerate() {
+            if let Some(r) = pulse {
+                self.on_index(wheel, *r, log);
+            }
+        }
+        let refs = IndexRefs {
+            left: self.trackers[0].reference(),
+            right: self.trackers[1].reference(),
+        };
+        let step = self.integrate(counts, refs, log);
+        self.follow_timing(raw, log);
+        let gps = match raw.state {
+            SyncState::FreeRunning => None,
+            _ => self.tagger.gps_time(raw.sample.second),
+        };
+
+        let sequence = self.sequence;
+        self.sequence = self.sequence.wrapping_add(1);
+        let status = |wheel: usize, fault: bool, calibrated: bool| WheelStatus {
+            fault,
+            index_seen: self.trackers[wheel].seen(),
+            index_mismatch: self.mismatch[wheel],
+            calibrated,
+        };
+        self.flags = StatusFlags {
+            sync: raw.state,
+            time_valid: gps.is_some(),
+            left: status(0, raw.faults.0, step.left_referenced),
+            right: status(1, raw.faults.1, step.right_referenced),
+            model: self.settings.chassis.uncertainty_model,
+        };
+        self.mcu_time_us = self.mcu_time_us(raw.sample.tick);
+        if sequence % self.settings.output_divider.max(1) != 0 {
+            return Some(None);
+        }
+        let integrator = self.integrator.as_ref()?;
+        let pose = integrator.pose();
+        let sigma = integrator.sigma();
+        Some(Some(PoseRecord {
+            sequence,
+            flags: self.flags,
+            mcu_time_us: self.mcu_time_us,
+            gnss: gps.map_or(GnssTime::default(), |g| GnssTime {
+                week: g.week,
+                tow_ms: g.tow * 1000,
+                sample_in_second: raw.sample.index as u16,
+            }),
+            x: pose.x,
+            y: pose.y,
+            heading: pose.heading,
+            sigma_x: sigma.x,
+            sigma_y: sigma.y,
+            sigma_heading: sigma.heading,
+            sigma_xy: sigma.xy,
+            gamma_left: counts.left,
+            gamma_right: counts.right,
+            index_left: refs.left.unwrap_or(0),
+            index_right: refs.right.unwrap_or(0),
+            dropped: self.dropped_since,
+        }))
+    }
+
+    /// True when the sample just processed starts a new second of samples: time for the
+    /// once-a-second Status heartbeat.
+    pub fn heartbeat_due(&self) -> bool {
+        self.sequence.wrapping_sub(1) % self.settings.rate.max(1) == 0
+    }
+
+    /// The Status heartbeat after sample `raw`: `rx_errors` host bytes and `gnss_lost`
+    /// receiver bytes lost so far.
+    pub fn heartbeat(
+        &self,
+        raw: &RawSample,
+        store: StoreState,
+        rx_errors: u32,
+        gnss_lost: u32,
+    ) -> Status {
+        Status {
+            uptime_us: self.mcu_time_us,
+            flags: self.flags,
+            rate_hz: self.settings.rate,
+            samples: self.sequence,
+            dropped_total: self.dropped_total,
+            pps_edges: raw.stats.accepted,
+            pps_rejected: raw.stats.glitches,
+            rx_errors,
+            settings_source: store.source,
+            settings_dirty: store.dirty,
+            samples_lost: raw.queue_lost,
+            gnss_rx_lost: gnss_lost,
+            merged_samples: self.merged_samples,
+        }
+    }
+
+    /// The record was queued (true) or dropped for lack of room (false).
+    pub fn sent(&mut self, sent: bool) {
+        if sent {
+            self.dropped_since = 0;
+            self.mismatch = [false; 2];
+        } else {
+            self.dropped_since = self.dropped_since.saturating_add(1);
+            self.dropped_total = self.dropped_total.saturating_add(1);
+        }
+    }
+
+    /// What `status` shows after sample `raw`, whose processing took `process_cycles`.
+    pub fn live(&mut self, raw: &RawSample, process_cycles: u32) -> Live {
+        self.isr_cycles_max = self.isr_cycles_max.max(raw.isr_cycles);
+        self.process_cycles_max = self.process_cycles_max.max(process_cycles);
+        Live {
+            isr_cycles_max: self.isr_cycles_max,
+            process_cycles_max: self.process_cycles_max,
+            isr_cycles_last: raw.isr_cycles,
+            process_cycles_last: process_cycles,
+            samples: self.sequence,
+            dropped_total: self.dropped_total,
+            flags: self.flags,
+            stats: raw.stats,
+            period: raw.period,
+            index_mismatches: [self.trackers[0].mismatches(), self.trackers[1].mismatches()],
+            nmea_errors: self.nmea_errors,
+            time_messages: self.time_messages,
+            mcu_time_us: self.mcu_time_us,
+            samples_lost: raw.queue_lost,
+            merged_samples: self.merged_samples,
+            latency_max: self.latency_max,
+            index_lost: self.index_lost,
+            pps_overcaptures: self.pps_overcaptures,
+            moving: self.sequence.wrapping_sub(self.last_motion) <= self.settings.rate.max(1),
+        }
+    }
+}

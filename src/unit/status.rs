@@ -1,0 +1,109 @@
+//! The text of the `status` command.
+
+use super::Live;
+use crate::console::Reply;
+use crate::settings::SettingsSource;
+use crate::timing::{ClockSource, SyncState};
+
+/// What only the board knows for `status`.
+#[derive(Debug, Clone, Copy)]
+pub struct BoardReport {
+    /// The clock running now.
+    pub clock: ClockSource,
+    /// Most stack used since start, and the stack's size, bytes.
+    pub stack: (usize, usize),
+    /// Unit of the cycle counts: `cycles` on the board, `instructions (QEMU)` in QEMU.
+    pub cycles_unit: &'static str,
+}
+
+/// Everything `status` reports.
+pub(crate) struct StatusInputs<'a> {
+    pub live: &'a Live,
+    pub rx_lost: u32,
+    pub gnss_lost: u32,
+    pub board: &'a BoardReport,
+    pub timer_hz: u32,
+    pub source: SettingsSource,
+    pub dirty: bool,
+}
+
+/// Appends the `status` lines to `reply`.
+pub(crate) fn write(reply: &mut Reply, s: &StatusInputs<'_>) {
+    let live = s.live;
+    let sync = match live.flags.sync {
+        SyncState::FreeRunning => "free",
+        SyncState::Locked => "locked",
+        SyncState::Holdover => "holdover",
+    };
+    let on = |b: bool| if b { "yes" } else { "no" };
+    let clock = match s.board.clock {
+        ClockSource::Hse => "hse",
+        ClockSource::Hsi => "hsi",
+        ClockSource::HsiFallback => "hsi-fallback (HSE failed)",
+    };
+    reply.push_line(format_args!("clock = {clock}"));
+    reply.push_line(format_args!("sync = {sync}"));
+    reply.push_line(format_args!("time_valid = {}", on(live.flags.time_valid)));
+    reply.push_line(format_args!("samples = {}", live.samples));
+    reply.push_line(format_args!("mcu_time_us = {}", live.mcu_time_us));
+    reply.push_line(format_args!("records_dropped = {}", live.dropped_total));
+    reply.push_line(format_args!(
+        "samples_lost = {}, merged_samples = {}",
+        live.samples_lost, live.merged_samples
+    ));
+    let latency_ns = u64::from(live.latency_max) * 1_000_000_000 / u64::from(s.timer_hz);
+    reply.push_line(format_args!("sample_latency_max = {latency_ns} ns"));
+    reply.push_line(format_args!("second_ticks = {}", live.period));
+    reply.push_line(format_args!(
+        "pps_accepted = {}, pps_glitches = {}, pps_missed = {}, pps_locks = {}, pps_overcaptures = {}",
+        live.stats.accepted,
+        live.stats.glitches,
+        live.stats.missed,
+        live.stats.locks,
+        live.pps_overcaptures
+    ));
+    reply.push_line(format_args!(
+        "nmea_time_messages = {}, nmea_errors = {}, gnss_rx_lost = {}",
+        live.time_messages, live.nmea_errors, s.gnss_lost
+    ));
+    for (name, w, m, lost) in [
+        (
+            "left",
+            live.flags.left,
+            live.index_mismatches[0],
+            live.index_lost[0],
+        ),
+        (
+            "right",
+            live.flags.right,
+            live.index_mismatches[1],
+            live.index_lost[1],
+        ),
+    ] {
+        reply.push_line(format_args!(
+            "{name}: fault = {}, index_seen = {}, index_mismatches = {m}, index_lost = {lost}",
+            on(w.fault),
+            on(w.index_seen)
+        ));
+    }
+    reply.push_line(format_args!("host_rx_lost = {}", s.rx_lost));
+    let unit = s.board.cycles_unit;
+    reply.push_line(format_args!(
+        "sample_isr_max = {} {unit}, process_max = {} {unit}",
+        live.isr_cycles_max, live.process_cycles_max
+    ));
+    reply.push_line(format_args!(
+        "sample_isr_last = {} {unit}, process_last = {} {unit}",
+        live.isr_cycles_last, live.process_cycles_last
+    ));
+    let (used, size) = s.board.stack;
+    reply.push_line(format_args!("stack_used = {used} of {size} bytes"));
+    let source = match s.source {
+        SettingsSource::Flash => "flash",
+        SettingsSource::Defaults => "defaults",
+    };
+    reply.push_line(format_args!(
+        "settings = {source}, unsaved_changes = {}",
+        on(s.dirty)
+    ));
+}
