@@ -336,7 +336,7 @@ macro_rules! key_table {
                     (Slot::F32(p), Value::F32(v)) => *p = v,
                     (Slot::U32(p), Value::U32(v)) => *p = v,
                     (Slot::Word(p), Value::Word(w)) => {
-                        let Kind::Word(words) = key.info().kind else {
+                        let Kind::Word(words) = *key.kind() else {
                             return None;
                         };
                         let i = words.iter().position(|x| *x == w)?;
@@ -571,7 +571,12 @@ impl Key {
 
     /// The shared key name.
     pub fn name(self) -> &'static str {
-        self.info().name
+        ENTRIES[self as usize].name
+    }
+
+    /// Type and range (as [`KeyInfo::kind`]).
+    pub fn kind(self) -> &'static Kind {
+        ENTRIES[self as usize].kind
     }
 
     /// The key of a name (exact, case-sensitive).

@@ -376,12 +376,16 @@ impl From<ParamError> for SettingError {
 
 impl fmt::Display for SettingError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        // Errors about one key start with its name.
+        if let Some(k) = self.key() {
+            write!(f, "{}: ", k.name())?;
+        }
         match *self {
-            Self::BadNumber(k) => write!(f, "{}: bad number", k.name()),
-            Self::NotFinite(k) => write!(f, "{}: NaN/inf not allowed", k.name()),
+            Self::BadNumber(_) => f.write_str("bad number"),
+            Self::NotFinite(_) => f.write_str("NaN/inf not allowed"),
             Self::OutOfRange(k) => {
-                write!(f, "{}: out of range, ", k.name())?;
-                match k.info().kind {
+                f.write_str("out of range, ")?;
+                match *k.kind() {
                     Kind::F64 { min, max } => write!(f, "{}..={}", Value::F64(min), Value::F64(max)),
                     Kind::F32 { min, max } => write!(f, "{}..={}", Value::F32(min), Value::F32(max)),
                     Kind::U32 { min, max } => write!(f, "{min}..={max}"),
@@ -396,18 +400,17 @@ impl fmt::Display for SettingError {
                 }
             }
             Self::BadChoice(k) => {
-                write!(f, "{}: expected", k.name())?;
-                if let Kind::Word(words) = k.info().kind {
+                f.write_str("expected")?;
+                if let Kind::Word(words) = *k.kind() {
                     for (i, w) in words.iter().enumerate() {
                         write!(f, "{}{w}", if i == 0 { " " } else { "|" })?;
                     }
                 }
                 Ok(())
             }
-            Self::Chassis(k) => write!(
+            Self::Chassis(_) => write!(
                 f,
-                "{}: does not fit the other chassis keys (one increment must stay within {} m and {} rad)",
-                k.name(),
+                "does not fit the other chassis keys (one increment must stay within {} m and {} rad)",
                 Shortest(ChassisParams::MAX_DISTANCE_PER_COUNT),
                 Shortest(ChassisParams::MAX_HEADING_PER_COUNT)
             ),
@@ -456,7 +459,7 @@ impl fmt::Display for SetManyError<'_> {
 /// directly, never through f64), integers without fraction or exponent, words exactly.
 /// The key's range is not checked ([`check_value`]).
 pub fn parse_value(key: Key, text: &str) -> Result<Value, SettingError> {
-    match key.info().kind {
+    match *key.kind() {
         Kind::F64 { .. } => decimal::parse_f64(text)
             .map(Value::F64)
             .map_err(|e| decimal_error(key, e)),
@@ -485,7 +488,7 @@ pub fn parse_value(key: Key, text: &str) -> Result<Value, SettingError> {
 
 /// Checks a value against `key`'s type and range ([`KeyInfo::kind`]).
 pub fn check_value(key: Key, value: Value) -> Result<(), SettingError> {
-    let ok = match (key.info().kind, value) {
+    let ok = match (*key.kind(), value) {
         (Kind::F64 { min, max }, Value::F64(v)) => {
             if !v.is_finite() {
                 return Err(SettingError::NotFinite(key));
