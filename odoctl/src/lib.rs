@@ -26,6 +26,7 @@ pub mod link;
 pub mod memory;
 pub mod optim;
 pub mod plots;
+pub mod reference;
 pub mod replay;
 pub mod simulate;
 pub mod stats;

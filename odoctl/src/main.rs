@@ -8,6 +8,7 @@ use clap::{Args, Parser, Subcommand};
 
 use odo_core::odometry::UncertaintyModel;
 use odoctl::calib::{CalibrationOptions, DeltaMode, WindowStart};
+use odoctl::reference::cli::{ReceiverArgs, ReferenceArgs};
 use odoctl::simulate::{PathKind, SimSettings};
 
 #[derive(Parser)]
@@ -123,9 +124,11 @@ enum Cmd {
         /// SAMPLES CSV.
         #[arg(long)]
         samples: PathBuf,
-        /// REFERENCE CSV.
+        /// Reference: REFERENCE CSV, NMEA 0183 log or RTKLIB `.pos` file.
         #[arg(long)]
         reference: PathBuf,
+        #[command(flatten)]
+        reference_input: ReferenceArgs,
         #[command(flatten)]
         params: ParamArgs,
         /// Initial heading (rad); when absent, the heading minimising eq (16) on this run.
@@ -223,9 +226,11 @@ struct CalibrateArgs {
     /// SAMPLES CSV of the estimation run.
     #[arg(long)]
     samples: PathBuf,
-    /// REFERENCE CSV (RTK GNSS) of the same run.
+    /// Reference (RTK GNSS) of the same run: REFERENCE CSV, NMEA 0183 log or RTKLIB `.pos`.
     #[arg(long)]
     reference: PathBuf,
+    #[command(flatten)]
+    reference_input: ReferenceArgs,
     /// First estimate (TOML, shared keys); the designed values when absent.
     #[arg(long)]
     initial: Option<PathBuf>,
@@ -348,6 +353,8 @@ struct SimulateArgs {
     /// Seed of the noise generator.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    #[command(flatten)]
+    receiver: ReceiverArgs,
 }
 
 fn main() -> ExitCode {
@@ -425,28 +432,31 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             check,
             out.as_deref(),
         ),
-        Cmd::Calibrate(a) => c::calibrate(&c::CalibrateOptions {
-            samples: a.samples,
-            reference: a.reference,
-            initial: a.initial,
-            sets: a.sets,
-            out: a.out,
-            windows_out: a.windows_out,
-            plots: a.plots,
-            calibration: CalibrationOptions {
-                delta_window: a.delta_window,
-                reference_sigma: a.reference_sigma,
-                delta_mode: a.delta_mode,
-                fit_delta: !a.no_delta,
-                fit_delta_diff: !a.no_fit_delta_diff,
-                reference_heading_sigma: a.reference_heading_sigma_deg.to_radians(),
-                models: a.models.list(),
-                polish: a.polish && !a.no_polish,
-                windows: a.windows,
-                window_start: a.window_start,
-                quiet: a.quiet,
+        Cmd::Calibrate(a) => c::calibrate(
+            &c::CalibrateOptions {
+                samples: a.samples,
+                reference: a.reference,
+                initial: a.initial,
+                sets: a.sets,
+                out: a.out,
+                windows_out: a.windows_out,
+                plots: a.plots,
+                calibration: CalibrationOptions {
+                    delta_window: a.delta_window,
+                    reference_sigma: a.reference_sigma,
+                    delta_mode: a.delta_mode,
+                    fit_delta: !a.no_delta,
+                    fit_delta_diff: !a.no_fit_delta_diff,
+                    reference_heading_sigma: a.reference_heading_sigma_deg.to_radians(),
+                    models: a.models.list(),
+                    polish: a.polish && !a.no_polish,
+                    windows: a.windows,
+                    window_start: a.window_start,
+                    quiet: a.quiet,
+                },
             },
-        }),
+            &a.reference_input,
+        ),
         Cmd::Validate {
             samples,
             reference,
@@ -457,6 +467,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             models,
             reference_sigma,
             reference_heading_sigma_deg,
+            reference_input,
         } => c::validate(
             &samples,
             &reference,
@@ -468,27 +479,31 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             &models.list(),
             reference_sigma,
             reference_heading_sigma_deg.to_radians(),
+            &reference_input,
         ),
-        Cmd::Simulate(a) => c::simulate(&c::SimulateOptions {
-            samples: a.samples,
-            reference: a.reference,
-            truth: a.truth,
-            sets: a.sets,
-            truth_out: a.truth_out,
-            path: a.path,
-            length: a.length,
-            settings: SimSettings {
-                rate: a.rate,
-                speed: a.speed,
-                slip: a.slip,
-                slip_corr: a.slip_corr,
-                slip_turn: a.slip_turn,
-                slip_turn_corr: a.slip_turn_corr,
-                rtk_sigma: a.rtk_sigma,
-                heading_sigma: (!a.no_heading).then(|| a.heading_sigma_deg.to_radians()),
-                start: (a.x0, a.y0, a.heading0),
-                seed: a.seed,
+        Cmd::Simulate(a) => c::simulate(
+            &c::SimulateOptions {
+                samples: a.samples,
+                reference: a.reference,
+                truth: a.truth,
+                sets: a.sets,
+                truth_out: a.truth_out,
+                path: a.path,
+                length: a.length,
+                settings: SimSettings {
+                    rate: a.rate,
+                    speed: a.speed,
+                    slip: a.slip,
+                    slip_corr: a.slip_corr,
+                    slip_turn: a.slip_turn,
+                    slip_turn_corr: a.slip_turn_corr,
+                    rtk_sigma: a.rtk_sigma,
+                    heading_sigma: (!a.no_heading).then(|| a.heading_sigma_deg.to_radians()),
+                    start: (a.x0, a.y0, a.heading0),
+                    seed: a.seed,
+                },
             },
-        }),
+            &a.receiver,
+        ),
     }
 }

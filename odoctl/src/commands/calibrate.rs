@@ -11,6 +11,7 @@ use odo_core::odometry::{ChassisParams, UncertaintyModel};
 use crate::calib::{self, CalibrationOptions, DeltaMode};
 use crate::config::{self as cfg, FitValue};
 use crate::csvio;
+use crate::reference::cli::{read_reference, reference_for_samples, ReferenceArgs};
 use crate::stats::{coverage, summarize};
 
 use super::create;
@@ -37,16 +38,17 @@ pub struct CalibrateOptions {
 }
 
 /// `odoctl calibrate`.
-pub fn calibrate(o: &CalibrateOptions) -> Result<ExitCode> {
+pub fn calibrate(o: &CalibrateOptions, input: &ReferenceArgs) -> Result<ExitCode> {
     let started = Instant::now();
     let timer = calib::PhaseTimer::new();
     // The two files are independent: read on two cores.
     let (samples, reference) = std::thread::scope(|scope| {
-        let reference = scope.spawn(|| csvio::read_reference(&o.reference));
+        let reference = scope.spawn(|| read_reference(&o.reference, input));
         let samples = csvio::read_samples(&o.samples);
         (samples, reference.join().expect("CSV reader panicked"))
     });
     let (samples, reference) = (samples?, reference?);
+    let reference = reference_for_samples(&reference, &samples)?;
     timer.lap("read CSV");
     let mut initial = match &o.initial {
         Some(p) => cfg::read_params(p, ChassisParams::DESIGNED)?,

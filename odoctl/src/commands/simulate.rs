@@ -8,6 +8,7 @@ use anyhow::{bail, Context, Result};
 
 use crate::config::{self as cfg};
 use crate::csvio;
+use crate::reference::cli::ReceiverArgs;
 use crate::simulate::{self, default_truth, PathKind};
 
 use super::create;
@@ -32,7 +33,7 @@ pub struct SimulateOptions {
     pub settings: simulate::SimSettings,
 }
 /// `odoctl simulate`.
-pub fn simulate(o: &SimulateOptions) -> Result<ExitCode> {
+pub fn simulate(o: &SimulateOptions, logs: &ReceiverArgs) -> Result<ExitCode> {
     let mut truth = match &o.truth {
         Some(p) => cfg::read_params(p, default_truth())?,
         None => default_truth(),
@@ -52,7 +53,10 @@ pub fn simulate(o: &SimulateOptions) -> Result<ExitCode> {
     {
         bail!("--length must be positive, --slip, --slip-turn and --rtk-sigma non-negative");
     }
-    let sim = simulate::simulate_path(o.path, o.length, truth, o.settings);
+    let receiver = logs.receiver(run.rtk_sigma, run.heading_sigma, run.seed)?;
+    let mut sim = simulate::simulate_path(o.path, o.length, truth, o.settings);
+    logs.prepare(&mut sim, &receiver);
+    logs.write(&sim, &receiver)?;
     let mut w = create(&o.samples)?;
     csvio::write_samples(&mut w, &sim.samples, csvio::SamplesLayout::Counts)?;
     w.flush()?;
@@ -76,7 +80,7 @@ pub fn simulate(o: &SimulateOptions) -> Result<ExitCode> {
     crate::outln!(
         "simulated {} samples over {:.1} s: {:.1} m travelled, {:.0} deg turned; true left_diameter {}, right_diameter {}, track_width {}",
         sim.samples.len(),
-        sim.samples.last().map_or(0.0, |s| s.t),
+        sim.samples.last().map_or(0.0, |s| s.t - sim.samples[0].t),
         travelled,
         turned.to_degrees(),
         truth.left_diameter,

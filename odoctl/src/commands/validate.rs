@@ -10,6 +10,7 @@ use odo_core::odometry::{ChassisParams, UncertaintyModel};
 use crate::calib::{self, Run};
 use crate::config::{self as cfg};
 use crate::csvio;
+use crate::reference::cli::{read_reference, reference_for_samples, ReferenceArgs};
 use crate::stats::{coverage, summarize};
 
 use super::create;
@@ -27,6 +28,7 @@ pub fn validate(
     models: &[UncertaintyModel],
     reference_sigma: f64,
     reference_heading_sigma: f64,
+    input: &ReferenceArgs,
 ) -> Result<ExitCode> {
     if !(reference_sigma >= 0.0 && reference_heading_sigma >= 0.0) {
         bail!("--reference-sigma and --reference-heading-sigma-deg must be non-negative");
@@ -36,7 +38,7 @@ pub fn validate(
         params.uncertainty_model = *one;
     }
     let samples = csvio::read_samples(samples_path)?;
-    let reference = csvio::read_reference(reference_path)?;
+    let reference = reference_for_samples(&read_reference(reference_path, input)?, &samples)?;
     let matches = csvio::match_or_fail(
         &samples,
         &samples_path.display().to_string(),
