@@ -233,10 +233,8 @@ pub fn metadata(
         "reset_pose",
         "odom kept continuous (offset composed), WARN on /diagnostics".into(),
     );
-    for k in cfg::KEYS {
-        if let Ok(v) = cfg::get_key(params, k) {
-            put(k, v);
-        }
+    for k in cfg::chassis_keys() {
+        put(k.name(), cfg::chassis_value_text(params, k));
     }
     m
 }

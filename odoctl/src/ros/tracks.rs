@@ -110,10 +110,8 @@ pub fn validate_hook(
     );
     meta.insert("stamp_source".to_string(), "samples_t".to_string());
     meta.insert("initial_heading".to_string(), format!("{h0:?}"));
-    for k in cfg::KEYS {
-        if let Ok(v) = cfg::get_key(&params, k) {
-            meta.insert(k.to_string(), v);
-        }
+    for k in cfg::chassis_keys() {
+        meta.insert(k.name().to_string(), cfg::chassis_value_text(&params, k));
     }
     let sum = write_tracks(out, &reference, &ev, &meta)?;
     eprintln!(
