@@ -350,12 +350,14 @@ fn all_kinds() -> Vec<(Message, u32)> {
     ]
 }
 
-/// Flip every bit of every encoded frame (delimiter included), followed by an intact frame:
-/// the corrupted frame is never accepted, and the next frame always is.
+/// Flip every bit of every encoded frame (delimiter included), between intact frames: the
+/// corrupted frame is never accepted, and the next frame always is.
 #[test]
 fn every_single_bit_error_is_detected() {
     let follower = example_reply();
     let follow_bytes = encode(&follower, 8);
+    // The decoder has joined the stream: a failure of the first run would be a join.
+    let primer = encode(&example_reply(), 100);
     let mut flips = 0;
     for (msg, seq) in all_kinds() {
         let good = encode(&msg, seq);
@@ -364,6 +366,7 @@ fn every_single_bit_error_is_detected() {
                 let mut bad = good.clone();
                 bad[i] ^= 1 << bit;
                 let mut dec = FrameDecoder::new();
+                dec.feed(&primer, |r| assert!(r.is_ok()));
                 let mut oks = Vec::new();
                 let mut errs = 0;
                 dec.feed(&bad, |r| match r {
@@ -417,16 +420,45 @@ fn resynchronises_after_garbage_oversize_and_mid_stream_join() {
     let mut ok = 0;
     dec.feed(&frames[40..], |r| ok += r.is_ok() as u32);
     assert_eq!(ok, 2);
-    assert_eq!(dec.stats().crc_errors + dec.stats().malformed, 1);
-    // A long run without delimiter, then frames.
+    // The tail of the frame under way is a join, not a link error.
+    let first_len = encode(&example_pose(), 0).len() as u32;
+    assert_eq!(dec.stats().join_bytes, first_len - 40 - 1);
+    assert_eq!(dec.stats().crc_errors + dec.stats().malformed, 0);
+    // A stream read from its start decodes its first frame.
     let mut dec = FrameDecoder::new();
-    let mut stream = vec![0x55u8; 3 * MAX_WIRE_FRAME];
+    let mut ok = 0;
+    dec.feed(&frames, |r| ok += r.is_ok() as u32);
+    assert_eq!((ok, dec.stats().join_bytes), (3, 0));
+    // After the join, a damaged frame is an error again.
+    let mut damaged = frames[40..].to_vec();
+    let at = damaged.len() - 10;
+    damaged[at] ^= 0x01;
+    let mut dec = FrameDecoder::new();
+    dec.feed(&damaged, |_| {});
+    assert_eq!(dec.stats().crc_errors + dec.stats().malformed, 1);
+    // Joining inside a run longer than any frame: all of it counted as join bytes.
+    let mut dec = FrameDecoder::new();
+    let mut stream = vec![0x55u8; 2 * MAX_WIRE_FRAME];
+    stream.extend_from_slice(&frames);
+    let mut ok = 0;
+    dec.feed(&stream, |r| ok += r.is_ok() as u32);
+    assert_eq!(ok, 2);
+    assert_eq!(dec.stats().oversize, 0);
+    assert_eq!(
+        dec.stats().join_bytes,
+        2 * MAX_WIRE_FRAME as u32 + first_len - 1
+    );
+    // After a frame, a long run without delimiter, then frames.
+    let mut dec = FrameDecoder::new();
+    let mut stream = encode(&example_pose(), 7);
+    stream.extend(vec![0x55u8; 3 * MAX_WIRE_FRAME]);
     stream.push(0);
     stream.extend_from_slice(&frames);
     let mut ok = 0;
     dec.feed(&stream, |r| ok += r.is_ok() as u32);
-    assert_eq!(ok, 3);
+    assert_eq!(ok, 4);
     assert_eq!(dec.stats().oversize, 1);
+    assert_eq!(dec.stats().join_bytes, 0);
     // Leading and repeated delimiters are harmless.
     let mut dec = FrameDecoder::new();
     let mut stream = vec![0u8; 5];

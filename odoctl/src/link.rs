@@ -79,8 +79,9 @@ impl StreamStats {
 /// Formats the link's health: frame counters of the decoder and record counters.
 pub fn health(d: &DecoderStats, s: &StreamStats) -> String {
     format!(
-        "frames {}, CRC errors {}, malformed {}, oversize {}, version errors {}, unknown types {}, frame sequence gaps {} ({} frames lost); records {}, record sequence gaps {}, dropped by the unit {}",
+        "frames {}, joined after {} bytes, CRC errors {}, malformed {}, oversize {}, version errors {}, unknown types {}, frame sequence gaps {} ({} frames lost); records {}, record sequence gaps {}, dropped by the unit {}",
         d.frames,
+        d.join_bytes,
         d.crc_errors,
         d.malformed,
         d.oversize,
