@@ -220,7 +220,7 @@ fn sample_index_pulses_are_applied_with_the_sample() {
 }
 
 #[test]
-fn moving_means_counts_changed_within_one_second_of_samples() {
+fn moving_means_a_wheel_moved_beyond_the_threshold_within_one_second() {
     let rate = Settings::DEFAULT.rate;
     let mut p = processor();
     let mut log = Events::default();
@@ -232,8 +232,48 @@ fn moving_means_counts_changed_within_one_second_of_samples() {
     }
     record(&mut p, &raw(rate, 0, 0), &mut log);
     assert!(!p.live(&raw(rate, 0, 0), 0).moving, "a second at rest");
-    record(&mut p, &raw(rate + 1, 0, 1), &mut log);
-    assert!(p.live(&raw(rate + 1, 0, 1), 0).moving, "moved again");
+    // A wheel dithering on one edge of its code (+-1 count) at rest is not moving, ever.
+    for k in rate + 1..5 * rate {
+        let c = (k % 2) as u32;
+        record(&mut p, &raw(k, c, 0), &mut log);
+        assert!(!p.live(&raw(k, c, 0), 0).moving, "dither at sample {k}");
+    }
+    // Beyond MOTION_THRESHOLD increments (8), it moves again; at the threshold it does not.
+    let k = 5 * rate;
+    record(&mut p, &raw(k, 0, 8), &mut log);
+    assert!(!p.live(&raw(k, 0, 8), 0).moving, "8 increments");
+    record(&mut p, &raw(k + 1, 0, 9), &mut log);
+    assert!(p.live(&raw(k + 1, 0, 9), 0).moving, "moved again");
+    assert_eq!(odo_core::unit::processor::MOTION_THRESHOLD, 8);
+}
+
+#[test]
+fn settings_dirty_means_different_from_the_stored_settings() {
+    let mut c = commands(MemFlash::new(4, 0));
+    assert!(!c.store_state().dirty, "defaults, nothing stored");
+    line(&mut c, "set rate 100", false);
+    assert!(c.store_state().dirty);
+    line(&mut c, "set rate 50", false);
+    assert!(!c.store_state().dirty, "back to what a reset starts with");
+    line(&mut c, "set track_width 0.6", false);
+    line(&mut c, "save", false);
+    assert!(!c.store_state().dirty);
+    line(&mut c, "defaults", false);
+    assert!(c.store_state().dirty, "defaults differ from the stored 0.6");
+    line(&mut c, "set track_width 0.6", false);
+    assert!(!c.store_state().dirty, "equal to the stored record again");
+    // Start-up replaced the stored settings: the working ones differ from the stored.
+    let mut stored = Settings::DEFAULT;
+    stored.rate = 7;
+    let c = Commands::new(
+        Settings::DEFAULT,
+        SettingsSource::Flash,
+        SettingsStore::new(MemFlash::new(4, 0)),
+        HZ,
+        ClockSource::Hse,
+    )
+    .with_stored(stored);
+    assert!(c.store_state().dirty);
 }
 
 #[test]

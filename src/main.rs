@@ -152,7 +152,8 @@ mod app {
         crate::log::booted(timer_hz, &cfg);
 
         let processor = Processor::new(&settings, timer_hz, board::COUNTER_BITS);
-        let commands = Commands::new(settings, loaded.source, store, timer_hz, clock);
+        let commands = Commands::new(settings, loaded.source, store, timer_hz, clock)
+            .with_stored(loaded.settings);
         let shared = Shared {
             acq,
             link: Link::new(),
@@ -360,7 +361,7 @@ mod app {
                     settings,
                     discipline,
                 } => {
-                    cx.shared.store_state.lock(|s| s.dirty = true);
+                    cx.shared.store_state.lock(|s| *s = c.store_state());
                     if cx.local.cfg_in.enqueue(discipline).is_err() {
                         defmt::warn!("sampler configuration queue full");
                     }

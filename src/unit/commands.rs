@@ -20,8 +20,9 @@ pub trait StallingFlash: Flash {
 pub enum Effect {
     /// Nothing.
     None,
-    /// The working settings changed (and are now unsaved): the processing task takes
-    /// `settings`, the sampler `discipline`.
+    /// The working settings changed (see [`Commands::store_state`] for whether they now
+    /// differ from the stored ones): the processing task takes `settings`, the sampler
+    /// `discipline`.
     SettingsChanged {
         /// The new working settings.
         settings: Settings,
@@ -50,7 +51,9 @@ pub struct Commands<F> {
     settings: Settings,
     store: SettingsStore<F>,
     source: SettingsSource,
-    dirty: bool,
+    /// The settings a reset would start with: the stored record's, or the defaults when
+    /// none is stored.
+    stored: Settings,
     timer_hz: u32,
     /// The clock source found at start.
     clock: ClockSource,
@@ -66,15 +69,32 @@ impl<F: StallingFlash> Commands<F> {
         timer_hz: u32,
         clock: ClockSource,
     ) -> Self {
+        let stored = match source {
+            SettingsSource::Flash => settings,
+            SettingsSource::Defaults => Settings::DEFAULT,
+        };
         Self {
             assembler: LineAssembler::new(),
             settings,
             store,
             source,
-            dirty: false,
+            stored,
             timer_hz,
             clock,
         }
+    }
+
+    /// The settings loaded at start were `stored` (they differ from the working ones when
+    /// start-up replaced them, `unit::Start::settings_replaced`).
+    pub fn with_stored(mut self, stored: Settings) -> Self {
+        self.stored = stored;
+        self
+    }
+
+    /// The working settings differ from those the unit would start with after a reset
+    /// (the stored record's, or the defaults when none is stored): `save` is pending.
+    pub fn dirty(&self) -> bool {
+        self.settings != self.stored
     }
 
     /// The working settings.
@@ -92,11 +112,11 @@ impl<F: StallingFlash> Commands<F> {
         self.clock
     }
 
-    /// Where the settings came from and whether they are unsaved.
+    /// Where the settings came from and whether they differ from the stored ones.
     pub fn store_state(&self) -> super::StoreState {
         super::StoreState {
             source: self.source,
-            dirty: self.dirty,
+            dirty: self.dirty(),
         }
     }
 
@@ -126,13 +146,10 @@ impl<F: StallingFlash> Commands<F> {
     ) -> (Reply, Effect) {
         let effect = match action {
             Action::None => Effect::None,
-            Action::SettingsChanged => {
-                self.dirty = true;
-                Effect::SettingsChanged {
-                    settings: self.settings,
-                    discipline: discipline_config(&self.settings, self.timer_hz, clock()),
-                }
-            }
+            Action::SettingsChanged => Effect::SettingsChanged {
+                settings: self.settings,
+                discipline: discipline_config(&self.settings, self.timer_hz, clock()),
+            },
             Action::Save
                 if moving()
                     && !self
@@ -148,7 +165,7 @@ impl<F: StallingFlash> Commands<F> {
             }
             Action::Save => match self.store.save(&self.settings) {
                 Ok(generation) => {
-                    self.dirty = false;
+                    self.stored = self.settings;
                     self.source = SettingsSource::Flash;
                     reply.push_line(format_args!("saved (generation {generation})"));
                     Effect::Saved { generation }
@@ -203,7 +220,7 @@ impl<F: StallingFlash> Commands<F> {
                 board,
                 timer_hz: self.timer_hz,
                 source: self.source,
-                dirty: self.dirty,
+                dirty: self.dirty(),
             },
         );
     }

@@ -13,6 +13,11 @@ use crate::protocol::{GnssTime, PoseRecord, Status, StatusFlags, WheelStatus};
 use crate::settings::{Settings, SettingsSource};
 use crate::timing::{LineBuffer, NmeaError, PpsEvent, PpsStats, SyncState, TimeTagger};
 
+/// Increments a wheel must turn away from where it rests to count as moving (for the
+/// save-while-moving check): an encoder dithering on one edge of its code at rest changes
+/// its count by +-1 forever.
+pub const MOTION_THRESHOLD: u64 = 8;
+
 /// Changes the command task asks the processing task to apply at the next sample.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Requests {
@@ -23,12 +28,13 @@ pub struct Requests {
 }
 
 /// Where the settings in use came from and whether they differ from the stored ones
-/// (kept by the command task, reported by the heartbeat).
+/// (kept by the command task, reported by the heartbeat and `status`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct StoreState {
     /// Flash or defaults.
     pub source: SettingsSource,
-    /// The working settings differ from the stored ones.
+    /// The working settings differ from those a reset would start with (the stored record's,
+    /// or the defaults when none is stored).
     pub dirty: bool,
 }
 
@@ -72,7 +78,7 @@ pub struct Live {
     pub index_lost: [u32; 2],
     /// PPS edges lost to an over-capture.
     pub pps_overcaptures: u32,
-    /// The wheels moved within the last second.
+    /// A wheel moved more than [`MOTION_THRESHOLD`] increments within the last second.
     pub moving: bool,
 }
 
@@ -107,8 +113,9 @@ pub struct Processor {
     latency_max: u32,
     index_lost: [u32; 2],
     pps_overcaptures: u32,
-    /// Counts of the last sample, and the sample sequence at which they last changed.
-    last_counts: Option<(u32, u32)>,
+    /// Counts where the wheels were last seen at rest (within [`MOTION_THRESHOLD`]), and
+    /// the sample sequence at which they last moved beyond it.
+    rest_counts: Option<WheelCounts>,
     last_motion: u32,
 }
 
@@ -147,7 +154,7 @@ impl Processor {
             latency_max: 0,
             index_lost: [0; 2],
             pps_overcaptures: 0,
-            last_counts: None,
+            rest_counts: None,
             last_motion: 0,
         }
     }
@@ -271,6 +278,19 @@ impl Processor {
         step
     }
 
+    /// Motion: a wheel more than [`MOTION_THRESHOLD`] increments from where it was last at
+    /// rest moves (and rests there from now); dithering on one edge of the code does not.
+    fn follow_motion(&mut self, counts: WheelCounts) {
+        let moved = self.rest_counts.is_none_or(|rest| {
+            (counts.left - rest.left).unsigned_abs() > MOTION_THRESHOLD
+                || (counts.right - rest.right).unsigned_abs() > MOTION_THRESHOLD
+        });
+        if moved {
+            self.rest_counts = Some(counts);
+            self.last_motion = self.sequence;
+        }
+    }
+
     /// Timing of `raw`: its PPS edge, a state change, the fault lines.
     fn follow_timing(&mut self, raw: &RawSample, log: &mut impl Log) {
         if let Some((tick, event)) = raw.pps {
@@ -323,12 +343,8 @@ impl Processor {
             self.pps_overcaptures = self.pps_overcaptures.wrapping_add(1);
             log.event(Event::PpsOvercapture);
         }
-        let counts_now = (raw.counts.left, raw.counts.right);
-        if self.last_counts != Some(counts_now) {
-            self.last_counts = Some(counts_now);
-            self.last_motion = self.sequence;
-        }
         let counts = self.extend(raw);
+        self.follow_motion(counts);
         for (wheel, pulse) in raw.index_pulses.iter().enumerate() {
             if let Some(r) = pulse {
                 self.on_index(wheel, *r, log);
