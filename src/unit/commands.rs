@@ -4,7 +4,7 @@
 use super::discipline_config;
 use crate::console::{self, Action, LineAssembler, Reply};
 use crate::odometry::Pose;
-use crate::protocol::{DeviceInfo, PROTOCOL_VERSION};
+use crate::protocol::{DeviceInfo, ResetCause, PROTOCOL_VERSION};
 use crate::settings::store::{Flash, SettingsStore};
 use crate::settings::{Settings, SettingsSource};
 use crate::timing::{ClockSource, DisciplineConfig};
@@ -183,16 +183,23 @@ impl<F: StallingFlash> Commands<F> {
     }
 
     /// `version`: the reply lines, and the device information frame for the unit with
-    /// unique ID `uid`.
-    pub fn version(&self, reply: &mut Reply, uid: [u8; 12]) -> DeviceInfo {
+    /// unique ID `uid`, last started by `reset_cause`.
+    pub fn version(&self, reply: &mut Reply, uid: [u8; 12], reset_cause: ResetCause) -> DeviceInfo {
         reply.push_line(format_args!(
             "firmware = odo-unit {}",
             env!("CARGO_PKG_VERSION")
         ));
         reply.push_line(format_args!("protocol = {PROTOCOL_VERSION}"));
+        self.device_info(uid, reset_cause)
+    }
+
+    /// The device information frame (sent at start and after `version`) for the unit with
+    /// unique ID `uid`, last started by `reset_cause`.
+    pub fn device_info(&self, uid: [u8; 12], reset_cause: ResetCause) -> DeviceInfo {
         let mut info = DeviceInfo {
             protocol_version: PROTOCOL_VERSION,
             settings_source: self.source,
+            reset_cause,
             settings_checksum: self.settings.checksum(),
             uid,
             firmware_version: heapless::String::new(),
@@ -201,22 +208,22 @@ impl<F: StallingFlash> Commands<F> {
         info
     }
 
-    /// `status`: the unit's counters (`live`, host and receiver bytes lost) and the
+    /// `status`: the unit's counters (`live`, the host and receiver UARTs' errors) and the
     /// board's figures (`board`).
     pub fn status(
         &self,
         reply: &mut Reply,
         live: &super::Live,
-        rx_lost: u32,
-        gnss_lost: u32,
+        host: &super::RxErrors,
+        gnss: &super::RxErrors,
         board: &super::BoardReport,
     ) {
         super::status::write(
             reply,
             &super::status::StatusInputs {
                 live,
-                rx_lost,
-                gnss_lost,
+                host,
+                gnss,
                 board,
                 timer_hz: self.timer_hz,
                 source: self.source,
