@@ -160,7 +160,11 @@ fn status_layout_and_short_bodies() {
             0x5555_5555
         )
     );
-    assert_eq!(&body[36..40], &[1, 1, 3, 0], "source, dirty, reset cause, reserved");
+    assert_eq!(
+        &body[36..40],
+        &[1, 1, 3, 0],
+        "source, dirty, reset cause, reserved"
+    );
     assert_eq!(
         (field(40), field(44), field(48)),
         (0xA1A2_A3A4, 0xB1B2_B3B4, 0xC1C2_C3C4),
@@ -692,7 +696,10 @@ fn status_word_rate_switch_and_late_bits() {
     let back = StatusFlags::from_bits(0x3000).unwrap();
     assert!(back.rate_switch && back.late);
     assert_eq!(StatusFlags::DEFINED_BITS, 0x3FFF);
-    assert_eq!(StatusFlags::from_bits(0xFFFF_C000).unwrap(), StatusFlags::default());
+    assert_eq!(
+        StatusFlags::from_bits(0xFFFF_C000).unwrap(),
+        StatusFlags::default()
+    );
 }
 
 /// RCC_CSR (RM0368 sec. 6.3.21) to the reset cause: every reset sets PINRSTF, a power-on

@@ -265,7 +265,9 @@ mod app {
     #[task(binds = TIM3, priority = 4, local = [index_in_right, lost: u32 = 0], shared = [acq])]
     fn index_right(mut cx: index_right::Context) {
         if let Some(capture) = cx.shared.acq.lock(|acq| acq.take_index(1)) {
-            capture.queue(cx.local.lost, |c| cx.local.index_in_right.enqueue(c).is_ok());
+            capture.queue(cx.local.lost, |c| {
+                cx.local.index_in_right.enqueue(c).is_ok()
+            });
         }
     }
 

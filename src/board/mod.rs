@@ -57,8 +57,8 @@ pub const WATCHDOG_MIN_MS: u32 = WATCHDOG_MS * 32 / 47;
 
 const _: () = assert!(WATCHDOG_MIN_MS > 3 * flash::MAX_ERASE_MS);
 
-pub use odo_core::timing::ClockSource;
 use odo_core::protocol::{reset_cause::RCC_CSR_RMVF, ResetCause};
+pub use odo_core::timing::ClockSource;
 
 /// The watchdog stops while a debugger halts the core (DBGMCU_APB1_FZ DBG_IWDG_STOP), so
 /// that a debug session is not reset; the `watchdog-in-debug` feature keeps it running,

@@ -13,8 +13,8 @@
 
 use heapless::spsc::Producer;
 use odo_core::protocol::TxRing;
-pub use odo_core::unit::RxErrors;
 use odo_core::unit::RxByte;
+pub use odo_core::unit::RxErrors;
 use stm32f4xx_hal::pac;
 use stm32f4xx_hal::rcc::Enable;
 

@@ -2,6 +2,7 @@
 //! index-mismatch and motion accounting, the time tag and the Status heartbeat.
 
 use super::event::{Event, Log};
+use super::rx_errors::RxErrors;
 use super::sample::{IndexCapture, RawSample};
 use super::time_tag;
 use crate::odometry::index::DEFAULT_TOLERANCE;
@@ -9,7 +10,6 @@ use crate::odometry::{
     ChassisParams, CounterExtender, IndexCheck, IndexRefs, IndexTracker, Integrator, Pose,
     StepStatus, WheelCounts,
 };
-use super::rx_errors::RxErrors;
 use crate::protocol::{GnssTime, PoseRecord, ResetCause, Status, StatusFlags, WheelStatus};
 use crate::settings::{Settings, SettingsSource};
 use crate::timing::{LineBuffer, NmeaError, PpsEvent, PpsStats, SyncState, TimeTagger};
