@@ -108,8 +108,7 @@ mod app {
         // The watchdog first (it runs from the LSI): nothing after this can hang for good.
         let watchdog = board::start_watchdog(dp.IWDG, &dp.DBGMCU);
         let reset_cause = board::take_reset_cause(&dp.RCC);
-        let (mut rcc, clock) = board::start_clocks(dp.RCC);
-        let clocks = rcc.clocks;
+        let (mut rcc, clock, clocks) = board::start_clocks(dp.RCC);
         let timer_hz = board::timer_hz(&clocks);
 
         let pins = board::pins(dp.GPIOA, dp.GPIOB, dp.GPIOC, &mut rcc);
@@ -127,8 +126,8 @@ mod app {
 
         let mut acq = Acquisition::new(dp.TIM2, dp.TIM3, pins.faults, &mut rcc);
 
-        let host = HostUart::new(dp.USART2, &mut rcc, clocks.pclk1().raw(), settings.baud);
-        let gnss = GnssUart::new(dp.USART1, &mut rcc, clocks.pclk2().raw(), board::GNSS_BAUD);
+        let host = HostUart::new(dp.USART2, &mut rcc, clocks.pclk1, settings.baud);
+        let gnss = GnssUart::new(dp.USART1, &mut rcc, clocks.pclk2, board::GNSS_BAUD);
         // QEMU: PPS captures and NMEA bytes from the simulated receiver (board/qemu/gnss.rs).
         let (gnss, sampler_extra) = board::attach_gnss(gnss);
 

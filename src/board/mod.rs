@@ -43,6 +43,17 @@ pub use variant::{
 
 use stm32f4xx_hal::pac;
 
+/// The bus clocks the peripherals run at, Hz.
+#[derive(Debug, Clone, Copy)]
+pub struct BusClocks {
+    /// APB1 (USART2).
+    pub pclk1: u32,
+    /// APB2 (USART1).
+    pub pclk2: u32,
+    /// The APB1 timers (TIM2-5).
+    pub timer: u32,
+}
+
 /// Baud rate of the GNSS receiver's NMEA output (USART1).
 pub const GNSS_BAUD: u32 = 38_400;
 
