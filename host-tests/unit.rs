@@ -246,7 +246,7 @@ fn moving_means_a_wheel_moved_beyond_the_threshold_within_one_second() {
     assert!(!p.live(&raw(rate, 0, 0), 0).moving, "a second at rest");
     // A wheel dithering on one edge of its code (+-1 count) at rest is not moving, ever.
     for k in rate + 1..5 * rate {
-        let c = (k % 2) as u32;
+        let c = k % 2;
         record(&mut p, &raw(k, c, 0), &mut log);
         assert!(!p.live(&raw(k, c, 0), 0).moving, "dither at sample {k}");
     }

@@ -388,8 +388,9 @@ impl Processor {
             });
         }
         self.latency_max = self.latency_max.max(raw.latency);
-        let late_ticks = (raw.period / u64::from(raw.sample.rate.max(1))) / LATE_FRACTION;
-        if raw.merged > 0 || u64::from(raw.latency) > late_ticks {
+        // latency > period / rate / LATE_FRACTION, without a 64-bit division per sample.
+        let late = u64::from(raw.latency) * u64::from(raw.sample.rate) * LATE_FRACTION;
+        if raw.merged > 0 || late > raw.period {
             self.late = true;
             self.late_samples = self.late_samples.wrapping_add(1);
         }
