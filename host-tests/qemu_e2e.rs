@@ -274,6 +274,7 @@ fn qemu_end_to_end() {
 fn rate_switch(link: &mut UnitLink) {
     let from_record = link.records.len();
     let from_frame = link.frames.len();
+    let t_sent = link.records.last().expect("records").mcu_time_us;
     expect(
         link,
         "set rate 100 output_divider 4",
@@ -296,7 +297,13 @@ fn rate_switch(link: &mut UnitLink) {
     let k = flagged[0];
     let switch = records[k];
     assert_eq!(switch.mcu_time_us % 1_000_000, 0, "at a whole second");
-    assert!(switch.mcu_time_us > t_cmd && switch.mcu_time_us <= t_cmd + 1_000_000);
+    // The sampler takes the rate at the first second it has not committed a sample of: the
+    // next or, when the command arrives at the last sample of a second, the one after.
+    assert!(
+        switch.mcu_time_us > t_sent && switch.mcu_time_us <= t_cmd + 2_000_000,
+        "switch at {} us, command sent after {t_sent} us, answered by {t_cmd} us",
+        switch.mcu_time_us
+    );
     for w in records[..k].windows(2) {
         assert_eq!(
             w[1].mcu_time_us - w[0].mcu_time_us,
