@@ -1115,3 +1115,40 @@ fn uart_status_flags_table() {
     );
     assert_eq!(e.line_errors(), 4);
 }
+
+/// Issue 19, item 3: a sample lost to a full queue does not lose its PPS edge: the edge goes
+/// back into the latch and travels with the next sample (a later glitch does not hide it).
+#[test]
+fn a_dropped_sample_gives_its_pps_edge_to_the_next() {
+    let mut latch = PpsLatch::new();
+    latch.on_interrupt(
+        Some((
+            1000,
+            PpsEvent::Accepted {
+                second: 3,
+                phase_error: 2,
+            },
+        )),
+        true,
+    );
+    let (pps, over) = latch.take();
+    let mut lost = raw(1, 0, 0);
+    lost.pps = pps;
+    lost.pps_overcapture = over;
+    // The queue was full: put back, then a glitch comes before the next sample.
+    latch.put_back(&lost);
+    latch.on_interrupt(Some((1500, PpsEvent::Glitch)), false);
+    let (pps, over) = latch.take();
+    assert_eq!(
+        pps,
+        Some((
+            1000,
+            PpsEvent::Accepted {
+                second: 3,
+                phase_error: 2
+            }
+        ))
+    );
+    assert!(over);
+    assert_eq!(latch.take(), (None, false));
+}

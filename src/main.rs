@@ -246,8 +246,7 @@ mod app {
         };
         if let Err(raw) = cx.local.samples_in.enqueue(raw) {
             *cx.local.lost = cx.local.lost.wrapping_add(1);
-            // Its PPS edge goes with the next sample.
-            cx.local.pps.on_interrupt(raw.pps, raw.pps_overcapture);
+            cx.local.pps.put_back(&raw);
         }
         rtic::pend(Interrupt::SPI2);
     }

@@ -128,4 +128,10 @@ impl PpsLatch {
     pub fn take(&mut self) -> (Option<(u64, PpsEvent)>, bool) {
         (self.edge.take(), core::mem::take(&mut self.overcapture))
     }
+
+    /// `raw` could not be handed on (the queue was full): its PPS edge and over-capture go
+    /// with the next sample instead of being lost with it.
+    pub fn put_back(&mut self, raw: &RawSample) {
+        self.on_interrupt(raw.pps, raw.pps_overcapture);
+    }
 }
