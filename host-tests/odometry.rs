@@ -9,146 +9,14 @@ use odo_core::odometry::trig;
 use odo_core::odometry::uncertainty::{StepGeometry, StepJacobian};
 use odo_core::odometry::{
     ChassisParams, CounterExtender, IndexRefs, Integrator, Pose, PoseSigma, UncertaintyModel,
-    WheelCounts, WheelHarmonics,
+    WheelCounts,
 };
 use proptest::prelude::*;
 
-mod support;
+use odo_testkit::drive::drive_increments;
+use odo_testkit::reference::{chord, increments, Reference};
+use odo_testkit::{wobbly_wheels, Rng};
 use std::f64::consts::{PI, TAU};
-use support::Rng;
-
-/// The paper's odometry and uncertainty in f64.
-#[derive(Debug, Clone)]
-struct Reference {
-    c: [f64; 2],
-    w: f64,
-    delta: [f64; 2],
-    diameter: [f64; 2],
-    harmonics: [WheelHarmonics; 2],
-    ticks: f64,
-    counts: [i64; 2],
-    x: f64,
-    y: f64,
-    alpha: f64,
-    sigma_x: f64,
-    sigma_y: f64,
-    sigma_alpha: f64,
-}
-
-impl Reference {
-    fn new(p: &ChassisParams, counts: [i64; 2], pose: Pose) -> Self {
-        let ticks = f64::from(p.ticks_per_rev);
-        Self {
-            c: [PI * p.left_diameter / ticks, PI * p.right_diameter / ticks],
-            w: p.track_width,
-            delta: [f64::from(p.delta_left), f64::from(p.delta_right)],
-            diameter: [p.left_diameter, p.right_diameter],
-            harmonics: [p.left_wheel, p.right_wheel],
-            ticks,
-            counts,
-            x: pose.x,
-            y: pose.y,
-            alpha: pose.heading,
-            sigma_x: 0.0,
-            sigma_y: 0.0,
-            sigma_alpha: 0.0,
-        }
-    }
-
-    /// Eq (4)'s sum F_w of wheel i at absolute count g, with the index latched at `index`.
-    fn summed_wheel_function(&self, i: usize, g: i64, index: Option<i64>) -> f64 {
-        let linear = self.c[i] * g as f64;
-        let Some(index) = index else { return linear };
-        let theta = TAU * ((g - index).rem_euclid(self.ticks as i64)) as f64 / self.ticks;
-        let h = &self.harmonics[i];
-        let mut r = 0.0;
-        for k in 0..3 {
-            let n = (k + 1) as f64;
-            r += self.diameter[i] / 2.0
-                * (f64::from(h.cos[k]) / n * (n * theta).sin()
-                    - f64::from(h.sin[k]) / n * (n * theta).cos());
-        }
-        linear + r
-    }
-
-    fn step(&mut self, counts: [i64; 2], index: [Option<i64>; 2]) {
-        // Eq (1) and eq (5).
-        let dg = [counts[0] - self.counts[0], counts[1] - self.counts[1]];
-        let s = [
-            self.summed_wheel_function(0, counts[0], index[0])
-                - self.summed_wheel_function(0, self.counts[0], index[0]),
-            self.summed_wheel_function(1, counts[1], index[1])
-                - self.summed_wheel_function(1, self.counts[1], index[1]),
-        ];
-        self.counts = counts;
-        // Eqs (7)-(15).
-        let (ds, da) = ((s[0] + s[1]) / 2.0, (s[0] - s[1]) / self.w);
-        let dd = chord(ds, da);
-        let theta = self.alpha + da / 2.0;
-        let (dx, dy) = (dd * theta.sin(), dd * theta.cos());
-        // Eqs (19)-(28) with analytic f64 derivatives w.r.t. the wheel distances.
-        let sig = [
-            self.delta[0] * dg[0].abs() as f64,
-            self.delta[1] * dg[1].abs() as f64,
-        ];
-        let j = jacobian_f64(s, self.alpha, self.w);
-        let quad = |d: [f64; 2]| ((d[0] * sig[0]).powi(2) + (d[1] * sig[1]).powi(2)).sqrt();
-        let s_da = quad(j[0]);
-        let s_dx = quad(j[1]) + (dd * theta.cos() * self.sigma_alpha).abs();
-        let s_dy = quad(j[2]) + (dd * theta.sin() * self.sigma_alpha).abs();
-        self.sigma_alpha += s_da;
-        self.sigma_x += s_dx;
-        self.sigma_y += s_dy;
-        self.x += dx;
-        self.y += dy;
-        self.alpha += da;
-    }
-}
-
-/// Eqs (9)-(10).
-fn chord(ds: f64, da: f64) -> f64 {
-    if da == 0.0 {
-        ds
-    } else {
-        ds * 2.0 / da * (da / 2.0).sin()
-    }
-}
-
-/// (dalpha, dx, dy) of eqs (7)-(12) as functions of the wheel distances.
-fn increments(s: [f64; 2], alpha: f64, w: f64) -> [f64; 3] {
-    let (ds, da) = ((s[0] + s[1]) / 2.0, (s[0] - s[1]) / w);
-    let dd = chord(ds, da);
-    [
-        da,
-        dd * (alpha + da / 2.0).sin(),
-        dd * (alpha + da / 2.0).cos(),
-    ]
-}
-
-/// Analytic partial derivatives of `increments` w.r.t. s_1, s_2 (rows dalpha, dx, dy).
-fn jacobian_f64(s: [f64; 2], alpha: f64, w: f64) -> [[f64; 2]; 3] {
-    let (ds, da) = ((s[0] + s[1]) / 2.0, (s[0] - s[1]) / w);
-    let x = da / 2.0;
-    let (sinc, dsinc) = if x.abs() < 1e-4 {
-        (1.0 - x * x / 6.0, -x / 3.0)
-    } else {
-        (x.sin() / x, (x * x.cos() - x.sin()) / (x * x))
-    };
-    let dd = ds * sinc;
-    let theta = alpha + x;
-    let ddd = [
-        0.5 * sinc + ds * dsinc * 0.5 / w,
-        0.5 * sinc - ds * dsinc * 0.5 / w,
-    ];
-    let dth = [0.5 / w, -0.5 / w];
-    let mut j = [[0.0; 2]; 3];
-    for i in 0..2 {
-        j[0][i] = if i == 0 { 1.0 / w } else { -1.0 / w };
-        j[1][i] = ddd[i] * theta.sin() + dd * theta.cos() * dth[i];
-        j[2][i] = ddd[i] * theta.cos() - dd * theta.sin() * dth[i];
-    }
-    j
-}
 
 fn counts(c: [i64; 2]) -> WheelCounts {
     WheelCounts {
@@ -162,43 +30,6 @@ fn refs(r: [Option<i64>; 2]) -> IndexRefs {
         left: r[0],
         right: r[1],
     }
-}
-
-/// Per-sample increments of a varied drive: straights, arcs of both senses, pivots,
-/// stops and reversing, at `rate` samples per second and about 1 m/s.
-fn drive_increments(
-    rng: &mut Rng,
-    samples: usize,
-    counts_per_metre: f64,
-    rate: f64,
-) -> Vec<[i64; 2]> {
-    let mut out = Vec::with_capacity(samples);
-    let mut remaining = 0usize;
-    let mut speed = [0.0f64; 2];
-    let mut acc = [0.0f64; 2];
-    while out.len() < samples {
-        if remaining == 0 {
-            remaining = 50 + (rng.next() % 1500) as usize;
-            let v = 0.3 + 1.2 * rng.uniform();
-            let v = if rng.uniform() < 0.1 { -v } else { v };
-            speed = match rng.next() % 6 {
-                0 | 1 => [v, v],
-                2 => [v, v * (0.2 + 0.7 * rng.uniform())],
-                3 => [v * (0.2 + 0.7 * rng.uniform()), v],
-                4 => [0.3 * v, -0.3 * v],
-                _ => [0.0, 0.0],
-            };
-        }
-        remaining -= 1;
-        let mut d = [0i64; 2];
-        for i in 0..2 {
-            acc[i] += speed[i] * counts_per_metre / rate;
-            d[i] = acc[i].round() as i64;
-            acc[i] -= d[i] as f64;
-        }
-        out.push(d);
-    }
-    out
 }
 
 fn run_both(p: &ChassisParams, steps: &[[i64; 2]]) -> (Integrator, Reference) {
@@ -481,7 +312,7 @@ fn full_circle_of_known_radius_closes() {
 fn reversing_retraces_exactly() {
     let p = ChassisParams::DESIGNED;
     let mut integ = Integrator::new(&p, counts([0, 0]), Pose::default()).unwrap();
-    let mut rng = Rng(7);
+    let mut rng = Rng::new(7);
     let path = drive_increments(&mut rng, 5000, 1.0 / (PI * 0.26 / 20_000.0), 50.0);
     let mut g = [0i64; 2];
     for d in &path {
@@ -582,23 +413,9 @@ fn bad_parameters_are_refused_and_change_nothing() {
 // ---------------------------------------------------------------------------------------
 // Per-angle wheel function, eqs (3)-(5), referenced by the index line.
 
-fn wobbly() -> ChassisParams {
-    ChassisParams {
-        left_wheel: WheelHarmonics {
-            cos: [0.002, -0.0005, 0.0001],
-            sin: [0.001, 0.0003, 0.0],
-        },
-        right_wheel: WheelHarmonics {
-            cos: [-0.001, 0.0, 0.0002],
-            sin: [0.0015, -0.0002, 0.0001],
-        },
-        ..ChassisParams::DESIGNED
-    }
-}
-
 #[test]
 fn wheel_function_needs_the_index_and_matches_eq_5() {
-    let p = wobbly();
+    let p = wobbly_wheels();
     let mut integ = Integrator::new(&p, counts([0, 0]), Pose::default()).unwrap();
     let mut reference = Reference::new(&p, [0, 0], Pose::default());
     let mut g = [0i64; 2];
@@ -636,7 +453,7 @@ fn wheel_function_needs_the_index_and_matches_eq_5() {
 
 #[test]
 fn wheel_function_cancels_over_whole_turns_and_differs_within_one() {
-    let p = wobbly();
+    let p = wobbly_wheels();
     // Straight-ish: both wheels exactly one turn, from a referenced phase.
     let start = [1_234i64, 5_678];
     let index = refs([Some(0), Some(0)]);
@@ -667,7 +484,7 @@ fn wheel_function_cancels_over_whole_turns_and_differs_within_one() {
 fn index_changing_by_non_whole_turns_is_followed() {
     // A re-latched index that moved by counts that are not a whole turn (a fault the firmware
     // flags): the integrator follows the newest latch without a jump beyond the periodic term.
-    let p = wobbly();
+    let p = wobbly_wheels();
     let mut integ = Integrator::new(&p, counts([0, 0]), Pose::default()).unwrap();
     let mut g = 0i64;
     for k in 0..400 {
@@ -686,7 +503,7 @@ fn index_changing_by_non_whole_turns_is_followed() {
 #[test]
 fn jacobian_matches_finite_differences() {
     let w = 0.563f64;
-    let mut rng = Rng(42);
+    let mut rng = Rng::new(42);
     for _ in 0..2000 {
         let s = [(rng.uniform() - 0.5) * 0.2, (rng.uniform() - 0.5) * 0.2];
         let alpha = rng.uniform() * TAU * 3.0 - TAU;
@@ -734,7 +551,7 @@ fn jacobian_matches_finite_differences() {
 #[test]
 fn paper_uncertainty_matches_f64_reference_and_table_3_scale() {
     let p = ChassisParams::DESIGNED;
-    let mut rng = Rng(3);
+    let mut rng = Rng::new(3);
     let steps = drive_increments(&mut rng, 200_000, 1.0 / (PI * 0.26 / 20_000.0), 50.0);
     let (integ, reference) = run_both(&p, &steps);
     let sigma = integ.sigma();
@@ -803,7 +620,7 @@ fn covariance_model_is_independent_of_the_sampling_rate() {
     let counts_per_metre = 1.0 / (PI * 0.26 / 20_000.0);
     let mut sigmas = vec![];
     for rate in [50.0, 1000.0] {
-        let mut rng = Rng(11);
+        let mut rng = Rng::new(11);
         // The same path at two rates: one sample per 20 ms, or 20 per 20 ms.
         let coarse = drive_increments(&mut rng, 20_000, counts_per_metre, 50.0);
         let factor = (rate / 50.0) as i64;
@@ -838,7 +655,7 @@ fn ten_kilometre_drive_at_50_hz_matches_f64_reference() {
         ..ChassisParams::DESIGNED
     };
     let counts_per_metre = 20_000.0 / (PI * 0.2608);
-    let mut rng = Rng(2024);
+    let mut rng = Rng::new(2024);
     // About 1 m/s for 10 km of path: count the path as we go.
     let mut steps = vec![];
     let mut path = 0.0;

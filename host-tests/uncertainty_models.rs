@@ -16,8 +16,7 @@ use odo_core::odometry::{
 };
 use std::f64::consts::PI;
 
-mod support;
-use support::Rng;
+use odo_testkit::Rng;
 
 const KAPPA: f64 = 2.0e-6; // m^2 per metre rolled: 1.4 mm after 1 m, 4.5 mm after 10 m
 const RUNS: usize = 600;
@@ -87,7 +86,7 @@ fn monte_carlo(params: &ChassisParams) -> (Vec<[f64; 3]>, Vec<PoseSigma>) {
     let c = PI * params.left_diameter / f64::from(params.ticks_per_rev);
     let w = params.track_width;
     let steps = path(c);
-    let mut rng = Rng(0x5EED_1234);
+    let mut rng = Rng::new(0x5EED_1234);
     let (mut errors, mut sigmas) = (vec![], vec![]);
     for _ in 0..RUNS {
         let mut integ = Integrator::new(params, WheelCounts::default(), Pose::default()).unwrap();

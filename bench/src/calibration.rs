@@ -16,10 +16,9 @@ use std::time::Instant;
 
 use indicatif::ProgressBar;
 use odo_core::odometry::{ChassisParams, UncertaintyModel};
-use odoctl::calib::{self, DeltaMode, GeomOptions, Run, WindowStart};
-use odoctl::commands::{calibrate_run, default_truth, CalibrateOptions};
+use odoctl::calib::{self, CalibrationOptions, GeomOptions, Run, WindowStart};
 use odoctl::csvio::match_times;
-use odoctl::simulate::{self, PathKind, SimOptions, SimRun, SimSettings};
+use odoctl::simulate::{self, default_truth, PathKind, SimRun, SimSettings};
 
 /// Figures measured before issue 11 on the same inputs and machine (commit 0b32b1c:
 /// central-difference Jacobian, IRLS, and the Nelder-Mead polish that was then the default):
@@ -61,47 +60,7 @@ fn poor() -> ChassisParams {
 
 /// The run of `odoctl simulate --path KIND --length LENGTH` with its defaults.
 fn sim(kind: PathKind, length: f64) -> SimRun {
-    let settings = SimSettings {
-        rate: 50.0,
-        speed: 0.5,
-        slip: 0.001,
-        slip_corr: 0.1,
-        slip_turn: 0.0,
-        slip_turn_corr: 1.0,
-        rtk_sigma: 0.008,
-        heading_sigma: Some(0.5f64.to_radians()),
-        start: (0.0, 0.0, 0.3),
-        seed: 1,
-    };
-    let mut rng = simulate::Rng::new(settings.seed ^ 0x5EED);
-    simulate::simulate(&SimOptions {
-        truth: default_truth(),
-        segments: simulate::path(kind, length, &mut rng),
-        settings,
-    })
-}
-
-fn options() -> CalibrateOptions {
-    CalibrateOptions {
-        samples: "samples.csv".into(),
-        reference: "reference.csv".into(),
-        initial: None,
-        sets: vec![],
-        out: None,
-        delta_window: 10.0,
-        reference_sigma: 0.008,
-        delta_mode: DeltaMode::Equal,
-        fit_delta: true,
-        fit_delta_diff: true,
-        reference_heading_sigma: 0.5f64.to_radians(),
-        models: vec![],
-        polish: false,
-        windows: vec![],
-        window_start: WindowStart::Initial,
-        windows_out: None,
-        plots: None,
-        quiet: true,
-    }
+    simulate::simulate_path(kind, length, default_truth(), SimSettings::default())
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -197,12 +156,12 @@ fn case(name: &str, run: &SimRun, n: usize, before: &Before) {
     let mut times = Vec::new();
     for _ in 0..n {
         let t = Instant::now();
-        let c = calibrate_run(
+        let c = calib::calibrate(
             &run.samples,
             &run.reference,
             ("s", "r"),
             &poor(),
-            &options(),
+            &CalibrationOptions::default(),
         );
         times.push(t.elapsed().as_secs_f64());
         if let Err(e) = c {
@@ -219,11 +178,11 @@ fn case(name: &str, run: &SimRun, n: usize, before: &Before) {
     );
     // The fitted coefficients, both models (the paper's with delta_diff), so that a change of
     // the uncertainty fits can be checked against the bisection's tolerance.
-    let all = CalibrateOptions {
+    let all = CalibrationOptions {
         models: vec![UncertaintyModel::Paper, UncertaintyModel::Covariance],
-        ..options()
+        ..Default::default()
     };
-    match calibrate_run(&run.samples, &run.reference, ("s", "r"), &poor(), &all) {
+    match calib::calibrate(&run.samples, &run.reference, ("s", "r"), &poor(), &all) {
         Ok(c) => {
             for u in &c.uncertainty {
                 let p = &u.params;

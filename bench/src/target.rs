@@ -8,7 +8,7 @@ use odo_core::odometry::uncertainty::{
     CovarianceUncertainty, PaperUncertainty, StepGeometry, StepJacobian, UncertaintyCoefficients,
 };
 use odo_core::odometry::{
-    ChassisParams, IndexRefs, Integrator, Pose, UncertaintyModel, WheelCounts, WheelHarmonics,
+    ChassisParams, IndexRefs, Integrator, Pose, UncertaintyModel, WheelCounts,
 };
 
 use crate::inputs::{increments, SAMPLES};
@@ -186,17 +186,7 @@ fn main() -> ! {
     integrator_steps(&with_diff, false, false, overhead, &mut full);
     report("step, paper model + delta_diff", &mut full);
 
-    let wobbly = ChassisParams {
-        left_wheel: WheelHarmonics {
-            cos: [0.002, -0.0005, 0.0001],
-            sin: [0.001, 0.0003, 0.0],
-        },
-        right_wheel: WheelHarmonics {
-            cos: [-0.001, 0.0, 0.0002],
-            sin: [0.0015, -0.0002, 0.0001],
-        },
-        ..designed
-    };
+    let wobbly = odo_testkit::wobbly_wheels();
     integrator_steps(&wobbly, true, false, overhead, &mut full);
     report("step, per-angle wheel functions", &mut full);
 
@@ -264,11 +254,11 @@ fn stack_of_step(params: &ChassisParams) -> usize {
     };
     stack_used(|| {
         // Inputs generated on the fly: an input array would itself sit in the painted region.
-        let mut rng = crate::inputs::Rng(99);
+        let mut rng = odo_testkit::Rng::new(99);
         let mut g = [0i64; 2];
         for _ in 0..SAMPLES {
-            g[0] += (rng.next() % 2000) as i64 - 500;
-            g[1] += (rng.next() % 2000) as i64 - 500;
+            g[0] += (rng.next_u64() % 2000) as i64 - 500;
+            g[1] += (rng.next_u64() % 2000) as i64 - 500;
             black_box(integ.step(
                 WheelCounts {
                     left: g[0],

@@ -22,6 +22,107 @@ use anyhow::{anyhow, bail, Context, Result};
 /// Samples and reference points are matched when their times differ by at most this (s).
 pub const MATCH_TOLERANCE: f64 = 1.0e-3;
 
+/// The SAMPLES columns every file has: time, the two absolute counts, the index latches.
+pub const SAMPLE_COLUMNS: [&str; 5] = ["t", "left", "right", "left_index", "right_index"];
+
+/// The SAMPLES columns of the unit's own pose record ([`UnitPose`] and the status flags).
+pub const POSE_COLUMNS: [&str; 9] = [
+    "seq",
+    "x",
+    "y",
+    "heading",
+    "sigma_x",
+    "sigma_y",
+    "sigma_heading",
+    "sigma_xy",
+    "flags",
+];
+
+/// The SAMPLES columns of the record's clocks and link counters, as `record` and `decode`
+/// write them (the first three are read into [`UnitPose::time`], the ROS exports' stamps).
+pub const RECORD_COLUMNS: [&str; 5] = [
+    "mcu_time_us",
+    "gps_week",
+    "gps_tow_ms",
+    "sample_in_second",
+    "dropped",
+];
+
+/// Which columns a SAMPLES file carries; the one schema its writers and reader share.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SamplesLayout {
+    /// [`SAMPLE_COLUMNS`] only (`simulate`).
+    Counts,
+    /// [`SAMPLE_COLUMNS`] and [`POSE_COLUMNS`].
+    Pose,
+    /// [`SAMPLE_COLUMNS`], [`POSE_COLUMNS`] and [`RECORD_COLUMNS`] (`record`, `decode`).
+    Record,
+}
+
+/// The clocks and link counters of a [`SamplesLayout::Record`] row, in the order of
+/// [`RECORD_COLUMNS`].
+pub type RecordFields = [u64; 5];
+
+impl SamplesLayout {
+    /// The header row (without the line end).
+    pub fn header(self) -> String {
+        let mut cols: Vec<&str> = SAMPLE_COLUMNS.to_vec();
+        if self != Self::Counts {
+            cols.extend(POSE_COLUMNS);
+        }
+        if self == Self::Record {
+            cols.extend(RECORD_COLUMNS);
+        }
+        cols.join(",")
+    }
+
+    /// Appends one row and its line end to `buf`: `extra` fills [`RECORD_COLUMNS`] (empty
+    /// fields when `None`).
+    pub fn push_row(self, buf: &mut String, s: &Sample, extra: Option<&RecordFields>) {
+        let o = |v: Option<i64>| v.map(|v| v.to_string()).unwrap_or_default();
+        let _ = write!(
+            buf,
+            "{},{},{},{},{}",
+            fmt_t(s.t),
+            s.left,
+            s.right,
+            o(s.left_index),
+            o(s.right_index)
+        );
+        if self != Self::Counts {
+            match &s.unit {
+                Some(u) => {
+                    let _ = write!(
+                        buf,
+                        ",{},{},{},{},{},{},{},{},{}",
+                        u.seq.map(|v| v.to_string()).unwrap_or_default(),
+                        fmt_real(u.x),
+                        fmt_real(u.y),
+                        fmt_real(u.heading),
+                        fmt_real(u.sigma_x),
+                        fmt_real(u.sigma_y),
+                        fmt_real(u.sigma_heading),
+                        fmt_real(u.sigma_xy),
+                        s.flags.map(|v| v.to_string()).unwrap_or_default()
+                    );
+                }
+                None => buf.push_str(",,,,,,,,,"),
+            }
+        }
+        if self == Self::Record {
+            match extra {
+                Some(e) => {
+                    for v in e {
+                        let _ = write!(buf, ",{v}");
+                    }
+                }
+                None => buf.push_str(",,,,,"),
+            }
+        }
+        buf.push('\n');
+    }
+}
+
 /// The unit's own pose record carried in a SAMPLES row (as `record` writes it).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct UnitPose {
@@ -41,6 +142,19 @@ pub struct UnitPose {
     pub sigma_heading: f32,
     /// Signed x-y covariance term as the unit sends it (m), 0 when absent.
     pub sigma_xy: f32,
+    /// The record's time tag (`mcu_time_us`, `gps_week`, `gps_tow_ms`), when the file has it.
+    pub time: Option<RecordTime>,
+}
+
+/// The time fields of a recorded pose record (what `record` writes after the pose columns).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct RecordTime {
+    /// MCU time of the sample, microseconds since the unit started.
+    pub mcu_time_us: u64,
+    /// GPS week (meaningful when the flags' time-valid bit is set).
+    pub gps_week: u16,
+    /// GPS time of week of the sample's second, milliseconds.
+    pub gps_tow_ms: u32,
 }
 
 /// One SAMPLES row.
@@ -248,17 +362,20 @@ fn read_text(path: &Path) -> Result<String> {
 /// Parses a SAMPLES CSV text; `file` names it in errors.
 pub fn parse_samples(file: &str, text: &str) -> Result<Vec<Sample>> {
     let table = Table::parse(file, text)?;
-    let ct = table.required("t")?;
-    let cl = table.required("left")?;
-    let cr = table.required("right")?;
-    let cli = table.column("left_index");
-    let cri = table.column("right_index");
-    let cflags = table.column("flags");
-    let cseq = table.column("seq");
-    let pose_cols =
-        ["x", "y", "heading", "sigma_x", "sigma_y", "sigma_heading"].map(|c| table.column(c));
+    let [t, left, right, left_index, right_index] = SAMPLE_COLUMNS;
+    let [seq, x, y, heading, sigma_x, sigma_y, sigma_heading, sigma_xy, flags] = POSE_COLUMNS;
+    let ct = table.required(t)?;
+    let cl = table.required(left)?;
+    let cr = table.required(right)?;
+    let cli = table.column(left_index);
+    let cri = table.column(right_index);
+    let cflags = table.column(flags);
+    let cseq = table.column(seq);
+    let pose_cols = [x, y, heading, sigma_x, sigma_y, sigma_heading].map(|c| table.column(c));
     let has_pose = pose_cols.iter().all(Option::is_some);
-    let cxy = table.column("sigma_xy");
+    let cxy = table.column(sigma_xy);
+    let [mcu_time_us, gps_week, gps_tow_ms, _, _] = RECORD_COLUMNS;
+    let time_cols = [mcu_time_us, gps_week, gps_tow_ms].map(|c| table.column(c));
     let mut out = Vec::with_capacity(table.lines.len());
     let mut prev = None;
     for row in table.rows() {
@@ -284,6 +401,25 @@ pub fn parse_samples(file: &str, text: &str) -> Result<Vec<Sample>> {
                     sigma_y: row.get(g(4), real)?,
                     sigma_heading: row.get(g(5), real)?,
                     sigma_xy: row.optional(cxy, real)?.unwrap_or(0.0),
+                    time: match [0, 1, 2].map(|i| row.optional(time_cols[i], unsigned)) {
+                        [Ok(Some(m)), Ok(Some(w)), Ok(Some(t))] => Some(RecordTime {
+                            mcu_time_us: m,
+                            gps_week: w.try_into().map_err(|_| {
+                                anyhow!("{file}:{}: `{gps_week}` out of range", row.line)
+                            })?,
+                            gps_tow_ms: t.try_into().map_err(|_| {
+                                anyhow!("{file}:{}: `{gps_tow_ms}` out of range", row.line)
+                            })?,
+                        }),
+                        [m, w, t] => {
+                            // Empty fields: no time tag; anything else that is not a number
+                            // is an error naming the column.
+                            m?;
+                            w?;
+                            t?;
+                            None
+                        }
+                    },
                 });
             }
         }
@@ -379,46 +515,19 @@ pub fn fmt_t(t: f64) -> String {
     format!("{t:.6}")
 }
 
-/// Writes SAMPLES CSV (with index columns, and the unit's pose columns when `with_pose`).
-pub fn write_samples(w: &mut dyn Write, samples: &[Sample], with_pose: bool) -> Result<()> {
-    let mut buf = String::from("t,left,right,left_index,right_index");
-    if with_pose {
-        buf.push_str(",seq,x,y,heading,sigma_x,sigma_y,sigma_heading,sigma_xy,flags");
-    }
+/// Formats a real field: the shortest text that reads back to the same `f64` or `f32`
+/// (Rust's `{:?}`: a decimal point always, an exponent for very large and small values).
+pub fn fmt_real(v: impl std::fmt::Debug) -> String {
+    format!("{v:?}")
+}
+
+/// Writes SAMPLES CSV in `layout` ([`SamplesLayout::Record`] rows without their clocks).
+pub fn write_samples(w: &mut dyn Write, samples: &[Sample], layout: SamplesLayout) -> Result<()> {
+    let mut buf = layout.header();
     buf.push('\n');
     for s in samples {
         buf.clear_if_large(w)?;
-        let o = |v: Option<i64>| v.map(|v| v.to_string()).unwrap_or_default();
-        let _ = write!(
-            buf,
-            "{},{},{},{},{}",
-            fmt_t(s.t),
-            s.left,
-            s.right,
-            o(s.left_index),
-            o(s.right_index)
-        );
-        if with_pose {
-            match &s.unit {
-                Some(u) => {
-                    let _ = write!(
-                        buf,
-                        ",{},{},{},{},{},{},{},{},{}",
-                        u.seq.map(|v| v.to_string()).unwrap_or_default(),
-                        u.x,
-                        u.y,
-                        u.heading,
-                        u.sigma_x,
-                        u.sigma_y,
-                        u.sigma_heading,
-                        u.sigma_xy,
-                        s.flags.map(|v| v.to_string()).unwrap_or_default()
-                    );
-                }
-                None => buf.push_str(",,,,,,,,,"),
-            }
-        }
-        buf.push('\n');
+        layout.push_row(&mut buf, s, None);
     }
     w.write_all(buf.as_bytes())?;
     Ok(())
@@ -434,13 +543,9 @@ pub fn write_reference(w: &mut dyn Write, reference: &[RefPoint]) -> Result<()> 
     });
     for r in reference {
         buf.clear_if_large(w)?;
-        let _ = write!(buf, "{},{},{}", fmt_t(r.t), r.x, r.y);
+        let _ = write!(buf, "{},{},{}", fmt_t(r.t), fmt_real(r.x), fmt_real(r.y));
         if with_heading {
-            let _ = write!(
-                buf,
-                ",{}",
-                r.heading.map(|h| h.to_string()).unwrap_or_default()
-            );
+            let _ = write!(buf, ",{}", r.heading.map(fmt_real).unwrap_or_default());
         }
         buf.push('\n');
     }
@@ -545,7 +650,7 @@ mod tests {
             },
         ];
         let mut out = Vec::new();
-        write_samples(&mut out, &s, true).unwrap();
+        write_samples(&mut out, &s, SamplesLayout::Pose).unwrap();
         let back = parse_samples("x", std::str::from_utf8(&out).unwrap()).unwrap();
         assert_eq!(back[1], s[1]);
         assert_eq!(back[0].unit, None);

@@ -21,12 +21,13 @@ macro_rules! outln {
 pub mod calib;
 pub mod commands;
 pub mod config;
-pub mod core_api;
 pub mod csvio;
 pub mod link;
 pub mod memory;
 pub mod optim;
 pub mod plots;
+pub mod reference;
 pub mod replay;
+pub mod ros;
 pub mod simulate;
 pub mod stats;

@@ -5,7 +5,6 @@
 //! Subcommands `monitor`, `record`, `decode` and `config`.
 
 use std::collections::VecDeque;
-use std::fmt::Write as _;
 use std::fs::File;
 use std::io::{BufWriter, ErrorKind, Read, Write};
 use std::net::TcpStream;
@@ -13,12 +12,12 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{bail, Context, Result};
 use odo_core::protocol::{DecoderStats, Frame, FrameDecoder, Message, PoseRecord, Status};
 use odo_core::timing::SyncState;
 
 use crate::config as cfg;
-use crate::csvio::fmt_t;
+use crate::csvio::{RecordFields, Sample, SamplesLayout, UnitPose};
 
 /// A byte stream to the unit.
 pub trait Link: Read + Write + Send {}
@@ -403,10 +402,6 @@ impl TimeBase {
     }
 }
 
-/// Header of the CSV that `record` and `decode` write: the SAMPLES columns, then the unit's
-/// own record.
-pub const RECORD_HEADER: &str = "t,left,right,left_index,right_index,seq,x,y,heading,sigma_x,sigma_y,sigma_heading,sigma_xy,flags,mcu_time_us,gps_week,gps_tow_ms,sample_in_second,dropped";
-
 /// Writes pose records as SAMPLES CSV rows; skips rows whose time does not increase.
 struct RecordWriter<W: Write> {
     w: W,
@@ -419,7 +414,7 @@ struct RecordWriter<W: Write> {
 
 impl<W: Write> RecordWriter<W> {
     fn new(mut w: W, time: TimeBase) -> Result<Self> {
-        writeln!(w, "{RECORD_HEADER}")?;
+        writeln!(w, "{}", SamplesLayout::Record.header())?;
         Ok(Self {
             w,
             time,
@@ -437,31 +432,34 @@ impl<W: Write> RecordWriter<W> {
             return Ok(());
         }
         self.last_t = Some(t);
-        let idx = |seen: bool, v: i64| if seen { v.to_string() } else { String::new() };
-        self.buf.clear();
-        let _ = writeln!(
-            self.buf,
-            "{},{},{},{},{},{},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{},{},{},{},{},{}",
-            fmt_t(t),
-            r.gamma_left,
-            r.gamma_right,
-            idx(r.flags.left.index_seen, r.index_left),
-            idx(r.flags.right.index_seen, r.index_right),
-            r.sequence,
-            r.x,
-            r.y,
-            r.heading,
-            r.sigma_x,
-            r.sigma_y,
-            r.sigma_heading,
-            r.sigma_xy,
-            r.flags.to_bits(),
+        let sample = Sample {
+            t,
+            left: r.gamma_left,
+            right: r.gamma_right,
+            left_index: r.flags.left.index_seen.then_some(r.index_left),
+            right_index: r.flags.right.index_seen.then_some(r.index_right),
+            flags: Some(u64::from(r.flags.to_bits())),
+            unit: Some(UnitPose {
+                seq: Some(u64::from(r.sequence)),
+                x: r.x,
+                y: r.y,
+                heading: r.heading,
+                sigma_x: r.sigma_x,
+                sigma_y: r.sigma_y,
+                sigma_heading: r.sigma_heading,
+                sigma_xy: r.sigma_xy,
+                time: None,
+            }),
+        };
+        let clocks: RecordFields = [
             r.mcu_time_us,
-            r.gnss.week,
-            r.gnss.tow_ms,
-            r.gnss.sample_in_second,
-            r.dropped
-        );
+            u64::from(r.gnss.week),
+            u64::from(r.gnss.tow_ms),
+            u64::from(r.gnss.sample_in_second),
+            u64::from(r.dropped),
+        ];
+        self.buf.clear();
+        SamplesLayout::Record.push_row(&mut self.buf, &sample, Some(&clocks));
         self.w.write_all(self.buf.as_bytes())?;
         self.rows += 1;
         Ok(())
@@ -578,7 +576,7 @@ pub fn record(
         }
         None => {
             if let Some(mut f) = file.take() {
-                writeln!(f, "{RECORD_HEADER}")?;
+                writeln!(f, "{}", SamplesLayout::Record.header())?;
                 f.flush()?;
             }
             (0, 0)
@@ -685,39 +683,10 @@ pub enum ConfigAction {
     Save,
     /// Send a parameter file; then `save` when true.
     Push(PathBuf, bool),
+    /// `get`, written to a TOML file.
+    Pull(PathBuf),
     /// Any command line.
     Raw(String),
-}
-
-/// The `set` lines that send a parameter file: all its top-level shared keys (in groups of
-/// at most 16 pairs per atomic `set`).
-pub fn push_lines(path: &Path) -> Result<Vec<String>> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("{}: cannot read", path.display()))?;
-    // Validate as a whole first (names file and line on error).
-    let params = cfg::parse_params(
-        &path.display().to_string(),
-        &text,
-        odo_core::odometry::ChassisParams::DESIGNED,
-    )?;
-    let table: toml::Table =
-        toml::from_str(&text).map_err(|e| anyhow!("{}: {e}", path.display()))?;
-    let keys: Vec<&str> = cfg::KEYS
-        .iter()
-        .copied()
-        .filter(|k| table.contains_key(*k))
-        .collect();
-    if keys.is_empty() {
-        bail!("{}: no parameter keys to send", path.display());
-    }
-    let pairs: Vec<String> = keys
-        .iter()
-        .map(|k| format!("{k} {}", cfg::get_key(&params, k).expect("known key")))
-        .collect();
-    Ok(pairs
-        .chunks(odo_core::console::MAX_SET_PAIRS)
-        .map(|c| format!("set {}", c.join(" ")))
-        .collect())
 }
 
 /// `odoctl config`: prints the unit's replies; exit code 1 on an error reply.
@@ -728,12 +697,13 @@ pub fn config(port: &str, baud: u32, action: ConfigAction) -> Result<ExitCode> {
         ConfigAction::Set(k, v) => vec![format!("set {k} {v}")],
         ConfigAction::Save => vec!["save".into()],
         ConfigAction::Push(p, save) => {
-            let mut l = push_lines(p)?;
+            let mut l = cfg::push_lines(p)?;
             if *save {
                 l.push("save".into());
             }
             l
         }
+        ConfigAction::Pull(_) => vec!["get".into()],
         ConfigAction::Raw(l) => vec![l.clone()],
     };
     if lines.iter().any(|l| l.contains('\n') || l.contains('\r')) {
@@ -749,6 +719,14 @@ pub fn config(port: &str, baud: u32, action: ConfigAction) -> Result<ExitCode> {
         if !ok {
             eprintln!("odoctl: the unit rejected `{line}`");
             return Ok(ExitCode::FAILURE);
+        }
+        if let ConfigAction::Pull(path) = &action {
+            let (settings, keys) = cfg::parse_get_reply(&text)?;
+            let toml =
+                cfg::render_settings(&settings, &keys, "odoctl config pull: the unit's settings");
+            std::fs::write(path, toml)
+                .with_context(|| format!("{}: cannot write", path.display()))?;
+            crate::outln!("wrote {}", path.display());
         }
     }
     Ok(ExitCode::SUCCESS)

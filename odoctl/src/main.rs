@@ -7,7 +7,8 @@ use std::process::ExitCode;
 use clap::{Args, Parser, Subcommand};
 
 use odo_core::odometry::UncertaintyModel;
-use odoctl::calib::{DeltaMode, WindowStart};
+use odoctl::calib::{CalibrationOptions, DeltaMode, WindowStart};
+use odoctl::reference::cli::{ReceiverArgs, ReferenceArgs};
 use odoctl::simulate::{PathKind, SimSettings};
 
 #[derive(Parser)]
@@ -77,6 +78,13 @@ enum Cmd {
         /// `replay --check` can reproduce it bit for bit.
         #[arg(long)]
         reset_pose: bool,
+        /// Also write the unit's poses as ROS 2 topics (/odom, /tf, /diagnostics) to this
+        /// MCAP file once recording ends (docs/ROS.md); the twist needs the unit's parameters
+        /// (`--config`, `--set`).
+        #[arg(long)]
+        mcap: Option<PathBuf>,
+        #[command(flatten)]
+        params: ParamArgs,
     },
     /// Decode a captured raw byte stream to a SAMPLES CSV.
     Decode {
@@ -115,6 +123,10 @@ enum Cmd {
         /// Write the CSV here instead of stdout.
         #[arg(long, short)]
         out: Option<PathBuf>,
+        /// Also record the replay as ROS 2 topics (/odom, /tf, /diagnostics) in this MCAP
+        /// file (docs/ROS.md).
+        #[arg(long)]
+        mcap: Option<PathBuf>,
     },
     /// Estimate the chassis parameters from a run and its RTK GNSS reference (eq 16).
     Calibrate(CalibrateArgs),
@@ -123,9 +135,11 @@ enum Cmd {
         /// SAMPLES CSV.
         #[arg(long)]
         samples: PathBuf,
-        /// REFERENCE CSV.
+        /// Reference: REFERENCE CSV, NMEA 0183 log or RTKLIB `.pos` file.
         #[arg(long)]
         reference: PathBuf,
+        #[command(flatten)]
+        reference_input: ReferenceArgs,
         #[command(flatten)]
         params: ParamArgs,
         /// Initial heading (rad); when absent, the heading minimising eq (16) on this run.
@@ -150,9 +164,31 @@ enum Cmd {
         /// the heading bands widened by it, as `calibrate`'s `delta_diff` criterion uses.
         #[arg(long, default_value_t = 0.5)]
         reference_heading_sigma_deg: f64,
+        /// Also write the reference track and the odometry path (`nav_msgs/Path`) to this
+        /// MCAP file, for Foxglove (docs/ROS.md).
+        #[arg(long)]
+        mcap: Option<PathBuf>,
     },
     /// Write a synthetic run (SAMPLES and REFERENCE CSVs) with known true parameters.
     Simulate(SimulateArgs),
+    /// Publish the live pose on ROS 2 (/odom, /tf, /diagnostics) over DDS (docs/ROS.md).
+    Bridge {
+        #[command(flatten)]
+        port: PortArgs,
+        /// The unit's parameters, for the twist from the counts.
+        #[command(flatten)]
+        params: ParamArgs,
+        /// Stop after this many seconds.
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Stop after this many published records.
+        #[arg(long)]
+        count: Option<u64>,
+        /// Seconds between reconnection attempts, and without records before the status
+        /// turns STALE.
+        #[arg(long, default_value_t = 1.0)]
+        retry: f64,
+    },
 }
 
 /// A choice of uncertainty models.
@@ -196,14 +232,20 @@ enum ConfigAction {
     },
     /// Store the settings in flash.
     Save,
-    /// Send a parameter file (a calibration result) in one atomic `set`, then `save` unless
-    /// `--no-save`.
+    /// Send a parameter file (a calibration result, or unit options) in atomic `set` lines,
+    /// then `save` unless `--no-save`.
     Push {
         /// TOML file with the shared key names.
         file: PathBuf,
         /// Do not save to flash.
         #[arg(long)]
         no_save: bool,
+    },
+    /// Write the unit's settings (its `get` reply) to a TOML file that `push` sends back
+    /// bit for bit.
+    Pull {
+        /// TOML file to write.
+        file: PathBuf,
     },
     /// Send any command line and print the reply.
     Raw {
@@ -217,9 +259,11 @@ struct CalibrateArgs {
     /// SAMPLES CSV of the estimation run.
     #[arg(long)]
     samples: PathBuf,
-    /// REFERENCE CSV (RTK GNSS) of the same run.
+    /// Reference (RTK GNSS) of the same run: REFERENCE CSV, NMEA 0183 log or RTKLIB `.pos`.
     #[arg(long)]
     reference: PathBuf,
+    #[command(flatten)]
+    reference_input: ReferenceArgs,
     /// First estimate (TOML, shared keys); the designed values when absent.
     #[arg(long)]
     initial: Option<PathBuf>,
@@ -276,6 +320,14 @@ struct CalibrateArgs {
     /// No progress bars.
     #[arg(long, short)]
     quiet: bool,
+    /// Also write the result as ros2_control diff_drive_controller parameters (YAML:
+    /// wheel_separation, wheel_radius, the wheel radius multipliers; docs/ROS.md).
+    #[arg(long, requires = "out")]
+    export_ros: Option<PathBuf>,
+    /// Also write the reference track and the calibrated odometry path (`nav_msgs/Path`, the
+    /// paper's Fig. 4) to this MCAP file, as `validate --mcap` with the result (docs/ROS.md).
+    #[arg(long, requires = "out")]
+    mcap: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -342,6 +394,8 @@ struct SimulateArgs {
     /// Seed of the noise generator.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    #[command(flatten)]
+    receiver: ReceiverArgs,
 }
 
 fn main() -> ExitCode {
@@ -382,15 +436,23 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             duration,
             count,
             reset_pose,
-        } => c::record(
-            &port.port,
-            port.baud,
-            &out,
-            raw.as_deref(),
-            duration,
-            count,
-            reset_pose,
-        ),
+            mcap,
+            params,
+        } => {
+            let code = c::record(
+                &port.port,
+                port.baud,
+                &out,
+                raw.as_deref(),
+                duration,
+                count,
+                reset_pose,
+            )?;
+            if let Some(m) = &mcap {
+                odoctl::ros::export::record_hook(m, &out, params.config.as_deref(), &params.sets)?;
+            }
+            Ok(code)
+        }
         Cmd::Decode { file, out } => c::decode(&file, out.as_deref()),
         Cmd::Config { port, action } => {
             let action = match action {
@@ -398,6 +460,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 ConfigAction::Set { key, value } => c::ConfigAction::Set(key, value),
                 ConfigAction::Save => c::ConfigAction::Save,
                 ConfigAction::Push { file, no_save } => c::ConfigAction::Push(file, !no_save),
+                ConfigAction::Pull { file } => c::ConfigAction::Pull(file),
                 ConfigAction::Raw { line } => c::ConfigAction::Raw(line.join(" ")),
             };
             c::config(&port.port, port.baud, action)
@@ -410,34 +473,72 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             heading,
             check,
             out,
-        } => c::replay(
-            &samples,
-            params.config.as_deref(),
-            &params.sets,
-            (x, y, heading),
-            check,
-            out.as_deref(),
-        ),
-        Cmd::Calibrate(a) => c::calibrate(&c::CalibrateOptions {
-            samples: a.samples,
-            reference: a.reference,
-            initial: a.initial,
-            sets: a.sets,
-            out: a.out,
-            delta_window: a.delta_window,
-            reference_sigma: a.reference_sigma,
-            delta_mode: a.delta_mode,
-            fit_delta: !a.no_delta,
-            fit_delta_diff: !a.no_fit_delta_diff,
-            reference_heading_sigma: a.reference_heading_sigma_deg.to_radians(),
-            models: a.models.list(),
-            polish: a.polish && !a.no_polish,
-            windows: a.windows,
-            window_start: a.window_start,
-            windows_out: a.windows_out,
-            plots: a.plots,
-            quiet: a.quiet,
-        }),
+            mcap,
+        } => {
+            if let Some(m) = &mcap {
+                odoctl::ros::export::replay_hook(
+                    m,
+                    &samples,
+                    params.config.as_deref(),
+                    &params.sets,
+                    (x, y, heading),
+                )?;
+            }
+            c::replay(
+                &samples,
+                params.config.as_deref(),
+                &params.sets,
+                (x, y, heading),
+                check,
+                out.as_deref(),
+            )
+        }
+        Cmd::Calibrate(a) => {
+            let ros = a.export_ros.clone().zip(a.out.clone());
+            let tracks = a.mcap.clone().zip(a.out.clone());
+            let files = (a.samples.clone(), a.reference.clone());
+            let reference_input = a.reference_input.clone();
+            let code = c::calibrate(
+                &c::CalibrateOptions {
+                    samples: a.samples,
+                    reference: a.reference,
+                    initial: a.initial,
+                    sets: a.sets,
+                    out: a.out,
+                    windows_out: a.windows_out,
+                    plots: a.plots,
+                    calibration: CalibrationOptions {
+                        delta_window: a.delta_window,
+                        reference_sigma: a.reference_sigma,
+                        delta_mode: a.delta_mode,
+                        fit_delta: !a.no_delta,
+                        fit_delta_diff: !a.no_fit_delta_diff,
+                        reference_heading_sigma: a.reference_heading_sigma_deg.to_radians(),
+                        models: a.models.list(),
+                        polish: a.polish && !a.no_polish,
+                        windows: a.windows,
+                        window_start: a.window_start,
+                        quiet: a.quiet,
+                    },
+                },
+                &a.reference_input,
+            )?;
+            if let Some((yaml, result)) = &ros {
+                odoctl::ros::diff_drive::export_hook(yaml, result)?;
+            }
+            if let Some((m, result)) = &tracks {
+                odoctl::ros::tracks::validate_hook(
+                    m,
+                    &files.0,
+                    &files.1,
+                    &reference_input,
+                    Some(result),
+                    &[],
+                    None,
+                )?;
+            }
+            Ok(code)
+        }
         Cmd::Validate {
             samples,
             reference,
@@ -448,38 +549,77 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             models,
             reference_sigma,
             reference_heading_sigma_deg,
-        } => c::validate(
-            &samples,
-            &reference,
-            params.config.as_deref(),
-            &params.sets,
-            heading,
-            errors.as_deref(),
-            plots.as_deref(),
-            &models.list(),
-            reference_sigma,
-            reference_heading_sigma_deg.to_radians(),
-        ),
-        Cmd::Simulate(a) => c::simulate(&c::SimulateOptions {
-            samples: a.samples,
-            reference: a.reference,
-            truth: a.truth,
-            sets: a.sets,
-            truth_out: a.truth_out,
-            path: a.path,
-            length: a.length,
-            settings: SimSettings {
-                rate: a.rate,
-                speed: a.speed,
-                slip: a.slip,
-                slip_corr: a.slip_corr,
-                slip_turn: a.slip_turn,
-                slip_turn_corr: a.slip_turn_corr,
-                rtk_sigma: a.rtk_sigma,
-                heading_sigma: (!a.no_heading).then(|| a.heading_sigma_deg.to_radians()),
-                start: (a.x0, a.y0, a.heading0),
-                seed: a.seed,
+            reference_input,
+            mcap,
+        } => {
+            if let Some(m) = &mcap {
+                odoctl::ros::tracks::validate_hook(
+                    m,
+                    &samples,
+                    &reference,
+                    &reference_input,
+                    params.config.as_deref(),
+                    &params.sets,
+                    heading,
+                )?;
+            }
+            c::validate(
+                &samples,
+                &reference,
+                params.config.as_deref(),
+                &params.sets,
+                heading,
+                errors.as_deref(),
+                plots.as_deref(),
+                &models.list(),
+                reference_sigma,
+                reference_heading_sigma_deg.to_radians(),
+                &reference_input,
+            )
+        }
+        Cmd::Bridge {
+            port,
+            params,
+            duration,
+            count,
+            retry,
+        } => {
+            let secs = |what: &str, v: f64| {
+                std::time::Duration::try_from_secs_f64(v)
+                    .map_err(|_| anyhow::anyhow!("--{what} {v}: not a duration in seconds"))
+            };
+            odoctl::ros::bridge::run(&odoctl::ros::bridge::BridgeOptions {
+                port: port.port,
+                baud: port.baud,
+                params: odoctl::config::load(params.config.as_deref(), &params.sets)?,
+                duration: duration.map(|d| secs("duration", d)).transpose()?,
+                count,
+                retry: secs("retry", retry)?,
+            })
+        }
+        Cmd::Simulate(a) => c::simulate(
+            &c::SimulateOptions {
+                samples: a.samples,
+                reference: a.reference,
+                truth: a.truth,
+                sets: a.sets,
+                truth_out: a.truth_out,
+                path: a.path,
+                length: a.length,
+                settings: SimSettings {
+                    rate: a.rate,
+                    speed: a.speed,
+                    slip: a.slip,
+                    slip_corr: a.slip_corr,
+                    slip_turn: a.slip_turn,
+                    slip_turn_corr: a.slip_turn_corr,
+                    rtk_sigma: a.rtk_sigma,
+                    heading_sigma: (!a.no_heading).then(|| a.heading_sigma_deg.to_radians()),
+                    start: (a.x0, a.y0, a.heading0),
+                    seed: a.seed,
+                },
             },
-        }),
+            &a.receiver,
+        ),
     }
 }

@@ -5,8 +5,8 @@ use std::io::Write;
 
 use anyhow::{anyhow, Result};
 
-use crate::core_api::{ChassisParams, IndexRefs, Integrator, Pose, PoseSigma, WheelCounts};
 use crate::csvio::{fmt_t, Sample};
+use odo_core::odometry::{ChassisParams, IndexRefs, Integrator, Pose, PoseSigma, WheelCounts};
 
 /// The integrator's input of a SAMPLES row: absolute counts.
 pub fn counts(s: &Sample) -> WheelCounts {

@@ -22,8 +22,9 @@
 
 use std::f64::consts::PI;
 
-use crate::core_api::ChassisParams;
 use crate::csvio::{RefPoint, Sample};
+use odo_core::odometry::ChassisParams;
+pub use odo_testkit::Rng;
 
 /// A piece of the path.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -49,6 +50,17 @@ pub enum PathKind {
     Validation,
     /// Random straights and arcs (seeded).
     Random,
+}
+
+/// The default true chassis of `simulate`: the paper's final estimates (Table 2) with its
+/// designed encoder and uncertainty (Table 3).
+pub fn default_truth() -> ChassisParams {
+    ChassisParams {
+        left_diameter: 0.2608,
+        right_diameter: 0.2607,
+        track_width: 0.5656,
+        ..ChassisParams::DESIGNED
+    }
 }
 
 /// The segments of a built-in path, scaled so the centre travels about `length` metres (the
@@ -159,6 +171,25 @@ pub struct SimSettings {
     pub seed: u64,
 }
 
+impl Default for SimSettings {
+    /// `odoctl simulate`'s defaults: 50 Hz, 0.5 m/s, slip 0.001 over 0.1 m, no turning slip,
+    /// the BD982's 8 mm and 0.5 deg, start at (0, 0) heading 0.3 rad, seed 1.
+    fn default() -> Self {
+        Self {
+            rate: 50.0,
+            speed: 0.5,
+            slip: 0.001,
+            slip_corr: 0.1,
+            slip_turn: 0.0,
+            slip_turn_corr: 1.0,
+            rtk_sigma: 0.008,
+            heading_sigma: Some(0.5f64.to_radians()),
+            start: (0.0, 0.0, 0.3),
+            seed: 1,
+        }
+    }
+}
+
 /// The simulated run.
 #[derive(Debug, Clone)]
 pub struct SimRun {
@@ -168,6 +199,22 @@ pub struct SimRun {
     pub reference: Vec<RefPoint>,
     /// True centre pose at each sample (x, y, cumulative heading).
     pub truth: Vec<(f64, f64, f64)>,
+}
+
+/// The run of `odoctl simulate --path kind --length length`: the path drawn from the seed
+/// (`settings.seed ^ 0x5EED`), then driven by `truth` with `settings`.
+pub fn simulate_path(
+    kind: PathKind,
+    length: f64,
+    truth: ChassisParams,
+    settings: SimSettings,
+) -> SimRun {
+    let mut rng = Rng::new(settings.seed ^ 0x5EED);
+    simulate(&SimOptions {
+        truth,
+        segments: path(kind, length, &mut rng),
+        settings,
+    })
 }
 
 /// Runs the plant. Stand-stills of 1 s open and close the run.
@@ -318,60 +365,5 @@ pub fn simulate(o: &SimOptions) -> SimRun {
         samples,
         reference,
         truth,
-    }
-}
-
-/// xoshiro256** seeded by SplitMix64, with Box-Muller normals.
-#[derive(Debug, Clone)]
-pub struct Rng {
-    s: [u64; 4],
-    spare: Option<f64>,
-}
-
-impl Rng {
-    /// A generator from a seed.
-    pub fn new(seed: u64) -> Self {
-        let mut z = seed;
-        let mut next = || {
-            z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut r = z;
-            r = (r ^ (r >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            r = (r ^ (r >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            r ^ (r >> 31)
-        };
-        Self {
-            s: [next(), next(), next(), next()],
-            spare: None,
-        }
-    }
-
-    /// The next 64 random bits.
-    pub fn next_u64(&mut self) -> u64 {
-        let r = self.s[1].wrapping_mul(5).rotate_left(7).wrapping_mul(9);
-        let t = self.s[1] << 17;
-        self.s[2] ^= self.s[0];
-        self.s[3] ^= self.s[1];
-        self.s[1] ^= self.s[2];
-        self.s[0] ^= self.s[3];
-        self.s[2] ^= t;
-        self.s[3] = self.s[3].rotate_left(45);
-        r
-    }
-
-    /// Uniform in [0, 1).
-    pub fn uniform(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
-    }
-
-    /// Standard normal.
-    pub fn normal(&mut self) -> f64 {
-        if let Some(v) = self.spare.take() {
-            return v;
-        }
-        let u1 = 1.0 - self.uniform();
-        let u2 = self.uniform();
-        let r = (-2.0 * u1.ln()).sqrt();
-        self.spare = Some(r * (2.0 * PI * u2).sin());
-        r * (2.0 * PI * u2).cos()
     }
 }

@@ -6,8 +6,7 @@ use std::time::Instant;
 
 use indicatif::ProgressBar;
 use odo_core::odometry::{ChassisParams, Pose};
-use odoctl::calib::{self, DeltaMode, Run, WindowStart};
-use odoctl::commands::{calibrate_run, CalibrateOptions};
+use odoctl::calib::{self, CalibrationOptions, Run, WindowStart};
 use odoctl::csvio::match_times;
 use odoctl::simulate::PathKind;
 
@@ -20,41 +19,18 @@ fn poor_first_estimate() -> ChassisParams {
     }
 }
 
-fn options() -> CalibrateOptions {
-    CalibrateOptions {
-        samples: "samples.csv".into(),
-        reference: "reference.csv".into(),
-        initial: None,
-        sets: vec![],
-        out: None,
-        delta_window: 10.0,
-        reference_sigma: 0.008,
-        delta_mode: DeltaMode::Equal,
-        fit_delta: true,
-        fit_delta_diff: true,
-        reference_heading_sigma: 0.5f64.to_radians(),
-        models: vec![],
-        polish: false,
-        windows: vec![],
-        window_start: WindowStart::Initial,
-        windows_out: None,
-        plots: None,
-        quiet: true,
-    }
-}
-
 #[test]
 fn calibrate_recovers_the_truth_from_the_papers_poor_first_estimate() {
     let truth = common::truth();
     for seed in [11, 12] {
         let sim = common::sim(PathKind::Estimation, 70.0, seed);
         let started = Instant::now();
-        let c = calibrate_run(
+        let c = calib::calibrate(
             &sim.samples,
             &sim.reference,
             ("s", "r"),
             &poor_first_estimate(),
-            &options(),
+            &CalibrationOptions::default(),
         )
         .unwrap();
         let e = [
@@ -104,12 +80,12 @@ fn delta_diff_is_fitted_when_the_wheels_slip_in_opposite_phase_while_turning() {
     // delta refitted, so the horizontal band stays nominal too.
     let sim = common::sim_turn_slip(PathKind::Estimation, 70.0, 11, 0.03);
     let started = Instant::now();
-    let c = calibrate_run(
+    let c = calib::calibrate(
         &sim.samples,
         &sim.reference,
         ("s", "r"),
         &common::truth(),
-        &options(),
+        &CalibrationOptions::default(),
     )
     .unwrap();
     let u = &c.uncertainty[0];
@@ -133,14 +109,14 @@ fn delta_diff_is_fitted_when_the_wheels_slip_in_opposite_phase_while_turning() {
     assert!((u.coverage1 - calib::ONE_SIGMA_COVERAGE).abs() < 0.01);
     assert!(f64::from(c.params.delta_left) < d.delta_before);
     // --no-fit-delta-diff keeps the initial value and reports the same "before" coverage.
-    let kept = calibrate_run(
+    let kept = calib::calibrate(
         &sim.samples,
         &sim.reference,
         ("s", "r"),
         &common::truth(),
-        &CalibrateOptions {
+        &CalibrationOptions {
             fit_delta_diff: false,
-            ..options()
+            ..Default::default()
         },
     )
     .unwrap();

@@ -17,7 +17,7 @@ use odo_core::protocol::{
 };
 use odo_core::settings::Settings;
 use odoctl::csvio::Sample;
-use odoctl::simulate::{self, PathKind, SimOptions, SimRun, SimSettings};
+use odoctl::simulate::{self, PathKind, SimRun, SimSettings};
 
 /// The odoctl binary.
 pub fn bin() -> &'static str {
@@ -54,7 +54,7 @@ pub fn scratch(name: &str) -> PathBuf {
 
 /// The default true chassis of `simulate`.
 pub fn truth() -> ChassisParams {
-    odoctl::commands::default_truth()
+    simulate::default_truth()
 }
 
 /// A simulated run with the tool's default noise.
@@ -65,23 +65,13 @@ pub fn sim(kind: PathKind, length: f64, seed: u64) -> SimRun {
 /// A simulated run with the tool's default noise plus opposite-phase slip when turning
 /// (`simulate --slip-turn`, correlation 1 m of differential travel).
 pub fn sim_turn_slip(kind: PathKind, length: f64, seed: u64, slip_turn: f64) -> SimRun {
-    let mut rng = simulate::Rng::new(seed ^ 0x5EED);
-    simulate::simulate(&SimOptions {
-        truth: truth(),
-        segments: simulate::path(kind, length, &mut rng),
-        settings: SimSettings {
-            rate: 50.0,
-            speed: 0.5,
-            slip: 0.001,
-            slip_corr: 0.1,
-            slip_turn,
-            slip_turn_corr: 1.0,
-            rtk_sigma: 0.008,
-            heading_sigma: Some(0.5f64.to_radians()),
-            start: (3.0, -2.0, 0.3),
-            seed,
-        },
-    })
+    let settings = SimSettings {
+        slip_turn,
+        start: (3.0, -2.0, 0.3),
+        seed,
+        ..Default::default()
+    };
+    simulate::simulate_path(kind, length, truth(), settings)
 }
 
 /// Pose records as the firmware makes them: the first at the integrator's creation (pose 0,

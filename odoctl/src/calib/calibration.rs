@@ -1,0 +1,231 @@
+//! The whole calibration in memory: the eq (16) fit, the uncertainty and `delta_diff` fits,
+//! the final evaluation and the stability study, returning values (no printing).
+
+use std::time::Instant;
+
+use anyhow::{bail, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use odo_core::odometry::{ChassisParams, UncertaintyModel};
+
+use crate::config as cfg;
+use crate::csvio;
+
+use super::{
+    evaluate, fit_delta_diff, fit_geometry, fit_uncertainty_on, windows_study, DeltaMode,
+    DiffOptions, Evaluation, GeomFit, GeomOptions, Restarts, Run, UncertaintyFit, WindowEstimate,
+    WindowStart,
+};
+
+/// Options of the calibration (`odoctl calibrate`'s fitting options; the defaults are the
+/// command line's).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CalibrationOptions {
+    /// Sub-trajectory length of the uncertainty fit (m).
+    pub delta_window: f64,
+    /// Reference noise (m).
+    pub reference_sigma: f64,
+    /// Left/right relation of the coefficients.
+    pub delta_mode: DeltaMode,
+    /// Fit the uncertainty coefficients.
+    pub fit_delta: bool,
+    /// Fit `delta_diff` of the paper's model by the heading criterion (when the reference has
+    /// a heading; else the initial value is kept).
+    pub fit_delta_diff: bool,
+    /// Reference heading noise (rad), added to `sigma_heading` in the heading criterion.
+    pub reference_heading_sigma: f64,
+    /// The uncertainty models whose coefficients are fitted (empty: the initial estimate's
+    /// `uncertainty_model`). The result keeps the initial model when it is among them, else
+    /// the last one.
+    pub models: Vec<UncertaintyModel>,
+    /// Nelder-Mead polish of eq (16).
+    pub polish: bool,
+    /// Stability study lengths (m); empty: no study.
+    pub windows: Vec<f64>,
+    /// Where the study's fits start.
+    pub window_start: WindowStart,
+    /// No progress bars.
+    pub quiet: bool,
+}
+
+impl Default for CalibrationOptions {
+    /// 10 m sub-trajectories, the BD982's 8 mm and 0.5 deg, equal coefficients, `delta` and
+    /// `delta_diff` fitted for the initial estimate's model, no polish, no stability study,
+    /// no progress bars.
+    fn default() -> Self {
+        Self {
+            delta_window: 10.0,
+            reference_sigma: 0.008,
+            delta_mode: DeltaMode::Equal,
+            fit_delta: true,
+            fit_delta_diff: true,
+            reference_heading_sigma: 0.5f64.to_radians(),
+            models: Vec::new(),
+            polish: false,
+            windows: Vec::new(),
+            window_start: WindowStart::Initial,
+            quiet: true,
+        }
+    }
+}
+
+fn bar(quiet: bool, what: &str) -> ProgressBar {
+    if quiet {
+        return ProgressBar::hidden();
+    }
+    let pb = ProgressBar::new(1);
+    pb.set_style(
+        ProgressStyle::with_template("{prefix:>22} [{bar:40}] {pos}/{len} {elapsed}")
+            .expect("valid template")
+            .progress_chars("=> "),
+    );
+    pb.set_prefix(what.to_string());
+    pb
+}
+
+/// The outcome of a calibration (also used by the tests).
+pub struct Calibration {
+    /// Final parameters.
+    pub params: ChassisParams,
+    /// The eq (16) fit.
+    pub geometry: GeomFit,
+    /// The uncertainty fits, one per model fitted.
+    pub uncertainty: Vec<UncertaintyFit>,
+    /// Evaluation of the whole run with the final parameters.
+    pub evaluation: Evaluation,
+    /// The stability study.
+    pub windows: Vec<WindowEstimate>,
+}
+
+/// Runs the calibration in memory (the work of `odoctl calibrate` without the files and the
+/// printing); `names` are the two inputs' names for error messages.
+pub fn calibrate(
+    samples: &[csvio::Sample],
+    reference: &[csvio::RefPoint],
+    names: (&str, &str),
+    initial: &ChassisParams,
+    o: &CalibrationOptions,
+) -> Result<Calibration> {
+    if !(o.reference_sigma >= 0.0 && o.reference_heading_sigma >= 0.0) {
+        bail!("--reference-sigma and --reference-heading-sigma-deg must be non-negative");
+    }
+    let matches = csvio::match_or_fail(samples, names.0, reference, names.1, 10)?;
+    let run = Run::new(samples, reference, matches);
+    let timer = PhaseTimer::new();
+    let h0 = run.heading_guess(0);
+    let pb = bar(o.quiet, "eq (16) fit");
+    let geometry = fit_geometry(
+        &run,
+        initial,
+        h0,
+        0,
+        run.len() - 1,
+        GeomOptions {
+            polish: o.polish,
+            ..Default::default()
+        },
+        &pb,
+    )?;
+    pb.finish_and_clear();
+    timer.lap("eq (16) fit");
+    let mut params = geometry.params;
+    let mut uncertainty = Vec::new();
+    if o.fit_delta {
+        let models = if o.models.is_empty() {
+            vec![initial.uncertainty_model]
+        } else {
+            o.models.clone()
+        };
+        let restarts = Restarts::new(&run, &params, geometry.heading0, o.delta_window)?;
+        timer.lap("restart headings");
+        for &m in &models {
+            let pb = bar(o.quiet, &format!("{} model fit", cfg::model_name(m)));
+            let mut p = params;
+            p.uncertainty_model = m;
+            let mut u = fit_uncertainty_on(
+                &run,
+                &restarts,
+                &p,
+                initial,
+                o.reference_sigma,
+                o.delta_mode,
+                &pb,
+            )?;
+            pb.finish_and_clear();
+            timer.lap("uncertainty fit");
+            if m == UncertaintyModel::Paper {
+                let pb = bar(o.quiet, "delta_diff fit");
+                u = fit_delta_diff(
+                    &run,
+                    &restarts,
+                    u,
+                    initial,
+                    DiffOptions {
+                        fit: o.fit_delta_diff,
+                        ref_heading_sigma: o.reference_heading_sigma,
+                        ref_sigma: o.reference_sigma,
+                        mode: o.delta_mode,
+                    },
+                    &pb,
+                )?;
+                pb.finish_and_clear();
+                timer.lap("delta_diff fit");
+            }
+            params = u.params;
+            uncertainty.push(u);
+        }
+        params.uncertainty_model = if models.contains(&initial.uncertainty_model) {
+            initial.uncertainty_model
+        } else {
+            *models.last().expect("one model")
+        };
+    }
+    let evaluation = evaluate(&run, &params, geometry.heading0)?;
+    timer.lap("final evaluation");
+    let windows = if o.windows.is_empty() {
+        Vec::new()
+    } else {
+        if o.windows.iter().any(|l| l.is_nan() || *l <= 0.0) {
+            bail!("--windows: lengths must be positive metres");
+        }
+        let pb = bar(o.quiet, "sub-trajectories");
+        let w = windows_study(&run, &geometry, initial, &o.windows, o.window_start, &pb)?;
+        pb.finish_and_clear();
+        w
+    };
+    Ok(Calibration {
+        params,
+        geometry,
+        uncertainty,
+        evaluation,
+        windows,
+    })
+}
+
+/// Wall time of each calibration phase, printed to stderr when `ODOCTL_DEBUG` is set.
+pub struct PhaseTimer {
+    last: Option<std::cell::Cell<Instant>>,
+}
+
+impl Default for PhaseTimer {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl PhaseTimer {
+    /// Starts the clock when `ODOCTL_DEBUG` is set.
+    pub fn new() -> Self {
+        Self {
+            last: std::env::var_os("ODOCTL_DEBUG").map(|_| std::cell::Cell::new(Instant::now())),
+        }
+    }
+
+    /// Prints the time since the previous lap (or the start) under `phase`.
+    pub fn lap(&self, phase: &str) {
+        if let Some(last) = &self.last {
+            let now = Instant::now();
+            eprintln!("time: {phase}: {:.4} s", (now - last.get()).as_secs_f64());
+            last.set(now);
+        }
+    }
+}

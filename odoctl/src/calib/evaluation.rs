@@ -1,0 +1,212 @@
+//! Errors and predicted uncertainty along a run (`validate`, and the uncertainty fits).
+
+use anyhow::{anyhow, Result};
+use odo_core::odometry::ChassisParams;
+
+use crate::optim::norm2;
+use crate::stats::wrap_angle;
+
+use super::*;
+
+/// Errors and predicted uncertainty along a run.
+#[derive(Debug, Clone, Default)]
+pub struct Evaluation {
+    /// Match indices evaluated.
+    pub k: Vec<usize>,
+    /// Times (s).
+    pub t: Vec<f64>,
+    /// Reference path length from the start (m).
+    pub dist: Vec<f64>,
+    /// Odometry position (m).
+    pub odo: Vec<(f64, f64)>,
+    /// Reference position (m).
+    pub reference: Vec<(f64, f64)>,
+    /// Horizontal error |odometry - reference| (m).
+    pub horizontal: Vec<f64>,
+    /// Predicted horizontal sigma (m).
+    pub sigma_h: Vec<f64>,
+    /// Odometry heading (rad, cumulative).
+    pub heading: Vec<f64>,
+    /// Heading error odometry - reference, wrapped to (-pi, pi] (rad), where the reference
+    /// has a heading.
+    pub heading_err: Vec<Option<f64>>,
+    /// Predicted heading sigma (rad).
+    pub sigma_heading: Vec<f64>,
+    /// Error of the heading change since the stretch's start (rad): `(heading - heading at
+    /// the start) - (reference heading - reference heading at the start)`, wrapped to (-pi, pi],
+    /// where the reference has a heading; the start's reference heading is averaged over a
+    /// standstill there ([`Run::start_heading`]). `sigma_heading` (zero at the start)
+    /// predicts exactly this error; the absolute heading error also carries the error of
+    /// the fitted start heading.
+    pub heading_change_err: Vec<Option<f64>>,
+    /// Number of reference headings averaged at the stretch's start.
+    pub start_headings: Vec<usize>,
+}
+
+impl Evaluation {
+    /// Empties every column, keeping the allocations.
+    pub fn clear(&mut self) {
+        let Self {
+            k,
+            t,
+            dist,
+            odo,
+            reference,
+            horizontal,
+            sigma_h,
+            heading,
+            heading_err,
+            sigma_heading,
+            heading_change_err,
+            start_headings,
+        } = self;
+        k.clear();
+        t.clear();
+        dist.clear();
+        odo.clear();
+        reference.clear();
+        horizontal.clear();
+        sigma_h.clear();
+        heading.clear();
+        heading_err.clear();
+        sigma_heading.clear();
+        heading_change_err.clear();
+        start_headings.clear();
+    }
+
+    /// Reserves room for `n` more rows in every column.
+    pub(super) fn reserve(&mut self, n: usize) {
+        self.k.reserve(n);
+        self.t.reserve(n);
+        self.dist.reserve(n);
+        self.odo.reserve(n);
+        self.reference.reserve(n);
+        self.horizontal.reserve(n);
+        self.sigma_h.reserve(n);
+        self.heading.reserve(n);
+        self.heading_err.reserve(n);
+        self.sigma_heading.reserve(n);
+        self.heading_change_err.reserve(n);
+        self.start_headings.reserve(n);
+    }
+
+    /// Moves the rows of `other` to the end of `self`.
+    pub(super) fn append(&mut self, other: &mut Self) {
+        let Self {
+            k,
+            t,
+            dist,
+            odo,
+            reference,
+            horizontal,
+            sigma_h,
+            heading,
+            heading_err,
+            sigma_heading,
+            heading_change_err,
+            start_headings,
+        } = other;
+        self.k.append(k);
+        self.t.append(t);
+        self.dist.append(dist);
+        self.odo.append(odo);
+        self.reference.append(reference);
+        self.horizontal.append(horizontal);
+        self.sigma_h.append(sigma_h);
+        self.heading.append(heading);
+        self.heading_err.append(heading_err);
+        self.sigma_heading.append(sigma_heading);
+        self.heading_change_err.append(heading_change_err);
+        self.start_headings.append(start_headings);
+    }
+
+    /// Appends the evaluation of matches `a+1..=b` from a restart at `a` (see
+    /// [`Run::integrate`]); with `include_start`, the start point itself too (zero error
+    /// by construction, zero sigma).
+    pub fn extend(
+        &mut self,
+        run: &Run,
+        params: &ChassisParams,
+        a: usize,
+        b: usize,
+        heading0: f64,
+        include_start: bool,
+    ) -> Result<()> {
+        let mut rows = Vec::with_capacity(b - a);
+        run.integrate(params, a, b, heading0, |k, integ| {
+            let p = integ.pose();
+            let s = integ.sigma();
+            rows.push((
+                k,
+                (p.x, p.y),
+                p.heading,
+                f64::from(s.horizontal()),
+                f64::from(s.heading),
+            ));
+        })
+        .map_err(|e| anyhow!("parameters: {e}"))?;
+        let start = run
+            .start_heading(a, |k| rows.get(k - a - 1).map(|r| r.2 - heading0))
+            .map(|(h, n)| (heading0, h, n));
+        self.reserve(rows.len() + 1);
+        if include_start {
+            self.push(run, a, run.anchor(a), heading0, 0.0, 0.0, start);
+        }
+        for (k, xy, h, sh, sa) in rows {
+            self.push(run, k, xy, h, sh, sa, start);
+        }
+        Ok(())
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn push(
+        &mut self,
+        run: &Run,
+        k: usize,
+        odo: (f64, f64),
+        heading: f64,
+        sigma_h: f64,
+        sigma_heading: f64,
+        start: Option<(f64, f64, usize)>,
+    ) {
+        let r = run.reference_at(k);
+        let change = match (start, r.heading) {
+            (Some((h0, r0, n)), Some(rh)) => {
+                self.start_headings.push(n);
+                Some(wrap_angle((heading - h0) - wrap_angle(rh - r0)))
+            }
+            _ => {
+                self.start_headings.push(0);
+                None
+            }
+        };
+        self.heading_change_err.push(change);
+        self.k.push(k);
+        self.t.push(r.t);
+        self.dist.push(run.dist[k]);
+        self.odo.push(odo);
+        self.reference.push((r.x, r.y));
+        self.horizontal.push(norm2(odo.0 - r.x, odo.1 - r.y));
+        self.sigma_h.push(sigma_h);
+        self.heading.push(heading);
+        self.heading_err
+            .push(r.heading.map(|h| wrap_angle(heading - h)));
+        self.sigma_heading.push(sigma_heading);
+    }
+
+    /// The heading errors and sigmas where the reference has a heading.
+    pub fn heading_pairs(&self) -> (Vec<f64>, Vec<f64>) {
+        self.heading_err
+            .iter()
+            .zip(&self.sigma_heading)
+            .filter_map(|(e, s)| e.map(|e| (e, *s)))
+            .unzip()
+    }
+}
+
+/// Evaluation of the whole run from match 0.
+pub fn evaluate(run: &Run, params: &ChassisParams, heading0: f64) -> Result<Evaluation> {
+    let mut ev = Evaluation::default();
+    ev.extend(run, params, 0, run.len() - 1, heading0, true)?;
+    Ok(ev)
+}

@@ -1,0 +1,579 @@
+//! The eq (16) fit of the diameters and the track width: residuals and their Jacobian,
+//! continuation, damped Newton, the optional polish, standard errors and the restart heading.
+
+use anyhow::{anyhow, bail, Result};
+use indicatif::ProgressBar;
+use odo_core::odometry::ChassisParams;
+
+use crate::optim::{self, LmOptions, NmOptions, NormalAccumulator, Objective};
+
+use super::*;
+
+impl Run<'_> {
+    /// [`Run::residuals`] and, with `jac`, their derivatives with respect to the geometry
+    /// unknowns `cols` (indices into [`GEOMETRY_UNKNOWNS`]; row-major: one row per residual,
+    /// one column per entry of `cols`), in the same pass.
+    #[allow(clippy::too_many_arguments)]
+    pub fn residuals_with_jacobian(
+        &self,
+        params: &ChassisParams,
+        a: usize,
+        b: usize,
+        heading0: f64,
+        out: &mut Vec<f64>,
+        jac: Option<&mut Vec<f64>>,
+        cols: &[usize],
+    ) -> bool {
+        let Some(jac) = jac else {
+            return self.residuals(params, a, b, heading0, out);
+        };
+        if cols.iter().any(|&c| c >= GEOMETRY_UNKNOWNS.len()) {
+            return false;
+        }
+        out.clear();
+        jac.clear();
+        // Room for every row at once: no regrowth (and copy) of the large Jacobian.
+        out.reserve(2 * (b - a));
+        jac.reserve(2 * (b - a) * cols.len());
+        self.integrate_with_sensitivity(params, a, b, heading0, |k, p, d| {
+            let r = self.reference_at(k);
+            out.push(p.x - r.x);
+            out.push(p.y - r.y);
+            jac.extend(cols.iter().map(|&c| d.x[c]));
+            jac.extend(cols.iter().map(|&c| d.y[c]));
+        })
+        .is_ok()
+            && out.iter().chain(jac.iter()).all(|v| v.is_finite())
+    }
+
+    /// [`Run::residuals_with_jacobian`] fed straight into `acc` (pair by pair, in match order:
+    /// the same sums as of the stored vectors) instead of stored: the objective and normal
+    /// equations of the eq (16) fits without a pass over tens of megabytes of Jacobian.
+    /// False when the parameters are not admissible or a residual is not finite.
+    pub fn accumulate_normal(
+        &self,
+        params: &ChassisParams,
+        a: usize,
+        b: usize,
+        heading0: f64,
+        cols: &[usize],
+        acc: &mut NormalAccumulator,
+    ) -> bool {
+        if cols.iter().any(|&c| c >= GEOMETRY_UNKNOWNS.len()) {
+            return false;
+        }
+        let mut finite = true;
+        let (mut jx, mut jy) = ([0.0; 4], [0.0; 4]);
+        let ok = self
+            .integrate_with_sensitivity(params, a, b, heading0, |k, p, d| {
+                let r = self.reference_at(k);
+                for (j, &c) in cols.iter().enumerate() {
+                    jx[j] = d.x[c];
+                    jy[j] = d.y[c];
+                }
+                let (rx, ry) = (p.x - r.x, p.y - r.y);
+                finite &= rx.is_finite() && ry.is_finite();
+                acc.add_pair(rx, ry, &jx, &jy);
+            })
+            .is_ok();
+        ok && finite && acc.cost().is_finite()
+    }
+
+    /// The x and y differences odometry - reference at matches `a+1..=b`, into `out`;
+    /// false when the parameters are not admissible.
+    pub fn residuals(
+        &self,
+        params: &ChassisParams,
+        a: usize,
+        b: usize,
+        heading0: f64,
+        out: &mut Vec<f64>,
+    ) -> bool {
+        out.clear();
+        out.reserve(2 * (b - a));
+        self.integrate_pose(params, a, b, heading0, |k, integ| {
+            let p = integ.pose();
+            let r = self.reference_at(k);
+            out.push(p.x - r.x);
+            out.push(p.y - r.y);
+        })
+        .is_ok()
+            && out.iter().all(|v| v.is_finite())
+    }
+
+    /// Eq (16) over matches `a..=b`.
+    pub fn eq16(&self, params: &ChassisParams, a: usize, b: usize, heading0: f64) -> Option<f64> {
+        let mut r = Vec::new();
+        self.residuals(params, a, b, heading0, &mut r)
+            .then(|| optim::objective(Objective::SumOfNorms, &r))
+    }
+}
+
+/// Which parameters the geometry fit estimates.
+pub(super) fn with_geometry(base: &ChassisParams, x: &[f64]) -> ChassisParams {
+    let mut p = *base;
+    p.left_diameter = x[0];
+    p.right_diameter = x[1];
+    p.track_width = x[2];
+    p
+}
+
+/// Result of the eq (16) fit.
+#[derive(Debug, Clone)]
+pub struct GeomFit {
+    /// The parameters with the estimated diameters and track width.
+    pub params: ChassisParams,
+    /// The estimated initial heading (rad).
+    pub heading0: f64,
+    /// Eq (16) at the estimate (m).
+    pub cost: f64,
+    /// Number of terms of eq (16) (common times after the start).
+    pub points: usize,
+    /// Accepted optimiser iterations over all stages.
+    pub iterations: usize,
+    /// Integrator runs over all stages.
+    pub evaluations: usize,
+    /// Continuation stages.
+    pub stages: usize,
+    /// False when the stretch turned too little to determine the track width, which was
+    /// then kept at its starting value.
+    pub track_estimated: bool,
+    /// Total absolute heading change along the stretch at the estimate (rad).
+    pub turning: f64,
+    /// The start position the fit used (x east, y north, m): the reference point at the
+    /// first common time, or the mean over the standstill there ([`Run::anchor`]). A replay
+    /// from it with `heading0` and `params` reproduces `cost`.
+    pub start: (f64, f64),
+    /// Standard errors of [`GEOMETRY_UNKNOWNS`] (m, m, m, rad; `None` for an unknown that was
+    /// held); see [`standard_errors`].
+    pub std_errors: [Option<f64>; 4],
+    /// Residual standard deviation `s` of the x and y differences at the estimate (m).
+    pub residual_sigma: f64,
+    /// Set when the trajectory turned too little to determine the track width
+    /// ([`track_width_warning`]).
+    pub track_warning: Option<String>,
+}
+
+/// Options of [`fit_geometry`].
+#[derive(Debug, Clone, Copy)]
+pub struct GeomOptions {
+    /// Path length of the first continuation stage (m).
+    pub first_stage: f64,
+    /// Growth of the prefix per stage.
+    pub stage_growth: f64,
+    /// Run a Nelder-Mead polish of eq (16) after the Newton fit (off by default: it costs
+    /// up to 600 integrator runs and finds only the cost's arithmetic noise, about 1e-7 of
+    /// it, below the Newton minimum).
+    pub polish: bool,
+    /// The track width is estimated only on a stretch whose total absolute heading change
+    /// reaches this (rad); on a straighter one it is not identifiable (eq 8: only turning
+    /// reveals it) and is held at its current value.
+    pub min_turning: f64,
+}
+
+impl Default for GeomOptions {
+    fn default() -> Self {
+        Self {
+            first_stage: 2.0,
+            stage_growth: 1.5,
+            polish: false,
+            min_turning: 30f64.to_radians(),
+        }
+    }
+}
+
+/// Total absolute heading change of the odometry over matches `a..=b` (rad), summed over
+/// steps of at least 0.25 m of path so that count noise does not add up.
+pub fn turning(run: &Run, params: &ChassisParams, a: usize, b: usize, heading0: f64) -> f64 {
+    let mut total = 0.0;
+    let mut last = (heading0, run.dist[a]);
+    let _ = run.integrate_pose(params, a, b, heading0, |k, integ| {
+        let h = integ.pose().heading;
+        if run.dist[k] - last.1 >= 0.25 || k == b {
+            total += (h - last.0).abs();
+            last = (h, run.dist[k]);
+        }
+    });
+    total
+}
+
+/// Stop a continuation stage's fit when the predicted relative reduction of its cost falls
+/// below this: the stages only carry the estimate along the trajectory, the last fit sets it.
+const STAGE_PRED_TOL: f64 = 1e-4;
+
+/// Stop the final eq (16) fit when the predicted relative reduction falls below this: well
+/// under the noise of eq (16) as the fixed-point integrator computes it (about 1e-7 of the
+/// cost: position increments are rounded to 2^-32 m, transfer constants to 2^-48 m).
+const FINAL_PRED_TOL: f64 = 1e-10;
+
+/// Levenberg-Marquardt over the geometry unknowns marked free in `free` (the others held),
+/// with the analytic Jacobian of [`Run::accumulate_normal`] (its columns of the free
+/// unknowns).
+#[allow(clippy::too_many_arguments)]
+fn lm_subset(
+    run: &Run,
+    base: &ChassisParams,
+    a: usize,
+    b: usize,
+    x: &[f64],
+    scale: &[f64],
+    free: &[bool],
+    kind: Objective,
+    opts: LmOptions,
+) -> Option<optim::OptResult> {
+    let idx: Vec<usize> = (0..x.len()).filter(|&i| free[i]).collect();
+    let full = |sub: &[f64]| {
+        let mut v = x.to_vec();
+        for (j, &i) in idx.iter().enumerate() {
+            v[i] = sub[j];
+        }
+        v
+    };
+    let sub0: Vec<f64> = idx.iter().map(|&i| x[i]).collect();
+    let sub_scale: Vec<f64> = idx.iter().map(|&i| scale[i]).collect();
+    let f = |s: &[f64], acc: &mut NormalAccumulator| {
+        let v = full(s);
+        run.accumulate_normal(&with_geometry(base, &v), a, b, v[3], &idx, acc)
+    };
+    let mut res = optim::levenberg_marquardt_streamed(f, &sub0, &sub_scale, kind, opts)?;
+    res.x = full(&res.x);
+    Some(res)
+}
+
+/// Estimates `left_diameter`, `right_diameter`, `track_width` and the initial heading on
+/// matches `a..=b` by minimising eq (16), from `start` and `heading0`.
+pub fn fit_geometry(
+    run: &Run,
+    start: &ChassisParams,
+    heading0: f64,
+    a: usize,
+    b: usize,
+    opts: GeomOptions,
+    progress: &ProgressBar,
+) -> Result<GeomFit> {
+    if b < a + 4 {
+        bail!(
+            "too few common times to fit ({} after the start; at least 4)",
+            b.saturating_sub(a)
+        );
+    }
+    start
+        .validate()
+        .map_err(|e| anyhow!("initial parameters: {e}"))?;
+    let scale = [
+        start.left_diameter,
+        start.right_diameter,
+        start.track_width,
+        1.0,
+    ];
+    let mut x = vec![
+        start.left_diameter,
+        start.right_diameter,
+        start.track_width,
+        heading0,
+    ];
+    let total = run.dist[b] - run.dist[a];
+    let mut ends = Vec::new();
+    let mut len = opts.first_stage;
+    while len < total {
+        let e = run.last_within(a, len);
+        if e >= a + 4 && ends.last().is_none_or(|&l| e > l) {
+            ends.push(e);
+        }
+        len *= opts.stage_growth;
+    }
+    if ends.last() != Some(&b) {
+        ends.push(b);
+    }
+    let debug = std::env::var_os("ODOCTL_DEBUG").is_some();
+    let (mut iterations, mut evaluations) = (0, 0);
+    let lm = LmOptions {
+        max_iter: 60,
+        pred_tol: STAGE_PRED_TOL,
+        // Light damping from the start: the trust region (max_step) bounds the first steps
+        // from a poor estimate, and each stage starts near its minimum.
+        lambda0: 1e-9,
+        ..LmOptions::default()
+    };
+    progress.set_length((ends.len() + 1 + usize::from(opts.polish)) as u64);
+    let mut free = [true, true, false, true];
+    for &e in &ends {
+        // The track width joins once the stretch has turned enough (it stays free after).
+        if !free[2] && turning(run, &with_geometry(start, &x), a, e, x[3]) >= opts.min_turning {
+            free[2] = true;
+        }
+        let res = lm_subset(run, start, a, e, &x, &scale, &free, Objective::Squares, lm)
+            .ok_or_else(|| anyhow!("the starting parameters are not admissible"))?;
+        x = res.x;
+        iterations += res.iterations;
+        evaluations += res.evaluations;
+        if debug {
+            eprintln!(
+                "stage to {e} ({:.1} m): {x:?} cost {} iterations {} runs {} free {free:?}",
+                run.dist[e] - run.dist[a],
+                res.cost,
+                res.iterations,
+                res.evaluations
+            );
+        }
+        progress.inc(1);
+    }
+    let res = lm_subset(
+        run,
+        start,
+        a,
+        b,
+        &x,
+        &scale,
+        &free,
+        Objective::SumOfNorms,
+        LmOptions {
+            max_iter: 200,
+            pred_tol: FINAL_PRED_TOL,
+            newton: true,
+            ..lm
+        },
+    )
+    .ok_or_else(|| anyhow!("the fit left the admissible parameter range"))?;
+    x = res.x;
+    let mut cost = res.cost;
+    iterations += res.iterations;
+    evaluations += res.evaluations;
+    if debug {
+        eprintln!(
+            "final fit: {x:?} cost {} iterations {} runs {}",
+            res.cost, res.iterations, res.evaluations
+        );
+    }
+    progress.inc(1);
+    if opts.polish {
+        let idx: Vec<usize> = (0..4).filter(|&i| free[i]).collect();
+        let full = |sub: &[f64]| {
+            let mut v = x.clone();
+            for (j, &i) in idx.iter().enumerate() {
+                v[i] = sub[j];
+            }
+            v
+        };
+        let sub0: Vec<f64> = idx.iter().map(|&i| x[i]).collect();
+        let step: Vec<f64> = idx.iter().map(|&i| scale[i] * 1e-4).collect();
+        let nm = optim::nelder_mead(
+            |s| {
+                let v = full(s);
+                run.eq16(&with_geometry(start, &v), a, b, v[3])
+            },
+            &sub0,
+            &step,
+            NmOptions {
+                max_evals: 600,
+                ..NmOptions::default()
+            },
+        );
+        evaluations += nm.evaluations;
+        iterations += nm.iterations;
+        if nm.cost < cost {
+            x = full(&nm.x);
+            cost = nm.cost;
+        }
+        progress.inc(1);
+    }
+    let params = with_geometry(start, &x);
+    let turned = turning(run, &params, a, b, x[3]);
+    let (std_errors, residual_sigma) = standard_errors(run, &params, a, b, x[3], free)
+        .ok_or_else(|| anyhow!("the fit left the admissible parameter range"))?;
+    evaluations += 2;
+    let track_warning =
+        track_width_warning(free[2], turned, opts.min_turning, &params, &std_errors);
+    Ok(GeomFit {
+        params,
+        heading0: x[3],
+        start: run.anchor(a),
+        cost,
+        points: b - a,
+        iterations,
+        evaluations,
+        stages: ends.len(),
+        track_estimated: free[2],
+        turning: turned,
+        std_errors,
+        residual_sigma,
+        track_warning,
+    })
+}
+
+/// Relative standard error of `track_width` above which the fit warns that the trajectory
+/// turned too little to determine it (see [`track_width_warning`]).
+pub const TRACK_WIDTH_MAX_RELATIVE_SE: f64 = 1e-3;
+
+/// Total absolute turning below which the fit warns that the track width is poorly
+/// determined, whatever its standard error says (rad; 90 degrees).
+pub const TRACK_WIDTH_WARN_TURNING: f64 = core::f64::consts::FRAC_PI_2;
+
+/// The warning of a geometry fit whose trajectory turned too little to determine the track
+/// width: it was held (total absolute turning below `min_turning`), or the turning is below
+/// [`TRACK_WIDTH_WARN_TURNING`] (90 deg), or the relative standard error of `track_width`
+/// exceeds [`TRACK_WIDTH_MAX_RELATIVE_SE`] (0.1 %, 0.6 mm on a 0.56 m track). Eq (8): only
+/// turning reveals the track width, and the formal standard error assumes independent
+/// residuals, which odometry drift is not, so both the turning and the error are checked.
+pub fn track_width_warning(
+    estimated: bool,
+    turning: f64,
+    min_turning: f64,
+    params: &ChassisParams,
+    std_errors: &[Option<f64>; 4],
+) -> Option<String> {
+    let deg = turning.to_degrees();
+    if !estimated {
+        return Some(format!(
+            "the trajectory turned {deg:.0} deg in all (less than {:.0}): track_width not estimated, kept at {}",
+            min_turning.to_degrees(),
+            params.track_width
+        ));
+    }
+    let rel = std_errors[2].map_or(f64::INFINITY, |se| se / params.track_width);
+    if turning < TRACK_WIDTH_WARN_TURNING || rel.is_nan() || rel > TRACK_WIDTH_MAX_RELATIVE_SE {
+        return Some(format!(
+            "the trajectory turned {deg:.0} deg in all: track_width poorly determined (standard error {:.2} % of it; a fit wants at least {:.0} deg and at most {:.1} %)",
+            100.0 * rel,
+            TRACK_WIDTH_WARN_TURNING.to_degrees(),
+            100.0 * TRACK_WIDTH_MAX_RELATIVE_SE
+        ));
+    }
+    None
+}
+
+/// Standard errors of the geometry unknowns ([`GEOMETRY_UNKNOWNS`]) at an eq (16) estimate
+/// over matches `a..=b`, with the held ones (`free[i]` false) `None`, and the residual
+/// standard deviation `s` (m). From the analytic Jacobian `J` of the x and y residuals (the
+/// unknowns that were free): `cov = (J^T J)^-1 s^2`, `s^2 = sum r^2 / (m - p)` with `m` residual
+/// components (two per common time) and `p` free unknowns: the least-squares approximation
+/// at the eq (16) optimum, for independent residuals (odometry drift is correlated along the
+/// run, so these are lower bounds of the real uncertainty; the stability study shows the
+/// spread over sub-trajectories). An unknown that the data do not determine (`J^T J`
+/// singular) gets an infinite error; `None` when the parameters are not admissible.
+pub fn standard_errors(
+    run: &Run,
+    params: &ChassisParams,
+    a: usize,
+    b: usize,
+    heading0: f64,
+    free: [bool; 4],
+) -> Option<([Option<f64>; 4], f64)> {
+    let idx: Vec<usize> = (0..4).filter(|&i| free[i]).collect();
+    let p = idx.len();
+    let mut acc = NormalAccumulator::new(Objective::Squares, false, p);
+    if !run.accumulate_normal(params, a, b, heading0, &idx, &mut acc) {
+        return None;
+    }
+    let (jtj, _) = acc.equations();
+    let m = acc.residuals();
+    let s2 = acc.cost() / (m.saturating_sub(p).max(1)) as f64;
+    let mut se = [None; 4];
+    for (j, &i) in idx.iter().enumerate() {
+        let mut e = vec![0.0; p];
+        e[j] = 1.0;
+        let var = optim::solve(jtj.clone(), e).map_or(f64::INFINITY, |col| col[j] * s2);
+        se[i] = Some(if var >= 0.0 {
+            var.sqrt()
+        } else {
+            f64::INFINITY
+        });
+    }
+    Some((se, s2.sqrt()))
+}
+
+/// The heading at match `a` minimising eq (16) over `a..=b` with the geometry fixed.
+pub fn fit_heading(
+    run: &Run,
+    params: &ChassisParams,
+    a: usize,
+    b: usize,
+    guess: f64,
+) -> Result<f64> {
+    let f = |x: &[f64], acc: &mut NormalAccumulator| {
+        run.accumulate_normal(params, a, b, x[0], &[3], acc)
+    };
+    let res = optim::levenberg_marquardt_streamed(
+        f,
+        &[guess],
+        &[1.0],
+        Objective::SumOfNorms,
+        LmOptions::default(),
+    )
+    .ok_or_else(|| anyhow!("parameters: not admissible"))?;
+    Ok(res.x[0])
+}
+
+/// Stop a restart heading fit when the predicted relative reduction of eq (16) falls below
+/// this (the heading is then the minimum within about 1e-10 rad).
+const RESTART_PRED_TOL: f64 = 1e-14;
+
+/// A path turned by up to this (rad) is the re-integrated path to within the integrator's
+/// own arithmetic noise; a restart heading found further from the heading the path was
+/// integrated at is refined from a path integrated at it (the turned path's error grows
+/// with the angle: about 1e-7 m at 0.5 rad over 10 m, 1e-7 rad on the heading found).
+const RESTART_TURN_EXACT: f64 = 0.01;
+
+/// Integrations of one restart heading fit at most (the second from the first's heading).
+const RESTART_PASSES: usize = 2;
+
+/// [`fit_heading`] for the restarts of the uncertainty fits, integrating once (twice when the
+/// heading found is more than [`RESTART_TURN_EXACT`] from `guess`). A change of
+/// the start heading by `phi` turns the whole path about its start by `phi` (clockwise):
+/// the odometry is integrated once at `guess`, and eq (16) is minimised over the rotation of
+/// those positions, `x - x0 = dx cos(phi) + dy sin(phi)`, `y - y0 = -dx sin(phi) + dy cos(phi)`
+/// (`dx`, `dy` the positions at `guess` relative to the start), with the derivative
+/// `d x / d heading0 = y - y0`, `d y / d heading0 = -(x - x0)` (what the forward sensitivity
+/// of [`Run::residuals_with_jacobian`] sums). The core integrator turns the same path by
+/// the same angle up to its rounding (the sine/cosine kernel, 2e-9 of the distance), so the
+/// heading is the one a fit re-integrating at every step would find.
+pub(super) fn fit_restart_heading(
+    run: &Run,
+    params: &ChassisParams,
+    a: usize,
+    b: usize,
+    guess: f64,
+) -> Result<f64> {
+    let (x0, y0) = run.anchor(a);
+    let mut path = Vec::with_capacity(b - a);
+    let mut heading = guess;
+    for _ in 0..RESTART_PASSES {
+        path.clear();
+        run.integrate_pose(params, a, b, heading, |k, integ| {
+            let p = integ.pose();
+            let r = run.reference_at(k);
+            path.push([p.x - x0, p.y - y0, r.x - x0, r.y - y0]);
+        })
+        .map_err(|e| anyhow!("parameters: {e}"))?;
+        let at = heading;
+        let f = |x: &[f64], acc: &mut NormalAccumulator| {
+            let (sin, cos) = (x[0] - at).sin_cos();
+            for &[dx, dy, rx, ry] in &path {
+                let (px, py) = (dx * cos + dy * sin, dy * cos - dx * sin);
+                acc.add_pair(px - rx, py - ry, &[py], &[-px]);
+            }
+            acc.cost().is_finite()
+        };
+        let res = optim::levenberg_marquardt_streamed(
+            f,
+            &[at],
+            &[1.0],
+            Objective::SumOfNorms,
+            LmOptions {
+                // The Newton model of the norms converges quadratically: the heading is the
+                // minimum of the turned path's eq (16) to 1e-10 rad, not where the IRLS
+                // majoriser's linear convergence happens to stop (iterations cost no
+                // integration here).
+                newton: true,
+                pred_tol: RESTART_PRED_TOL,
+                ..LmOptions::default()
+            },
+        )
+        .ok_or_else(|| anyhow!("parameters: not admissible"))?;
+        heading = res.x[0];
+        if (heading - at).abs() <= RESTART_TURN_EXACT {
+            break;
+        }
+    }
+    Ok(heading)
+}

@@ -1,0 +1,202 @@
+//! The restarted sub-trajectories that the uncertainty fits share.
+
+use std::cell::RefCell;
+use std::rc::Rc;
+
+use anyhow::{anyhow, bail, Result};
+use odo_core::odometry::ChassisParams;
+
+use crate::optim::norm2;
+
+use super::*;
+
+/// The restarted sub-trajectories of the uncertainty fits: consecutive stretches of `window`
+/// metres, each started from the reference position with the heading minimising eq (16) over
+/// it. They depend on the geometry only, so every coefficient fit shares them.
+#[derive(Debug, Clone)]
+pub struct Restarts {
+    /// `(start, end)` match indices.
+    pub windows: Vec<(usize, usize)>,
+    /// Restart headings (rad).
+    pub headings: Vec<f64>,
+    /// The last evaluations (see [`Restarts::evaluate_memo`]).
+    memo: RefCell<Vec<(ChassisParams, bool, Rc<Evaluation>)>>,
+}
+
+/// Evaluations kept by [`Restarts::evaluate_memo`]: the two latest of a coefficient search
+/// (its predictor) and the fit's result.
+const MEMO_EVALUATIONS: usize = 4;
+
+impl Restarts {
+    /// Cuts the run and fits the restart headings (eq 16 over each sub-trajectory, from the
+    /// full-run odometry with `heading0`).
+    pub fn new(run: &Run, geometry: &ChassisParams, heading0: f64, window: f64) -> Result<Self> {
+        let wins = windows(run, window, 3);
+        if wins.is_empty() {
+            bail!("the run is too short for the uncertainty fit (no sub-trajectory of {window} m with 3 points)");
+        }
+        // The full-run odometry headings (the pose does not depend on the uncertainty model).
+        let mut full = Vec::with_capacity(run.len());
+        full.push(heading0);
+        run.integrate_pose(geometry, 0, run.len() - 1, heading0, |_, integ| {
+            full.push(integ.pose().heading)
+        })
+        .map_err(|e| anyhow!("parameters: {e}"))?;
+        // The sub-trajectories' fits are independent: spread over the cores (the same fits,
+        // in the same order of results, as one after the other).
+        let threads = cores().min(wins.len());
+        let chunk = wins.len().div_ceil(threads.max(1));
+        let headings = std::thread::scope(|scope| {
+            let jobs: Vec<_> = wins
+                .chunks(chunk)
+                .map(|part| {
+                    let full = &full;
+                    scope.spawn(move || {
+                        part.iter()
+                            .map(|&(a, b)| fit_restart_heading(run, geometry, a, b, full[a]))
+                            .collect::<Result<Vec<f64>>>()
+                    })
+                })
+                .collect();
+            jobs.into_iter()
+                .map(|j| j.join().expect("restart heading fit panicked"))
+                .collect::<Result<Vec<_>>>()
+        })?
+        .concat();
+        Ok(Self {
+            windows: wins,
+            headings,
+            memo: RefCell::default(),
+        })
+    }
+
+    /// [`Restarts::evaluate`], remembered: the last [`MEMO_EVALUATIONS`] evaluations are kept
+    /// and returned again for the same parameters (the fits of the coefficients evaluate the
+    /// same parameters several times: the result, its coverages, the refits of delta).
+    pub fn evaluate_memo(&self, run: &Run, p: &ChassisParams) -> Result<Rc<Evaluation>> {
+        self.memo_eval(run, p, true)
+    }
+
+    /// The horizontal errors and sigmas only (`horizontal`, `sigma_h`; the other columns
+    /// may be empty), remembered with [`Restarts::evaluate_memo`]'s evaluations.
+    pub(super) fn horizontal_memo(&self, run: &Run, p: &ChassisParams) -> Result<Rc<Evaluation>> {
+        self.memo_eval(run, p, false)
+    }
+
+    fn memo_eval(&self, run: &Run, p: &ChassisParams, full: bool) -> Result<Rc<Evaluation>> {
+        let mut memo = self.memo.borrow_mut();
+        if let Some(i) = memo.iter().position(|(q, f, _)| q == p && (*f || !full)) {
+            let hit = memo.remove(i);
+            let ev = Rc::clone(&hit.2);
+            memo.push(hit);
+            return Ok(ev);
+        }
+        // Reuse the buffers of the oldest evaluation when nobody holds it any more.
+        let mut ev = if memo.len() >= MEMO_EVALUATIONS {
+            Rc::try_unwrap(memo.remove(0).2).unwrap_or_default()
+        } else {
+            Evaluation::default()
+        };
+        drop(memo);
+        self.evaluate_parts(run, p, &mut ev, full)?;
+        let ev = Rc::new(ev);
+        let mut memo = self.memo.borrow_mut();
+        // A full evaluation replaces a horizontal one of the same parameters.
+        memo.retain(|(q, _, _)| q != p);
+        memo.push((*p, full, Rc::clone(&ev)));
+        Ok(ev)
+    }
+
+    /// The remembered evaluations whose parameters satisfy `family`, newest first.
+    pub(super) fn memo_where(
+        &self,
+        family: impl Fn(&ChassisParams) -> bool,
+    ) -> Vec<(ChassisParams, Rc<Evaluation>)> {
+        self.memo
+            .borrow()
+            .iter()
+            .rev()
+            .filter(|(q, _, _)| family(q))
+            .map(|(q, _, ev)| (*q, Rc::clone(ev)))
+            .collect()
+    }
+
+    /// Errors and sigmas at every match after each restart (restart points excluded).
+    pub fn evaluate(&self, run: &Run, p: &ChassisParams) -> Result<Evaluation> {
+        let mut ev = Evaluation::default();
+        self.evaluate_into(run, p, &mut ev)?;
+        Ok(ev)
+    }
+
+    /// [`Restarts::evaluate`] into `ev` (cleared first, its buffers reused: the coverage
+    /// bisections evaluate the same sub-trajectories dozens of times).
+    /// The sub-trajectories are evaluated on all cores (independent, appended in order: the
+    /// same evaluation as one after the other).
+    pub fn evaluate_into(&self, run: &Run, p: &ChassisParams, ev: &mut Evaluation) -> Result<()> {
+        self.evaluate_parts(run, p, ev, true)
+    }
+
+    /// [`Restarts::evaluate_into`], with only `horizontal` and `sigma_h` filled when not
+    /// `full` (what the coefficient searches need: a fraction of the memory traffic).
+    fn evaluate_parts(
+        &self,
+        run: &Run,
+        p: &ChassisParams,
+        ev: &mut Evaluation,
+        full: bool,
+    ) -> Result<()> {
+        ev.clear();
+        let threads = cores().min(self.windows.len()).max(1);
+        let chunk = self.windows.len().div_ceil(threads);
+        let jobs: Vec<_> = self
+            .windows
+            .chunks(chunk)
+            .zip(self.headings.chunks(chunk))
+            .collect();
+        let (first, rest) = jobs.split_first().expect("at least one sub-trajectory");
+        let evaluate = |ev: &mut Evaluation, (wins, heads): (&[(usize, usize)], &[f64])| {
+            let n = wins.iter().map(|(a, b)| b - a).sum();
+            if full {
+                ev.reserve(n);
+            } else {
+                ev.horizontal.reserve(n);
+                ev.sigma_h.reserve(n);
+            }
+            for (&(a, b), &h) in wins.iter().zip(heads) {
+                if full {
+                    ev.extend(run, p, a, b, h, false)?;
+                } else {
+                    run.integrate(p, a, b, h, |k, integ| {
+                        let o = integ.pose();
+                        let r = run.reference_at(k);
+                        ev.horizontal.push(norm2(o.x - r.x, o.y - r.y));
+                        ev.sigma_h.push(f64::from(integ.sigma().horizontal()));
+                    })
+                    .map_err(|e| anyhow!("parameters: {e}"))?;
+                }
+            }
+            Ok::<_, anyhow::Error>(())
+        };
+        let parts = std::thread::scope(|scope| {
+            let spawned: Vec<_> = rest
+                .iter()
+                .map(|&job| {
+                    scope.spawn(move || {
+                        let mut part = Evaluation::default();
+                        evaluate(&mut part, job).map(|()| part)
+                    })
+                })
+                .collect();
+            let own = evaluate(ev, *first);
+            let parts = spawned
+                .into_iter()
+                .map(|j| j.join().expect("evaluation panicked"))
+                .collect::<Result<Vec<_>>>();
+            own.and(parts)
+        })?;
+        for mut part in parts {
+            ev.append(&mut part);
+        }
+        Ok(())
+    }
+}

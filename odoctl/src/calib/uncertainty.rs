@@ -1,0 +1,505 @@
+//! The uncertainty coefficients (delta or kappa) by the coverage criterion.
+
+use std::cell::RefCell;
+
+use anyhow::Result;
+use indicatif::ProgressBar;
+use odo_core::odometry::{ChassisParams, UncertaintyModel};
+
+use crate::optim::norm2;
+
+use super::*;
+
+/// Nominal coverage of a 1-sigma band of a normal distribution.
+pub const ONE_SIGMA_COVERAGE: f64 = 0.682_689_492;
+
+/// How the two wheels' coefficients are fitted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum DeltaMode {
+    /// Left and right equal.
+    Equal,
+    /// Keep the ratio left/right of the initial parameters; fit the common scale.
+    KeepRatio,
+}
+
+/// Result of the uncertainty fit.
+#[derive(Debug, Clone)]
+pub struct UncertaintyFit {
+    /// The model whose coefficients were fitted.
+    pub model: UncertaintyModel,
+    /// The parameters with the fitted coefficients.
+    pub params: ChassisParams,
+    /// Which keys were fitted (`delta_left`/`delta_right` or `kappa_left`/`kappa_right`).
+    pub keys: (&'static str, &'static str),
+    /// Sub-trajectories used.
+    pub windows: usize,
+    /// Points used (common times after each restart).
+    pub points: usize,
+    /// Achieved coverage of the 1-sigma band (with the reference noise).
+    pub coverage1: f64,
+    /// Achieved coverage of the 3-sigma band (with the reference noise).
+    pub coverage3: f64,
+    /// Set when the criterion could not be met inside the admissible range.
+    pub warning: Option<String>,
+    /// The `delta_diff` fit and heading coverage (paper model, reference with a heading).
+    pub diff: Option<DiffFit>,
+}
+
+/// Cuts matches `0..len` into consecutive sub-trajectories of `window` metres (the whole run
+/// when `window <= 0`); each is `(start, end)` with at least `min_points` after the start.
+pub fn windows(run: &Run, window: f64, min_points: usize) -> Vec<(usize, usize)> {
+    let mut out = Vec::new();
+    if run.is_empty() {
+        return out;
+    }
+    let last = run.len() - 1;
+    if window <= 0.0 {
+        if last >= min_points {
+            out.push((0, last));
+        }
+        return out;
+    }
+    let mut a = 0;
+    while a < last {
+        let b = run.last_within(a, window).max(a + 1);
+        if b - a >= min_points && run.dist[b] - run.dist[a] >= 0.5 * window {
+            out.push((a, b));
+        }
+        a = b;
+    }
+    out
+}
+
+pub(super) fn set_coefficient(
+    base: &ChassisParams,
+    mode: DeltaMode,
+    initial: &ChassisParams,
+    v: f64,
+) -> ChassisParams {
+    let mut p = *base;
+    let ratio = |l: f32, r: f32| {
+        if l > 0.0 && r > 0.0 && mode == DeltaMode::KeepRatio {
+            f64::from(r / l)
+        } else {
+            1.0
+        }
+    };
+    match p.uncertainty_model {
+        UncertaintyModel::Paper => {
+            let q = ratio(initial.delta_left, initial.delta_right);
+            p.delta_left = v as f32;
+            p.delta_right = (v * q) as f32;
+        }
+        UncertaintyModel::Covariance => {
+            let q = ratio(initial.kappa_left, initial.kappa_right);
+            p.kappa_left = v as f32;
+            p.kappa_right = (v * q) as f32;
+        }
+    }
+    p
+}
+/// Coverage of the horizontal `k`-sigma band widened by the reference noise:
+/// the fraction of points with `e <= k sqrt(sigma_h^2 + ref_sigma^2)`.
+pub fn horizontal_coverage(ev: &Evaluation, ref_sigma: f64, k: f64) -> f64 {
+    let inside = ev
+        .horizontal
+        .iter()
+        .zip(&ev.sigma_h)
+        .filter(|(e, s)| **e <= k * s.hypot(ref_sigma))
+        .count();
+    inside as f64 / ev.horizontal.len().max(1) as f64
+}
+
+/// Coverage of the heading-change `k`-sigma band widened by the reference heading noise, over
+/// the points `from..` where the reference has a heading: the fraction with `|e| <= k
+/// sqrt(sigma_heading^2 + (1 + 1/n) ref_heading_sigma^2)`, `e` the error of the heading change
+/// since the stretch's start ([`Evaluation::heading_change_err`]; the reference noise enters
+/// at the point and, averaged over `n` headings, at the start); NaN without any.
+pub fn heading_coverage(ev: &Evaluation, ref_heading_sigma: f64, k: f64, from: usize) -> f64 {
+    let (mut n, mut inside) = (0usize, 0usize);
+    for i in from..ev.heading_change_err.len() {
+        if let Some(e) = ev.heading_change_err[i] {
+            let m = ev.start_headings[i].max(1) as f64;
+            let band = norm2(
+                ev.sigma_heading[i],
+                ref_heading_sigma * (1.0 + 1.0 / m).sqrt(),
+            );
+            n += 1;
+            if e.abs() <= k * band {
+                inside += 1;
+            }
+        }
+    }
+    if n == 0 {
+        f64::NAN
+    } else {
+        inside as f64 / n as f64
+    }
+}
+
+/// Number of points `from..` with a heading-change error.
+pub fn heading_points(ev: &Evaluation, from: usize) -> usize {
+    ev.heading_change_err
+        .get(from..)
+        .map_or(0, |v| v.iter().filter(|e| e.is_some()).count())
+}
+
+/// The smallest `v` in `[0, hi]` with `cover(v) >= ONE_SIGMA_COVERAGE`, for a coverage that is
+/// non-decreasing in `v`: 0 when it already holds there, else a bisection in log scale down
+/// to a relative width `rel_tol`. Returns the value and a warning when `hi` is not enough or
+/// the criterion is not identifiable.
+pub(super) fn smallest_covering(
+    hi: f64,
+    zero_allowed: bool,
+    rel_tol: f64,
+    mut cover: impl FnMut(f64) -> Result<f64>,
+    progress: &ProgressBar,
+) -> Result<(f64, Option<String>)> {
+    let lo = hi * 1e-12;
+    if zero_allowed && cover(0.0)? >= ONE_SIGMA_COVERAGE {
+        return Ok((0.0, None));
+    }
+    let c_hi = cover(hi)?;
+    if c_hi < ONE_SIGMA_COVERAGE {
+        return Ok((
+            hi,
+            Some(format!(
+                "even {hi:e} (the largest admissible) covers only {:.1} % of the errors",
+                100.0 * c_hi
+            )),
+        ));
+    }
+    if cover(lo)? >= ONE_SIGMA_COVERAGE {
+        return Ok((
+            lo,
+            Some("the reference noise alone covers 68.3 % of the errors: the coefficient is not identifiable".into()),
+        ));
+    }
+    let (mut l, mut h) = (lo.ln(), hi.ln());
+    while h - l > rel_tol {
+        let m = 0.5 * (l + h);
+        if cover(m.exp())? >= ONE_SIGMA_COVERAGE {
+            h = m;
+        } else {
+            l = m;
+        }
+        progress.inc(1);
+    }
+    Ok((h.exp(), None))
+}
+
+/// Fits the uncertainty coefficients by the coverage criterion of the module documentation.
+#[allow(clippy::too_many_arguments)]
+pub fn fit_uncertainty(
+    run: &Run,
+    geometry: &ChassisParams,
+    heading0: f64,
+    initial: &ChassisParams,
+    window: f64,
+    ref_sigma: f64,
+    mode: DeltaMode,
+    progress: &ProgressBar,
+) -> Result<UncertaintyFit> {
+    let restarts = Restarts::new(run, geometry, heading0, window)?;
+    fit_uncertainty_on(run, &restarts, geometry, initial, ref_sigma, mode, progress)
+}
+
+/// Bisection width (natural log of the coefficient) of the horizontal fit.
+pub(super) const COEFFICIENT_LOG_TOL: f64 = 1e-7;
+/// Bisection width of `delta_diff`, and of delta when refitted inside its fit (0.01 %).
+pub(super) const DIFF_LOG_TOL: f64 = 1e-4;
+
+/// [`fit_uncertainty`] on given restarted sub-trajectories; the other coefficients (e.g.
+/// `delta_diff`) are those of `geometry`.
+pub fn fit_uncertainty_on(
+    run: &Run,
+    restarts: &Restarts,
+    geometry: &ChassisParams,
+    initial: &ChassisParams,
+    ref_sigma: f64,
+    mode: DeltaMode,
+    progress: &ProgressBar,
+) -> Result<UncertaintyFit> {
+    progress.set_length(48);
+    fit_coefficient(
+        run,
+        restarts,
+        geometry,
+        initial,
+        ref_sigma,
+        mode,
+        COEFFICIENT_LOG_TOL,
+        progress,
+    )
+}
+
+#[allow(clippy::too_many_arguments)]
+pub(super) fn fit_coefficient(
+    run: &Run,
+    restarts: &Restarts,
+    geometry: &ChassisParams,
+    initial: &ChassisParams,
+    ref_sigma: f64,
+    mode: DeltaMode,
+    log_tol: f64,
+    progress: &ProgressBar,
+) -> Result<UncertaintyFit> {
+    let (keys, hi) = match geometry.uncertainty_model {
+        UncertaintyModel::Paper => (
+            ("delta_left", "delta_right"),
+            f64::from(ChassisParams::MAX_DELTA),
+        ),
+        UncertaintyModel::Covariance => (
+            ("kappa_left", "kappa_right"),
+            f64::from(ChassisParams::MAX_KAPPA),
+        ),
+    };
+    // With the ratio kept, the larger coefficient must stay in range too.
+    let q = match (mode, geometry.uncertainty_model) {
+        (DeltaMode::KeepRatio, UncertaintyModel::Paper) if initial.delta_left > 0.0 => {
+            f64::from(initial.delta_right / initial.delta_left)
+        }
+        (DeltaMode::KeepRatio, UncertaintyModel::Covariance) if initial.kappa_left > 0.0 => {
+            f64::from(initial.kappa_right / initial.kappa_left)
+        }
+        _ => 1.0,
+    };
+    let hi = hi / q.max(1.0);
+    let at = |v: f64| set_coefficient(geometry, mode, initial, v);
+    let coefficient = |p: &ChassisParams| match p.uncertainty_model {
+        UncertaintyModel::Paper => f64::from(p.delta_left),
+        UncertaintyModel::Covariance => f64::from(p.kappa_left),
+    };
+    // The evaluations of this family (these parameters but the coefficient) already made,
+    // e.g. by the horizontal fit before a refit of delta: (coefficient, coverage).
+    let family = |p: &ChassisParams| at(coefficient(p)) == *p;
+    let facts = RefCell::new(
+        restarts
+            .memo_where(family)
+            .iter()
+            .map(|(p, ev)| (coefficient(p), horizontal_coverage(ev, ref_sigma, 1.0)))
+            .collect::<Vec<_>>(),
+    );
+    let real = |v: f64| -> Result<f64> {
+        let ev = restarts.horizontal_memo(run, &at(v))?;
+        let c = horizontal_coverage(&ev, ref_sigma, 1.0);
+        facts.borrow_mut().push((v, c));
+        Ok(c)
+    };
+    // The coverage is non-decreasing in the coefficient (what the bisection assumes): a
+    // value at or above one known to cover, or at or below one known not to, is decided
+    // without an evaluation; the bisection then takes exactly the steps it would take with
+    // every coverage evaluated, and only the midpoints between those are evaluated.
+    let cover = |v: f64| -> Result<f64> {
+        let known = known_coverage(&facts.borrow(), v);
+        match known {
+            Some(c) => Ok(c),
+            None => real(v),
+        }
+    };
+    bracket_threshold(
+        restarts,
+        hi,
+        log_tol,
+        family,
+        ref_sigma,
+        match geometry.uncertainty_model {
+            // sigma proportional to delta (with delta_diff = 0), variance to kappa.
+            UncertaintyModel::Paper => 1.0,
+            UncertaintyModel::Covariance => 0.5,
+        },
+        coefficient(geometry),
+        &facts,
+        &real,
+    )?;
+    let (value, warning) = smallest_covering(hi, false, log_tol, cover, progress)?;
+    let warning = warning.map(|w| {
+        if w.contains("reference noise") {
+            format!("the reference noise alone ({ref_sigma} m) covers 68.3 % of the errors: the coefficient is not identifiable")
+        } else {
+            w
+        }
+    });
+    let params = at(value);
+    let ev = restarts.evaluate_memo(run, &params)?;
+    Ok(UncertaintyFit {
+        model: geometry.uncertainty_model,
+        params,
+        keys,
+        windows: restarts.windows.len(),
+        points: ev.horizontal.len(),
+        coverage1: horizontal_coverage(&ev, ref_sigma, 1.0),
+        coverage3: horizontal_coverage(&ev, ref_sigma, 3.0),
+        warning,
+        diff: None,
+    })
+}
+
+/// The coverage at `v` implied by the coverages `facts` (coefficient, coverage) of a
+/// non-decreasing coverage: the one at `v` itself, else one `>= ONE_SIGMA_COVERAGE` at or
+/// below `v`, else one below it at or above `v` (the caller only compares it with
+/// [`ONE_SIGMA_COVERAGE`]); `None` when they do not decide.
+fn known_coverage(facts: &[(f64, f64)], v: f64) -> Option<f64> {
+    if let Some(&(_, c)) = facts.iter().find(|(u, _)| *u == v) {
+        return Some(c);
+    }
+    facts
+        .iter()
+        .find(|(u, c)| *u <= v && *c >= ONE_SIGMA_COVERAGE)
+        .or_else(|| {
+            facts
+                .iter()
+                .find(|(u, c)| *u >= v && *c < ONE_SIGMA_COVERAGE)
+        })
+        .map(|&(_, c)| c)
+}
+
+/// Predicts, from evaluations of one family at coefficients `a` and `b` (`sigma_h` of each,
+/// the horizontal errors being the same), the smallest coefficient whose horizontal 1-sigma
+/// band covers [`ONE_SIGMA_COVERAGE`] of the errors: per point, `sigma_h` is taken as a power
+/// of the coefficient through the two evaluations (exact for the covariance model, `sigma_h^2`
+/// linear in kappa, and for the paper model without `delta_diff`, `sigma_h` linear in delta;
+/// to f32 rounding), which gives the coefficient at which the point becomes covered; the
+/// prediction is their 68.27 % quantile. With one evaluation (`b` = `None`) the power is
+/// `exponent`.
+fn predict_threshold(
+    e: &[f64],
+    ref_sigma: f64,
+    a: (f64, &[f64]),
+    b: Option<(f64, &[f64])>,
+    exponent: f64,
+) -> Option<f64> {
+    let n = e.len();
+    if n == 0 || a.0 <= 0.0 {
+        return None;
+    }
+    let mut need = ONE_SIGMA_COVERAGE * n as f64;
+    need = need.ceil().min(n as f64);
+    let mut k = need as usize;
+    while k > 0 && (k - 1) as f64 / n as f64 >= ONE_SIGMA_COVERAGE {
+        k -= 1;
+    }
+    while k <= n && (k as f64 / n as f64) < ONE_SIGMA_COVERAGE {
+        k += 1;
+    }
+    if k == 0 || k > n {
+        return None;
+    }
+    let (la, sa) = (a.0.ln(), a.1);
+    let mut t: Vec<f64> = (0..n)
+        .map(|i| {
+            let target2 = e[i] * e[i] - ref_sigma * ref_sigma;
+            if target2 <= 0.0 {
+                return 0.0;
+            }
+            let ls = 0.5 * target2.ln();
+            let s0 = sa[i];
+            let p = match b {
+                Some((vb, sb)) if sb[i] > 0.0 && s0 > 0.0 && vb != a.0 => {
+                    (sb[i].ln() - s0.ln()) / (vb.ln() - la)
+                }
+                _ => exponent,
+            };
+            if !(s0 > 0.0 && p > 0.0 && p.is_finite()) {
+                return f64::INFINITY;
+            }
+            (la + (ls - s0.ln()) / p).exp()
+        })
+        .collect();
+    let (_, &mut th, _) = t.select_nth_unstable_by(k - 1, f64::total_cmp);
+    (th.is_finite() && th > 0.0).then_some(th)
+}
+
+/// Brackets the threshold of the coverage criterion before the bisection: evaluations
+/// (`real`, which records its results in `facts`) on either side of the predicted threshold
+/// ([`predict_threshold`], from the latest two evaluations of the family), at a distance of
+/// the bisection's width, widened when a prediction misses. The bisection then finds every
+/// step outside the bracket decided (see [`known_coverage`]): the result is the bisection's,
+/// with a handful of evaluations instead of dozens. Evaluations only; never decides anything.
+#[allow(clippy::too_many_arguments)]
+fn bracket_threshold(
+    restarts: &Restarts,
+    hi: f64,
+    log_tol: f64,
+    family: impl Fn(&ChassisParams) -> bool,
+    ref_sigma: f64,
+    exponent: f64,
+    start: f64,
+    facts: &RefCell<Vec<(f64, f64)>>,
+    real: &dyn Fn(f64) -> Result<f64>,
+) -> Result<()> {
+    let lo = hi * 1e-12;
+    let coefficient = |p: &ChassisParams| match p.uncertainty_model {
+        UncertaintyModel::Paper => f64::from(p.delta_left),
+        UncertaintyModel::Covariance => f64::from(p.kappa_left),
+    };
+    let mut width = log_tol;
+    for _ in 0..8 {
+        let (below, above) = {
+            let f = facts.borrow();
+            let below = f
+                .iter()
+                .filter(|(_, c)| *c < ONE_SIGMA_COVERAGE)
+                .map(|p| p.0)
+                .fold(f64::NEG_INFINITY, f64::max);
+            let above = f
+                .iter()
+                .filter(|(_, c)| *c >= ONE_SIGMA_COVERAGE)
+                .map(|p| p.0)
+                .fold(f64::INFINITY, f64::min);
+            (below, above)
+        };
+        if below > 0.0 && above.is_finite() && (above / below).ln() <= 2.5 * log_tol {
+            return Ok(());
+        }
+        if above <= lo || below >= hi {
+            return Ok(());
+        }
+        let evs = restarts.memo_where(&family);
+        let Some((pa, ea)) = evs.first() else {
+            let v0 = if start > lo && start < hi {
+                start
+            } else {
+                (lo * hi).sqrt()
+            };
+            real(v0)?;
+            continue;
+        };
+        let b = evs
+            .get(1)
+            .map(|(pb, eb)| (coefficient(pb), eb.sigma_h.as_slice()));
+        let Some(pred) = predict_threshold(
+            &ea.horizontal,
+            ref_sigma,
+            (coefficient(pa), &ea.sigma_h),
+            b,
+            exponent,
+        ) else {
+            return Ok(());
+        };
+        // Inside what is known, else bisect what is known.
+        let pred = if pred > below && pred < above {
+            pred
+        } else if below > 0.0 && above.is_finite() {
+            (below * above).sqrt()
+        } else if pred >= above {
+            above * (-width).exp()
+        } else {
+            below * width.exp()
+        };
+        let (l, h) = (
+            (pred * (-width).exp()).clamp(lo, hi),
+            (pred * width.exp()).clamp(lo, hi),
+        );
+        let c_h = known_coverage(&facts.borrow(), h);
+        let c_h = match c_h {
+            Some(c) => c,
+            None => real(h)?,
+        };
+        if c_h >= ONE_SIGMA_COVERAGE && known_coverage(&facts.borrow(), l).is_none() {
+            real(l)?;
+        }
+        width *= 4.0;
+    }
+    Ok(())
+}

@@ -1,0 +1,456 @@
+//! `odoctl calibrate`: reads the files, runs [`calib::calibrate`], prints and writes the result.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use odo_core::odometry::{ChassisParams, UncertaintyModel};
+
+use crate::calib::{self, CalibrationOptions, DeltaMode};
+use crate::config::{self as cfg, FitValue};
+use crate::csvio;
+use crate::reference::cli::{read_reference, reference_for_samples, ReferenceArgs};
+use crate::stats::{coverage, summarize};
+
+use super::create;
+
+/// Options of `odoctl calibrate`: the files, and the fitting options.
+#[derive(Debug, Clone, Default)]
+pub struct CalibrateOptions {
+    /// SAMPLES CSV.
+    pub samples: PathBuf,
+    /// REFERENCE CSV.
+    pub reference: PathBuf,
+    /// First-estimate file.
+    pub initial: Option<PathBuf>,
+    /// `KEY=VALUE` overrides of the first estimate.
+    pub sets: Vec<String>,
+    /// Result file.
+    pub out: Option<PathBuf>,
+    /// Study CSV.
+    pub windows_out: Option<PathBuf>,
+    /// Figure directory.
+    pub plots: Option<PathBuf>,
+    /// The fitting options.
+    pub calibration: CalibrationOptions,
+}
+
+/// `odoctl calibrate`.
+pub fn calibrate(o: &CalibrateOptions, input: &ReferenceArgs) -> Result<ExitCode> {
+    let started = Instant::now();
+    let timer = calib::PhaseTimer::new();
+    // The two files are independent: read on two cores.
+    let (samples, reference) = std::thread::scope(|scope| {
+        let reference = scope.spawn(|| read_reference(&o.reference, input));
+        let samples = csvio::read_samples(&o.samples);
+        (samples, reference.join().expect("CSV reader panicked"))
+    });
+    let (samples, reference) = (samples?, reference?);
+    let reference = reference_for_samples(&reference, &samples)?;
+    timer.lap("read CSV");
+    let mut initial = match &o.initial {
+        Some(p) => cfg::read_params(p, ChassisParams::DESIGNED)?,
+        None => ChassisParams::DESIGNED,
+    };
+    cfg::apply_sets(&mut initial, &o.sets)?;
+    let initial = cfg::validated(initial, "initial estimate")?;
+    let names = (
+        o.samples.display().to_string(),
+        o.reference.display().to_string(),
+    );
+    let opts = &o.calibration;
+    let c = calib::calibrate(&samples, &reference, (&names.0, &names.1), &initial, opts)?;
+    timer.lap("calibration");
+    let g = &c.geometry;
+    let ev = &c.evaluation;
+    let h = summarize(&ev.horizontal[1..]);
+    let (he, hs) = ev.heading_pairs();
+    let head = summarize(&he.iter().map(|e| e.abs()).collect::<Vec<_>>());
+    let cov1 = coverage(&ev.horizontal[1..], &ev.sigma_h[1..], 1.0);
+    let cov3 = coverage(&ev.horizontal[1..], &ev.sigma_h[1..], 3.0);
+
+    crate::outln!(
+        "calibration: {} common times, {:.1} m of reference path",
+        g.points + 1,
+        ev.dist.last().unwrap_or(&0.0)
+    );
+    crate::outln!(
+        "  {:<16} {:>14} {:>14} {:>12}",
+        "parameter",
+        "initial",
+        "estimate",
+        "std. error"
+    );
+    let se = |i: usize| g.std_errors[i].map_or_else(|| "held".to_string(), |v| format!("{v:.2e}"));
+    for (i, (k, a, b)) in [
+        (
+            "left_diameter",
+            initial.left_diameter,
+            c.params.left_diameter,
+        ),
+        (
+            "right_diameter",
+            initial.right_diameter,
+            c.params.right_diameter,
+        ),
+        ("track_width", initial.track_width, c.params.track_width),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        crate::outln!("  {k:<16} {a:>14.6} {b:>14.6} {:>12}", se(i));
+    }
+    crate::outln!(
+        "  {:<16} {:>14} {:>14.6} {:>12}",
+        "initial heading",
+        "",
+        g.heading0,
+        se(3)
+    );
+    crate::outln!(
+        "  start position {:.4} m E, {:.4} m N (the reference, averaged over the standstill there); standard errors (J^T J)^-1 s^2, s = {:.4} m, residuals taken as independent",
+        g.start.0,
+        g.start.1,
+        g.residual_sigma
+    );
+    if let Some(w) = &g.track_warning {
+        eprintln!("warning: eq (16) fit: {w}");
+    }
+    for u in &c.uncertainty {
+        let (a, b) = match u.model {
+            UncertaintyModel::Paper => (
+                (initial.delta_left, initial.delta_right),
+                (c.params.delta_left, c.params.delta_right),
+            ),
+            UncertaintyModel::Covariance => (
+                (initial.kappa_left, initial.kappa_right),
+                (c.params.kappa_left, c.params.kappa_right),
+            ),
+        };
+        crate::outln!("  {:<16} {:>14.4e} {:>14.4e}", u.keys.0, a.0, b.0);
+        crate::outln!("  {:<16} {:>14.4e} {:>14.4e}", u.keys.1, a.1, b.1);
+        crate::outln!(
+            "{} model fit: {} sub-trajectories of {} m, {} points; 1-sigma band covers {:.1} % (target 68.3 %), 3-sigma {:.1} %",
+            cfg::model_name(u.model),
+            u.windows,
+            opts.delta_window,
+            u.points,
+            100.0 * u.coverage1,
+            100.0 * u.coverage3
+        );
+        if let Some(w) = &u.warning {
+            eprintln!("warning: uncertainty fit: {w}");
+        }
+        if let Some(d) = &u.diff {
+            crate::outln!(
+                "  {:<16} {:>14.4e} {:>14.4e}",
+                "delta_diff",
+                d.initial,
+                d.delta_diff
+            );
+            let deg = opts.reference_heading_sigma.to_degrees();
+            if d.fitted {
+                crate::outln!(
+                    "delta_diff fit: {} heading points, reference heading noise {deg} deg; heading 1-sigma band covers {:.1} % -> {:.1} % (target 68.3 %), 3-sigma {:.1} % -> {:.1} %; delta {} ({:.4e} with the initial delta_diff), horizontal 1-sigma {:.1} %",
+                    d.points,
+                    100.0 * d.coverage1_before,
+                    100.0 * d.coverage1,
+                    100.0 * d.coverage3_before,
+                    100.0 * d.coverage3,
+                    if d.joint { "refitted with it" } else { "held" },
+                    d.delta_before,
+                    100.0 * u.coverage1
+                );
+            } else {
+                crate::outln!(
+                    "delta_diff kept (--no-fit-delta-diff): {} heading points, reference heading noise {deg} deg; heading 1-sigma band covers {:.1} %, 3-sigma {:.1} %",
+                    d.points,
+                    100.0 * d.coverage1,
+                    100.0 * d.coverage3
+                );
+            }
+            if let Some(w) = &d.warning {
+                eprintln!("warning: delta_diff fit: {w}");
+            }
+        }
+    }
+    crate::outln!(
+        "eq (16): {:.6} m over {} points (mean {:.4} m); {} stages, {} iterations, {} integrator runs",
+        g.cost,
+        g.points,
+        g.cost / g.points as f64,
+        g.stages,
+        g.iterations,
+        g.evaluations
+    );
+    crate::outln!(
+        "horizontal error: mean {:.4} m, rms {:.4} m, p95 {:.4} m, max {:.4} m; within 1 sigma {:.1} %, 3 sigma {:.1} %",
+        h.mean,
+        h.rms,
+        h.p95,
+        h.max,
+        100.0 * cov1,
+        100.0 * cov3
+    );
+    if !he.is_empty() {
+        crate::outln!(
+            "heading error: mean |e| {:.3} deg, rms {:.3} deg, max {:.3} deg; within 1 sigma {:.1} %, 3 sigma {:.1} %",
+            head.mean.to_degrees(),
+            head.rms.to_degrees(),
+            head.max.to_degrees(),
+            100.0 * coverage(&he, &hs, 1.0),
+            100.0 * coverage(&he, &hs, 3.0)
+        );
+    }
+    if !c.windows.is_empty() {
+        print_window_stats(&c.windows);
+        if let Some(p) = &o.windows_out {
+            write_windows_csv(p, &c.windows)?;
+        }
+    }
+    if let Some(p) = &o.out {
+        let mut fit = vec![
+            ("samples", FitValue::Text(o.samples.display().to_string())),
+            (
+                "reference",
+                FitValue::Text(o.reference.display().to_string()),
+            ),
+            ("initial_x", FitValue::Num(g.start.0)),
+            ("initial_y", FitValue::Num(g.start.1)),
+            ("initial_heading", FitValue::Num(g.heading0)),
+            ("eq16_cost", FitValue::Num(g.cost)),
+            ("points", FitValue::Int(g.points as i64)),
+        ];
+        for (name, se) in calib::GEOMETRY_UNKNOWNS.iter().zip(g.std_errors) {
+            if let Some(v) = se {
+                fit.push((se_keys(name), FitValue::Num(v)));
+            }
+        }
+        fit.push(("residual_sigma", FitValue::Num(g.residual_sigma)));
+        fit.push(("turning", FitValue::Num(g.turning)));
+        fit.push((
+            "track_width_estimated",
+            FitValue::Text(if g.track_estimated { "yes" } else { "no" }.into()),
+        ));
+        if let Some(w) = &g.track_warning {
+            fit.push(("track_width_warning", FitValue::Text(w.clone())));
+        }
+        fit.extend([
+            (
+                "path_length",
+                FitValue::Num(*ev.dist.last().unwrap_or(&0.0)),
+            ),
+            ("horizontal_error_mean", FitValue::Num(h.mean)),
+            ("horizontal_error_rms", FitValue::Num(h.rms)),
+            ("horizontal_error_p95", FitValue::Num(h.p95)),
+            ("horizontal_error_max", FitValue::Num(h.max)),
+            ("coverage_1sigma", FitValue::Num(cov1)),
+            ("coverage_3sigma", FitValue::Num(cov3)),
+        ]);
+        if !he.is_empty() {
+            fit.push(("heading_error_rms", FitValue::Num(head.rms)));
+            fit.push(("heading_error_max", FitValue::Num(head.max)));
+        }
+        if !c.uncertainty.is_empty() {
+            fit.push((
+                "uncertainty_criterion",
+                FitValue::Text(format!(
+                    "1-sigma band sqrt(sigma_h^2 + reference_sigma^2) covers 68.27 % of horizontal errors on sub-trajectories restarted from the reference ({} mode)",
+                    match opts.delta_mode {
+                        DeltaMode::Equal => "equal",
+                        DeltaMode::KeepRatio => "keep-ratio",
+                    }
+                )),
+            ));
+            fit.push(("uncertainty_window", FitValue::Num(opts.delta_window)));
+            fit.push(("reference_sigma", FitValue::Num(opts.reference_sigma)));
+        }
+        let mut per_model: Vec<(String, FitValue)> = Vec::new();
+        for u in &c.uncertainty {
+            let name = cfg::model_name(u.model);
+            per_model.push((format!("{name}_points"), FitValue::Int(u.points as i64)));
+            per_model.push((
+                format!("{name}_coverage_1sigma"),
+                FitValue::Num(u.coverage1),
+            ));
+            per_model.push((
+                format!("{name}_coverage_3sigma"),
+                FitValue::Num(u.coverage3),
+            ));
+        }
+        let diff = c.uncertainty.iter().find_map(|u| u.diff.as_ref());
+        if let Some(d) = diff {
+            if d.fitted {
+                per_model.push((
+                    "delta_diff_criterion".into(),
+                    FitValue::Text(
+                        "smallest delta_diff >= 0 for which, with delta refitted by the horizontal criterion, the 1-sigma heading band sqrt(sigma_heading^2 + (1 + 1/n) reference_heading_sigma^2) covers 68.27 % of the errors of the heading change since each restart (wrapped) on the same sub-trajectories".into(),
+                    ),
+                ));
+                per_model.push(("delta_diff_initial".into(), FitValue::Num(d.initial)));
+                per_model.push(("delta_before_diff".into(), FitValue::Num(d.delta_before)));
+                per_model.push((
+                    "delta_diff_joint".into(),
+                    FitValue::Text(
+                        if d.joint {
+                            "delta refitted"
+                        } else {
+                            "delta held"
+                        }
+                        .into(),
+                    ),
+                ));
+            }
+            per_model.push((
+                "reference_heading_sigma".into(),
+                FitValue::Num(opts.reference_heading_sigma),
+            ));
+            per_model.push(("heading_points".into(), FitValue::Int(d.points as i64)));
+            for (k, v) in [
+                ("heading_coverage_1sigma_before", d.coverage1_before),
+                ("heading_coverage_3sigma_before", d.coverage3_before),
+                ("heading_coverage_1sigma", d.coverage1),
+                ("heading_coverage_3sigma", d.coverage3),
+            ] {
+                per_model.push((k.into(), FitValue::Num(v)));
+            }
+        }
+        fit.extend(per_model.iter().map(|(k, v)| (k.as_str(), v.clone())));
+        let always: &[&str] = if diff.is_some_and(|d| d.fitted) {
+            &["delta_diff"]
+        } else {
+            &[]
+        };
+        let text = cfg::render_params_with(
+            &c.params,
+            "odoctl calibrate: chassis parameters estimated by eq (16) of Jilek, Burian, Kriz",
+            &fit,
+            always,
+        );
+        std::fs::write(p, text).with_context(|| format!("{}: cannot write", p.display()))?;
+        crate::outln!("wrote {}", p.display());
+    }
+    if let Some(dir) = &o.plots {
+        let mut files = crate::plots::run_figures(dir, "calibrate", "Estimation run", ev)?;
+        if !c.windows.is_empty() {
+            let full = [
+                g.params.left_diameter,
+                g.params.right_diameter,
+                g.params.track_width,
+            ];
+            files.extend(crate::plots::window_figures(dir, &c.windows, full)?);
+        }
+        for f in files {
+            crate::outln!("wrote {}", f.display());
+        }
+    }
+    timer.lap("report");
+    crate::outln!("done in {:.2} s", started.elapsed().as_secs_f64());
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The `[fit]` key of an unknown's standard error: `left_diameter_se`, ...
+fn se_keys(name: &str) -> &'static str {
+    match name {
+        "left_diameter" => "left_diameter_se",
+        "right_diameter" => "right_diameter_se",
+        "track_width" => "track_width_se",
+        _ => "initial_heading_se",
+    }
+}
+
+fn print_window_stats(est: &[calib::WindowEstimate]) {
+    let mut lengths: Vec<f64> = est.iter().map(|e| e.length).collect();
+    lengths.sort_by(f64::total_cmp);
+    lengths.dedup();
+    crate::outln!("stability study (estimates on consecutive sub-trajectories):");
+    crate::outln!(
+        "  {:>6} {:>5} {:>5}  {:<15} {:>10} {:>10} {:>10} {:>10} {:>10}",
+        "length",
+        "fits",
+        "fail",
+        "parameter",
+        "mean",
+        "std",
+        "median",
+        "min",
+        "max"
+    );
+    for l in lengths {
+        let all: Vec<&calib::WindowEstimate> = est.iter().filter(|e| e.length == l).collect();
+        let ok: Vec<[f64; 4]> = all
+            .iter()
+            .filter_map(|e| e.estimate.as_ref().ok().copied())
+            .collect();
+        for (p, name) in ["left_diameter", "right_diameter", "track_width"]
+            .iter()
+            .enumerate()
+        {
+            let vals: Vec<f64> = ok.iter().map(|v| v[p]).filter(|v| v.is_finite()).collect();
+            let s = summarize(&vals);
+            let note = if vals.len() < ok.len() {
+                format!(
+                    "  ({} of {} turned too little)",
+                    ok.len() - vals.len(),
+                    ok.len()
+                )
+            } else {
+                String::new()
+            };
+            let head = if p == 0 {
+                format!("{:>5} m {:>5} {:>5}", l, ok.len(), all.len() - ok.len())
+            } else {
+                format!("{:>7} {:>5} {:>5}", "", "", "")
+            };
+            crate::outln!(
+                "  {head}  {name:<15} {:>10.5} {:>10.5} {:>10.5} {:>10.5} {:>10.5}{note}",
+                s.mean,
+                s.std,
+                s.median,
+                s.min,
+                s.max
+            );
+        }
+    }
+}
+
+fn write_windows_csv(path: &Path, est: &[calib::WindowEstimate]) -> Result<()> {
+    let mut w = create(path)?;
+    writeln!(
+        w,
+        "length,start_dist,t_start,t_end,points,turning,left_diameter,right_diameter,track_width,initial_heading,mean_error,error"
+    )?;
+    for e in est {
+        let (v, err) = match &e.estimate {
+            Ok(v) => (
+                v.map(|x| {
+                    if x.is_finite() {
+                        format!("{x:?}")
+                    } else {
+                        String::new()
+                    }
+                })
+                .join(","),
+                String::new(),
+            ),
+            Err(s) => (",,,".to_string(), s.replace(',', ";")),
+        };
+        writeln!(
+            w,
+            "{},{:.3},{},{},{},{:.6},{},{:?},{}",
+            e.length,
+            e.start_dist,
+            csvio::fmt_t(e.t.0),
+            csvio::fmt_t(e.t.1),
+            e.points,
+            e.turning,
+            v,
+            e.mean_error,
+            err
+        )?;
+    }
+    w.flush()?;
+    Ok(())
+}

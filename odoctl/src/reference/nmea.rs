@@ -1,0 +1,664 @@
+//! An NMEA 0183 log of the reference receiver: GGA positions, dated by RMC or ZDA, with the
+//! heading of HDT and the standard deviations of GST.
+//!
+//! Every line is checked by the firmware's sentence parser first
+//! (`odo_core::timing::nmea::parse_sentence`: `$`, `*hh` checksum, any talker), which also
+//! reads RMC and ZDA (date and time, the same code as on the unit). GGA, HDT and GST are
+//! read by the `nmea` crate. Other sentences are counted by type and skipped; corrupt lines
+//! (checksum, syntax, binary data between sentences) are counted and skipped; a line with
+//! stray bytes before its `$` is read from the `$` and counted; only a log with no usable
+//! epoch is an error.
+//!
+//! Times: GGA carries the UTC time of day only. Each epoch is dated by the nearest earlier
+//! date (an RMC with status A, a ZDA, or the previous dated epoch), taking the day that puts
+//! it within 12 hours of that date's time, so a log running over midnight gets the next
+//! day; epochs before the first date sentence take its date the same way. UTC becomes GPS
+//! time with the leap seconds (`--leap-seconds`, 18 by default). A leap second 23:59:60 is
+//! skipped (the `nmea` crate does not represent it).
+//!
+//! Association: a GST belongs to the GGA of the same time of day (before or after it). An
+//! HDT carries no time: it belongs to the epoch being sent, the time of the last sentence
+//! that carries one (GGA, GST, RMC, ZDA), whether its GGA came before or comes after it; an
+//! HDT sent first in its epoch, before any timed sentence, is taken for the previous epoch's.
+
+use anyhow::{bail, Result};
+use chrono::Timelike;
+use odo_core::timing::nmea::{days_from_civil, parse_sentence, NmeaError, TimeMessage};
+
+use super::geodetic::Geodetic;
+use super::{gps_time, Epoch, FixQuality, GeodeticLog, ReadReport};
+
+/// `$` + body + `*hh`: the sentence with its checksum (XOR of the body's bytes).
+pub fn with_checksum(body: &str) -> String {
+    let sum = body.bytes().fold(0u8, |a, b| a ^ b);
+    format!("${body}*{sum:02X}")
+}
+
+/// A GGA before dating.
+struct Undated {
+    sod: f64,
+    position: Geodetic,
+    fix: FixQuality,
+    heading: Option<f64>,
+    sigma: Option<[f64; 3]>,
+    line: usize,
+    /// The last date sentence before it (index into the dates).
+    date: Option<usize>,
+}
+
+/// A date sentence: (days since 1970-01-01, seconds of the day, line).
+#[derive(Clone, Copy)]
+struct DateMark {
+    days: i64,
+    sod: f64,
+    line: usize,
+}
+
+/// The key of a time of day for matching GST to GGA: milliseconds.
+fn ms(sod: f64) -> i64 {
+    (sod * 1000.0).round() as i64
+}
+
+fn seconds_of_day(t: chrono::NaiveTime) -> f64 {
+    f64::from(t.num_seconds_from_midnight()) + f64::from(t.nanosecond()) * 1e-9
+}
+
+fn fix_quality(f: Option<nmea::sentences::FixType>) -> FixQuality {
+    use nmea::sentences::FixType as F;
+    match f {
+        Some(F::Rtk) => FixQuality::RtkFixed,
+        Some(F::FloatRtk) => FixQuality::RtkFloat,
+        Some(F::DGps) => FixQuality::Dgps,
+        Some(F::Gps | F::Pps) => FixQuality::Single,
+        _ => FixQuality::Invalid,
+    }
+}
+
+/// The sentence type of a checked line: `GGA` for `$GNGGA,...`, the whole address of a
+/// proprietary sentence (`PUBX`).
+fn sentence_type(s: &str) -> &str {
+    let address = s[1..].split(',').next().unwrap_or("");
+    if address.len() == 5 && !address.starts_with('P') {
+        &address[2..]
+    } else {
+        address
+    }
+}
+
+/// Parses an NMEA log; `file` names it in messages. UTC + `leap_seconds` = GPS time.
+pub fn parse(file: &str, text: &str, leap_seconds: i32) -> Result<GeodeticLog> {
+    let mut report = ReadReport::default();
+    let mut undated: Vec<Undated> = Vec::new();
+    let mut dates: Vec<DateMark> = Vec::new();
+    // GSTs that came before their GGA: (time of day in ms, sigmas).
+    let mut pending_gst: Vec<(i64, [f64; 3])> = Vec::new();
+    // The epoch an HDT would belong to (the last GGA, until an HDT takes it).
+    let mut hdt_target: Option<usize> = None;
+    // Time of day (ms) of the last sentence that carries one: the epoch being sent.
+    let mut epoch_time: Option<i64> = None;
+    // An HDT sent in an epoch before its GGA: (time of day in ms, heading in rad, line).
+    let mut pending_hdt: Option<(i64, f64, usize)> = None;
+    let drop_hdt = |report: &mut ReadReport, p: Option<(i64, f64, usize)>| {
+        if let Some((_, _, l)) = p {
+            report.unusable(format!(
+                "{file}:{l}: HDT without a GGA of its epoch (or a second HDT): skipped"
+            ));
+        }
+    };
+    for (i, raw) in text.lines().enumerate() {
+        let line = i + 1;
+        let raw = raw.trim();
+        if raw.is_empty() {
+            continue;
+        }
+        let Some(start) = raw.rfind('$') else {
+            report.corrupt(format!("{file}:{line}: not an NMEA sentence (no `$`)"));
+            continue;
+        };
+        if start > 0 {
+            report.stray_bytes(format!(
+                "{file}:{line}: {start} bytes before the `$` (read from the `$`)"
+            ));
+        }
+        let s = &raw[start..];
+        let kind = match parse_sentence(s.as_bytes()) {
+            Ok(TimeMessage::Rmc { valid: false, .. }) => {
+                report.unusable(format!(
+                    "{file}:{line}: RMC with status V (data not valid): its date is not used"
+                ));
+                continue;
+            }
+            Ok(m) => {
+                let t = m.time();
+                let sod = f64::from(t.hour) * 3600.0
+                    + f64::from(t.minute) * 60.0
+                    + f64::from(t.second)
+                    + f64::from(t.millis) * 1e-3;
+                epoch_time = Some(ms(sod));
+                dates.push(DateMark {
+                    days: days_from_civil(i64::from(t.year), u32::from(t.month), u32::from(t.day)),
+                    sod,
+                    line,
+                });
+                report.used(sentence_type(s));
+                continue;
+            }
+            Err(NmeaError::BadChecksum { computed, received }) => {
+                report.corrupt(format!(
+                    "{file}:{line}: checksum {received:02X}, but the sentence's is {computed:02X}"
+                ));
+                continue;
+            }
+            Err(e @ (NmeaError::NoChecksum | NmeaError::NoStart | NmeaError::Overflow)) => {
+                report.corrupt(format!("{file}:{line}: {e:?}: sentence skipped"));
+                continue;
+            }
+            Err(NmeaError::Field(name)) => {
+                report.unusable(format!(
+                    "{file}:{line}: {}: field `{name}` missing or malformed",
+                    sentence_type(s)
+                ));
+                continue;
+            }
+            Err(NmeaError::BadDate) => {
+                report.corrupt(format!(
+                    "{file}:{line}: {}: date or time out of range",
+                    sentence_type(s)
+                ));
+                continue;
+            }
+            Err(NmeaError::Unsupported) => sentence_type(s),
+        };
+        if !matches!(kind, "GGA" | "HDT" | "GST") {
+            report.other(kind);
+            continue;
+        }
+        let parsed = match nmea::parse_str(s) {
+            Ok(p) => p,
+            Err(e) => {
+                let time = s.split(',').nth(1).unwrap_or("");
+                if kind != "HDT" && time.len() >= 6 && &time[4..6] == "60" {
+                    report.unusable(format!(
+                        "{file}:{line}: {kind} in a leap second ({time}): skipped"
+                    ));
+                } else {
+                    report.corrupt(format!("{file}:{line}: {kind}: {e}"));
+                }
+                continue;
+            }
+        };
+        match parsed {
+            nmea::ParseResult::GGA(g) => {
+                let (Some(t), Some(lat), Some(lon), Some(alt)) =
+                    (g.fix_time, g.latitude, g.longitude, g.altitude)
+                else {
+                    report.unusable(format!(
+                        "{file}:{line}: GGA without a time, position or altitude (fix quality {:?})",
+                        g.fix_type
+                    ));
+                    continue;
+                };
+                let sod = seconds_of_day(t);
+                let sigma = pending_gst
+                    .iter()
+                    .position(|(k, _)| *k == ms(sod))
+                    .map(|p| pending_gst.swap_remove(p).1);
+                report.used("GGA");
+                epoch_time = Some(ms(sod));
+                let mut heading = None;
+                hdt_target = Some(undated.len());
+                match pending_hdt.take() {
+                    Some((k, h, _)) if k == ms(sod) => {
+                        heading = Some(h);
+                        hdt_target = None;
+                        report.used("HDT");
+                    }
+                    other => drop_hdt(&mut report, other),
+                }
+                undated.push(Undated {
+                    sod,
+                    position: Geodetic {
+                        lat_deg: lat,
+                        lon_deg: lon,
+                        // Ellipsoidal = above mean sea level + geoid separation.
+                        height: f64::from(alt) + f64::from(g.geoid_separation.unwrap_or(0.0)),
+                    },
+                    fix: fix_quality(g.fix_type),
+                    heading,
+                    sigma,
+                    line,
+                    date: dates.len().checked_sub(1),
+                });
+            }
+            nmea::ParseResult::HDT(h) => {
+                let Some(deg) = h.heading.map(f64::from).filter(|d| d.is_finite()) else {
+                    report.unusable(format!("{file}:{line}: HDT without a heading"));
+                    continue;
+                };
+                let heading = crate::stats::wrap_angle(deg.to_radians());
+                match (hdt_target, epoch_time) {
+                    // After the GGA of the epoch being sent.
+                    (Some(k), Some(t)) if ms(undated[k].sod) == t => {
+                        undated[k].heading = Some(heading);
+                        hdt_target = None;
+                        report.used("HDT");
+                    }
+                    // Before it: waits for the GGA of that time.
+                    (_, Some(t)) => {
+                        let old = pending_hdt.replace((t, heading, line));
+                        drop_hdt(&mut report, old);
+                    }
+                    (_, None) => drop_hdt(&mut report, Some((0, heading, line))),
+                }
+            }
+            nmea::ParseResult::GST(g) => {
+                let (Some(t), Some(n), Some(e)) = (g.time, g.lat_sd, g.long_sd) else {
+                    report.unusable(format!(
+                        "{file}:{line}: GST without time or latitude/longitude sigmas"
+                    ));
+                    continue;
+                };
+                let sigma = [
+                    f64::from(n),
+                    f64::from(e),
+                    g.alt_sd.map_or(f64::NAN, f64::from),
+                ];
+                let key = ms(seconds_of_day(t));
+                epoch_time = Some(key);
+                report.used("GST");
+                let recent = undated.len().saturating_sub(20);
+                match undated[recent..]
+                    .iter_mut()
+                    .rev()
+                    .find(|u| ms(u.sod) == key && u.sigma.is_none())
+                {
+                    Some(u) => u.sigma = Some(sigma),
+                    None => {
+                        if pending_gst.len() >= 20 {
+                            pending_gst.remove(0);
+                        }
+                        pending_gst.push((key, sigma));
+                    }
+                }
+            }
+            _ => report.other(kind),
+        }
+    }
+    drop_hdt(&mut report, pending_hdt);
+    let epochs = date_epochs(file, undated, &dates, leap_seconds, &mut report)?;
+    if epochs.is_empty() {
+        bail!("{file}: no usable position (no GGA with a position): {report}");
+    }
+    Ok(GeodeticLog { epochs, report })
+}
+
+/// Dates the GGA epochs (see the module doc), converts to GPS time and drops epochs whose
+/// time is not after the previous one's.
+fn date_epochs(
+    file: &str,
+    undated: Vec<Undated>,
+    dates: &[DateMark],
+    leap_seconds: i32,
+    report: &mut ReadReport,
+) -> Result<Vec<Epoch>> {
+    if undated.is_empty() {
+        return Ok(Vec::new());
+    }
+    let Some(first_date) = dates.first().copied() else {
+        bail!(
+            "{file}: no date: {} GGA epochs but no RMC (status A) or ZDA sentence to date them \
+             (GGA carries only the time of day); {report}",
+            undated.len()
+        );
+    };
+    let mut out: Vec<Epoch> = Vec::with_capacity(undated.len());
+    let mut prev: Option<DateMark> = None;
+    for u in undated {
+        let mark = match (u.date.map(|k| dates[k]), prev) {
+            (Some(d), Some(p)) => {
+                if d.line > p.line {
+                    d
+                } else {
+                    p
+                }
+            }
+            (Some(d), None) => d,
+            (None, Some(p)) => p,
+            (None, None) => first_date,
+        };
+        let mut days = mark.days;
+        if u.sod - mark.sod > 43_200.0 {
+            days -= 1;
+        } else if mark.sod - u.sod > 43_200.0 {
+            days += 1;
+        }
+        let gps_time = gps_time::utc_to_gps(days, u.sod, leap_seconds)
+            .map_err(|e| anyhow::anyhow!("{file}:{}: {e}", u.line))?;
+        prev = Some(DateMark {
+            days,
+            sod: u.sod,
+            line: u.line,
+        });
+        if let Some(last) = out.last() {
+            if gps_time <= last.gps_time {
+                report.unusable(format!(
+                    "{file}:{}: GGA time is not after the previous epoch's (line {}): skipped",
+                    u.line, last.line
+                ));
+                continue;
+            }
+        }
+        out.push(Epoch {
+            gps_time,
+            position: u.position,
+            heading: u.heading,
+            sigma: u.sigma,
+            fix: u.fix,
+            line: u.line,
+        });
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// GGA body at a time of day, with a position and quality.
+    fn gga(talker: &str, time: &str, lat: &str, ns: &str, lon: &str, ew: &str, q: u8) -> String {
+        with_checksum(&format!(
+            "{talker}GGA,{time},{lat},{ns},{lon},{ew},{q},12,0.6,250.000,M,45.000,M,1.0,0000"
+        ))
+    }
+
+    fn zda(time: &str, d: u32, m: u32, y: u32) -> String {
+        with_checksum(&format!("GPZDA,{time},{d:02},{m:02},{y},00,00"))
+    }
+
+    #[test]
+    fn checksum_of_a_published_sentence() {
+        // The GGA example of the NMEA literature (gpsd's NMEA revealed):
+        // $GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*47
+        assert_eq!(
+            with_checksum("GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,"),
+            "$GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*47"
+        );
+        let log = format!(
+            "{}\n$GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*47\n",
+            zda("123518.00", 23, 11, 2026)
+        );
+        let l = parse("a.nmea", &log, 18).unwrap();
+        let e = &l.epochs[0];
+        assert!((e.position.lat_deg - (48.0 + 7.038 / 60.0)).abs() < 1e-12);
+        assert!((e.position.lon_deg - (11.0 + 31.0 / 60.0)).abs() < 1e-12);
+        assert!((e.position.height - 592.3).abs() < 1e-4);
+        assert_eq!(e.fix, FixQuality::Single);
+    }
+
+    #[test]
+    fn published_receiver_sentences() {
+        // GGA and GST as printed (with their checksums) in Trimble's NMEA-0183 message
+        // reference (the BD982's family); the date from a ZDA of ours.
+        let log = [
+            zda("172813.00", 12, 7, 2024),
+            "$GPGGA,172814.0,3723.46587704,N,12202.26957864,W,2,6,1.2,18.893,M,-25.669,M,2.0,0031*4F".to_string(),
+            "$GPGST,172814.0,0.006,0.023,0.020,273.6,0.023,0.020,0.031*6A".to_string(),
+        ]
+        .join("\r\n");
+        let l = parse("t.nmea", &log, 18).unwrap();
+        let e = &l.epochs[0];
+        assert!((e.position.lat_deg - (37.0 + 23.465_877_04 / 60.0)).abs() < 1e-12);
+        assert!((e.position.lon_deg + (122.0 + 2.269_578_64 / 60.0)).abs() < 1e-12);
+        assert!((e.position.height - (18.893 - 25.669)).abs() < 1e-4);
+        assert_eq!(e.fix, FixQuality::Dgps);
+        let s = e.sigma.unwrap();
+        assert!(
+            (s[0] - 0.023).abs() < 1e-6
+                && (s[1] - 0.020).abs() < 1e-6
+                && (s[2] - 0.031).abs() < 1e-6
+        );
+        let want = gps_time::utc_to_gps(days_from_civil(2024, 7, 12), 62_894.0, 18).unwrap();
+        assert_eq!(e.gps_time, want);
+        assert_eq!((l.report.corrupt, l.report.unusable), (0, 0));
+    }
+
+    #[test]
+    fn hemispheres_and_talkers() {
+        // (talker, N/S, E/W) -> signs.
+        for (talker, ns, ew, sn, se) in [
+            ("GP", "N", "E", 1.0, 1.0),
+            ("GN", "S", "E", -1.0, 1.0),
+            ("GL", "N", "W", 1.0, -1.0),
+            ("GA", "S", "W", -1.0, -1.0),
+            ("BD", "N", "E", 1.0, 1.0),
+        ] {
+            let log = format!(
+                "{}\n{}\n",
+                zda("000000.00", 1, 1, 2025),
+                gga(
+                    talker,
+                    "000000.10",
+                    "3402.50000000",
+                    ns,
+                    "15812.50000000",
+                    ew,
+                    4
+                )
+            );
+            let l = parse("h.nmea", &log, 18).unwrap();
+            let p = l.epochs[0].position;
+            assert!(
+                (p.lat_deg - sn * (34.0 + 2.5 / 60.0)).abs() < 1e-12,
+                "{talker}"
+            );
+            assert!(
+                (p.lon_deg - se * (158.0 + 12.5 / 60.0)).abs() < 1e-12,
+                "{talker}"
+            );
+            assert_eq!(l.epochs[0].fix, FixQuality::RtkFixed);
+        }
+    }
+
+    #[test]
+    fn day_rollover_dates_and_gps_time() {
+        // A ZDA before midnight, epochs on both sides of it, no further date sentence; an
+        // epoch before the first date is dated from it too.
+        let log = [
+            gga("GN", "235959.80", "4912.0", "N", "01636.0", "E", 4),
+            zda("235959.90", 31, 12, 2026),
+            gga("GN", "235959.90", "4912.0", "N", "01636.0", "E", 4),
+            gga("GN", "000000.00", "4912.0", "N", "01636.0", "E", 4),
+            gga("GN", "000000.10", "4912.0", "N", "01636.0", "E", 5),
+        ]
+        .join("\r\n");
+        let l = parse("d.nmea", &log, 18).unwrap();
+        let day = days_from_civil(2026, 12, 31);
+        let base = gps_time::utc_to_gps(day, 86_399.8, 18).unwrap();
+        let ts: Vec<f64> = l.epochs.iter().map(|e| e.gps_time - base).collect();
+        for (t, want) in ts.iter().zip([0.0, 0.1, 0.2, 0.3]) {
+            assert!((t - want).abs() < 1e-6, "{ts:?}");
+        }
+        assert_eq!(l.epochs[3].fix, FixQuality::RtkFloat);
+        // 2027-01-01 00:00:00 UTC = GPS 1,483,228,800 - 315,964,800 + 18 s.
+        let midnight = gps_time::utc_to_gps(days_from_civil(2027, 1, 1), 0.0, 18).unwrap();
+        assert_eq!(midnight, (1_798_761_600.0 - 315_964_800.0) + 18.0);
+        assert!((l.epochs[2].gps_time - midnight).abs() < 1e-6);
+        // The leap-second count moves every epoch by whole seconds.
+        let l19 = parse("d.nmea", &log, 19).unwrap();
+        assert!((l19.epochs[2].gps_time - midnight - 1.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn rmc_dates_but_not_with_status_v() {
+        let rmc = |status: &str, date: &str| {
+            with_checksum(&format!(
+                "GNRMC,120000.00,{status},4912.0,N,01636.0,E,0.0,0.0,{date},,,R"
+            ))
+        };
+        let log = [
+            rmc("V", "010199"),
+            rmc("A", "230926"),
+            gga("GN", "120000.00", "4912.0", "N", "01636.0", "E", 4),
+        ]
+        .join("\n");
+        let l = parse("r.nmea", &log, 18).unwrap();
+        let want = gps_time::utc_to_gps(days_from_civil(2026, 9, 23), 43_200.0, 18).unwrap();
+        assert_eq!(l.epochs[0].gps_time, want);
+        assert_eq!((l.report.unusable, l.report.used["RMC"]), (1, 1));
+        assert!(l.report.problems[0].starts_with("r.nmea:1: RMC with status V"));
+    }
+
+    #[test]
+    fn missing_date_is_an_error() {
+        let log = gga("GP", "120000.00", "4912.0", "N", "01636.0", "E", 4);
+        let e = parse("n.nmea", &log, 18).unwrap_err().to_string();
+        assert!(e.starts_with("n.nmea: no date") && e.contains("RMC"), "{e}");
+    }
+
+    #[test]
+    fn corrupt_sentences_are_counted_never_fatal_unless_nothing_is_left() {
+        let good = gga("GP", "120000.00", "4912.0", "N", "01636.0", "E", 4);
+        let mut bad_sum = good.clone();
+        bad_sum.replace_range(bad_sum.len() - 2.., "00");
+        let log = [
+            zda("120000.00", 23, 11, 2026),
+            bad_sum.clone(),                // 2: checksum
+            good.replace('*', "#"),         // 3: no checksum
+            "\u{1}\u{2}binary".to_string(), // 4: no sentence
+            format!(
+                "xx{}",
+                gga("GP", "120000.10", "4912.0", "N", "01636.0", "E", 4)
+            ), // 5: junk first
+            with_checksum("GPGSV,1,1,01,05,45,120,40"), // 6: other
+            with_checksum("PUBX,00,1"),     // 7: proprietary
+            with_checksum("GPGGA,120000.20,,,,,0,00,99.9,,M,,M,,"), // 8: no position
+            with_checksum("GPGGA,120000.30,4x12.0,N,01636.0,E,4,12,0.6,250.0,M,45.0,M,,"), // 9: syntax
+            good.clone(), // 10: same time as line 1's epoch? no: 12:00:00.00 again
+        ]
+        .join("\n");
+        let l = parse("c.nmea", &log, 18).unwrap();
+        assert_eq!(l.epochs.len(), 1, "{:?}", l.report);
+        assert_eq!(l.epochs[0].line, 5);
+        // 2, 3, 4, 9 corrupt; 5 read after its stray bytes; 8 and 10 (time not after line
+        // 5's) unusable.
+        assert_eq!(l.report.corrupt, 4, "{}", l.report);
+        assert_eq!(l.report.stray_bytes, 1, "{}", l.report);
+        assert_eq!(l.report.unusable, 2, "{}", l.report);
+        assert_eq!(l.report.other["GSV"], 1);
+        assert_eq!(l.report.other["PUBX"], 1);
+        assert!(
+            l.report.problems[0].starts_with("c.nmea:2: checksum 00"),
+            "{:?}",
+            l.report.problems
+        );
+        // Nothing usable: fatal, with the report.
+        let e = parse(
+            "c.nmea",
+            &[zda("120000.00", 23, 11, 2026), bad_sum].join("\n"),
+            18,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("c.nmea: no usable position") && e.contains("c.nmea:2: checksum"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn gst_and_hdt_association() {
+        let gst = |t: &str, n: f64, e: f64| {
+            with_checksum(&format!("GNGST,{t},0.5,0.02,0.01,30.0,{n},{e},0.03"))
+        };
+        let hdt = |h: f64| with_checksum(&format!("GNHDT,{h:.3},T"));
+        let log = [
+            zda("100000.00", 2, 2, 2026),
+            gst("100000.00", 0.011, 0.012), // before its GGA
+            gga("GN", "100000.00", "4912.0", "S", "01636.0", "W", 4),
+            hdt(359.5),
+            gga("GN", "100000.10", "4912.0", "S", "01636.0", "W", 4),
+            gst("100000.10", 0.021, 0.022), // after its GGA
+            hdt(90.0),
+            hdt(91.0), // a second HDT for the same epoch: skipped
+            gga("GN", "100000.20", "4912.0", "S", "01636.0", "W", 4),
+        ]
+        .join("\n");
+        let l = parse("g.nmea", &log, 18).unwrap();
+        let e = &l.epochs;
+        assert_eq!(
+            e[0].sigma.map(|s| [s[0], s[1]]),
+            Some([0.011f32 as f64, 0.012f32 as f64])
+        );
+        assert_eq!(
+            e[1].sigma.map(|s| [s[0], s[1]]),
+            Some([0.021f32 as f64, 0.022f32 as f64])
+        );
+        assert_eq!(e[2].sigma, None);
+        assert!(
+            (e[0].heading.unwrap() + 0.5f64.to_radians()).abs() < 1e-6,
+            "{:?}",
+            e[0].heading
+        );
+        assert!((e[1].heading.unwrap() - std::f64::consts::FRAC_PI_2).abs() < 1e-6);
+        assert_eq!(e[2].heading, None);
+        assert_eq!(l.report.unusable, 1);
+    }
+
+    #[test]
+    fn hdt_before_its_gga_goes_with_the_epoch_being_sent() {
+        let hdt = |h: f64| with_checksum(&format!("GNHDT,{h:.3},T"));
+        let rmc = |t: &str| {
+            with_checksum(&format!(
+                "GNRMC,{t},A,4912.0,N,01636.0,E,0.0,0.0,020226,,,R"
+            ))
+        };
+        let gga = |t: &str| gga("GN", t, "4912.0", "N", "01636.0", "E", 4);
+        // Each epoch: RMC, HDT, GGA (a receiver that sends HDT before GGA).
+        let log = [
+            rmc("100000.00"),
+            hdt(10.0),
+            gga("100000.00"),
+            rmc("100000.10"),
+            hdt(20.0),
+            gga("100000.10"),
+            rmc("100000.20"),
+            hdt(30.0),
+            rmc("100000.30"), // the epoch of 10:00:00.20 had no GGA: its HDT is dropped
+            hdt(40.0),
+            gga("100000.30"),
+        ]
+        .join("\n");
+        let l = parse("b.nmea", &log, 18).unwrap();
+        let deg: Vec<f64> = l
+            .epochs
+            .iter()
+            .map(|e| (e.heading.unwrap().to_degrees() * 1000.0).round() / 1000.0)
+            .collect();
+        assert_eq!(deg, vec![10.0, 20.0, 40.0]);
+        assert_eq!(
+            (l.report.used["HDT"], l.report.unusable),
+            (3, 1),
+            "{}",
+            l.report
+        );
+        assert!(l.report.problems[0].starts_with("b.nmea:8: HDT without a GGA"));
+    }
+
+    #[test]
+    fn leap_second_epoch_is_skipped_and_counted() {
+        let log = [
+            zda("235959.00", 31, 12, 2016),
+            gga("GP", "235959.50", "4912.0", "N", "01636.0", "E", 4),
+            gga("GP", "235960.00", "4912.0", "N", "01636.0", "E", 4),
+            gga("GP", "235960.50", "4912.0", "N", "01636.0", "E", 4),
+            gga("GP", "000000.00", "4912.0", "N", "01636.0", "E", 4),
+        ]
+        .join("\n");
+        // One leap-second count serves the whole log: 17, valid until the insertion.
+        let l = parse("l.nmea", &log, 17).unwrap();
+        assert_eq!(l.epochs.len(), 2);
+        assert_eq!(l.report.unusable, 2, "{}", l.report);
+        assert!(l.report.problems[0].contains("leap second"));
+        assert_eq!(l.epochs[0].gps_time, 1_167_264_016.5);
+    }
+}
