@@ -269,8 +269,9 @@ struct CalibrateArgs {
     /// Stability study: sub-trajectory lengths in metres, e.g. `1,2,4,8`.
     #[arg(long, value_delimiter = ',')]
     windows: Vec<f64>,
-    /// Where the stability study's fits start.
-    #[arg(long, value_enum, default_value_t = WindowStart::Initial)]
+    /// Where the stability study's fits start: the whole-run estimate (`full`), or the
+    /// initial estimate as the paper did (`initial`).
+    #[arg(long, value_enum, default_value_t = WindowStart::Full)]
     window_start: WindowStart,
     /// Per-sub-trajectory estimates of the stability study to this CSV.
     #[arg(long)]

@@ -49,8 +49,8 @@ pub struct CalibrationOptions {
 
 impl Default for CalibrationOptions {
     /// 10 m sub-trajectories, the BD982's 8 mm and 0.5 deg, equal coefficients, `delta` and
-    /// `delta_diff` fitted for the initial estimate's model, no polish, no stability study,
-    /// no progress bars.
+    /// `delta_diff` fitted for the initial estimate's model, no polish, no stability study
+    /// (its windows started from the whole-run estimate), no progress bars.
     fn default() -> Self {
         Self {
             delta_window: 10.0,
@@ -62,7 +62,7 @@ impl Default for CalibrationOptions {
             models: Vec::new(),
             polish: false,
             windows: Vec::new(),
-            window_start: WindowStart::Initial,
+            window_start: WindowStart::Full,
             quiet: true,
         }
     }

@@ -362,14 +362,13 @@ fn se_keys(name: &str) -> &'static str {
 }
 
 fn print_window_stats(est: &[calib::WindowEstimate]) {
-    let mut lengths: Vec<f64> = est.iter().map(|e| e.length).collect();
-    lengths.sort_by(f64::total_cmp);
-    lengths.dedup();
-    crate::outln!("stability study (estimates on consecutive sub-trajectories):");
+    crate::outln!(
+        "stability study (estimates on consecutive sub-trajectories; failed windows left out):"
+    );
     crate::outln!(
         "  {:>6} {:>5} {:>5}  {:<15} {:>10} {:>10} {:>10} {:>10} {:>10}",
         "length",
-        "fits",
+        "used",
         "fail",
         "parameter",
         "mean",
@@ -378,39 +377,45 @@ fn print_window_stats(est: &[calib::WindowEstimate]) {
         "min",
         "max"
     );
-    for l in lengths {
-        let all: Vec<&calib::WindowEstimate> = est.iter().filter(|e| e.length == l).collect();
-        let ok: Vec<[f64; 4]> = all
-            .iter()
-            .filter_map(|e| e.estimate.as_ref().ok().copied())
-            .collect();
-        for (p, name) in ["left_diameter", "right_diameter", "track_width"]
-            .iter()
-            .enumerate()
-        {
-            let vals: Vec<f64> = ok.iter().map(|v| v[p]).filter(|v| v.is_finite()).collect();
-            let s = summarize(&vals);
-            let note = if vals.len() < ok.len() {
-                format!(
-                    "  ({} of {} turned too little)",
-                    ok.len() - vals.len(),
-                    ok.len()
-                )
-            } else {
-                String::new()
-            };
+    for w in calib::summarize_windows(est) {
+        for (p, name) in calib::WINDOW_PARAMS.iter().enumerate() {
+            let s = &w.stats[p];
             let head = if p == 0 {
-                format!("{:>5} m {:>5} {:>5}", l, ok.len(), all.len() - ok.len())
+                format!(
+                    "{:>5} m {:>5} {:>5}",
+                    w.length,
+                    w.accepted,
+                    w.windows - w.accepted
+                )
             } else {
                 format!("{:>7} {:>5} {:>5}", "", "", "")
             };
             crate::outln!(
-                "  {head}  {name:<15} {:>10.5} {:>10.5} {:>10.5} {:>10.5} {:>10.5}{note}",
+                "  {head}  {name:<15} {:>10.5} {:>10.5} {:>10.5} {:>10.5} {:>10.5}",
                 s.mean,
                 s.std,
                 s.median,
                 s.min,
                 s.max
+            );
+        }
+        if !w.failures.is_empty() {
+            let why: Vec<String> = w
+                .failures
+                .iter()
+                .map(|(code, n)| format!("{n} {code}"))
+                .collect();
+            crate::outln!("  {:>7} failed: {}", "", why.join(", "));
+        }
+    }
+    for e in est {
+        if let Err(f) = &e.estimate {
+            crate::outln!(
+                "  FAILED {} m window at {:.1} m ({:.2}-{:.2} s): {f}",
+                e.length,
+                e.start_dist,
+                e.t.0,
+                e.t.1
             );
         }
     }
@@ -420,26 +425,26 @@ fn write_windows_csv(path: &Path, est: &[calib::WindowEstimate]) -> Result<()> {
     let mut w = create(path)?;
     writeln!(
         w,
-        "length,start_dist,t_start,t_end,points,turning,left_diameter,right_diameter,track_width,initial_heading,mean_error,error"
+        "length,start_dist,t_start,t_end,points,turning,left_diameter,right_diameter,track_width,initial_heading,left_diameter_se,right_diameter_se,track_width_se,initial_heading_se,condition,mean_error,status,reason"
     )?;
+    let num = |x: f64| {
+        if x.is_finite() {
+            format!("{x:?}")
+        } else {
+            String::new()
+        }
+    };
     for e in est {
-        let (v, err) = match &e.estimate {
-            Ok(v) => (
-                v.map(|x| {
-                    if x.is_finite() {
-                        format!("{x:?}")
-                    } else {
-                        String::new()
-                    }
-                })
-                .join(","),
-                String::new(),
-            ),
-            Err(s) => (",,,".to_string(), s.replace(',', ";")),
+        let v = e
+            .fitted
+            .map_or_else(|| ",,,".to_string(), |v| v.map(num).join(","));
+        let (status, reason) = match &e.estimate {
+            Ok(_) => ("ok", String::new()),
+            Err(f) => ("failed", f.to_string().replace([',', '\n'], ";")),
         };
         writeln!(
             w,
-            "{},{:.3},{},{},{},{:.6},{},{:?},{}",
+            "{},{:.3},{},{},{},{:.6},{},{},{},{},{},{}",
             e.length,
             e.start_dist,
             csvio::fmt_t(e.t.0),
@@ -447,8 +452,11 @@ fn write_windows_csv(path: &Path, est: &[calib::WindowEstimate]) -> Result<()> {
             e.points,
             e.turning,
             v,
-            e.mean_error,
-            err
+            e.std_errors.map(num).join(","),
+            num(e.condition),
+            num(e.mean_error),
+            status,
+            reason
         )?;
     }
     w.flush()?;
