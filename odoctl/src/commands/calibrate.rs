@@ -118,6 +118,9 @@ pub fn calibrate(o: &CalibrateOptions, input: &ReferenceArgs) -> Result<ExitCode
     if let Some(w) = &g.track_warning {
         eprintln!("warning: eq (16) fit: {w}");
     }
+    if let Some(hf) = &c.harmonics {
+        print_harmonics(hf, &initial);
+    }
     for u in &c.uncertainty {
         let (a, b) = match u.model {
             UncertaintyModel::Paper => (
@@ -317,12 +320,15 @@ pub fn calibrate(o: &CalibrateOptions, input: &ReferenceArgs) -> Result<ExitCode
                 per_model.push((k.into(), FitValue::Num(v)));
             }
         }
+        if let Some(hf) = &c.harmonics {
+            per_model.extend(harmonics_fit_keys(hf));
+        }
         fit.extend(per_model.iter().map(|(k, v)| (k.as_str(), v.clone())));
-        let always: &[&str] = if diff.is_some_and(|d| d.fitted) {
-            &["delta_diff"]
-        } else {
-            &[]
-        };
+        let mut always: Vec<&str> = c.harmonics.iter().flat_map(|h| h.keys.clone()).collect();
+        if diff.is_some_and(|d| d.fitted) {
+            always.push("delta_diff");
+        }
+        let always = always.as_slice();
         let text = cfg::render_params_with(
             &c.params,
             "odoctl calibrate: chassis parameters estimated by eq (16) of Jilek, Burian, Kriz",
@@ -461,4 +467,68 @@ fn write_windows_csv(path: &Path, est: &[calib::WindowEstimate]) -> Result<()> {
     }
     w.flush()?;
     Ok(())
+}
+
+fn print_harmonics(hf: &calib::HarmonicsFit, initial: &odo_core::odometry::ChassisParams) {
+    crate::outln!(
+        "wheel function: {} harmonic(s) per wheel, referenced to the index, geometry fixed; {} segments of {} m restarted from the reference, {} points, residual {:.4} m",
+        hf.order,
+        hf.segments,
+        hf.segment,
+        hf.points,
+        hf.residual_sigma
+    );
+    crate::outln!(
+        "  {:<16} {:>14} {:>14} {:>12} {:>12} {:>12}",
+        "parameter",
+        "initial",
+        "estimate",
+        "std. error",
+        "(iid)",
+        "radius [mm]"
+    );
+    for (i, k) in hf.keys.iter().enumerate() {
+        let before = crate::config::get_key(initial, k)
+            .ok()
+            .and_then(|t| t.parse::<f64>().ok())
+            .unwrap_or(f64::NAN);
+        let radius = if k.starts_with("left") {
+            hf.params.left_diameter
+        } else {
+            hf.params.right_diameter
+        } / 2.0;
+        crate::outln!(
+            "  {k:<16} {before:>14.3e} {:>14.3e} {:>12.2e} {:>12.2e} {:>12.4}",
+            hf.values[i],
+            hf.std_errors[i],
+            hf.std_errors_iid[i],
+            1e3 * radius * hf.values[i]
+        );
+    }
+    crate::outln!(
+        "  standard errors cluster-robust over the segments; (iid): taking the residuals as independent"
+    );
+}
+
+/// The `[fit]` keys of the wheel-function fit.
+fn harmonics_fit_keys(hf: &calib::HarmonicsFit) -> Vec<(String, FitValue)> {
+    let mut v = vec![
+        (
+            "wheel_harmonics".to_string(),
+            FitValue::Int(hf.order as i64),
+        ),
+        (
+            "harmonics_segments".to_string(),
+            FitValue::Int(hf.segments as i64),
+        ),
+        ("harmonics_window".to_string(), FitValue::Num(hf.segment)),
+        (
+            "harmonics_residual_sigma".to_string(),
+            FitValue::Num(hf.residual_sigma),
+        ),
+    ];
+    for (k, se) in hf.keys.iter().zip(&hf.std_errors) {
+        v.push((format!("{k}_se"), FitValue::Num(*se)));
+    }
+    v
 }
