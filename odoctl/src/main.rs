@@ -275,7 +275,8 @@ struct CalibrateArgs {
     window_start: WindowStart,
     /// Estimate the per-angle wheel function (eqs 3-5): the first N harmonics (1..=3) of each
     /// wheel, `left_cos1..N`, `left_sin1..N`, `right_...`, referenced to the index line, with
-    /// the geometry fixed; needs SAMPLES with the `left_index`, `right_index` columns.
+    /// the geometry fit's result kept (its corrections refitted alongside as nuisances); needs
+    /// SAMPLES with the `left_index`, `right_index` columns.
     #[arg(long, value_name = "N", default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=3))]
     wheel_harmonics: u8,
     /// Segment length of the wheel-function fit (m of reference path; each segment restarted

@@ -471,7 +471,7 @@ fn write_windows_csv(path: &Path, est: &[calib::WindowEstimate]) -> Result<()> {
 
 fn print_harmonics(hf: &calib::HarmonicsFit, initial: &odo_core::odometry::ChassisParams) {
     crate::outln!(
-        "wheel function: {} harmonic(s) per wheel, referenced to the index, geometry fixed; {} segments of {} m restarted from the reference, {} points, residual {:.4} m",
+        "wheel function: {} harmonic(s) per wheel, referenced to the index, after the geometry fit (its corrections refitted alongside); {} segments of {} m restarted from the reference, {} points, residual {:.4} m",
         hf.order,
         hf.segments,
         hf.segment,
