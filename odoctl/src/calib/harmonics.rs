@@ -139,7 +139,7 @@ pub fn fit_harmonics(
     if !(1..=WHEEL_HARMONICS).contains(&order) {
         bail!("--wheel-harmonics {order}: must be 1..={WHEEL_HARMONICS}");
     }
-    if !(segment > 0.0) {
+    if segment.is_nan() || segment <= 0.0 {
         bail!("--harmonics-window {segment}: must be positive metres");
     }
     let indexed = run
@@ -209,7 +209,7 @@ pub fn fit_harmonics(
         let mut values = Vec::with_capacity(q);
         for (i, &c) in cols.iter().enumerate() {
             let v = f64::from(coefficient(&p, c)) + step[i];
-            if !(v.abs() <= f64::from(ChassisParams::MAX_HARMONIC)) {
+            if v.is_nan() || v.abs() > f64::from(ChassisParams::MAX_HARMONIC) {
                 bail!(
                     "{}: estimate {v:.3e} outside +-{} (the run does not determine the wheel function)",
                     key(c),
@@ -474,6 +474,7 @@ mod tests {
     /// 3 km, RTK noise 8 mm, slip 0.001: recovered within 3 standard errors, each about
     /// 0.025 mm of radius (measured: see odoctl/README.md).
     #[test]
+    #[allow(clippy::needless_range_loop)]
     fn eccentric_wheels_are_recovered() {
         let mut truth = default_truth();
         let (rl, rr) = (truth.left_diameter / 2.0, truth.right_diameter / 2.0);

@@ -263,12 +263,12 @@ fn judge(
             min_deg: min_turning.to_degrees(),
         });
     }
-    if !(condition <= MAX_CONDITION) {
+    if condition.is_nan() || condition > MAX_CONDITION {
         return Some(WindowFailure::IllConditioned { condition });
     }
     for (p, key) in WINDOW_PARAMS.iter().enumerate() {
         let rel = se[p] / v[p].abs();
-        if !(rel <= MAX_RELATIVE_SE) {
+        if rel.is_nan() || rel > MAX_RELATIVE_SE {
             return Some(WindowFailure::Undetermined {
                 key,
                 relative_se: rel,
@@ -298,7 +298,7 @@ pub fn scaled_condition(
     }
     let (mut m, _) = acc.equations();
     let d: Vec<f64> = (0..n).map(|i| m[i * n + i].sqrt()).collect();
-    if d.iter().any(|&x| !(x > 0.0) || !x.is_finite()) {
+    if d.iter().any(|&x| x.is_nan() || x <= 0.0 || !x.is_finite()) {
         return f64::INFINITY;
     }
     for i in 0..n {
@@ -421,6 +421,7 @@ mod tests {
     /// no window at a bound or undetermined reaches the statistics, every failed window says
     /// why, and the accepted 4 m and 8 m windows' means are close to the truth.
     #[test]
+    #[allow(clippy::needless_range_loop)]
     fn failed_windows_are_reported_and_kept_out_of_the_statistics() {
         let truth = default_truth();
         let sim = simulate_path(PathKind::Estimation, 70.0, truth, SimSettings::default());
