@@ -488,9 +488,12 @@ fn print_harmonics(hf: &calib::HarmonicsFit, initial: &odo_core::odometry::Chass
         "radius [mm]"
     );
     for (i, k) in hf.keys.iter().enumerate() {
-        let before = crate::config::get_key(initial, k)
-            .ok()
-            .and_then(|t| t.parse::<f64>().ok())
+        let before = odo_core::settings::Key::from_name(k)
+            .and_then(|key| {
+                crate::config::chassis_value_text(initial, key)
+                    .parse::<f64>()
+                    .ok()
+            })
             .unwrap_or(f64::NAN);
         let radius = if k.starts_with("left") {
             hf.params.left_diameter
