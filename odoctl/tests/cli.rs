@@ -407,7 +407,7 @@ fn wheel_harmonics_reach_the_output_and_config_push() {
     ] {
         assert!(text.contains(key), "{key} missing in\n{text}");
     }
-    let lines = odoctl::link::push_lines(&cal).unwrap().join(" ");
+    let lines = odoctl::config::push_lines(&cal).unwrap().join(" ");
     for key in ["left_cos1 ", "left_sin1 ", "right_cos1 ", "right_sin1 "] {
         assert!(lines.contains(key), "{key} not pushed: {lines}");
     }
