@@ -225,6 +225,8 @@ struct CalibrateArgs {
     reference: PathBuf,
     #[command(flatten)]
     reference_input: ReferenceArgs,
+    #[command(flatten)]
+    geometry: odoctl::commands::GeometryArgs,
     /// First estimate (TOML, shared keys); the designed values when absent.
     #[arg(long)]
     initial: Option<PathBuf>,
@@ -434,6 +436,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 out: a.out,
                 windows_out: a.windows_out,
                 plots: a.plots,
+                geometry: a.geometry,
                 calibration: CalibrationOptions {
                     delta_window: a.delta_window,
                     reference_sigma: a.reference_sigma,
@@ -446,6 +449,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                     windows: a.windows,
                     window_start: a.window_start,
                     quiet: a.quiet,
+                    ..Default::default()
                 },
             },
             &a.reference_input,
