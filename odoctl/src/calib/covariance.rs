@@ -1,5 +1,6 @@
 //! Covariance of an estimate from its normal equations: the formal one for independent
-//! residuals, `H^-1 s^2`, and the cluster-robust sandwich `H^-1 (G/(G-1) sum_c g_c g_c^T) H^-1`
+//! residuals, `H^-1 s^2`, the cluster-robust jackknife ([`cluster_jackknife`]) that
+//! `calibrate` reports, and the plain cluster-robust sandwich `H^-1 (G/(G-1) sum_c g_c g_c^T) H^-1`
 //! over clusters of residuals (sub-trajectories, or consecutive stretches of one path) whose
 //! errors are correlated within a cluster and independent between clusters: `H` the
 //! (Gauss-Newton) Hessian of the objective at the estimate, `g_c` the gradient of cluster `c`'s
@@ -69,6 +70,43 @@ pub fn cluster_sandwich(h: &[f64], n: usize, scores: &[Vec<f64>]) -> Option<Vec<
             .map(|v| v * f)
             .collect(),
     )
+}
+
+/// The delete-one-cluster jackknife of the estimate, linearised (the cluster-robust `CR3`
+/// form): leaving cluster `c` out moves the estimate by `d_c = (H - H_c)^-1 g_c` (`H_c` the
+/// cluster's share of the Hessian, `g_c` of the gradient), and the covariance is
+/// `(G-1)/G sum_c (d_c - mean d)(d_c - mean d)^T`. Unlike the plain sandwich it is not
+/// biased low when a few clusters carry much of the information (the sub-trajectories that
+/// turn most, for the track width) or when there are few clusters. `None` when `H` or a
+/// leave-one-out `H - H_c` is singular, or with fewer than two clusters.
+pub fn cluster_jackknife(
+    h: &[f64],
+    n: usize,
+    clusters: &[(Vec<f64>, Vec<f64>)],
+) -> Option<Vec<f64>> {
+    let g = clusters.len();
+    if g < 2 {
+        return None;
+    }
+    inverse(h, n)?;
+    let mut shifts = Vec::with_capacity(g);
+    for (hc, gc) in clusters {
+        let rest: Vec<f64> = h.iter().zip(hc).map(|(a, b)| a - b).collect();
+        shifts.push(optim::solve(rest, gc.clone())?);
+    }
+    let mean: Vec<f64> = (0..n)
+        .map(|i| shifts.iter().map(|d| d[i]).sum::<f64>() / g as f64)
+        .collect();
+    let f = (g - 1) as f64 / g as f64;
+    let mut cov = vec![0.0; n * n];
+    for d in &shifts {
+        for i in 0..n {
+            for j in 0..n {
+                cov[i * n + j] += f * (d[i] - mean[i]) * (d[j] - mean[j]);
+            }
+        }
+    }
+    Some(cov)
 }
 
 /// Square roots of the diagonal of an `n x n` covariance (infinite where negative or not

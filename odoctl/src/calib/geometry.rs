@@ -487,8 +487,9 @@ fn lever_arm_of(run: &Run, x: &[f64]) -> (f64, f64) {
 /// Cluster-robust standard errors of an eq (16) estimate over matches `a..=b` (the unknowns
 /// `free`, indices as [`MODEL_UNKNOWNS`]; `None` for the held ones) and the number of
 /// clusters: the run is cut into consecutive stretches of `length` metres of reference path,
-/// and the sandwich ([`cluster_sandwich`]) is formed from the Newton Hessian of eq (16) and
-/// each stretch's share of its gradient `sum J_k^T u_k`. `None` with fewer than two
+/// and the linearised delete-one-stretch jackknife ([`cluster_jackknife`]) is formed from
+/// each stretch's share of the Newton Hessian of eq (16) and of its gradient
+/// `sum J_k^T u_k`. `None` with fewer than two
 /// stretches or a singular Hessian. Eq (16)'s residuals are one drifting path, correlated
 /// along the whole run, so even these errors hold only when the drift within a stretch
 /// dominates (see the README's figures).
@@ -523,13 +524,13 @@ pub fn paper_cluster_errors(
     .ok()?;
     clusters.retain(|c| c.residuals() > 0);
     let mut h = vec![0.0; p * p];
-    let mut scores = Vec::with_capacity(clusters.len());
+    let mut parts = Vec::with_capacity(clusters.len());
     for c in &clusters {
         let (hc, gc) = c.equations();
         h.iter_mut().zip(&hc).for_each(|(a, b)| *a += b);
-        scores.push(gc);
+        parts.push((hc, gc));
     }
-    let cov = cluster_sandwich(&h, p, &scores)?;
+    let cov = cluster_jackknife(&h, p, &parts)?;
     let se = diagonal_std_errors(&cov, p);
     let mut out = vec![None; free.len()];
     for (j, &i) in idx.iter().enumerate() {

@@ -26,9 +26,11 @@
 //! - Levenberg-Marquardt on that reduced system, a step accepted when the cost falls; the
 //!   sub-trajectories are evaluated on all cores.
 //!
-//! Standard errors: the cluster-robust sandwich over the sub-trajectories
-//! ([`cluster_sandwich`]) from the reduced `S_j` and `g_j`; the formal `H^-1 s^2`, which
-//! takes every residual as independent, is kept beside it for comparison.
+//! Standard errors: cluster-robust over the sub-trajectories, the linearised
+//! delete-one-sub-trajectory jackknife ([`cluster_jackknife`]) from the reduced `S_j` and
+//! `g_j` (the plain sandwich [`cluster_sandwich`] covers the truth less often with a few dozen
+//! sub-trajectories); the formal `H^-1 s^2`, which takes every residual as independent, is
+//! kept beside it for comparison.
 //!
 //! The trade of the length: shorter sub-trajectories follow less drift but each spends three
 //! unknowns and needs turning to see the track width; longer ones carry more drift into the
@@ -148,7 +150,8 @@ pub struct SubtrajectoryFit {
     pub iterations: usize,
     /// Passes over all sub-trajectories.
     pub evaluations: usize,
-    /// Cluster-robust standard errors of [`SHARED_UNKNOWNS`] (m; `None` where held).
+    /// Cluster-robust standard errors of [`SHARED_UNKNOWNS`] (m; `None` where held): the
+    /// jackknife over the sub-trajectories.
     pub std_errors: [Option<f64>; 5],
     /// The formal standard errors for independent residuals, `H^-1 s^2` (m; `None` where
     /// held): far too small with correlated slip.
@@ -522,13 +525,14 @@ pub fn fit_subtrajectories(
     for e in &evals {
         h.iter_mut().zip(&e.s).for_each(|(a, b)| *a += b);
     }
-    let scores: Vec<Vec<f64>> = evals.iter().map(|e| e.g.clone()).collect();
     let points: usize = evals.iter().map(|e| e.points).sum();
     let dof = (2 * points).saturating_sub(p + 3 * evals.len()).max(1);
     let s2 = cost / dof as f64;
     // Squares: the Hessian of the cost is 2 J^T J, its gradient 2 J^T r; the factors cancel in
-    // the sandwich, and H^-1 s^2 is the usual (J^T J)^-1 s^2 on the reduced J^T J.
-    let robust = cluster_sandwich(&h, p, &scores)
+    // the jackknife's shifts, and H^-1 s^2 is the usual (J^T J)^-1 s^2 on the reduced J^T J.
+    let clusters: Vec<(Vec<f64>, Vec<f64>)> =
+        evals.iter().map(|e| (e.s.clone(), e.g.clone())).collect();
+    let robust = cluster_jackknife(&h, p, &clusters)
         .ok_or_else(|| anyhow!("the sub-trajectory fit's normal equations are singular"))?;
     let formal = independent(&h, p, s2)
         .ok_or_else(|| anyhow!("the sub-trajectory fit's normal equations are singular"))?;
