@@ -12,9 +12,9 @@ use crate::csvio;
 
 use super::{
     evaluate, fit_delta_diff, fit_geometry, fit_heading, fit_subtrajectories, fit_uncertainty_on,
-    track_width_warning, windows_study, DeltaMode, DiffOptions, Evaluation, GeomFit, GeomOptions,
-    LeverArm, Restarts, Run, SubtrajectoryFit, SubtrajectoryOptions, UncertaintyFit,
-    WindowEstimate, WindowStart, SUBTRAJECTORY_LENGTH,
+    paper_cluster_errors, standard_errors, track_width_warning, windows_study, DeltaMode,
+    DiffOptions, Evaluation, GeomFit, GeomOptions, LeverArm, Restarts, Run, SubtrajectoryFit,
+    SubtrajectoryOptions, UncertaintyFit, WindowEstimate, WindowStart, SUBTRAJECTORY_LENGTH,
 };
 
 /// How the diameters and the track width are estimated.
@@ -255,7 +255,8 @@ pub fn calibrate(
 /// The [`GeomFit`] of a sub-trajectory estimate, for what works on the whole run (the final
 /// evaluation, the uncertainty fits' first headings, `validate`'s output): the heading at the
 /// run's start minimising eq (16) over the whole run at the estimate (from the first
-/// sub-trajectory's), eq (16) there, and the sub-trajectory fit's robust errors.
+/// sub-trajectory's), eq (16) there, and the sub-trajectory fit's robust errors (the
+/// heading's own, with the geometry held, over stretches of the sub-trajectory length).
 fn whole_run_summary(run: &Run, s: &SubtrajectoryFit) -> Result<GeomFit> {
     let last = run.len() - 1;
     let guess = s.blocks.first().map_or(0.0, |b| b.heading);
@@ -264,7 +265,22 @@ fn whole_run_summary(run: &Run, s: &SubtrajectoryFit) -> Result<GeomFit> {
         .eq16(&s.params, 0, last, heading0)
         .ok_or_else(|| anyhow::anyhow!("the estimate is not admissible"))?;
     let se = &s.std_errors;
-    let robust = [se[0], se[1], se[2], None];
+    // The heading's errors with the geometry held (it is fitted with the geometry held).
+    let heading_free = [false, false, false, true];
+    let formal = standard_errors(run, &s.params, 0, last, heading0, heading_free)
+        .map_or(None, |(e, _)| e[3]);
+    let clustered = paper_cluster_errors(
+        run,
+        &s.params,
+        run.antenna,
+        0,
+        last,
+        heading0,
+        &heading_free,
+        SUBTRAJECTORY_LENGTH,
+    )
+    .and_then(|(e, _)| e[3]);
+    let robust = [se[0], se[1], se[2], clustered];
     let min_turning = SubtrajectoryOptions::default().min_turning;
     Ok(GeomFit {
         params: s.params,
@@ -281,7 +297,7 @@ fn whole_run_summary(run: &Run, s: &SubtrajectoryFit) -> Result<GeomFit> {
             s.independent_std_errors[0],
             s.independent_std_errors[1],
             s.independent_std_errors[2],
-            None,
+            formal,
         ],
         robust_std_errors: robust,
         clusters: s.blocks.len(),

@@ -27,7 +27,7 @@ impl Run<'_> {
         let Some(jac) = jac else {
             return self.residuals(params, a, b, heading0, out);
         };
-        if cols.iter().any(|&c| c >= MODEL_UNKNOWNS) || cols.len() > MODEL_UNKNOWNS {
+        if cols.iter().any(|&c| c >= GEOMETRY_UNKNOWNS.len()) {
             return false;
         }
         out.clear();
@@ -62,6 +62,9 @@ impl Run<'_> {
         cols: &[usize],
         acc: &mut NormalAccumulator,
     ) -> bool {
+        if cols.iter().any(|&c| c >= GEOMETRY_UNKNOWNS.len()) {
+            return false;
+        }
         self.accumulate_normal_with(params, self.antenna, a, b, heading0, cols, acc)
     }
 

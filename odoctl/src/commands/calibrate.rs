@@ -133,10 +133,7 @@ pub fn calibrate(o: &CalibrateOptions, input: &ReferenceArgs) -> Result<ExitCode
         "std. error"
     );
     let se = |i: usize| {
-        g.robust_std_errors[i].map_or_else(
-            || if i == 3 { "-" } else { "held" }.to_string(),
-            |v| format!("{v:.2e}"),
-        )
+        g.robust_std_errors[i].map_or_else(|| "held".to_string(), |v| format!("{v:.2e}"))
     };
     for (i, (k, a, b)) in [
         (
@@ -192,7 +189,7 @@ pub fn calibrate(o: &CalibrateOptions, input: &ReferenceArgs) -> Result<ExitCode
                 .join(", ")
         );
         crate::outln!(
-            "  initial heading: the whole run's eq (16) heading at the estimate (for the evaluation below)"
+            "  initial heading: the whole run's eq (16) heading at the estimate, the geometry held (for the evaluation below)"
         );
     } else {
         if g.antenna != (0.0, 0.0) || g.antenna_std_errors.is_some() {
