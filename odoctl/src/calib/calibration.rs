@@ -11,10 +11,11 @@ use crate::config as cfg;
 use crate::csvio;
 
 use super::{
-    evaluate, fit_delta_diff, fit_geometry, fit_heading, fit_subtrajectories, fit_uncertainty_on,
-    paper_cluster_errors, standard_errors, track_width_warning, windows_study, DeltaMode,
-    DiffOptions, Evaluation, GeomFit, GeomOptions, LeverArm, Restarts, Run, SubtrajectoryFit,
-    SubtrajectoryOptions, UncertaintyFit, WindowEstimate, WindowStart, SUBTRAJECTORY_LENGTH,
+    evaluate, fit_delta_diff, fit_geometry, fit_restart_heading, fit_subtrajectories,
+    fit_uncertainty_on, paper_cluster_errors, standard_errors, track_width_warning, windows_study,
+    DeltaMode, DiffOptions, Evaluation, GeomFit, GeomOptions, LeverArm, Restarts, Run,
+    SubtrajectoryFit, SubtrajectoryOptions, UncertaintyFit, WindowEstimate, WindowStart,
+    SUBTRAJECTORY_LENGTH,
 };
 
 /// How the diameters and the track width are estimated.
@@ -260,7 +261,9 @@ pub fn calibrate(
 fn whole_run_summary(run: &Run, s: &SubtrajectoryFit) -> Result<GeomFit> {
     let last = run.len() - 1;
     let guess = s.blocks.first().map_or(0.0, |b| b.heading);
-    let heading0 = fit_heading(run, &s.params, 0, last, guess)?;
+    // One integration (two when it turns by more than 0.01 rad), the path turned about its
+    // start: the heading a re-integrating fit would find.
+    let heading0 = fit_restart_heading(run, &s.params, 0, last, guess)?;
     let cost = run
         .eq16(&s.params, 0, last, heading0)
         .ok_or_else(|| anyhow::anyhow!("the estimate is not admissible"))?;
