@@ -270,8 +270,8 @@ fn whole_run_summary(run: &Run, s: &SubtrajectoryFit) -> Result<GeomFit> {
     let se = &s.std_errors;
     // The heading's errors with the geometry held (it is fitted with the geometry held).
     let heading_free = [false, false, false, true];
-    let formal = standard_errors(run, &s.params, 0, last, heading0, heading_free)
-        .map_or(None, |(e, _)| e[3]);
+    let formal =
+        standard_errors(run, &s.params, 0, last, heading0, heading_free).and_then(|(e, _)| e[3]);
     let clustered = paper_cluster_errors(
         run,
         &s.params,

@@ -509,7 +509,7 @@ pub fn paper_cluster_errors(
 ) -> Option<(Vec<Option<f64>>, usize)> {
     let idx: Vec<usize> = (0..free.len()).filter(|&i| free[i]).collect();
     let p = idx.len();
-    if !(length > 0.0) {
+    if length.is_nan() || length <= 0.0 {
         return None;
     }
     let mut clusters: Vec<NormalAccumulator> = Vec::new();
