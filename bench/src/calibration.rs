@@ -9,14 +9,19 @@
 //! inputs, so the cost comparison is part of the output. Figures only: nothing here fails on
 //! noise.
 //!
+//! First the accuracy table of both geometry methods (sub-trajectories, the default, and the
+//! paper's eq 16) over 70 m, 300 m, 1 km and 3 km logs with correlated slip, and the wall time
+//! of the default calibration on 3 km; the speed figures below it are those of
+//! `--method paper` (the eq 16 fit, comparable with the figures before issue 11).
+//!
 //! `BENCH_REPS` (default 5) sets the repetitions of the 70 m figures; the 3 km figures use
-//! `BENCH_REPS_LONG` (default 3).
+//! `BENCH_REPS_LONG` (default 3); `BENCH_SEEDS` (default 5) the seeds of the accuracy table.
 
 use std::time::Instant;
 
 use indicatif::ProgressBar;
 use odo_core::odometry::{ChassisParams, UncertaintyModel};
-use odoctl::calib::{self, CalibrationOptions, GeomOptions, Run, WindowStart};
+use odoctl::calib::{self, CalibrationOptions, GeomOptions, Method, Run, WindowStart};
 use odoctl::csvio::match_times;
 use odoctl::simulate::{self, default_truth, PathKind, SimRun, SimSettings};
 
@@ -161,7 +166,10 @@ fn case(name: &str, run: &SimRun, n: usize, before: &Before) {
             &run.reference,
             ("s", "r"),
             &poor(),
-            &CalibrationOptions::default(),
+            &CalibrationOptions {
+                method: Method::Paper,
+                ..Default::default()
+            },
         );
         times.push(t.elapsed().as_secs_f64());
         if let Err(e) = c {
@@ -171,7 +179,7 @@ fn case(name: &str, run: &SimRun, n: usize, before: &Before) {
     }
     let t_all = median(times);
     println!(
-        "{name}:   whole calibration (eq 16 + delta + delta_diff, in-process): {:.4} s (median of {n}; before {:.4} s, {})",
+        "{name}:   whole calibration with --method paper (eq 16 + delta + delta_diff, in-process): {:.4} s (median of {n}; before {:.4} s, {})",
         t_all,
         before.calibrate_s,
         ratio(before.calibrate_s, t_all)
@@ -180,6 +188,7 @@ fn case(name: &str, run: &SimRun, n: usize, before: &Before) {
     // the uncertainty fits can be checked against the bisection's tolerance.
     let all = CalibrationOptions {
         models: vec![UncertaintyModel::Paper, UncertaintyModel::Covariance],
+        method: Method::Paper,
         ..Default::default()
     };
     match calib::calibrate(&run.samples, &run.reference, ("s", "r"), &poor(), &all) {
@@ -202,10 +211,135 @@ fn case(name: &str, run: &SimRun, n: usize, before: &Before) {
     }
 }
 
+/// One geometry estimate's errors to the truth (mm: left, right, track) and its reported
+/// standard errors (mm).
+fn geometry_errors(c: &calib::Calibration) -> ([f64; 3], [f64; 3]) {
+    let t = default_truth();
+    let p = &c.params;
+    let se = c.geometry.robust_std_errors;
+    (
+        [
+            (p.left_diameter - t.left_diameter) * 1e3,
+            (p.right_diameter - t.right_diameter) * 1e3,
+            (p.track_width - t.track_width) * 1e3,
+        ],
+        std::array::from_fn(|i| se[i].map_or(f64::NAN, |v| v * 1e3)),
+    )
+}
+
+/// The accuracy table of issue 16: errors to the truth of both methods from 0.300/0.300/0.700
+/// on logs of 70 m (the estimation path), 300 m, 1 km and 3 km (random paths), all with the
+/// simulator's correlated slip (`odoctl simulate` defaults: 0.1 % over 0.1 m); seed 1 (what
+/// `odoctl simulate` writes) with its reported standard errors, and the RMS error over seeds
+/// 1-`BENCH_SEEDS` (default 5). Then the wall time of the whole default calibration on 3 km.
+fn accuracy_table() {
+    let seeds = reps("BENCH_SEEDS", 5) as u64;
+    println!(
+        "accuracy from 0.300/0.300/0.700, simulator defaults (slip 0.1 % over 0.1 m, RTK 8 mm); errors to the truth in mm (left / right / track), seed 1 with its reported standard errors, RMS over seeds 1-{seeds}:"
+    );
+    println!(
+        "  {:<6} {:<14} {:>28} {:>28} {:>28}",
+        "log", "method", "seed 1 error", "seed 1 std. error", "RMS error"
+    );
+    for (kind, length, label) in [
+        (PathKind::Estimation, 70.0, "70 m"),
+        (PathKind::Random, 300.0, "300 m"),
+        (PathKind::Random, 1000.0, "1 km"),
+        (PathKind::Random, 3000.0, "3 km"),
+    ] {
+        let runs: Vec<SimRun> = (1..=seeds)
+            .map(|seed| {
+                simulate::simulate_path(
+                    kind,
+                    length,
+                    default_truth(),
+                    SimSettings {
+                        seed,
+                        ..Default::default()
+                    },
+                )
+            })
+            .collect();
+        for (method, mname) in [
+            (Method::Subtrajectory, "subtrajectory"),
+            (Method::Paper, "paper"),
+        ] {
+            let o = CalibrationOptions {
+                method,
+                fit_delta: false,
+                ..Default::default()
+            };
+            let mut sq = [0.0; 3];
+            let mut first = None;
+            for r in &runs {
+                match calib::calibrate(&r.samples, &r.reference, ("s", "r"), &poor(), &o) {
+                    Ok(c) => {
+                        let (e, se) = geometry_errors(&c);
+                        for i in 0..3 {
+                            sq[i] += e[i] * e[i];
+                        }
+                        first.get_or_insert((e, se));
+                    }
+                    Err(e) => println!("  {label} {mname}: failed: {e}"),
+                }
+            }
+            let Some((e, se)) = first else { continue };
+            let rms = sq.map(|v| (v / seeds as f64).sqrt());
+            let f = |v: [f64; 3], sign: bool| {
+                if sign {
+                    format!("{:+.4} / {:+.4} / {:+.3}", v[0], v[1], v[2])
+                } else {
+                    format!("{:.4} / {:.4} / {:.3}", v[0], v[1], v[2])
+                }
+            };
+            println!(
+                "  {label:<6} {mname:<14} {:>28} {:>28} {:>28}",
+                f(e, true),
+                f(se, false),
+                f(rms, false)
+            );
+        }
+    }
+    // The whole default calibration (sub-trajectory fit, delta, delta_diff) on the 3 km log.
+    let s3k = sim(PathKind::Random, 3000.0);
+    let n = reps("BENCH_REPS_LONG", 3);
+    let mut times = Vec::new();
+    let mut fit_times = Vec::new();
+    for _ in 0..n {
+        let t = Instant::now();
+        let c = calib::calibrate(
+            &s3k.samples,
+            &s3k.reference,
+            ("s", "r"),
+            &poor(),
+            &CalibrationOptions::default(),
+        );
+        times.push(t.elapsed().as_secs_f64());
+        if let Err(e) = c {
+            println!("3 km default calibration failed: {e}");
+            return;
+        }
+        let r = Run::new(
+            &s3k.samples,
+            &s3k.reference,
+            match_times(&s3k.samples, &s3k.reference),
+        );
+        let t = Instant::now();
+        let _ = calib::fit_subtrajectories(&r, &poor(), calib::SubtrajectoryOptions::default());
+        fit_times.push(t.elapsed().as_secs_f64());
+    }
+    println!(
+        "3 km random path, default method from 0.300/0.300/0.700: sub-trajectory fit {:.4} s, whole calibration (fit + delta + delta_diff, in-process) {:.4} s (medians of {n})",
+        median(fit_times),
+        median(times)
+    );
+}
+
 /// Prints the calibration figures.
 pub fn run() {
     let n = reps("BENCH_REPS", 5);
     let n_long = reps("BENCH_REPS_LONG", 3);
+    accuracy_table();
     let s70 = sim(PathKind::Estimation, 70.0);
     case("70 m estimation path", &s70, n, &BEFORE_70);
     let s3k = sim(PathKind::Random, 3000.0);

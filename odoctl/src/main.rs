@@ -264,6 +264,8 @@ struct CalibrateArgs {
     reference: PathBuf,
     #[command(flatten)]
     reference_input: ReferenceArgs,
+    #[command(flatten)]
+    geometry: odoctl::commands::GeometryArgs,
     /// First estimate (TOML, shared keys); the designed values when absent.
     #[arg(long)]
     initial: Option<PathBuf>,
@@ -518,6 +520,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                     out: a.out,
                     windows_out: a.windows_out,
                     plots: a.plots,
+                    geometry: a.geometry,
                     calibration: CalibrationOptions {
                         delta_window: a.delta_window,
                         reference_sigma: a.reference_sigma,
@@ -532,6 +535,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                         wheel_harmonics: usize::from(a.wheel_harmonics),
                         harmonics_window: a.harmonics_window,
                         quiet: a.quiet,
+                        ..Default::default()
                     },
                 },
                 &a.reference_input,

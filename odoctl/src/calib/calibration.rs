@@ -11,10 +11,23 @@ use crate::config as cfg;
 use crate::csvio;
 
 use super::{
-    evaluate, fit_delta_diff, fit_geometry, fit_uncertainty_on, windows_study, DeltaMode,
-    DiffOptions, Evaluation, GeomFit, GeomOptions, Restarts, Run, UncertaintyFit, WindowEstimate,
-    WindowStart,
+    evaluate, fit_delta_diff, fit_geometry, fit_restart_heading, fit_subtrajectories,
+    fit_uncertainty_on, paper_cluster_errors, standard_errors, track_width_warning, windows_study,
+    DeltaMode, DiffOptions, Evaluation, GeomFit, GeomOptions, LeverArm, Restarts, Run,
+    SubtrajectoryFit, SubtrajectoryOptions, UncertaintyFit, WindowEstimate, WindowStart,
+    SUBTRAJECTORY_LENGTH,
 };
+
+/// How the diameters and the track width are estimated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum Method {
+    /// Sub-trajectories restarted every `subtrajectory_length` metres, their start position
+    /// and heading fitted, the chassis shared ([`fit_subtrajectories`]): the default.
+    #[default]
+    Subtrajectory,
+    /// The paper's eq (16) over the whole run ([`fit_geometry`]).
+    Paper,
+}
 
 /// Options of the calibration (`odoctl calibrate`'s fitting options; the defaults are the
 /// command line's).
@@ -37,6 +50,13 @@ pub struct CalibrationOptions {
     /// `uncertainty_model`). The result keeps the initial model when it is among them, else
     /// the last one.
     pub models: Vec<UncertaintyModel>,
+    /// How the geometry is estimated.
+    pub method: Method,
+    /// Sub-trajectory length of [`Method::Subtrajectory`], and of the stretches of the
+    /// paper method's cluster-robust standard errors (m of reference path).
+    pub subtrajectory_length: f64,
+    /// The antenna lever arm: measured (held) or fitted with the geometry.
+    pub antenna: LeverArm,
     /// Nelder-Mead polish of eq (16).
     pub polish: bool,
     /// Stability study lengths (m); empty: no study.
@@ -52,9 +72,10 @@ pub struct CalibrationOptions {
 }
 
 impl Default for CalibrationOptions {
-    /// 10 m sub-trajectories, the BD982's 8 mm and 0.5 deg, equal coefficients, `delta` and
+    /// The sub-trajectory method on 10 m, no lever arm; 10 m sub-trajectories of the
+    /// uncertainty fit, the BD982's 8 mm and 0.5 deg, equal coefficients, `delta` and
     /// `delta_diff` fitted for the initial estimate's model, no polish, no stability study
-    /// (its windows started from the whole-run estimate), no progress bars.
+    /// (its windows started from the whole-run estimate), no wheel harmonics, no progress bars.
     fn default() -> Self {
         Self {
             delta_window: 10.0,
@@ -64,6 +85,9 @@ impl Default for CalibrationOptions {
             fit_delta_diff: true,
             reference_heading_sigma: 0.5f64.to_radians(),
             models: Vec::new(),
+            method: Method::Subtrajectory,
+            subtrajectory_length: SUBTRAJECTORY_LENGTH,
+            antenna: LeverArm::Fixed(0.0, 0.0),
             polish: false,
             windows: Vec::new(),
             window_start: WindowStart::Full,
@@ -92,8 +116,11 @@ fn bar(quiet: bool, what: &str) -> ProgressBar {
 pub struct Calibration {
     /// Final parameters.
     pub params: ChassisParams,
-    /// The eq (16) fit.
+    /// The geometry fit, whichever the method (for the sub-trajectory method: its estimate,
+    /// robust errors, and the whole run's eq (16) heading and cost at it).
     pub geometry: GeomFit,
+    /// The sub-trajectory fit, with [`Method::Subtrajectory`].
+    pub subtrajectories: Option<SubtrajectoryFit>,
     /// The uncertainty fits, one per model fitted.
     pub uncertainty: Vec<UncertaintyFit>,
     /// Evaluation of the whole run with the final parameters.
@@ -117,24 +144,48 @@ pub fn calibrate(
         bail!("--reference-sigma and --reference-heading-sigma-deg must be non-negative");
     }
     let matches = csvio::match_or_fail(samples, names.0, reference, names.1, 10)?;
-    let run = Run::new(samples, reference, matches);
+    let mut run = Run::new(samples, reference, matches).with_antenna(o.antenna.value());
     let timer = PhaseTimer::new();
     let h0 = run.heading_guess(0);
-    let pb = bar(o.quiet, "eq (16) fit");
-    let geometry = fit_geometry(
-        &run,
-        initial,
-        h0,
-        0,
-        run.len() - 1,
-        GeomOptions {
-            polish: o.polish,
-            ..Default::default()
-        },
-        &pb,
-    )?;
-    pb.finish_and_clear();
-    timer.lap("eq (16) fit");
+    let (geometry, subtrajectories) = match o.method {
+        Method::Paper => {
+            let pb = bar(o.quiet, "eq (16) fit");
+            let g = fit_geometry(
+                &run,
+                initial,
+                h0,
+                0,
+                run.len() - 1,
+                GeomOptions {
+                    polish: o.polish,
+                    antenna: o.antenna,
+                    cluster_length: o.subtrajectory_length,
+                    ..Default::default()
+                },
+                &pb,
+            )?;
+            pb.finish_and_clear();
+            timer.lap("eq (16) fit");
+            (g, None)
+        }
+        Method::Subtrajectory => {
+            let s = fit_subtrajectories(
+                &run,
+                initial,
+                SubtrajectoryOptions {
+                    length: o.subtrajectory_length,
+                    antenna: o.antenna,
+                    ..Default::default()
+                },
+            )?;
+            timer.lap("sub-trajectory fit");
+            run.antenna = s.antenna;
+            let g = whole_run_summary(&run, &s)?;
+            timer.lap("whole-run heading");
+            (g, Some(s))
+        }
+    };
+    run.antenna = geometry.antenna;
     let mut params = geometry.params;
     let harmonics = if o.wheel_harmonics > 0 {
         let h = super::fit_harmonics(
@@ -217,10 +268,75 @@ pub fn calibrate(
     Ok(Calibration {
         params,
         geometry,
+        subtrajectories,
         uncertainty,
         evaluation,
         windows,
         harmonics,
+    })
+}
+
+/// The [`GeomFit`] of a sub-trajectory estimate, for what works on the whole run (the final
+/// evaluation, the uncertainty fits' first headings, `validate`'s output): the heading at the
+/// run's start minimising eq (16) over the whole run at the estimate (from the first
+/// sub-trajectory's), eq (16) there, and the sub-trajectory fit's robust errors (the
+/// heading's own, with the geometry held, over stretches of the sub-trajectory length).
+fn whole_run_summary(run: &Run, s: &SubtrajectoryFit) -> Result<GeomFit> {
+    let last = run.len() - 1;
+    let guess = s.blocks.first().map_or(0.0, |b| b.heading);
+    // One integration (two when it turns by more than 0.01 rad), the path turned about its
+    // start: the heading a re-integrating fit would find.
+    let heading0 = fit_restart_heading(run, &s.params, 0, last, guess)?;
+    let cost = run
+        .eq16(&s.params, 0, last, heading0)
+        .ok_or_else(|| anyhow::anyhow!("the estimate is not admissible"))?;
+    let se = &s.std_errors;
+    // The heading's errors with the geometry held (it is fitted with the geometry held).
+    let heading_free = [false, false, false, true];
+    let formal =
+        standard_errors(run, &s.params, 0, last, heading0, heading_free).and_then(|(e, _)| e[3]);
+    let clustered = paper_cluster_errors(
+        run,
+        &s.params,
+        run.antenna,
+        0,
+        last,
+        heading0,
+        &heading_free,
+        SUBTRAJECTORY_LENGTH,
+    )
+    .and_then(|(e, _)| e[3]);
+    let robust = [se[0], se[1], se[2], clustered];
+    let min_turning = SubtrajectoryOptions::default().min_turning;
+    Ok(GeomFit {
+        params: s.params,
+        heading0,
+        cost,
+        points: last,
+        iterations: s.iterations,
+        evaluations: s.evaluations,
+        stages: 0,
+        track_estimated: s.track_estimated,
+        turning: s.turning,
+        start: run.anchor(0),
+        std_errors: [
+            s.independent_std_errors[0],
+            s.independent_std_errors[1],
+            s.independent_std_errors[2],
+            formal,
+        ],
+        robust_std_errors: robust,
+        clusters: s.blocks.len(),
+        antenna: s.antenna,
+        antenna_std_errors: se[3].zip(se[4]).map(|(f, l)| [f, l]),
+        residual_sigma: s.residual_sigma,
+        track_warning: track_width_warning(
+            s.track_estimated,
+            s.turning,
+            min_turning,
+            &s.params,
+            &robust,
+        ),
     })
 }
 

@@ -17,7 +17,8 @@ pub struct Evaluation {
     pub t: Vec<f64>,
     /// Reference path length from the start (m).
     pub dist: Vec<f64>,
-    /// Odometry position (m).
+    /// Odometry position (m) of the point the reference measures: the axle centre, or the
+    /// antenna with a lever arm ([`Run::observed`]).
     pub odo: Vec<(f64, f64)>,
     /// Reference position (m).
     pub reference: Vec<(f64, f64)>,
@@ -138,7 +139,7 @@ impl Evaluation {
             let s = integ.sigma();
             rows.push((
                 k,
-                (p.x, p.y),
+                run.observed(&p, heading0),
                 p.heading,
                 f64::from(s.horizontal()),
                 f64::from(s.heading),

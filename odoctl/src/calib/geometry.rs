@@ -35,12 +35,15 @@ impl Run<'_> {
         // Room for every row at once: no regrowth (and copy) of the large Jacobian.
         out.reserve(2 * (b - a));
         jac.reserve(2 * (b - a) * cols.len());
+        let n = cols.len();
+        let (mut jx, mut jy) = ([0.0; MODEL_UNKNOWNS], [0.0; MODEL_UNKNOWNS]);
         self.integrate_with_sensitivity(params, a, b, heading0, |k, p, d| {
             let r = self.reference_at(k);
-            out.push(p.x - r.x);
-            out.push(p.y - r.y);
-            jac.extend(cols.iter().map(|&c| d.x[c]));
-            jac.extend(cols.iter().map(|&c| d.y[c]));
+            let (ox, oy) = observed_with_rows(p, d, self.antenna, heading0, cols, &mut jx, &mut jy);
+            out.push(ox - r.x);
+            out.push(oy - r.y);
+            jac.extend_from_slice(&jx[..n]);
+            jac.extend_from_slice(&jy[..n]);
         })
         .is_ok()
             && out.iter().chain(jac.iter()).all(|v| v.is_finite())
@@ -62,16 +65,32 @@ impl Run<'_> {
         if cols.iter().any(|&c| c >= GEOMETRY_UNKNOWNS.len()) {
             return false;
         }
+        self.accumulate_normal_with(params, self.antenna, a, b, heading0, cols, acc)
+    }
+
+    /// [`Run::accumulate_normal`] with the lever arm `antenna` instead of the run's own (for
+    /// fits that estimate it; its columns are [`ANTENNA_FORWARD`], [`ANTENNA_LEFT`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn accumulate_normal_with(
+        &self,
+        params: &ChassisParams,
+        antenna: (f64, f64),
+        a: usize,
+        b: usize,
+        heading0: f64,
+        cols: &[usize],
+        acc: &mut NormalAccumulator,
+    ) -> bool {
+        if cols.iter().any(|&c| c >= MODEL_UNKNOWNS) || cols.len() > MODEL_UNKNOWNS {
+            return false;
+        }
         let mut finite = true;
-        let (mut jx, mut jy) = ([0.0; 4], [0.0; 4]);
+        let (mut jx, mut jy) = ([0.0; MODEL_UNKNOWNS], [0.0; MODEL_UNKNOWNS]);
         let ok = self
             .integrate_with_sensitivity(params, a, b, heading0, |k, p, d| {
                 let r = self.reference_at(k);
-                for (j, &c) in cols.iter().enumerate() {
-                    jx[j] = d.x[c];
-                    jy[j] = d.y[c];
-                }
-                let (rx, ry) = (p.x - r.x, p.y - r.y);
+                let (ox, oy) = observed_with_rows(p, d, antenna, heading0, cols, &mut jx, &mut jy);
+                let (rx, ry) = (ox - r.x, oy - r.y);
                 finite &= rx.is_finite() && ry.is_finite();
                 acc.add_pair(rx, ry, &jx, &jy);
             })
@@ -92,10 +111,10 @@ impl Run<'_> {
         out.clear();
         out.reserve(2 * (b - a));
         self.integrate_pose(params, a, b, heading0, |k, integ| {
-            let p = integ.pose();
+            let (px, py) = self.observed(&integ.pose(), heading0);
             let r = self.reference_at(k);
-            out.push(p.x - r.x);
-            out.push(p.y - r.y);
+            out.push(px - r.x);
+            out.push(py - r.y);
         })
         .is_ok()
             && out.iter().all(|v| v.is_finite())
@@ -145,8 +164,19 @@ pub struct GeomFit {
     /// from it with `heading0` and `params` reproduces `cost`.
     pub start: (f64, f64),
     /// Standard errors of [`GEOMETRY_UNKNOWNS`] (m, m, m, rad; `None` for an unknown that was
-    /// held); see [`standard_errors`].
+    /// held) for independent residuals; see [`standard_errors`]. Far too small when slip
+    /// makes the residuals correlated: see `robust_std_errors`.
     pub std_errors: [Option<f64>; 4],
+    /// Cluster-robust standard errors of [`GEOMETRY_UNKNOWNS`] (see [`paper_cluster_errors`];
+    /// for the sub-trajectory method, [`SubtrajectoryFit::std_errors`], the heading `None`):
+    /// what `calibrate` reports.
+    pub robust_std_errors: [Option<f64>; 4],
+    /// Clusters of the robust errors (stretches, or sub-trajectories).
+    pub clusters: usize,
+    /// The lever arm of the fit (`(forward, left)`, m): fitted, or as given.
+    pub antenna: (f64, f64),
+    /// Cluster-robust standard errors of a fitted lever arm (m).
+    pub antenna_std_errors: Option<[f64; 2]>,
     /// Residual standard deviation `s` of the x and y differences at the estimate (m).
     pub residual_sigma: f64,
     /// Set when the trajectory turned too little to determine the track width
@@ -169,6 +199,10 @@ pub struct GeomOptions {
     /// reaches this (rad); on a straighter one it is not identifiable (eq 8: only turning
     /// reveals it) and is held at its current value.
     pub min_turning: f64,
+    /// The antenna lever arm: held at the run's ([`Run::antenna`]) or fitted from a guess.
+    pub antenna: LeverArm,
+    /// Length of the stretches of the cluster-robust standard errors (m of reference path).
+    pub cluster_length: f64,
 }
 
 impl Default for GeomOptions {
@@ -178,6 +212,8 @@ impl Default for GeomOptions {
             stage_growth: 1.5,
             polish: false,
             min_turning: 30f64.to_radians(),
+            antenna: LeverArm::Fixed(0.0, 0.0),
+            cluster_length: SUBTRAJECTORY_LENGTH,
         }
     }
 }
@@ -233,7 +269,8 @@ fn lm_subset(
     let sub_scale: Vec<f64> = idx.iter().map(|&i| scale[i]).collect();
     let f = |s: &[f64], acc: &mut NormalAccumulator| {
         let v = full(s);
-        run.accumulate_normal(&with_geometry(base, &v), a, b, v[3], &idx, acc)
+        let antenna = lever_arm_of(run, &v);
+        run.accumulate_normal_with(&with_geometry(base, &v), antenna, a, b, v[3], &idx, acc)
     };
     let mut res = optim::levenberg_marquardt_streamed(f, &sub0, &sub_scale, kind, opts)?;
     res.x = full(&res.x);
@@ -260,7 +297,7 @@ pub fn fit_geometry(
     start
         .validate()
         .map_err(|e| anyhow!("initial parameters: {e}"))?;
-    let scale = [
+    let mut scale = vec![
         start.left_diameter,
         start.right_diameter,
         start.track_width,
@@ -272,6 +309,12 @@ pub fn fit_geometry(
         start.track_width,
         heading0,
     ];
+    // A fitted lever arm: unknowns 4 and 5 ([`ANTENNA_FORWARD`], [`ANTENNA_LEFT`]), free with
+    // the track width (only turning reveals it too).
+    if let LeverArm::Fitted(f, l) = opts.antenna {
+        x.extend([f, l]);
+        scale.extend([1.0, 1.0]);
+    }
     let total = run.dist[b] - run.dist[a];
     let mut ends = Vec::new();
     let mut len = opts.first_stage;
@@ -296,11 +339,12 @@ pub fn fit_geometry(
         ..LmOptions::default()
     };
     progress.set_length((ends.len() + 1 + usize::from(opts.polish)) as u64);
-    let mut free = [true, true, false, true];
+    let mut free = vec![true, true, false, true];
+    free.resize(x.len(), false);
     for &e in &ends {
         // The track width joins once the stretch has turned enough (it stays free after).
         if !free[2] && turning(run, &with_geometry(start, &x), a, e, x[3]) >= opts.min_turning {
-            free[2] = true;
+            free[2..].iter_mut().for_each(|f| *f = true);
         }
         let res = lm_subset(run, start, a, e, &x, &scale, &free, Objective::Squares, lm)
             .ok_or_else(|| anyhow!("the starting parameters are not admissible"))?;
@@ -346,7 +390,8 @@ pub fn fit_geometry(
         );
     }
     progress.inc(1);
-    if opts.polish {
+    // (The polish varies the geometry alone: not with a fitted lever arm.)
+    if opts.polish && x.len() == 4 {
         let idx: Vec<usize> = (0..4).filter(|&i| free[i]).collect();
         let full = |sub: &[f64]| {
             let mut v = x.clone();
@@ -378,10 +423,33 @@ pub fn fit_geometry(
         progress.inc(1);
     }
     let params = with_geometry(start, &x);
+    let antenna = lever_arm_of(run, &x);
+    if opts.antenna.fitted() && !free[4] {
+        bail!(
+            "the stretch turned too little to estimate the antenna lever arm (--fit-antenna needs {:.0} deg)",
+            opts.min_turning.to_degrees()
+        );
+    }
     let turned = turning(run, &params, a, b, x[3]);
-    let (std_errors, residual_sigma) = standard_errors(run, &params, a, b, x[3], free)
-        .ok_or_else(|| anyhow!("the fit left the admissible parameter range"))?;
-    evaluations += 2;
+    let held = [free[0], free[1], free[2], free[3]];
+    let (std_errors, residual_sigma) = if x.len() == 4 {
+        standard_errors(run, &params, a, b, x[3], held)
+    } else {
+        standard_errors_with(run, &params, antenna, a, b, x[3], &free)
+            .map(|(se, s)| ([se[0], se[1], se[2], se[3]], s))
+    }
+    .ok_or_else(|| anyhow!("the fit left the admissible parameter range"))?;
+    let robust = paper_cluster_errors(
+        run,
+        &params,
+        antenna,
+        a,
+        b,
+        x[3],
+        &free,
+        opts.cluster_length,
+    );
+    evaluations += 3;
     let track_warning =
         track_width_warning(free[2], turned, opts.min_turning, &params, &std_errors);
     Ok(GeomFit {
@@ -396,9 +464,82 @@ pub fn fit_geometry(
         track_estimated: free[2],
         turning: turned,
         std_errors,
+        robust_std_errors: robust
+            .as_ref()
+            .map_or([None; 4], |(se, _)| [se[0], se[1], se[2], se[3]]),
+        clusters: robust.as_ref().map_or(0, |(_, g)| *g),
+        antenna,
+        antenna_std_errors: robust
+            .as_ref()
+            .and_then(|(se, _)| Some([se.get(4).copied()??, se.get(5).copied()??])),
         residual_sigma,
         track_warning,
     })
+}
+
+/// The lever arm of a geometry-fit vector: its entries 4 and 5 when it has them (fitted),
+/// else the run's.
+fn lever_arm_of(run: &Run, x: &[f64]) -> (f64, f64) {
+    if x.len() > ANTENNA_LEFT {
+        (x[ANTENNA_FORWARD], x[ANTENNA_LEFT])
+    } else {
+        run.antenna
+    }
+}
+
+/// Cluster-robust standard errors of an eq (16) estimate over matches `a..=b` (the unknowns
+/// `free`, indices as [`MODEL_UNKNOWNS`]; `None` for the held ones) and the number of
+/// clusters: the run is cut into consecutive stretches of `length` metres of reference path,
+/// and the linearised delete-one-stretch jackknife ([`cluster_jackknife`]) is formed from
+/// each stretch's share of the Newton Hessian of eq (16) and of its gradient
+/// `sum J_k^T u_k`. `None` with fewer than two
+/// stretches or a singular Hessian. Eq (16)'s residuals are one drifting path, correlated
+/// along the whole run, so even these errors hold only when the drift within a stretch
+/// dominates (see the README's figures).
+#[allow(clippy::too_many_arguments)]
+pub fn paper_cluster_errors(
+    run: &Run,
+    params: &ChassisParams,
+    antenna: (f64, f64),
+    a: usize,
+    b: usize,
+    heading0: f64,
+    free: &[bool],
+    length: f64,
+) -> Option<(Vec<Option<f64>>, usize)> {
+    let idx: Vec<usize> = (0..free.len()).filter(|&i| free[i]).collect();
+    let p = idx.len();
+    if length.is_nan() || length <= 0.0 {
+        return None;
+    }
+    let mut clusters: Vec<NormalAccumulator> = Vec::new();
+    let (mut jx, mut jy) = ([0.0; MODEL_UNKNOWNS], [0.0; MODEL_UNKNOWNS]);
+    let start = run.dist[a];
+    run.integrate_with_sensitivity(params, a, b, heading0, |k, pose, d| {
+        let c = ((run.dist[k] - start) / length) as usize;
+        while clusters.len() <= c {
+            clusters.push(NormalAccumulator::new(Objective::SumOfNorms, true, p));
+        }
+        let r = run.reference_at(k);
+        let (ox, oy) = observed_with_rows(pose, d, antenna, heading0, &idx, &mut jx, &mut jy);
+        clusters[c].add_pair(ox - r.x, oy - r.y, &jx, &jy);
+    })
+    .ok()?;
+    clusters.retain(|c| c.residuals() > 0);
+    let mut h = vec![0.0; p * p];
+    let mut parts = Vec::with_capacity(clusters.len());
+    for c in &clusters {
+        let (hc, gc) = c.equations();
+        h.iter_mut().zip(&hc).for_each(|(a, b)| *a += b);
+        parts.push((hc, gc));
+    }
+    let cov = cluster_jackknife(&h, p, &parts)?;
+    let se = diagonal_std_errors(&cov, p);
+    let mut out = vec![None; free.len()];
+    for (j, &i) in idx.iter().enumerate() {
+        out[i] = Some(se[j]);
+    }
+    Some((out, clusters.len()))
 }
 
 /// Relative standard error of `track_width` above which the fit warns that the trajectory
@@ -459,16 +600,31 @@ pub fn standard_errors(
     heading0: f64,
     free: [bool; 4],
 ) -> Option<([Option<f64>; 4], f64)> {
-    let idx: Vec<usize> = (0..4).filter(|&i| free[i]).collect();
+    standard_errors_with(run, params, run.antenna, a, b, heading0, &free)
+        .map(|(se, s)| ([se[0], se[1], se[2], se[3]], s))
+}
+
+/// [`standard_errors`] with the lever arm `antenna` and any of the [`MODEL_UNKNOWNS`] free
+/// (`free[i]`, one entry per unknown up to the last one of interest).
+pub fn standard_errors_with(
+    run: &Run,
+    params: &ChassisParams,
+    antenna: (f64, f64),
+    a: usize,
+    b: usize,
+    heading0: f64,
+    free: &[bool],
+) -> Option<(Vec<Option<f64>>, f64)> {
+    let idx: Vec<usize> = (0..free.len()).filter(|&i| free[i]).collect();
     let p = idx.len();
     let mut acc = NormalAccumulator::new(Objective::Squares, false, p);
-    if !run.accumulate_normal(params, a, b, heading0, &idx, &mut acc) {
+    if !run.accumulate_normal_with(params, antenna, a, b, heading0, &idx, &mut acc) {
         return None;
     }
     let (jtj, _) = acc.equations();
     let m = acc.residuals();
     let s2 = acc.cost() / (m.saturating_sub(p).max(1)) as f64;
-    let mut se = [None; 4];
+    let mut se = vec![None; free.len()];
     for (j, &i) in idx.iter().enumerate() {
         let mut e = vec![0.0; p];
         e[j] = 1.0;
@@ -540,9 +696,10 @@ pub(super) fn fit_restart_heading(
     for _ in 0..RESTART_PASSES {
         path.clear();
         run.integrate_pose(params, a, b, heading, |k, integ| {
-            let p = integ.pose();
+            // The antenna turns with the path about the start, as the centre does.
+            let (px, py) = run.observed(&integ.pose(), heading);
             let r = run.reference_at(k);
-            path.push([p.x - x0, p.y - y0, r.x - x0, r.y - y0]);
+            path.push([px - x0, py - y0, r.x - x0, r.y - y0]);
         })
         .map_err(|e| anyhow!("parameters: {e}"))?;
         let at = heading;

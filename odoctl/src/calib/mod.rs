@@ -50,7 +50,9 @@
 //! `uncertainty` (delta, kappa), `delta_diff`, `harmonics` (the per-angle wheel function), `stability` (the study on sub-trajectories) and
 //! `calibration` (all of it in memory: [`calibrate`]).
 
+mod antenna;
 mod calibration;
+mod covariance;
 mod delta_diff;
 mod evaluation;
 mod geometry;
@@ -60,9 +62,12 @@ mod restarts;
 mod run;
 mod sensitivity;
 mod stability;
+mod subtrajectory;
 mod uncertainty;
 
+pub use antenna::*;
 pub use calibration::*;
+pub use covariance::*;
 pub use delta_diff::*;
 pub use evaluation::*;
 pub use geometry::*;
@@ -72,6 +77,7 @@ pub use restarts::*;
 pub use run::*;
 pub use sensitivity::*;
 pub use stability::*;
+pub use subtrajectory::*;
 pub use uncertainty::*;
 
 #[cfg(test)]

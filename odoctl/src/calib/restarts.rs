@@ -167,9 +167,9 @@ impl Restarts {
                     ev.extend(run, p, a, b, h, false)?;
                 } else {
                     run.integrate(p, a, b, h, |k, integ| {
-                        let o = integ.pose();
+                        let (ox, oy) = run.observed(&integ.pose(), h);
                         let r = run.reference_at(k);
-                        ev.horizontal.push(norm2(o.x - r.x, o.y - r.y));
+                        ev.horizontal.push(norm2(ox - r.x, oy - r.y));
                         ev.sigma_h.push(f64::from(integ.sigma().horizontal()));
                     })
                     .map_err(|e| anyhow!("parameters: {e}"))?;

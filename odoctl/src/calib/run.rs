@@ -27,6 +27,10 @@ pub struct Run<'a> {
     pub matches: Vec<(usize, usize)>,
     /// Reference path length from the first match to each match (m).
     pub dist: Vec<f64>,
+    /// Where the reference antenna sits on the chassis, `(forward, left)` metres from the
+    /// axle centre ((0, 0) by default): the reference is compared with
+    /// [`Run::observed`], the odometry's antenna position.
+    pub antenna: (f64, f64),
 }
 
 impl<'a> Run<'a> {
@@ -58,7 +62,22 @@ impl<'a> Run<'a> {
             reference,
             matches,
             dist,
+            antenna: (0.0, 0.0),
         }
+    }
+
+    /// This run with the reference antenna at `(forward, left)` metres from the axle centre.
+    pub fn with_antenna(mut self, antenna: (f64, f64)) -> Self {
+        self.antenna = antenna;
+        self
+    }
+
+    /// The point of the chassis at `pose` that the reference measures (x east, y north, m),
+    /// for a stretch integrated from its anchor with heading `heading0`: the antenna
+    /// ([`super::observed_point`]); the centre itself without a lever arm.
+    #[inline(always)]
+    pub fn observed(&self, pose: &Pose, heading0: f64) -> (f64, f64) {
+        super::observed_point(pose, self.antenna, heading0)
     }
 
     /// Number of common times.

@@ -8,7 +8,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use odo_core::odometry::{ChassisParams, UncertaintyModel};
 
-use crate::calib::{self, CalibrationOptions, DeltaMode};
+use crate::calib::{self, CalibrationOptions, DeltaMode, LeverArm, Method};
 use crate::config::{self as cfg, FitValue};
 use crate::csvio;
 use crate::reference::cli::{read_reference, reference_for_samples, ReferenceArgs};
@@ -35,6 +35,53 @@ pub struct CalibrateOptions {
     pub plots: Option<PathBuf>,
     /// The fitting options.
     pub calibration: CalibrationOptions,
+    /// The geometry method and lever arm options (applied over `calibration`).
+    pub geometry: GeometryArgs,
+}
+
+/// How `calibrate` estimates the geometry: the method, its sub-trajectory length, the antenna
+/// lever arm.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct GeometryArgs {
+    /// Geometry estimator: `subtrajectory` (restarted every --subtrajectory-length metres, the
+    /// default) or `paper` (eq 16 over the whole run).
+    #[arg(long, value_enum, default_value_t = Method::Subtrajectory)]
+    pub method: Method,
+    /// Sub-trajectory length of the default method, and the stretches of the paper method's
+    /// cluster-robust standard errors (m of reference path).
+    #[arg(long, default_value_t = calib::SUBTRAJECTORY_LENGTH)]
+    pub subtrajectory_length: f64,
+    /// Measured antenna position from the axle centre, `FORWARD,LEFT` (m, chassis frame):
+    /// the reference is the antenna's path (held; the first guess with --fit-antenna).
+    #[arg(long, value_name = "F,L", allow_hyphen_values = true)]
+    pub antenna: Option<String>,
+    /// Estimate the antenna lever arm with the geometry (standard errors in `[fit]`).
+    #[arg(long)]
+    pub fit_antenna: bool,
+}
+
+impl GeometryArgs {
+    /// Sets the method, the length and the lever arm of `o`.
+    pub fn apply(&self, o: &mut CalibrationOptions) -> Result<()> {
+        if !(self.subtrajectory_length > 0.0 && self.subtrajectory_length.is_finite()) {
+            anyhow::bail!(
+                "--subtrajectory-length {}: must be a positive number of metres",
+                self.subtrajectory_length
+            );
+        }
+        let (f, l) = match &self.antenna {
+            Some(s) => crate::reference::parse_antenna(s)?,
+            None => (0.0, 0.0),
+        };
+        o.method = self.method;
+        o.subtrajectory_length = self.subtrajectory_length;
+        o.antenna = if self.fit_antenna {
+            LeverArm::Fitted(f, l)
+        } else {
+            LeverArm::Fixed(f, l)
+        };
+        Ok(())
+    }
 }
 
 /// `odoctl calibrate`.
@@ -60,7 +107,9 @@ pub fn calibrate(o: &CalibrateOptions, input: &ReferenceArgs) -> Result<ExitCode
         o.samples.display().to_string(),
         o.reference.display().to_string(),
     );
-    let opts = &o.calibration;
+    let mut opts = o.calibration.clone();
+    o.geometry.apply(&mut opts)?;
+    let opts = &opts;
     let c = calib::calibrate(&samples, &reference, (&names.0, &names.1), &initial, opts)?;
     timer.lap("calibration");
     let g = &c.geometry;
@@ -83,7 +132,9 @@ pub fn calibrate(o: &CalibrateOptions, input: &ReferenceArgs) -> Result<ExitCode
         "estimate",
         "std. error"
     );
-    let se = |i: usize| g.std_errors[i].map_or_else(|| "held".to_string(), |v| format!("{v:.2e}"));
+    let se = |i: usize| {
+        g.robust_std_errors[i].map_or_else(|| "held".to_string(), |v| format!("{v:.2e}"))
+    };
     for (i, (k, a, b)) in [
         (
             "left_diameter",
@@ -109,12 +160,75 @@ pub fn calibrate(o: &CalibrateOptions, input: &ReferenceArgs) -> Result<ExitCode
         g.heading0,
         se(3)
     );
-    crate::outln!(
-        "  start position {:.4} m E, {:.4} m N (the reference, averaged over the standstill there); standard errors (J^T J)^-1 s^2, s = {:.4} m, residuals taken as independent",
-        g.start.0,
-        g.start.1,
-        g.residual_sigma
-    );
+    if let Some(s) = &c.subtrajectories {
+        for (k, (v, e)) in ["antenna_forward", "antenna_left"].iter().zip([
+            (s.antenna.0, s.std_errors[3]),
+            (s.antenna.1, s.std_errors[4]),
+        ]) {
+            if e.is_some() || s.antenna != (0.0, 0.0) {
+                let e = e.map_or_else(|| "held".to_string(), |v| format!("{v:.2e}"));
+                crate::outln!("  {k:<16} {:>14} {v:>14.6} {e:>12}", "");
+            }
+        }
+        crate::outln!(
+            "  method subtrajectory: {} sub-trajectories of {} m restarted at their fitted start position and heading, {} points, {} iterations, {} passes; residual sigma {:.4} m",
+            s.blocks.len(),
+            opts.subtrajectory_length,
+            s.points,
+            s.iterations,
+            s.evaluations,
+            s.residual_sigma
+        );
+        crate::outln!(
+            "  standard errors: cluster-robust over the {} sub-trajectories (with the residuals taken as independent: {})",
+            s.blocks.len(),
+            s.independent_std_errors[..3]
+                .iter()
+                .map(|v| v.map_or("held".to_string(), |v| format!("{v:.2e}")))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+        crate::outln!(
+            "  initial heading: the whole run's eq (16) heading at the estimate, the geometry held (for the evaluation below)"
+        );
+    } else {
+        if g.antenna != (0.0, 0.0) || g.antenna_std_errors.is_some() {
+            let e = |i: usize| {
+                g.antenna_std_errors
+                    .map_or("held".to_string(), |v| format!("{:.2e}", v[i]))
+            };
+            crate::outln!(
+                "  {:<16} {:>14} {:>14.6} {:>12}",
+                "antenna_forward",
+                "",
+                g.antenna.0,
+                e(0)
+            );
+            crate::outln!(
+                "  {:<16} {:>14} {:>14.6} {:>12}",
+                "antenna_left",
+                "",
+                g.antenna.1,
+                e(1)
+            );
+        }
+        crate::outln!(
+            "  method paper (eq 16 over the whole run); start position {:.4} m E, {:.4} m N (the reference, averaged over the standstill there)",
+            g.start.0,
+            g.start.1
+        );
+        crate::outln!(
+            "  standard errors: cluster-robust over {} stretches of {} m (with the residuals taken as independent, (J^T J)^-1 s^2, s = {:.4} m: {})",
+            g.clusters,
+            opts.subtrajectory_length,
+            g.residual_sigma,
+            g.std_errors
+                .iter()
+                .map(|v| v.map_or("held".to_string(), |v| format!("{v:.2e}")))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
     if let Some(w) = &g.track_warning {
         eprintln!("warning: eq (16) fit: {w}");
     }
@@ -179,15 +293,24 @@ pub fn calibrate(o: &CalibrateOptions, input: &ReferenceArgs) -> Result<ExitCode
             }
         }
     }
-    crate::outln!(
-        "eq (16): {:.6} m over {} points (mean {:.4} m); {} stages, {} iterations, {} integrator runs",
-        g.cost,
-        g.points,
-        g.cost / g.points as f64,
-        g.stages,
-        g.iterations,
-        g.evaluations
-    );
+    if c.subtrajectories.is_some() {
+        crate::outln!(
+            "eq (16) over the whole run at the estimate: {:.6} m over {} points (mean {:.4} m)",
+            g.cost,
+            g.points,
+            g.cost / g.points as f64
+        );
+    } else {
+        crate::outln!(
+            "eq (16): {:.6} m over {} points (mean {:.4} m); {} stages, {} iterations, {} integrator runs",
+            g.cost,
+            g.points,
+            g.cost / g.points as f64,
+            g.stages,
+            g.iterations,
+            g.evaluations
+        );
+    }
     crate::outln!(
         "horizontal error: mean {:.4} m, rms {:.4} m, p95 {:.4} m, max {:.4} m; within 1 sigma {:.1} %, 3 sigma {:.1} %",
         h.mean,
@@ -226,9 +349,51 @@ pub fn calibrate(o: &CalibrateOptions, input: &ReferenceArgs) -> Result<ExitCode
             ("eq16_cost", FitValue::Num(g.cost)),
             ("points", FitValue::Int(g.points as i64)),
         ];
-        for (name, se) in calib::GEOMETRY_UNKNOWNS.iter().zip(g.std_errors) {
+        fit.push((
+            "method",
+            FitValue::Text(
+                match opts.method {
+                    Method::Subtrajectory => "subtrajectory",
+                    Method::Paper => "paper",
+                }
+                .into(),
+            ),
+        ));
+        fit.push((
+            "subtrajectory_length",
+            FitValue::Num(opts.subtrajectory_length),
+        ));
+        if let Some(s) = &c.subtrajectories {
+            fit.push(("subtrajectories", FitValue::Int(s.blocks.len() as i64)));
+            fit.push(("subtrajectory_cost", FitValue::Num(s.cost)));
+        }
+        fit.push((
+            "std_error_method",
+            FitValue::Text(format!(
+                "cluster-robust sandwich over {} {}",
+                g.clusters,
+                match opts.method {
+                    Method::Subtrajectory => "sub-trajectories",
+                    Method::Paper => "consecutive stretches",
+                }
+            )),
+        ));
+        for (name, se) in calib::GEOMETRY_UNKNOWNS.iter().zip(g.robust_std_errors) {
             if let Some(v) = se {
                 fit.push((se_keys(name), FitValue::Num(v)));
+            }
+        }
+        for (name, se) in calib::GEOMETRY_UNKNOWNS.iter().zip(g.std_errors) {
+            if let Some(v) = se {
+                fit.push((independent_se_key(name), FitValue::Num(v)));
+            }
+        }
+        if g.antenna != (0.0, 0.0) || g.antenna_std_errors.is_some() {
+            fit.push(("antenna_forward", FitValue::Num(g.antenna.0)));
+            fit.push(("antenna_left", FitValue::Num(g.antenna.1)));
+            if let Some([f, l]) = g.antenna_std_errors {
+                fit.push(("antenna_forward_se", FitValue::Num(f)));
+                fit.push(("antenna_left_se", FitValue::Num(l)));
             }
         }
         fit.push(("residual_sigma", FitValue::Num(g.residual_sigma)));
@@ -331,7 +496,10 @@ pub fn calibrate(o: &CalibrateOptions, input: &ReferenceArgs) -> Result<ExitCode
         let always = always.as_slice();
         let text = cfg::render_params_with(
             &c.params,
-            "odoctl calibrate: chassis parameters estimated by eq (16) of Jilek, Burian, Kriz",
+            match opts.method {
+                Method::Subtrajectory => "odoctl calibrate: chassis parameters estimated on restarted sub-trajectories (beyond eq 16 of Jilek, Burian, Kriz)",
+                Method::Paper => "odoctl calibrate: chassis parameters estimated by eq (16) of Jilek, Burian, Kriz",
+            },
             &fit,
             always,
         );
@@ -364,6 +532,16 @@ fn se_keys(name: &str) -> &'static str {
         "right_diameter" => "right_diameter_se",
         "track_width" => "track_width_se",
         _ => "initial_heading_se",
+    }
+}
+
+/// The `[fit]` key of an unknown's standard error for independent residuals.
+fn independent_se_key(name: &str) -> &'static str {
+    match name {
+        "left_diameter" => "left_diameter_se_independent",
+        "right_diameter" => "right_diameter_se_independent",
+        "track_width" => "track_width_se_independent",
+        _ => "initial_heading_se_independent",
     }
 }
 

@@ -13,7 +13,7 @@ mod simulate;
 mod validate;
 
 pub use crate::link::{config, decode, monitor, record, ConfigAction};
-pub use calibrate::{calibrate, CalibrateOptions};
+pub use calibrate::{calibrate, CalibrateOptions, GeometryArgs};
 pub use replay::replay;
 pub use simulate::{simulate, SimulateOptions};
 pub use validate::{validate, validation_report};

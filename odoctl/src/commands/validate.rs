@@ -46,7 +46,19 @@ pub fn validate(
         &reference_path.display().to_string(),
         2,
     )?;
-    let run = Run::new(&samples, &reference, matches);
+    let antenna = match config {
+        Some(p) => calib::read_lever_arm(p)?,
+        None => (0.0, 0.0),
+    };
+    let run = Run::new(&samples, &reference, matches).with_antenna(antenna);
+    if antenna != (0.0, 0.0) {
+        crate::outln!(
+            "antenna lever arm from {}: {:.4} m forward, {:.4} m left of the axle centre",
+            config.map_or(String::new(), |p| p.display().to_string()),
+            antenna.0,
+            antenna.1
+        );
+    }
     let last = run.len() - 1;
     let h0 = match heading {
         Some(h) => h,

@@ -94,7 +94,8 @@ pub fn validate_hook(
         &reference_path.display().to_string(),
         2,
     )?;
-    let run = Run::new(&samples, &reference, matches);
+    let antenna = config.map_or(Ok((0.0, 0.0)), calib::read_lever_arm)?;
+    let run = Run::new(&samples, &reference, matches).with_antenna(antenna);
     let last = run.len() - 1;
     let h0 = match heading {
         Some(h) => h,
