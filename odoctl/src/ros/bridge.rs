@@ -452,6 +452,32 @@ mod tests {
     use super::*;
 
     #[test]
+    fn freshness_table() {
+        let at = |us| PoseRecord {
+            mcu_time_us: us,
+            ..Default::default()
+        };
+        let last = at(600_000_000);
+        let s = Duration::from_secs;
+        assert_eq!(freshness(&at(1), None, s(0)), Freshness::New);
+        assert_eq!(
+            freshness(&at(600_020_000), Some(&last), s(0)),
+            Freshness::New
+        );
+        // Sent again after a 2 s gap: the unit's clock says it is old.
+        assert_eq!(freshness(&last, Some(&last), s(2)), Freshness::Stale);
+        assert_eq!(
+            freshness(&at(599_000_000), Some(&last), s(2)),
+            Freshness::Stale
+        );
+        // Up for 1.5 s after 3 s away: it restarted.
+        assert_eq!(
+            freshness(&at(1_500_000), Some(&last), s(3)),
+            Freshness::Restarted
+        );
+    }
+
+    #[test]
     fn rate_reply() {
         assert_eq!(parse_rate("rate = 50\n"), Some(50.0));
         assert_eq!(parse_rate("x = 1\nrate=100"), Some(100.0));

@@ -655,7 +655,7 @@ mod tests {
             p.push(&pose_at(i as f64 * 0.004, 0.0));
         }
         // 0, 0.012, 0.024, 0.036 kept; the latest (0.036) already last.
-        let m = p.message(&pose_at(0.036, 0.0));
+        let m = p.message(&pose_at(9.0 * 0.004, 0.0));
         assert_eq!(m.poses.len(), 4);
         let m = p.message(&pose_at(0.037, 0.0));
         assert_eq!(m.poses.len(), 5);
