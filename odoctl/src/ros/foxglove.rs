@@ -331,6 +331,8 @@ fn lock(shared: &Mutex<Shared>) -> std::sync::MutexGuard<'_, Shared> {
 }
 
 /// The handshake: accept the first subprotocol of ours the client offers, else refuse (400).
+// The signature of tungstenite's handshake callback.
+#[allow(clippy::result_large_err)]
 fn negotiate(req: &Request, mut res: Response) -> Result<Response, ErrorResponse> {
     let offered: Vec<String> = req
         .headers()
