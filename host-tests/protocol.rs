@@ -27,6 +27,8 @@ fn sample_pose() -> PoseRecord {
                 calibrated: false,
             },
             model: UncertaintyModel::Covariance,
+            rate_switch: true,
+            late: false,
         },
         mcu_time_us: 9_876_543_210,
         gnss: GnssTime {
@@ -91,13 +93,20 @@ fn status_round_trip() {
         samples_lost: 3,
         gnss_rx_lost: 0xFFFF_FFFE,
         merged_samples: 99,
+        reset_cause: ResetCause::Watchdog,
+        output_divider: 10,
+        index_lost: 5,
+        host_rx_overruns: 6,
+        host_rx_line_errors: 7,
+        gnss_rx_overruns: 8,
+        gnss_rx_line_errors: 9,
     });
     assert_eq!(roundtrip(&msg, u32::MAX).message, msg);
 }
 
 /// The Status body layout of docs/PROTOCOL.md, field by field, and the lengths a reader
-/// accepts: at least 52 bytes (longer is a later revision), shorter is malformed,
-/// including the 40-byte body of earlier firmware.
+/// accepts: at least 76 bytes (longer is a later revision), shorter is malformed,
+/// including the 40- and 52-byte bodies of earlier firmware.
 #[test]
 fn status_layout_and_short_bodies() {
     let st = Status {
@@ -118,9 +127,16 @@ fn status_layout_and_short_bodies() {
         samples_lost: 0xA1A2_A3A4,
         gnss_rx_lost: 0xB1B2_B3B4,
         merged_samples: 0xC1C2_C3C4,
+        reset_cause: ResetCause::BrownOut,
+        output_divider: 0xD1D2_D3D4,
+        index_lost: 0xE1E2_E3E4,
+        host_rx_overruns: 0xF1F2_F3F4,
+        host_rx_line_errors: 0x9192_9394,
+        gnss_rx_overruns: 0x8182_8384,
+        gnss_rx_line_errors: 0x7172_7374,
     };
-    assert_eq!(Status::BODY_LEN, 52);
-    let mut body = [0xEEu8; 60];
+    assert_eq!(Status::BODY_LEN, 76);
+    let mut body = [0xEEu8; 84];
     let n = st.write_body(&mut body).unwrap();
     assert_eq!(n, Status::BODY_LEN);
     let field = |at: usize| u32::from_le_bytes(body[at..at + 4].try_into().unwrap());
@@ -144,15 +160,24 @@ fn status_layout_and_short_bodies() {
             0x5555_5555
         )
     );
-    assert_eq!(&body[36..40], &[1, 1, 0, 0], "source, dirty, reserved");
+    assert_eq!(
+        &body[36..40],
+        &[1, 1, 3, 0],
+        "source, dirty, reset cause, reserved"
+    );
     assert_eq!(
         (field(40), field(44), field(48)),
         (0xA1A2_A3A4, 0xB1B2_B3B4, 0xC1C2_C3C4),
         "samples_lost, gnss_rx_lost, merged_samples"
     );
-    assert_eq!(Status::read_body(&body[..52]), Ok(st));
     assert_eq!(
-        Status::read_body(&body[..60]),
+        (field(52), field(56), field(60), field(64), field(68), field(72)),
+        (0xD1D2_D3D4, 0xE1E2_E3E4, 0xF1F2_F3F4, 0x9192_9394, 0x8182_8384, 0x7172_7374),
+        "output_divider, index_lost, host_rx_overruns, host_rx_line_errors, gnss_rx_overruns, gnss_rx_line_errors"
+    );
+    assert_eq!(Status::read_body(&body[..76]), Ok(st));
+    assert_eq!(
+        Status::read_body(&body[..84]),
         Ok(st),
         "appended bytes ignored"
     );
@@ -160,16 +185,18 @@ fn status_layout_and_short_bodies() {
     // the frames around them decode and the sequence counts them.
     let mut dec = FrameDecoder::new();
     let mut got = Vec::new();
-    dec.feed(&raw_frame(1, 0x02, 0, &body[..52]), |r| got.push(r));
-    dec.feed(&raw_frame(1, 0x02, 1, &body[..51]), |r| got.push(r));
+    dec.feed(&raw_frame(1, 0x02, 0, &body[..76]), |r| got.push(r));
+    dec.feed(&raw_frame(1, 0x02, 1, &body[..75]), |r| got.push(r));
     dec.feed(&raw_frame(1, 0x02, 2, &body[..40]), |r| got.push(r));
-    dec.feed(&raw_frame(1, 0x02, 3, &body[..60]), |r| got.push(r));
+    dec.feed(&raw_frame(1, 0x02, 3, &body[..84]), |r| got.push(r));
+    dec.feed(&raw_frame(1, 0x02, 4, &body[..52]), |r| got.push(r));
     assert_eq!(got[0].as_ref().unwrap().message, Message::Status(st));
     assert_eq!(got[1], Err(DecodeError::BodyTooShort(0x02)));
     assert_eq!(got[2], Err(DecodeError::BodyTooShort(0x02)));
     assert_eq!(got[3].as_ref().unwrap().message, Message::Status(st));
+    assert_eq!(got[4], Err(DecodeError::BodyTooShort(0x02)));
     let s = dec.stats();
-    assert_eq!((s.frames, s.malformed, s.seq_gaps), (2, 2, 0));
+    assert_eq!((s.frames, s.malformed, s.seq_gaps), (2, 3, 0));
     for len in 0..Status::BODY_LEN {
         assert_eq!(
             Status::read_body(&body[..len]),
@@ -186,6 +213,7 @@ fn device_info_round_trip() {
         settings_source: SettingsSource::Defaults,
         settings_checksum: 0xDEAD_BEEF,
         uid: [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12],
+        reset_cause: ResetCause::Pin,
         ..Default::default()
     };
     info.firmware_version
@@ -259,6 +287,7 @@ fn example_pose() -> Message {
                 ..Default::default()
             },
             model: UncertaintyModel::Paper,
+            ..Default::default()
         },
         mcu_time_us: 20_000_000,
         gnss: GnssTime {
@@ -350,12 +379,14 @@ fn all_kinds() -> Vec<(Message, u32)> {
     ]
 }
 
-/// Flip every bit of every encoded frame (delimiter included), followed by an intact frame:
-/// the corrupted frame is never accepted, and the next frame always is.
+/// Flip every bit of every encoded frame (delimiter included), between intact frames: the
+/// corrupted frame is never accepted, and the next frame always is.
 #[test]
 fn every_single_bit_error_is_detected() {
     let follower = example_reply();
     let follow_bytes = encode(&follower, 8);
+    // The decoder has joined the stream: a failure of the first run would be a join.
+    let primer = encode(&example_reply(), 100);
     let mut flips = 0;
     for (msg, seq) in all_kinds() {
         let good = encode(&msg, seq);
@@ -364,6 +395,7 @@ fn every_single_bit_error_is_detected() {
                 let mut bad = good.clone();
                 bad[i] ^= 1 << bit;
                 let mut dec = FrameDecoder::new();
+                dec.feed(&primer, |r| assert!(r.is_ok()));
                 let mut oks = Vec::new();
                 let mut errs = 0;
                 dec.feed(&bad, |r| match r {
@@ -417,16 +449,45 @@ fn resynchronises_after_garbage_oversize_and_mid_stream_join() {
     let mut ok = 0;
     dec.feed(&frames[40..], |r| ok += r.is_ok() as u32);
     assert_eq!(ok, 2);
-    assert_eq!(dec.stats().crc_errors + dec.stats().malformed, 1);
-    // A long run without delimiter, then frames.
+    // The tail of the frame under way is a join, not a link error.
+    let first_len = encode(&example_pose(), 0).len() as u32;
+    assert_eq!(dec.stats().join_bytes, first_len - 40 - 1);
+    assert_eq!(dec.stats().crc_errors + dec.stats().malformed, 0);
+    // A stream read from its start decodes its first frame.
     let mut dec = FrameDecoder::new();
-    let mut stream = vec![0x55u8; 3 * MAX_WIRE_FRAME];
+    let mut ok = 0;
+    dec.feed(&frames, |r| ok += r.is_ok() as u32);
+    assert_eq!((ok, dec.stats().join_bytes), (3, 0));
+    // After the join, a damaged frame is an error again.
+    let mut damaged = frames[40..].to_vec();
+    let at = damaged.len() - 10;
+    damaged[at] ^= 0x01;
+    let mut dec = FrameDecoder::new();
+    dec.feed(&damaged, |_| {});
+    assert_eq!(dec.stats().crc_errors + dec.stats().malformed, 1);
+    // Joining inside a run longer than any frame: all of it counted as join bytes.
+    let mut dec = FrameDecoder::new();
+    let mut stream = vec![0x55u8; 2 * MAX_WIRE_FRAME];
+    stream.extend_from_slice(&frames);
+    let mut ok = 0;
+    dec.feed(&stream, |r| ok += r.is_ok() as u32);
+    assert_eq!(ok, 2);
+    assert_eq!(dec.stats().oversize, 0);
+    assert_eq!(
+        dec.stats().join_bytes,
+        2 * MAX_WIRE_FRAME as u32 + first_len - 1
+    );
+    // After a frame, a long run without delimiter, then frames.
+    let mut dec = FrameDecoder::new();
+    let mut stream = encode(&example_pose(), 7);
+    stream.extend(vec![0x55u8; 3 * MAX_WIRE_FRAME]);
     stream.push(0);
     stream.extend_from_slice(&frames);
     let mut ok = 0;
     dec.feed(&stream, |r| ok += r.is_ok() as u32);
-    assert_eq!(ok, 3);
+    assert_eq!(ok, 4);
     assert_eq!(dec.stats().oversize, 1);
+    assert_eq!(dec.stats().join_bytes, 0);
     // Leading and repeated delimiters are harmless.
     let mut dec = FrameDecoder::new();
     let mut stream = vec![0u8; 5];
@@ -632,4 +693,76 @@ proptest! {
         let s = dec.stats();
         prop_assert!(s.frames >= spliced);
     }
+}
+
+/// DeviceInfo's byte 2 is the reset cause (it was reserved), byte 3 stays reserved.
+#[test]
+fn device_info_reset_cause_byte() {
+    let info = DeviceInfo {
+        protocol_version: PROTOCOL_VERSION,
+        settings_source: SettingsSource::Flash,
+        reset_cause: ResetCause::Watchdog,
+        settings_checksum: 0x0403_0201,
+        ..Default::default()
+    };
+    let mut body = [0u8; 64];
+    let n = info.write_body(&mut body).unwrap();
+    assert_eq!(n, DeviceInfo::FIXED_LEN);
+    assert_eq!(&body[..8], &[1, 1, 5, 0, 1, 2, 3, 4]);
+    assert_eq!(DeviceInfo::read_body(&body[..n]), Ok(info));
+}
+
+/// Status word bits 12 (rate switch) and 13 (late), each alone.
+#[test]
+fn status_word_rate_switch_and_late_bits() {
+    let f = StatusFlags {
+        rate_switch: true,
+        ..Default::default()
+    };
+    assert_eq!(f.to_bits(), 1 << 12);
+    let f = StatusFlags {
+        late: true,
+        ..Default::default()
+    };
+    assert_eq!(f.to_bits(), 1 << 13);
+    let back = StatusFlags::from_bits(0x3000).unwrap();
+    assert!(back.rate_switch && back.late);
+    assert_eq!(StatusFlags::DEFINED_BITS, 0x3FFF);
+    assert_eq!(
+        StatusFlags::from_bits(0xFFFF_C000).unwrap(),
+        StatusFlags::default()
+    );
+}
+
+/// RCC_CSR (RM0368 sec. 6.3.21) to the reset cause: every reset sets PINRSTF, a power-on
+/// sets BORRSTF too; the most specific flag wins. Codes round-trip.
+#[test]
+fn reset_cause_from_rcc_csr_table() {
+    const BOR: u32 = 1 << 25;
+    const PIN: u32 = 1 << 26;
+    const POR: u32 = 1 << 27;
+    const SFT: u32 = 1 << 28;
+    const IWDG: u32 = 1 << 29;
+    const WWDG: u32 = 1 << 30;
+    const LPWR: u32 = 1 << 31;
+    const LSION: u32 = 1;
+    for (csr, want) in [
+        (0, ResetCause::Unknown),
+        (LSION, ResetCause::Unknown),
+        (POR | BOR | PIN, ResetCause::PowerOn),
+        (PIN, ResetCause::Pin),
+        (BOR | PIN, ResetCause::BrownOut),
+        (SFT | PIN, ResetCause::Software),
+        (IWDG | PIN, ResetCause::Watchdog),
+        (IWDG | POR | BOR | PIN, ResetCause::Watchdog),
+        (WWDG | PIN, ResetCause::WindowWatchdog),
+        (LPWR | PIN, ResetCause::LowPower),
+    ] {
+        assert_eq!(ResetCause::from_rcc_csr(csr), want, "{csr:#010x}");
+    }
+    for code in 0..=7u8 {
+        assert_eq!(ResetCause::from_code(code).code(), code);
+    }
+    assert_eq!(ResetCause::from_code(8), ResetCause::Unknown);
+    assert_eq!(ResetCause::Watchdog.name(), "watchdog");
 }

@@ -21,6 +21,7 @@
 use std::path::Path;
 use std::time::{Duration, Instant};
 
+use odo_core::protocol::{Message, ResetCause};
 use odo_core::settings::Settings;
 use odo_core::settings::SettingsSource;
 use odo_core::timing::SyncState;
@@ -56,6 +57,19 @@ fn qemu_end_to_end() {
     };
     let start = Instant::now();
     let mut link = UnitLink::connect(qemu.port, DEADLINE);
+
+    // DeviceInfo first (frame 0): how a receiver sees that the unit (re)started.
+    let first = link.next_frame();
+    assert_eq!(first.seq, 0, "the first frame after start");
+    let Message::DeviceInfo(info) = &first.message else {
+        panic!("the first frame is {:?}, not DeviceInfo", first.message)
+    };
+    assert_eq!(info.protocol_version, 1);
+    assert_eq!(info.settings_source, SettingsSource::Defaults);
+    assert_eq!(info.settings_checksum, Settings::DEFAULT.checksum());
+    assert_eq!(info.firmware_version.as_str(), env!("CARGO_PKG_VERSION"));
+    // QEMU models no reset flags (RCC_CSR reads 0).
+    assert_eq!(info.reset_cause, ResetCause::Unknown);
 
     // Records flow from boot.
     while link.records.len() < 5 {
@@ -98,7 +112,7 @@ fn qemu_end_to_end() {
     expect(&mut link, "mode free", true, "ok");
     expect(&mut link, "status", true, "sync = free");
     expect(&mut link, "version", true, "protocol = 1");
-    assert_eq!(link.device_info, 1, "version sends one DeviceInfo frame");
+    assert_eq!(link.device_info, 2, "one at start, one for version");
     expect(&mut link, "save", true, "saved");
     let all = expect(&mut link, "get", true, "right_sin3");
     assert!(all.contains("delta_left = 0.000000045"), "{all}");
@@ -249,5 +263,101 @@ fn qemu_end_to_end() {
     assert!(
         matches!(stack[..], [used, size] if used > 1024 && used < size / 2),
         "stack: {stack:?}"
+    );
+
+    rate_switch(&mut link);
+}
+
+/// Issue 19, item 12: `set rate 100 output_divider 4` at 50 Hz / 1 switches everything at
+/// one whole second: the Status just before the flagged record announces 100 Hz / 4; the
+/// records before it are 20 ms apart, those after it 40 ms (every 4th sample at 100 Hz).
+fn rate_switch(link: &mut UnitLink) {
+    let from_record = link.records.len();
+    let from_frame = link.frames.len();
+    let t_sent = link.records.last().expect("records").mcu_time_us;
+    expect(
+        link,
+        "set rate 100 output_divider 4",
+        true,
+        "output_divider = 4",
+    );
+    let t_cmd = link.records.last().expect("records").mcu_time_us;
+    while link
+        .records
+        .last()
+        .is_none_or(|r| r.mcu_time_us < t_cmd + 3_500_000)
+    {
+        link.next_frame();
+    }
+    let records = &link.records[from_record..];
+    let flagged: Vec<usize> = (0..records.len())
+        .filter(|&i| records[i].flags.rate_switch)
+        .collect();
+    assert_eq!(flagged.len(), 1, "one record marks the switch");
+    let k = flagged[0];
+    let switch = records[k];
+    assert_eq!(switch.mcu_time_us % 1_000_000, 0, "at a whole second");
+    // The sampler takes the rate at the first second it has not committed a sample of: the
+    // next or, when the command arrives at the last sample of a second, the one after.
+    assert!(
+        switch.mcu_time_us > t_sent && switch.mcu_time_us <= t_cmd + 2_000_000,
+        "switch at {} us, command sent after {t_sent} us, answered by {t_cmd} us",
+        switch.mcu_time_us
+    );
+    for w in records[..k].windows(2) {
+        assert_eq!(
+            w[1].mcu_time_us - w[0].mcu_time_us,
+            20_000,
+            "50 Hz, every sample"
+        );
+        assert_eq!(w[1].sequence - w[0].sequence, 1);
+    }
+    assert_eq!(switch.mcu_time_us - records[k - 1].mcu_time_us, 20_000);
+    assert_eq!(switch.sequence - records[k - 1].sequence, 1);
+    for w in records[k..].windows(2) {
+        assert_eq!(
+            w[1].mcu_time_us - w[0].mcu_time_us,
+            40_000,
+            "100 Hz, every 4th"
+        );
+        assert_eq!(w[1].sequence - w[0].sequence, 4);
+    }
+    assert!(records[k + 1..].iter().all(|r| !r.flags.rate_switch));
+    // The frame before the flagged record is the Status announcing the new configuration.
+    let frames = &link.frames[from_frame..];
+    let at = frames
+        .iter()
+        .position(|f| matches!(&f.message, Message::Pose(r) if r.flags.rate_switch))
+        .expect("the flagged record's frame");
+    let Message::Status(announce) = &frames[at - 1].message else {
+        panic!("frame before the switch: {:?}", frames[at - 1].message)
+    };
+    assert_eq!((announce.rate_hz, announce.output_divider), (100, 4));
+    assert_eq!(announce.uptime_us, switch.mcu_time_us);
+    // Every Status: 50 Hz / 1 before, 100 Hz / 4 from the switch on, one per second.
+    let beats: Vec<_> = frames
+        .iter()
+        .filter_map(|f| match &f.message {
+            Message::Status(s) => Some(*s),
+            _ => None,
+        })
+        .collect();
+    for b in &beats {
+        let want = if b.uptime_us < switch.mcu_time_us {
+            (50, 1)
+        } else {
+            (100, 4)
+        };
+        assert_eq!((b.rate_hz, b.output_divider), want, "{b:?}");
+    }
+    for w in beats.windows(2) {
+        assert_eq!(w[1].uptime_us - w[0].uptime_us, 1_000_000);
+    }
+    println!(
+        "rate switch at {:.3} s (sample {}): {} records at 50 Hz / 1, then {} at 100 Hz / 4",
+        switch.mcu_time_us as f64 * 1e-6,
+        switch.sequence,
+        k,
+        records.len() - k
     );
 }

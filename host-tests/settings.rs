@@ -897,17 +897,26 @@ fn corrupt_or_mislabelled_old_records_are_rejected() {
     assert_eq!(SettingsStore::new(&mut f).save(&variant(7)).unwrap(), 11);
 }
 
-/// The save guard: an erase stall is survivable below `max_unread_interval` (0.669 s for the
-/// designed chassis at 2 m/s), so the x32 erase (500 ms) is, the x8 erase (800 ms) is not;
-/// slower wheels make the x8 erase survivable too, and a stall of zero always is.
+/// The save guard: one sample period plus the erase stall must stay below
+/// `max_unread_interval` (0.669 s for the designed chassis at 2 m/s), so at 50 Hz the x32
+/// erase (500 ms) is survivable, the x8 erase (800 ms) is not; slower wheels make the x8 erase
+/// survivable too, and a stall of zero always is.
 #[test]
 fn erase_stall_against_the_counter_range() {
     let d = Settings::DEFAULT;
     assert!(d.survives_stall(0));
     assert!(d.survives_stall(500));
-    assert!(d.survives_stall(668));
-    assert!(!d.survives_stall(670));
+    // 669 ms - 20 ms (one period at 50 Hz) = 649 ms.
+    assert!(d.survives_stall(648));
+    assert!(!d.survives_stall(650));
     assert!(!d.survives_stall(800));
+    // Issue 19: at 2 Hz the gap is 500 ms + the stall: the x32 erase (BOR level 3) no longer
+    // passes (counts 48,971 > 32,767 would alias TIM3).
+    let mut two_hz = d;
+    two_hz.rate = 2;
+    assert!(!two_hz.survives_stall(500));
+    assert!(two_hz.survives_stall(168));
+    assert!(!two_hz.survives_stall(170));
     let mut slow = d;
     slow.max_wheel_speed = 1.0;
     assert!(slow.survives_stall(800));

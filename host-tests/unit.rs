@@ -6,7 +6,7 @@
 
 use odo_core::console::Reply;
 use odo_core::odometry::Pose;
-use odo_core::protocol::{Queued, TxLink, TxRing};
+use odo_core::protocol::{Queued, ResetCause, TxLink, TxRing};
 use odo_core::settings::store::{Flash, SettingsStore, SLOT_LEN};
 use odo_core::settings::{Settings, SettingsSource};
 use odo_core::timing::{
@@ -98,6 +98,16 @@ fn mcu_time_is_the_sample_tick_in_microseconds() {
     assert_eq!(rec.mcu_time_us, 60_000);
 }
 
+/// Heartbeat inputs with no errors and `store`.
+fn inputs(store: StoreState) -> HeartbeatInputs {
+    HeartbeatInputs {
+        store,
+        host: RxErrors::default(),
+        gnss: RxErrors::default(),
+        reset_cause: ResetCause::PowerOn,
+    }
+}
+
 #[test]
 fn dropped_records_are_counted_until_one_is_sent() {
     let mut p = processor();
@@ -119,7 +129,7 @@ fn dropped_records_are_counted_until_one_is_sent() {
         source: SettingsSource::Defaults,
         dirty: false,
     };
-    assert_eq!(p.heartbeat(&r, store, 0, 0).dropped_total, 2);
+    assert_eq!(p.heartbeat(&r, &inputs(store)).dropped_total, 2);
 }
 
 #[test]
@@ -147,6 +157,7 @@ fn index_pulses_mark_seen_and_mismatch_until_a_record_is_sent() {
     let mut log = Events::default();
     let capture = |raw| IndexCapture {
         raw,
+        queue_lost: 0,
         overcapture: false,
     };
     // Before the first sample the counts are unknown: the pulse is ignored.
@@ -193,6 +204,7 @@ fn overcaptured_index_pulses_are_counted_as_lost() {
         IndexCapture {
             raw: 50,
             overcapture: true,
+            queue_lost: 0,
         },
         &mut log,
     );
@@ -220,7 +232,7 @@ fn sample_index_pulses_are_applied_with_the_sample() {
 }
 
 #[test]
-fn moving_means_counts_changed_within_one_second_of_samples() {
+fn moving_means_a_wheel_moved_beyond_the_threshold_within_one_second() {
     let rate = Settings::DEFAULT.rate;
     let mut p = processor();
     let mut log = Events::default();
@@ -232,8 +244,48 @@ fn moving_means_counts_changed_within_one_second_of_samples() {
     }
     record(&mut p, &raw(rate, 0, 0), &mut log);
     assert!(!p.live(&raw(rate, 0, 0), 0).moving, "a second at rest");
-    record(&mut p, &raw(rate + 1, 0, 1), &mut log);
-    assert!(p.live(&raw(rate + 1, 0, 1), 0).moving, "moved again");
+    // A wheel dithering on one edge of its code (+-1 count) at rest is not moving, ever.
+    for k in rate + 1..5 * rate {
+        let c = k % 2;
+        record(&mut p, &raw(k, c, 0), &mut log);
+        assert!(!p.live(&raw(k, c, 0), 0).moving, "dither at sample {k}");
+    }
+    // Beyond MOTION_THRESHOLD increments (8), it moves again; at the threshold it does not.
+    let k = 5 * rate;
+    record(&mut p, &raw(k, 0, 8), &mut log);
+    assert!(!p.live(&raw(k, 0, 8), 0).moving, "8 increments");
+    record(&mut p, &raw(k + 1, 0, 9), &mut log);
+    assert!(p.live(&raw(k + 1, 0, 9), 0).moving, "moved again");
+    assert_eq!(odo_core::unit::processor::MOTION_THRESHOLD, 8);
+}
+
+#[test]
+fn settings_dirty_means_different_from_the_stored_settings() {
+    let mut c = commands(MemFlash::new(4, 0));
+    assert!(!c.store_state().dirty, "defaults, nothing stored");
+    line(&mut c, "set rate 100", false);
+    assert!(c.store_state().dirty);
+    line(&mut c, "set rate 50", false);
+    assert!(!c.store_state().dirty, "back to what a reset starts with");
+    line(&mut c, "set track_width 0.6", false);
+    line(&mut c, "save", false);
+    assert!(!c.store_state().dirty);
+    line(&mut c, "defaults", false);
+    assert!(c.store_state().dirty, "defaults differ from the stored 0.6");
+    line(&mut c, "set track_width 0.6", false);
+    assert!(!c.store_state().dirty, "equal to the stored record again");
+    // Start-up replaced the stored settings: the working ones differ from the stored.
+    let mut stored = Settings::DEFAULT;
+    stored.rate = 7;
+    let c = Commands::new(
+        Settings::DEFAULT,
+        SettingsSource::Flash,
+        SettingsStore::new(MemFlash::new(4, 0)),
+        HZ,
+        ClockSource::Hse,
+    )
+    .with_stored(stored);
+    assert!(c.store_state().dirty);
 }
 
 #[test]
@@ -249,6 +301,7 @@ fn heartbeat_is_due_once_a_second_and_reports_the_counters() {
         record(&mut p, &r, &mut log);
         if p.heartbeat_due() {
             due.push(k);
+            p.status_sent(true);
         }
     }
     assert_eq!(due, [0, rate]);
@@ -267,7 +320,10 @@ fn heartbeat_is_due_once_a_second_and_reports_the_counters() {
         source: SettingsSource::Flash,
         dirty: true,
     };
-    let s = p.heartbeat(&r, store, 11, 12);
+    let mut hb = inputs(store);
+    hb.host.lost = 11;
+    hb.gnss.lost = 12;
+    let s = p.heartbeat(&r, &hb);
     assert_eq!(s.samples, rate + 1);
     assert_eq!(s.rate_hz, rate);
     assert_eq!((s.pps_edges, s.pps_rejected), (9, 2));
@@ -388,6 +444,7 @@ fn settings_and_pose_reset_apply_at_the_next_sample() {
     record(&mut p, &raw(3, 2000, 2000), &mut log);
     let c = |raw| IndexCapture {
         raw,
+        queue_lost: 0,
         overcapture: false,
     };
     p.on_index_capture(0, c(2000), &mut log);
@@ -738,7 +795,8 @@ fn reset_status_version_and_bad_lines() {
     assert_eq!(effect, Effect::Status);
     let (mut reply, effect) = line(&mut c, "version", false);
     assert_eq!(effect, Effect::Version);
-    let info = c.version(&mut reply, [7; 12]);
+    let info = c.version(&mut reply, [7; 12], ResetCause::Watchdog);
+    assert_eq!(info.reset_cause, ResetCause::Watchdog);
     assert_eq!(info.uid, [7; 12]);
     assert_eq!(info.settings_source, SettingsSource::Defaults);
     assert_eq!(info.settings_checksum, Settings::DEFAULT.checksum());
@@ -781,8 +839,23 @@ fn status_text_reports_every_counter() {
         clock: ClockSource::HsiFallback,
         stack: (1000, 4096),
         cycles_unit: "cycles",
+        reset_cause: ResetCause::BrownOut,
     };
-    c.status(&mut reply, &live, 3, 4, &board);
+    let host = RxErrors {
+        lost: 3,
+        overruns: 2,
+        framing: 1,
+        noise: 0,
+        parity: 0,
+    };
+    let gnss = RxErrors {
+        lost: 4,
+        overruns: 4,
+        framing: 0,
+        noise: 7,
+        parity: 0,
+    };
+    c.status(&mut reply, &live, &host, &gnss, &board);
     for expected in [
         "clock = hsi-fallback (HSE failed)",
         "sync = locked",
@@ -791,13 +864,16 @@ fn status_text_reports_every_counter() {
         "mcu_time_us = 20000",
         "records_dropped = 0",
         "samples_lost = 0, merged_samples = 0",
-        "sample_latency_max = 1000 ns",
+        "sample_latency_max = 1000 ns, late_samples = 0",
         "second_ticks = 84000000",
         "pps_accepted = 5, pps_glitches = 0, pps_missed = 0, pps_locks = 0, pps_overcaptures = 0",
-        "nmea_time_messages = 0, nmea_errors = 0, gnss_rx_lost = 4",
+        "reset_cause = brown-out",
+        "rate = 50 Hz, output_divider = 1",
+        "nmea_time_messages = 0, nmea_errors = 0",
+        "gnss_rx_lost = 4, gnss_rx_overruns = 4, gnss_rx_framing = 0, gnss_rx_noise = 7, gnss_rx_parity = 0",
+        "host_rx_lost = 3, host_rx_overruns = 2, host_rx_framing = 1, host_rx_noise = 0, host_rx_parity = 0",
         "left: fault = no, index_seen = no, index_mismatches = 0, index_lost = 0",
         "right: fault = no, index_seen = no, index_mismatches = 0, index_lost = 0",
-        "host_rx_lost = 3",
         "sample_isr_max = 321 cycles, process_max = 999 cycles",
         "sample_isr_last = 321 cycles, process_last = 999 cycles",
         "stack_used = 1000 of 4096 bytes",
@@ -809,4 +885,270 @@ fn status_text_reports_every_counter() {
             reply.text
         );
     }
+}
+
+/// Sample `s` of a real discipline as the sampler hands it on, with counts (left, right).
+fn raw_of(s: Sample, disc: &odo_core::timing::Discipline, left: u32, right: u32) -> RawSample {
+    let mut r = RawSample::first(s, RawCounts { left, right }, (false, false), disc);
+    r.state = SyncState::FreeRunning;
+    r
+}
+
+/// Issue 19, item 12: `set rate 50 output_divider 1` at 1 kHz / 10. The sampler switches at
+/// the next whole second; the records, the heartbeat and the rate reported switch at that
+/// same sample, which is sent with the rate switch flag after a Status announcing it.
+#[test]
+fn a_rate_switch_is_one_instant_for_records_heartbeat_and_status() {
+    use odo_core::timing::{Discipline, DisciplineConfig, SyncMode};
+    let mut fast = Settings::DEFAULT;
+    fast.rate = 1000;
+    fast.output_divider = 10;
+    let mut cfg = DisciplineConfig::for_clock(HZ, HSI_TOLERANCE_PPM);
+    cfg.mode = SyncMode::Free;
+    cfg.rate_hz = 1000;
+    let mut disc = Discipline::new(cfg, 0).unwrap();
+    let mut p = Processor::new(&fast, HZ, BITS);
+    let mut log = Events::default();
+    let store = StoreState {
+        source: SettingsSource::Defaults,
+        dirty: true,
+    };
+    // (tick, rate switch flag) of every record sent; (tick, rate, divider) of every Status.
+    let mut records: Vec<(u64, bool)> = Vec::new();
+    let mut beats: Vec<(u64, u32, u32)> = Vec::new();
+    let mut now = 0;
+    let mut switched_at = None;
+    for k in 0..3000u32 {
+        let s = disc.next_sample(now);
+        now = s.tick;
+        if k == 1_234 {
+            // The command: the processing task gets the settings, the sampler the rate
+            // (it applies it from the next second).
+            let mut slow = fast;
+            slow.rate = 50;
+            slow.output_divider = 1;
+            p.apply(
+                Requests {
+                    settings: Some(slow),
+                    reset: None,
+                },
+                &mut log,
+            );
+            let mut c = *disc.config();
+            c.rate_hz = 50;
+            disc.set_config(c).unwrap();
+        }
+        if s.rate == 50 && switched_at.is_none() {
+            switched_at = Some(s.tick);
+        }
+        let r = raw_of(s, &disc, k, k);
+        let rec = record(&mut p, &r, &mut log);
+        if p.heartbeat_due() {
+            let st = p.heartbeat(&r, &inputs(store));
+            beats.push((s.tick, st.rate_hz, st.output_divider));
+            p.status_sent(true);
+        }
+        if let Some(rec) = rec {
+            records.push((s.tick, rec.flags.rate_switch));
+            p.sent(true);
+        }
+    }
+    let switch = switched_at.expect("the sampler switched");
+    assert_eq!(switch, 2 * u64::from(HZ), "at the next whole second");
+    // Exactly one flagged record: the first sample at 50 Hz.
+    let flagged: Vec<u64> = records.iter().filter(|r| r.1).map(|r| r.0).collect();
+    assert_eq!(flagged, [switch]);
+    // The Status of that second comes with it and announces 50 Hz, divider 1; every
+    // Status before it says 1000 Hz, divider 10.
+    assert!(beats.contains(&(switch, 50, 1)), "{beats:?}");
+    for b in beats.iter().filter(|b| b.0 < switch) {
+        assert_eq!((b.1, b.2), (1000, 10), "{b:?}");
+    }
+    for b in beats.iter().filter(|b| b.0 >= switch) {
+        assert_eq!((b.1, b.2), (50, 1), "{b:?}");
+    }
+    // Records per second: 100 before, 50 after, never more (the baud budget).
+    let hz = u64::from(HZ);
+    for second in 0..6 {
+        let n = records
+            .iter()
+            .filter(|r| r.0 >= second * hz && r.0 < (second + 1) * hz)
+            .count();
+        if (second + 1) * hz <= switch {
+            assert_eq!(n, 100, "second {second}");
+        } else if second * hz >= switch && second * hz < now {
+            assert!(n <= 50, "second {second}: {n}");
+        }
+    }
+    let live = p.live(&raw_of(disc.next_sample(now), &disc, 0, 0), 0);
+    assert_eq!((live.rate, live.output_divider), (50, 1));
+}
+
+/// A Status without room is tried again at the next sample, and comes before its record.
+#[test]
+fn a_heartbeat_without_room_is_retried() {
+    let mut p = processor();
+    let mut log = Events::default();
+    record(&mut p, &raw(0, 0, 0), &mut log);
+    assert!(p.heartbeat_due());
+    p.status_sent(false);
+    record(&mut p, &raw(1, 0, 0), &mut log);
+    assert!(p.heartbeat_due(), "still due");
+    p.status_sent(true);
+    record(&mut p, &raw(2, 0, 0), &mut log);
+    assert!(!p.heartbeat_due());
+}
+
+/// Issue 19, item 4: the first record after a stall (or a late interrupt) is flagged; set once,
+/// kept while records are skipped or dropped.
+#[test]
+fn a_late_sample_is_flagged_once() {
+    let mut s = Settings::DEFAULT;
+    s.output_divider = 2;
+    let mut p = Processor::new(&s, HZ, BITS);
+    let mut log = Events::default();
+    let rec = record(&mut p, &raw(0, 0, 0), &mut log).unwrap();
+    assert!(!rec.flags.late);
+    p.sent(true);
+    // Sample 1 ran late by a third of a period (not merged): flagged, carried past the
+    // skipped sample to record 2.
+    let mut r = raw(1, 0, 0);
+    r.latency = HZ / 50 / 3;
+    assert!(record(&mut p, &r, &mut log).is_none(), "divider 2");
+    let rec = record(&mut p, &raw(2, 0, 0), &mut log).unwrap();
+    assert!(rec.flags.late);
+    p.sent(false);
+    assert!(record(&mut p, &raw(3, 0, 0), &mut log).is_none());
+    let rec = record(&mut p, &raw(4, 0, 0), &mut log).unwrap();
+    assert!(rec.flags.late, "kept while the record is dropped");
+    p.sent(true);
+    assert!(record(&mut p, &raw(5, 0, 0), &mut log).is_none());
+    let rec = record(&mut p, &raw(6, 0, 0), &mut log).unwrap();
+    assert!(!rec.flags.late, "cleared once sent");
+    p.sent(true);
+    // A stall merged grid points into sample 7: late whatever the latency.
+    let mut r = raw(7, 0, 0);
+    r.merged = 2;
+    assert!(record(&mut p, &r, &mut log).is_none());
+    assert!(record(&mut p, &raw(8, 0, 0), &mut log).unwrap().flags.late);
+    assert_eq!(p.live(&r, 0).late_samples, 2);
+    // A quarter period is the limit: below it, not late.
+    let mut p = processor();
+    record(&mut p, &raw(0, 0, 0), &mut log);
+    let mut r = raw(1, 0, 0);
+    r.latency = HZ / 50 / 4;
+    assert!(!record(&mut p, &r, &mut log).unwrap().flags.late);
+    assert_eq!(p.live(&r, 0).late_samples, 0);
+}
+
+/// Issue 19, item 3: index pulses lost to a full queue are counted with the next one queued.
+#[test]
+fn index_pulses_lost_to_a_full_queue_are_counted() {
+    let mut lost = 0;
+    let c = IndexCapture {
+        raw: 1,
+        overcapture: false,
+        queue_lost: 0,
+    };
+    let mut queued = Vec::new();
+    c.queue(&mut lost, |_| false);
+    c.queue(&mut lost, |_| false);
+    assert_eq!(lost, 2);
+    c.queue(&mut lost, |c| {
+        queued.push(c);
+        true
+    });
+    assert_eq!(lost, 0);
+    assert_eq!(queued[0].queue_lost, 2);
+    let mut p = processor();
+    let mut log = Events::default();
+    record(&mut p, &raw(0, 0, 0), &mut log);
+    p.on_index_capture(
+        1,
+        IndexCapture {
+            raw: 3,
+            overcapture: true,
+            queue_lost: 2,
+        },
+        &mut log,
+    );
+    let r = raw(1, 0, 0);
+    record(&mut p, &r, &mut log);
+    assert_eq!(p.live(&r, 0).index_lost, [0, 3]);
+    assert_eq!(p.heartbeat(&r, &inputs(p_store())).index_lost, 3);
+}
+
+fn p_store() -> StoreState {
+    StoreState {
+        source: SettingsSource::Defaults,
+        dirty: false,
+    }
+}
+
+/// USART_SR (RM0368 sec. 19.6.1): what each flag does to the counters and the byte.
+#[test]
+fn uart_status_flags_table() {
+    use odo_core::unit::rx_errors::{SR_FE, SR_NF, SR_ORE, SR_PE, SR_RXNE};
+    let mut e = RxErrors::default();
+    for (sr, want) in [
+        (0, RxByte::None),
+        (SR_FE, RxByte::None), // no byte: nothing counted
+        (SR_RXNE, RxByte::Keep),
+        (SR_RXNE | SR_NF, RxByte::Keep),
+        (SR_RXNE | SR_FE, RxByte::Drop),
+        (SR_RXNE | SR_PE, RxByte::Drop),
+        (SR_ORE, RxByte::Keep),
+        (SR_RXNE | SR_ORE | SR_FE, RxByte::Drop),
+    ] {
+        assert_eq!(e.on_status(sr), want, "{sr:#x}");
+    }
+    e.on_queue_full();
+    assert_eq!(
+        e,
+        RxErrors {
+            lost: 3,
+            overruns: 2,
+            framing: 2,
+            noise: 1,
+            parity: 1
+        }
+    );
+    assert_eq!(e.line_errors(), 4);
+}
+
+/// Issue 19, item 3: a sample lost to a full queue does not lose its PPS edge: the edge goes
+/// back into the latch and travels with the next sample (a later glitch does not hide it).
+#[test]
+fn a_dropped_sample_gives_its_pps_edge_to_the_next() {
+    let mut latch = PpsLatch::new();
+    latch.on_interrupt(
+        Some((
+            1000,
+            PpsEvent::Accepted {
+                second: 3,
+                phase_error: 2,
+            },
+        )),
+        true,
+    );
+    let (pps, over) = latch.take();
+    let mut lost = raw(1, 0, 0);
+    lost.pps = pps;
+    lost.pps_overcapture = over;
+    // The queue was full: put back, then a glitch comes before the next sample.
+    latch.put_back(&lost);
+    latch.on_interrupt(Some((1500, PpsEvent::Glitch)), false);
+    let (pps, over) = latch.take();
+    assert_eq!(
+        pps,
+        Some((
+            1000,
+            PpsEvent::Accepted {
+                second: 3,
+                phase_error: 2
+            }
+        ))
+    );
+    assert!(over);
+    assert_eq!(latch.take(), (None, false));
 }

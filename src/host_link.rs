@@ -34,6 +34,21 @@ pub fn send(link: &mut impl Mutex<T = Link>, msg: &Message, reserve: usize) -> b
     }
 }
 
+/// Queues `msg` as the next frame before the tasks run (in `init`: no lock); false when it
+/// did not fit.
+pub fn queue_now(link: &mut Link, msg: &Message) -> bool {
+    let mut buf = [0u8; protocol::MAX_ENCODED_FRAME];
+    let seq = link.next_seq();
+    let Ok(n) = protocol::encode_frame(msg, seq, &mut buf) else {
+        return false;
+    };
+    let queued = link.queue(seq, &buf[..n], 0) == Queued::Queued;
+    if queued {
+        rtic::pend(Interrupt::USART2);
+    }
+    queued
+}
+
 /// Sends a reply frame, waiting for room (only the command task, the lowest priority,
 /// waits; the ring drains in the USART2 interrupt meanwhile).
 pub fn send_blocking(link: &mut impl Mutex<T = Link>, msg: &Message) {

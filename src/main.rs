@@ -47,17 +47,16 @@ mod app {
         serial::{GnssUart, HostUart, RxErrors},
         Acquisition, GnssRx, Led,
     };
-    use crate::host_link::{send, send_blocking, Link, RECORD_RESERVE};
+    use crate::host_link::{queue_now, send, send_blocking, Link, RECORD_RESERVE};
     use heapless::spsc::{Consumer, Producer, Queue};
     use odo_core::protocol::{CommandReply, Message};
     use odo_core::settings::store::SettingsStore;
     use odo_core::timing::{DisciplineConfig, SyncState};
     use odo_core::unit::{
-        self, Commands, Effect, IndexCapture, Live, PpsLatch, Processor, RawSample, Requests,
-        StoreState,
+        self, Commands, Effect, HeartbeatInputs, IndexCapture, Live, PpsLatch, Processor,
+        RawSample, Requests, StoreState,
     };
     use stm32f4xx_hal::pac::Interrupt;
-    use stm32f4xx_hal::prelude::*;
     use stm32f4xx_hal::watchdog::IndependentWatchdog;
 
     #[shared]
@@ -107,11 +106,9 @@ mod app {
         let mut core = cx.core;
         board::start_cycle_counter(&mut core);
         // The watchdog first (it runs from the LSI): nothing after this can hang for good.
-        let mut watchdog = IndependentWatchdog::new(dp.IWDG);
-        watchdog.stop_on_debug(&dp.DBGMCU, true);
-        watchdog.start(board::WATCHDOG_MS.millis());
-        let (mut rcc, clock) = board::start_clocks(dp.RCC);
-        let clocks = rcc.clocks;
+        let watchdog = board::start_watchdog(dp.IWDG, &dp.DBGMCU);
+        let reset_cause = board::take_reset_cause(&dp.RCC);
+        let (mut rcc, clock, clocks) = board::start_clocks(dp.RCC);
         let timer_hz = board::timer_hz(&clocks);
 
         let pins = board::pins(dp.GPIOA, dp.GPIOB, dp.GPIOC, &mut rcc);
@@ -129,8 +126,8 @@ mod app {
 
         let mut acq = Acquisition::new(dp.TIM2, dp.TIM3, pins.faults, &mut rcc);
 
-        let host = HostUart::new(dp.USART2, &mut rcc, clocks.pclk1().raw(), settings.baud);
-        let gnss = GnssUart::new(dp.USART1, &mut rcc, clocks.pclk2().raw(), board::GNSS_BAUD);
+        let host = HostUart::new(dp.USART2, &mut rcc, clocks.pclk1, settings.baud);
+        let gnss = GnssUart::new(dp.USART1, &mut rcc, clocks.pclk2, board::GNSS_BAUD);
         // QEMU: PPS captures and NMEA bytes from the simulated receiver (board/qemu/gnss.rs).
         let (gnss, sampler_extra) = board::attach_gnss(gnss);
 
@@ -152,10 +149,15 @@ mod app {
         crate::log::booted(timer_hz, &cfg);
 
         let processor = Processor::new(&settings, timer_hz, board::COUNTER_BITS);
-        let commands = Commands::new(settings, loaded.source, store, timer_hz, clock);
+        let commands = Commands::new(settings, loaded.source, store, timer_hz, clock)
+            .with_stored(loaded.settings);
+        // DeviceInfo is the first frame (sequence 0): receivers see a restart by it.
+        let mut link = Link::new();
+        let info = commands.device_info(board::unique_id(), reset_cause);
+        queue_now(&mut link, &Message::DeviceInfo(info));
         let shared = Shared {
             acq,
-            link: Link::new(),
+            link,
             requests: Requests::default(),
             live: Live::default(),
             host_errors: RxErrors::default(),
@@ -242,25 +244,28 @@ mod app {
             pps_overcapture,
             queue_lost: *cx.local.lost,
         };
-        if cx.local.samples_in.enqueue(raw).is_err() {
+        if let Err(raw) = cx.local.samples_in.enqueue(raw) {
             *cx.local.lost = cx.local.lost.wrapping_add(1);
+            cx.local.pps.put_back(&raw);
         }
         rtic::pend(Interrupt::SPI2);
     }
 
     /// Left index pulse: TIM2 latched the left counter at the edge (CH3 capture).
-    #[task(binds = TIM2, priority = 4, local = [index_in_left], shared = [acq])]
+    #[task(binds = TIM2, priority = 4, local = [index_in_left, lost: u32 = 0], shared = [acq])]
     fn index_left(mut cx: index_left::Context) {
         if let Some(capture) = cx.shared.acq.lock(|acq| acq.take_index(0)) {
-            let _ = cx.local.index_in_left.enqueue(capture);
+            capture.queue(cx.local.lost, |c| cx.local.index_in_left.enqueue(c).is_ok());
         }
     }
 
     /// Right index pulse: TIM3 latched the right counter at the edge (CH4 capture).
-    #[task(binds = TIM3, priority = 4, local = [index_in_right], shared = [acq])]
+    #[task(binds = TIM3, priority = 4, local = [index_in_right, lost: u32 = 0], shared = [acq])]
     fn index_right(mut cx: index_right::Context) {
         if let Some(capture) = cx.shared.acq.lock(|acq| acq.take_index(1)) {
-            let _ = cx.local.index_in_right.enqueue(capture);
+            capture.queue(cx.local.lost, |c| {
+                cx.local.index_in_right.enqueue(c).is_ok()
+            });
         }
     }
 
@@ -272,7 +277,7 @@ mod app {
         cx.shared.gnss_errors.lock(|errors| {
             if let Some(byte) = gnss.on_interrupt(errors) {
                 if gnss_in.enqueue(byte).is_err() {
-                    errors.lost = errors.lost.wrapping_add(1);
+                    errors.on_queue_full();
                 }
                 if byte == b'\n' {
                     rtic::pend(Interrupt::SPI2);
@@ -320,22 +325,21 @@ mod app {
             };
             cx.local.watchdog.feed();
             cx.local.led.set(raw.state == SyncState::Locked);
+            // The second's Status before its first record (it announces a rate switch);
+            // without room, tried again with the next sample.
+            if p.heartbeat_due() {
+                let inputs = HeartbeatInputs {
+                    store: cx.shared.store_state.lock(|s| *s),
+                    host: cx.shared.host_errors.lock(|e| *e),
+                    gnss: cx.shared.gnss_errors.lock(|e| *e),
+                    reset_cause: board::reset_cause(),
+                };
+                let status = Message::Status(p.heartbeat(&raw, &inputs));
+                p.status_sent(send(&mut cx.shared.link, &status, RECORD_RESERVE));
+            }
             if let Some(record) = record {
                 let sent = send(&mut cx.shared.link, &Message::Pose(record), RECORD_RESERVE);
                 p.sent(sent);
-            }
-            if p.heartbeat_due() {
-                let store = cx.shared.store_state.lock(|s| *s);
-                let rx_errors = cx.shared.host_errors.lock(|e| e.lost);
-                let gnss_lost = cx.shared.gnss_errors.lock(|e| e.lost);
-                let status = p.heartbeat(&raw, store, rx_errors, gnss_lost);
-                // Like a record: sent whole when there is room, else skipped (the next one
-                // follows a second later).
-                send(
-                    &mut cx.shared.link,
-                    &Message::Status(status),
-                    RECORD_RESERVE,
-                );
             }
             let spent = board::cycles().wrapping_sub(start);
             let live = p.live(&raw, spent);
@@ -360,7 +364,7 @@ mod app {
                     settings,
                     discipline,
                 } => {
-                    cx.shared.store_state.lock(|s| s.dirty = true);
+                    cx.shared.store_state.lock(|s| *s = c.store_state());
                     if cx.local.cfg_in.enqueue(discipline).is_err() {
                         defmt::warn!("sampler configuration queue full");
                     }
@@ -375,13 +379,13 @@ mod app {
                 Effect::ResetPose(pose) => cx.shared.requests.lock(|r| r.reset = Some(pose)),
                 Effect::Status => {
                     let live = cx.shared.live.lock(|l| *l);
-                    let rx_lost = cx.shared.host_errors.lock(|e| e.lost);
-                    let gnss_lost = cx.shared.gnss_errors.lock(|e| e.lost);
+                    let host = cx.shared.host_errors.lock(|e| *e);
+                    let gnss = cx.shared.gnss_errors.lock(|e| *e);
                     let board = board::report(c.clock_at_start());
-                    c.status(&mut reply, &live, rx_lost, gnss_lost, &board);
+                    c.status(&mut reply, &live, &host, &gnss, &board);
                 }
                 Effect::Version => {
-                    let info = c.version(&mut reply, board::unique_id());
+                    let info = c.version(&mut reply, board::unique_id(), board::reset_cause());
                     send_blocking(&mut cx.shared.link, &Message::DeviceInfo(info));
                 }
             }

@@ -110,6 +110,8 @@ pub struct UnitLink {
     pub seqs: Vec<u32>,
     /// DeviceInfo frames received.
     pub device_info: usize,
+    /// Every frame, in order.
+    pub frames: Vec<odo_core::protocol::Frame>,
 }
 
 impl UnitLink {
@@ -156,6 +158,7 @@ impl UnitLink {
             heartbeats: Vec::new(),
             seqs: Vec::new(),
             device_info: 0,
+            frames: Vec::new(),
         }
     }
 
@@ -175,6 +178,7 @@ impl UnitLink {
                     Message::DeviceInfo(_) => self.device_info += 1,
                     Message::Reply(_) => {}
                 }
+                self.frames.push((*f).clone());
                 *f
             }
             Ok(Event::Closed(stats)) => panic!("link closed by QEMU ({stats:?})"),

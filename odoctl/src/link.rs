@@ -13,7 +13,7 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
-use odo_core::protocol::{DecoderStats, Frame, FrameDecoder, Message, PoseRecord};
+use odo_core::protocol::{DecoderStats, Frame, FrameDecoder, Message, PoseRecord, Status};
 use odo_core::timing::SyncState;
 
 use crate::config as cfg;
@@ -79,8 +79,9 @@ impl StreamStats {
 /// Formats the link's health: frame counters of the decoder and record counters.
 pub fn health(d: &DecoderStats, s: &StreamStats) -> String {
     format!(
-        "frames {}, CRC errors {}, malformed {}, oversize {}, version errors {}, unknown types {}, frame sequence gaps {} ({} frames lost); records {}, record sequence gaps {}, dropped by the unit {}",
+        "frames {}, joined after {} bytes, CRC errors {}, malformed {}, oversize {}, version errors {}, unknown types {}, frame sequence gaps {} ({} frames lost); records {}, record sequence gaps {}, dropped by the unit {}",
         d.frames,
+        d.join_bytes,
         d.crc_errors,
         d.malformed,
         d.oversize,
@@ -292,9 +293,10 @@ pub const TABLE_HEADER: &str =
 fn describe(f: &Frame) -> Option<String> {
     match &f.message {
         Message::Status(s) => Some(format!(
-            "# status: uptime {:.1} s, rate {} Hz, sync {}, samples {}, dropped {}, samples lost {}, merged {}, PPS edges {} (rejected {}), rx errors {}, GNSS rx lost {}, settings {:?}{}",
+            "# status: uptime {:.1} s, rate {} Hz / output_divider {}, sync {}, samples {}, dropped {}, samples lost {}, merged {}, PPS edges {} (rejected {}), index lost {}, host rx lost {} (overruns {}, line errors {}), GNSS rx lost {} (overruns {}, line errors {}), reset cause {}, settings {:?}{}",
             s.uptime_us as f64 * 1e-6,
             s.rate_hz,
+            s.output_divider,
             sync_name(s.flags.sync),
             s.samples,
             s.dropped_total,
@@ -302,14 +304,24 @@ fn describe(f: &Frame) -> Option<String> {
             s.merged_samples,
             s.pps_edges,
             s.pps_rejected,
+            s.index_lost,
             s.rx_errors,
+            s.host_rx_overruns,
+            s.host_rx_line_errors,
             s.gnss_rx_lost,
+            s.gnss_rx_overruns,
+            s.gnss_rx_line_errors,
+            s.reset_cause.name(),
             s.settings_source,
             if s.settings_dirty { " (unsaved changes)" } else { "" }
         )),
         Message::DeviceInfo(d) => Some(format!(
-            "# device: firmware {}, protocol {}, settings {:?} checksum {:08x}",
-            d.firmware_version, d.protocol_version, d.settings_source, d.settings_checksum
+            "# device: firmware {}, protocol {}, started by {}, settings {:?} checksum {:08x}",
+            d.firmware_version,
+            d.protocol_version,
+            d.reset_cause.name(),
+            d.settings_source,
+            d.settings_checksum
         )),
         Message::Reply(r) => Some(format!("# reply: {}", r.text.trim_end())),
         Message::Pose(_) => None,
@@ -360,20 +372,33 @@ pub fn monitor(
     Ok(ExitCode::SUCCESS)
 }
 
-/// How `record` and `decode` fill the `t` column.
+/// How `record` and `decode` fill the `t` column: GNSS time when the first record carries
+/// it, else MCU time. The rate that turns a GNSS sample index into seconds follows the
+/// stream: the rate in use is in every Status, and the Status of a rate switch comes just
+/// before the first record at the new rate (docs/PROTOCOL.md, *Rate switch*), so a file
+/// may change rate anywhere.
 #[derive(Debug, Clone, Copy)]
 struct TimeBase {
-    /// Sample rate for GNSS time (Hz), when the records carry valid GNSS time.
-    gnss_rate: Option<f64>,
+    /// The records carry GNSS time.
+    gnss: bool,
+    /// Sample rate in use (Hz), from the latest Status (or `get rate` before the first).
+    rate: Option<f64>,
 }
 
 impl TimeBase {
     fn t(&self, r: &PoseRecord) -> f64 {
-        match self.gnss_rate {
-            Some(rate) if r.flags.time_valid => {
+        match self.rate {
+            Some(rate) if self.gnss && r.flags.time_valid => {
                 f64::from(r.gnss.tow_ms) * 1e-3 + f64::from(r.gnss.sample_in_second) / rate
             }
             _ => r.mcu_time_us as f64 * 1e-6,
+        }
+    }
+
+    /// A Status message: its rate applies to the records that follow it.
+    fn on_status(&mut self, s: &Status) {
+        if s.rate_hz > 0 {
+            self.rate = Some(f64::from(s.rate_hz));
         }
     }
 }
@@ -464,7 +489,7 @@ pub fn record(
     let mut s = Session::new(open(port, baud)?, raw)?;
     // The sample rate turns the GNSS time tag (second + sample index) into seconds.
     let (ok, text) = s.command("get rate", REPLY_TIMEOUT)?;
-    let rate = if ok { parse_rate(&text) } else { None };
+    let mut rate = if ok { parse_rate(&text) } else { None };
     let mut early = Vec::new();
     let mut started = !reset_pose;
     if reset_pose {
@@ -502,6 +527,13 @@ pub fn record(
                     ..
                 }) => r,
                 Some(f) => {
+                    if let Message::Status(st) = &f.message {
+                        match &mut writer {
+                            Some(w) => w.time.on_status(st),
+                            None if st.rate_hz > 0 => rate = Some(f64::from(st.rate_hz)),
+                            None => {}
+                        }
+                    }
                     if let Some(d) = describe(&f) {
                         eprintln!("{d}");
                     }
@@ -526,7 +558,8 @@ pub fn record(
             Some(w) => w,
             None => {
                 let time = TimeBase {
-                    gnss_rate: if r.flags.time_valid { rate } else { None },
+                    gnss: r.flags.time_valid,
+                    rate,
                 };
                 writer.insert(RecordWriter::new(file.take().expect("file once"), time)?)
             }
@@ -583,22 +616,24 @@ pub fn decode_bytes(bytes: &[u8], out: &mut dyn Write) -> Result<(u64, DecoderSt
         Message::Pose(r) => Some(r.flags.time_valid),
         _ => None,
     });
+    // Records before the first Status (a capture started mid-second) take its rate.
     let rate = frames.iter().find_map(|f| match &f.message {
         Message::Status(s) if s.rate_hz > 0 => Some(f64::from(s.rate_hz)),
         _ => None,
     });
     let time = TimeBase {
-        gnss_rate: if first_valid == Some(true) {
-            rate
-        } else {
-            None
-        },
+        gnss: first_valid == Some(true),
+        rate,
     };
     let mut w = RecordWriter::new(out, time)?;
     for f in &frames {
-        if let Message::Pose(r) = &f.message {
-            stats.on_record(r);
-            w.row(r)?;
+        match &f.message {
+            Message::Pose(r) => {
+                stats.on_record(r);
+                w.row(r)?;
+            }
+            Message::Status(st) => w.time.on_status(st),
+            _ => {}
         }
     }
     Ok((w.rows, decoder.stats(), stats))

@@ -314,9 +314,20 @@ struct CalibrateArgs {
     /// Stability study: sub-trajectory lengths in metres, e.g. `1,2,4,8`.
     #[arg(long, value_delimiter = ',')]
     windows: Vec<f64>,
-    /// Where the stability study's fits start.
-    #[arg(long, value_enum, default_value_t = WindowStart::Initial)]
+    /// Where the stability study's fits start: the whole-run estimate (`full`), or the
+    /// initial estimate as the paper did (`initial`).
+    #[arg(long, value_enum, default_value_t = WindowStart::Full)]
     window_start: WindowStart,
+    /// Estimate the per-angle wheel function (eqs 3-5): the first N harmonics (1..=3) of each
+    /// wheel, `left_cos1..N`, `left_sin1..N`, `right_...`, referenced to the index line, with
+    /// the geometry fit's result kept (its corrections refitted alongside as nuisances); needs
+    /// SAMPLES with the `left_index`, `right_index` columns.
+    #[arg(long, value_name = "N", default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=3))]
+    wheel_harmonics: u8,
+    /// Segment length of the wheel-function fit (m of reference path; each segment restarted
+    /// from the reference).
+    #[arg(long, default_value_t = odoctl::calib::HARMONICS_SEGMENT)]
+    harmonics_window: f64,
     /// Per-sub-trajectory estimates of the stability study to this CSV.
     #[arg(long)]
     windows_out: Option<PathBuf>,
@@ -524,6 +535,8 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                         polish: a.polish && !a.no_polish,
                         windows: a.windows,
                         window_start: a.window_start,
+                        wheel_harmonics: usize::from(a.wheel_harmonics),
+                        harmonics_window: a.harmonics_window,
                         quiet: a.quiet,
                     },
                 },

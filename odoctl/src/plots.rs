@@ -381,7 +381,8 @@ fn palette(i: usize) -> RGBColor {
 }
 
 /// The stability study: `windows_history.png` (estimates along the run per sub-trajectory
-/// length, Fig. 7) and `windows_histograms.png` (Fig. 8); returns their paths.
+/// length, Fig. 7) and `windows_histograms.png` (Fig. 8) of the accepted windows (failed
+/// ones are counted in the title, not drawn); returns their paths.
 pub fn window_figures(dir: &Path, est: &[WindowEstimate], full: [f64; 3]) -> Result<Vec<PathBuf>> {
     register_font()?;
     std::fs::create_dir_all(dir).map_err(|e| anyhow!("{}: {e}", dir.display()))?;
@@ -398,9 +399,13 @@ pub fn window_figures(dir: &Path, est: &[WindowEstimate], full: [f64; 3]) -> Res
     {
         let root = BitMapBackend::new(&path, (1100, 1000)).into_drawing_area();
         root.fill(&WHITE).map_err(pe)?;
-        let root = root
-            .titled("Estimates on consecutive sub-trajectories", (FAMILY, 24))
-            .map_err(pe)?;
+        let failed = est.len() - ok.len();
+        let title = if failed == 0 {
+            "Estimates on consecutive sub-trajectories".to_string()
+        } else {
+            format!("Estimates on consecutive sub-trajectories ({failed} failed windows not drawn)")
+        };
+        let root = root.titled(&title, (FAMILY, 24)).map_err(pe)?;
         let panels = root.split_evenly((3, 1));
         let (d0, d1) = range(est.iter().map(|e| e.start_dist), 0.02);
         for (p, area) in panels.iter().enumerate() {

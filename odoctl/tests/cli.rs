@@ -89,6 +89,14 @@ fn simulate_calibrate_validate_with_plots() {
     }
     let w = read(&d.join("w.csv"));
     assert!(w.lines().count() >= 8, "{w}");
+    assert!(w.lines().next().unwrap().ends_with(",status,reason"), "{w}");
+    // Every row is ok or failed with its reason.
+    for row in w.lines().skip(1) {
+        assert!(
+            row.ends_with(",ok,") || (row.contains(",failed,") && !row.ends_with(",failed,")),
+            "{row}"
+        );
+    }
     for f in [
         "calibrate_trajectory",
         "calibrate_horizontal_error",
@@ -342,4 +350,97 @@ fn a_replay_from_the_reported_fit_start_reproduces_the_reported_eq16_cost() {
         (sum - cost).abs() <= 1e-9 * cost,
         "replay from the [fit] start: eq (16) {sum} against the reported {cost}"
     );
+}
+
+/// `simulate` with an eccentric left wheel (its truth's `left_cos1`), `calibrate
+/// --wheel-harmonics 1`: the coefficients and their standard errors in the output TOML,
+/// under the shared keys that `config push` sends.
+#[test]
+fn wheel_harmonics_reach_the_output_and_config_push() {
+    let d = scratch("cli_harmonics");
+    let (sm, rf, cal) = (d.join("s.csv"), d.join("r.csv"), d.join("cal.toml"));
+    let o = odoctl(&[
+        "simulate",
+        "--samples",
+        s(&sm),
+        "--reference",
+        s(&rf),
+        "--path",
+        "random",
+        "--length",
+        "200",
+        "--rtk-sigma",
+        "0.001",
+        "--set",
+        "left_cos1=0.003",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = odoctl(&[
+        "calibrate",
+        "--samples",
+        s(&sm),
+        "--reference",
+        s(&rf),
+        "--wheel-harmonics",
+        "1",
+        "--no-delta",
+        "--out",
+        s(&cal),
+        "--quiet",
+    ]);
+    let out = success_stdout(&o);
+    assert!(
+        out.contains("wheel function: 1 harmonic(s) per wheel"),
+        "{out}"
+    );
+    let p = odoctl::config::read_params(&cal, odo_core::odometry::ChassisParams::DESIGNED).unwrap();
+    assert!((p.left_wheel.cos[0] - 0.003).abs() < 3e-4, "{out}");
+    assert!(p.right_wheel.cos[0].abs() < 3e-4, "{out}");
+    let text = read(&cal);
+    for key in [
+        "left_cos1 =",
+        "left_sin1 =",
+        "right_cos1 =",
+        "right_sin1 =",
+        "left_cos1_se =",
+        "wheel_harmonics = 1",
+    ] {
+        assert!(text.contains(key), "{key} missing in\n{text}");
+    }
+    let lines = odoctl::config::push_lines(&cal).unwrap().join(" ");
+    for key in ["left_cos1 ", "left_sin1 ", "right_cos1 ", "right_sin1 "] {
+        assert!(lines.contains(key), "{key} not pushed: {lines}");
+    }
+    // A run without index latches is refused with the reason.
+    let csv = read(&sm);
+    let header = csv.lines().next().unwrap().to_string();
+    let keep: Vec<usize> = header
+        .split(',')
+        .enumerate()
+        .filter(|(_, c)| !c.ends_with("_index"))
+        .map(|(i, _)| i)
+        .collect();
+    let stripped: String = csv
+        .lines()
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            keep.iter().map(|&i| f[i]).collect::<Vec<_>>().join(",") + "\n"
+        })
+        .collect();
+    let bare = d.join("bare.csv");
+    std::fs::write(&bare, stripped).unwrap();
+    let o = odoctl(&[
+        "calibrate",
+        "--samples",
+        s(&bare),
+        "--reference",
+        s(&rf),
+        "--wheel-harmonics",
+        "1",
+        "--no-delta",
+        "--quiet",
+    ]);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("index latches"), "{err}");
 }

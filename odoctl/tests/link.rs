@@ -215,6 +215,95 @@ fn record_and_monitor_against_a_unit_on_tcp() {
     unit.join().unwrap();
 }
 
+/// Issue 19, item 12: a capture whose rate changes inside it (50 Hz, then 10 Hz from a whole
+/// second, announced by a Status and the rate switch flag). `decode` turns each record's GNSS
+/// sample index into seconds with the rate in use at that record, so the `t` column
+/// stays exact and increasing across the switch, and `replay` integrates the file (it uses
+/// the counts of each row, whatever the time step) bit for bit.
+#[test]
+fn decode_and_replay_follow_a_rate_change_inside_a_capture() {
+    use odo_core::protocol::{GnssTime, Status};
+    use odo_core::timing::SyncState;
+    let d = scratch("link_rate_change");
+    let sim = common::sim(PathKind::Validation, 15.0, 11);
+    let params = common::truth();
+    // 4 s at 50 Hz, then every 5th simulated sample: 10 Hz.
+    let k = 200;
+    let used: Vec<_> = sim.samples[..k]
+        .iter()
+        .chain(sim.samples[k..].iter().step_by(5))
+        .cloned()
+        .collect();
+    let mut recs = common::records(&params, &used);
+    let tow0 = 345_600_000u32;
+    let status = |rate_hz: u32, div: u32| {
+        Message::Status(Status {
+            rate_hz,
+            output_divider: div,
+            ..Default::default()
+        })
+    };
+    let mut msgs = vec![status(50, 1)];
+    for (i, r) in recs.iter_mut().enumerate() {
+        let (second, index, rate) = if i < k {
+            (i / 50, i % 50, 50)
+        } else {
+            (k / 50 + (i - k) / 10, (i - k) % 10, 10)
+        };
+        r.flags.sync = SyncState::Locked;
+        r.flags.time_valid = true;
+        r.flags.rate_switch = i == k;
+        r.gnss = GnssTime {
+            week: 2400,
+            tow_ms: tow0 + 1000 * second as u32,
+            sample_in_second: index as u16,
+        };
+        if index == 0 && i > 0 {
+            msgs.push(status(rate, 1));
+        }
+        msgs.push(Message::Pose(*r));
+    }
+    let raw = d.join("capture.bin");
+    std::fs::write(&raw, common::encode(msgs)).unwrap();
+    let csv = d.join("rec.csv");
+    let o = odoctl(&["decode", s(&raw), "--out", s(&csv)]);
+    let err = String::from_utf8_lossy(&o.stderr).to_string();
+    assert!(o.status.success(), "{err}");
+    assert!(!err.contains("skipped"), "{err}");
+    let text = read(&csv);
+    let t: Vec<f64> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').next().unwrap().parse().unwrap())
+        .collect();
+    assert_eq!(t.len(), recs.len(), "every record is a row");
+    for (i, t) in t.iter().enumerate() {
+        let want = f64::from(tow0) * 1e-3
+            + if i < k {
+                i as f64 * 0.02
+            } else {
+                k as f64 * 0.02 + (i - k) as f64 * 0.1
+            };
+        assert!((t - want).abs() < 1e-9, "row {i}: t = {t}, want {want}");
+    }
+    let cfg = d.join("unit.toml");
+    std::fs::write(&cfg, odoctl::config::render_params(&params, "unit", &[])).unwrap();
+    let o = odoctl(&[
+        "replay",
+        s(&csv),
+        "--config",
+        s(&cfg),
+        "--check",
+        "--out",
+        s(&d.join("replay.csv")),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        o.status.success() && err.contains("match the unit's records bit for bit"),
+        "{err}"
+    );
+}
+
 /// `config pull` writes the unit's settings as TOML that `config push` sends back whole.
 #[test]
 fn config_pull_writes_what_push_sends_back() {

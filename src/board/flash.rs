@@ -6,7 +6,7 @@
 //! 3 guarantees (option bytes, BOR_LEV = 00). The driver reads BOR_LEV at each operation and
 //! falls back to x8, valid down to 1.8 V, on any lower level: slower, never out of spec.
 //! A 16 KiB sector erase takes 250 ms typical, 500 ms max at x32 (400 / 800 ms at x8;
-//! datasheet DS9716, table "Flash memory programming"): [`MAX_ERASE_MS`].
+//! datasheet DS10086, table "Flash memory programming"): [`MAX_ERASE_MS`].
 //!
 //! The F401 has one flash bank, so the CPU stalls on every flash read (instructions, the
 //! vector table) while an erase runs: no interrupt is served until it ends. The hardware

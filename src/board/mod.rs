@@ -10,7 +10,7 @@
 //! | left encoder fault           | GPIO in, pull-up      | PC2  | -  | active low |
 //! | right encoder fault          | GPIO in, pull-up      | PC3  | -  | active low |
 //! | GNSS 1-PPS                   | TIM5 CH1 input capture | PA0 | 2  | rising edge, pull-down, filtered; TIM5 also times the samples |
-//! | GNSS NMEA (receiver TX)      | USART1 RX             | PA10 | 7  | [`GNSS_BAUD`] 8N1, RS-232 level shifter |
+//! | GNSS NMEA (receiver TX)      | USART1 RX             | PA10 | 7  | [`GNSS_BAUD`] 8N1, RS-232 level shifter, pull-up |
 //! | host link TX / RX            | USART2 TX / RX        | PA2 / PA3 | 7 | Nucleo ST-LINK virtual COM port; QEMU `-serial` #2 |
 //! | status LED                   | GPIO out              | PA5  | -  | on = PPS locked (Nucleo LD2) |
 //!
@@ -43,11 +43,22 @@ pub use variant::{
 
 use stm32f4xx_hal::pac;
 
+/// The bus clocks the peripherals run at, Hz.
+#[derive(Debug, Clone, Copy)]
+pub struct BusClocks {
+    /// APB1 (USART2).
+    pub pclk1: u32,
+    /// APB2 (USART1).
+    pub pclk2: u32,
+    /// The APB1 timers (TIM2-5).
+    pub timer: u32,
+}
+
 /// Baud rate of the GNSS receiver's NMEA output (USART1).
 pub const GNSS_BAUD: u32 = 38_400;
 
 /// Watchdog timeout, milliseconds, at the LSI's nominal 32 kHz. The LSI runs anywhere
-/// from 17 to 47 kHz (datasheet DS9716), so the real timeout lies between 2.7 s and 7.5 s:
+/// from 17 to 47 kHz (datasheet DS10086), so the real timeout lies between 2.7 s and 7.5 s:
 /// the shortest is 3.4x the longest flash stall ([`flash::MAX_ERASE_MS`], 800 ms), before
 /// which the flash driver feeds the watchdog.
 pub const WATCHDOG_MS: u32 = 4_000;
@@ -57,7 +68,45 @@ pub const WATCHDOG_MIN_MS: u32 = WATCHDOG_MS * 32 / 47;
 
 const _: () = assert!(WATCHDOG_MIN_MS > 3 * flash::MAX_ERASE_MS);
 
+use odo_core::protocol::{reset_cause::RCC_CSR_RMVF, ResetCause};
 pub use odo_core::timing::ClockSource;
+
+/// The watchdog stops while a debugger halts the core (DBGMCU_APB1_FZ DBG_IWDG_STOP), so
+/// that a debug session is not reset; the `watchdog-in-debug` feature keeps it running,
+/// for the watchdog bring-up check (docs/HARDWARE.md).
+pub const WATCHDOG_STOPS_IN_DEBUG: bool = !cfg!(feature = "watchdog-in-debug");
+
+/// Starts the independent watchdog ([`WATCHDOG_MS`]; stopped while halted by a debugger
+/// unless the `watchdog-in-debug` feature is on).
+pub fn start_watchdog(
+    iwdg: pac::IWDG,
+    dbgmcu: &pac::DBGMCU,
+) -> stm32f4xx_hal::watchdog::IndependentWatchdog {
+    use stm32f4xx_hal::prelude::*;
+    let mut watchdog = stm32f4xx_hal::watchdog::IndependentWatchdog::new(iwdg);
+    watchdog.stop_on_debug(dbgmcu, WATCHDOG_STOPS_IN_DEBUG);
+    watchdog.start(WATCHDOG_MS.millis());
+    watchdog
+}
+
+/// Why the MCU last started, read from RCC_CSR once at start.
+static RESET_CAUSE: core::sync::atomic::AtomicU8 = core::sync::atomic::AtomicU8::new(0);
+
+/// Reads why the MCU started (RCC_CSR, [`ResetCause::from_rcc_csr`]) and clears the flags,
+/// so that the next start sees only its own cause; once, at start.
+pub fn take_reset_cause(rcc: &pac::RCC) -> ResetCause {
+    let cause = ResetCause::from_rcc_csr(rcc.csr().read().bits());
+    // Note(unsafe): RCC_CSR RMVF (bit 24) clears the reset flags; LSION is kept.
+    rcc.csr()
+        .modify(|r, w| unsafe { w.bits(r.bits() | RCC_CSR_RMVF) });
+    RESET_CAUSE.store(cause.code(), core::sync::atomic::Ordering::Relaxed);
+    cause
+}
+
+/// Why the MCU last started ([`take_reset_cause`]).
+pub fn reset_cause() -> ResetCause {
+    ResetCause::from_code(RESET_CAUSE.load(core::sync::atomic::Ordering::Relaxed))
+}
 
 /// Set by the clock security system's NMI when the HSE failed after start-up.
 pub(crate) static HSE_FAILED: core::sync::atomic::AtomicBool =
@@ -79,6 +128,7 @@ pub fn report(at_start: ClockSource) -> odo_core::unit::BoardReport {
         clock: clock_source(at_start),
         stack: stack::high_water(),
         cycles_unit: CYCLES_UNIT,
+        reset_cause: reset_cause(),
     }
 }
 
@@ -115,8 +165,9 @@ pub fn pins(
     // or line-driver outputs both work).
     let _ = b.pb10.into_alternate::<1>().internal_pull_up(true);
     let _ = b.pb1.into_alternate::<2>().internal_pull_up(true);
-    // USART1 RX (GNSS), USART2 TX/RX (host), AF7.
-    let _ = a.pa10.into_alternate::<7>();
+    // USART1 RX (GNSS), pulled up: an unplugged receiver (or its RS-232 transceiver
+    // without power) reads as an idle line, not noise. USART2 TX/RX (host), AF7.
+    let _ = a.pa10.into_alternate::<7>().internal_pull_up(true);
     let _ = a.pa2.into_alternate::<7>();
     let _ = a.pa3.into_alternate::<7>();
     Pins {

@@ -13,11 +13,13 @@
 //! the counts (the encoder timers keep counting), the time labels stay those of the grid, the GNSS
 //! seconds stay right, and the next compare goes on the first future grid point. A compare value
 //! that the counter passed while it was being written is caught by reading the counter back and
-//! forcing the compare event (EGR CC2G).
+//! forcing the compare event (EGR CC2G). The handler's reads, their order (flags before the
+//! counter, so that a compare firing between them is not lost) and its decisions are
+//! [`odo_core::timing::compare`], host-tested on a simulated timer.
 //!
 //! The PPS capture (CH1, rising edge, input filter [`PPS_FILTER`]) latches the counter at
 //! the edge; a second edge before the interrupt reads it sets the over-capture flag (one
-//! edge lost, reported). Its interrupt is enabled only in `pps` mode.
+//! edge lost, reported). The capture and its interrupt are enabled only in `pps` mode.
 //!
 //! QEMU models neither output compare nor input capture: in the `qemu` build the compare is
 //! emulated by the update event (the counter restarts at each sample and ARR, which QEMU
@@ -30,14 +32,11 @@
 
 use super::variant::sampler::Timeline;
 use super::SamplerExtra;
-use odo_core::timing::{
-    catch_up, ConfigError, Discipline, DisciplineConfig, PpsEvent, Sample, SyncMode,
-};
+use odo_core::timing::{ConfigError, Discipline, DisciplineConfig, Sample, SyncMode};
 use stm32f4xx_hal::pac;
 use stm32f4xx_hal::rcc::Enable;
 
-/// DIER CC1IE: the PPS capture interrupt.
-const DIER_CC1IE: u32 = 1 << 1;
+pub use odo_core::timing::TimerEvent as Event;
 
 /// Input filter of the PPS input (IC1F = 0b0011: 8 consecutive samples at 84 MHz). It
 /// rejects pulses shorter than about 95 ns and delays the capture by as much, a constant
@@ -45,30 +44,11 @@ const DIER_CC1IE: u32 = 1 << 1;
 /// shifts the sample grid by under 0.12 us against GNSS time.
 pub const PPS_FILTER: u32 = 0b0011;
 
-/// What one TIM5 interrupt found.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct Event {
-    /// A sample instant passed: the sample (the latest grid point reached).
-    pub sample: Option<Sample>,
-    /// Grid points merged into `sample` because the interrupt ran late (a stall).
-    pub merged: u32,
-    /// Ticks from the sample's grid point to the interrupt's counter reading.
-    pub latency: u32,
-    /// A PPS edge was captured: its tick and what the discipline made of it.
-    pub pps: Option<(u64, PpsEvent)>,
-    /// A PPS edge was lost to an over-capture (two edges before the interrupt ran).
-    pub overcapture: bool,
-}
-
 /// TIM5 and the discipline.
 pub struct Sampler {
     pub(super) tim: pac::TIM5,
     pub(super) disc: Discipline,
-    /// The sample whose compare is programmed.
-    pub(super) next: Sample,
-    /// Ticks of lead the compare needs: points closer than this to `now` are merged.
-    pub(super) guard: u64,
-    /// The board variant's view of the timer ([`Timeline`]).
+    /// The board variant's view of the timer and the programmed sample ([`Timeline`]).
     pub(super) timeline: Timeline,
 }
 
@@ -84,60 +64,47 @@ impl Sampler {
         pac::TIM5::enable(rcc);
         let s0 = disc.next_sample(0);
         let s1 = disc.next_sample(0);
+        // Ticks of lead the compare needs: points closer than this to `now` are merged.
         let guard = u64::from(disc.config().timer_hz / 100_000).max(1);
         let pps = disc.config().mode == SyncMode::Pps;
         // Note(unsafe): raw register values from RM0368 sec. 13.4: PSC = 0; CR1 = URS (only
         // overflows raise the update flag); CCMR1 CC1S = 01 (IC1 on TI1) with IC1F, CC2S = 00
-        // with OC2M = 000 (frozen: the compare only sets CC2IF); CCER CC1E (rising edge).
+        // with OC2M = 000 (frozen: the compare only sets CC2IF); CCER CC1E (rising edge) in
+        // pps mode only.
         unsafe {
             tim.psc().write(|w| w.bits(0));
             tim.cr1().write(|w| w.bits(1 << 2));
             tim.ccmr1_input().write(|w| w.bits(0b01 | PPS_FILTER << 4));
-            tim.ccer().write(|w| w.bits(1));
+            tim.ccer().write(|w| w.bits(u32::from(pps)));
         }
-        let timeline = Timeline::program(&tim, s0, s1, extra);
+        let timeline = Timeline::program(&tim, s0, s1, guard, extra);
         // Note(unsafe): EGR UG (bit 0) zeroes the counter and loads PSC and ARR; then clear
         // all flags (SR is rc_w0), enable the interrupts and CR1 |= CEN.
         unsafe {
             tim.egr().write(|w| w.bits(1));
             tim.sr().write(|w| w.bits(0));
-            tim.dier()
-                .write(|w| w.bits(Timeline::DIER_SAMPLE | if pps { DIER_CC1IE } else { 0 }));
+            tim.dier().write(|w| {
+                w.bits(Timeline::DIER_SAMPLE | if pps { Timeline::DIER_CAPTURE } else { 0 })
+            });
             tim.cr1().modify(|r, w| w.bits(r.bits() | 1));
         }
         let sampler = Self {
             tim,
             disc,
-            next: s1,
-            guard,
             timeline,
         };
         (sampler, s0)
     }
 
-    /// The compare of `self.next` fired and the counter read `now`: labels the sample and
-    /// picks the next grid point.
-    pub(super) fn sample_due(&mut self, now: u64, event: &mut Event) {
-        let c = catch_up(&mut self.disc, self.next, now, self.guard);
-        self.next = c.next;
-        event.sample = Some(c.sample);
-        event.merged = c.merged;
-        event.latency = u32::try_from(now - c.sample.tick).unwrap_or(u32::MAX);
-    }
-
     /// Changes the discipline's configuration (mode at once, rate from the next second);
-    /// the PPS capture interrupt is on in `pps` mode only.
+    /// the PPS capture and its interrupt are on in `pps` mode only.
     pub fn set_config(&mut self, cfg: DisciplineConfig) -> Result<(), ConfigError> {
+        let was_pps = self.disc.config().mode == SyncMode::Pps;
         self.disc.set_config(cfg)?;
         let pps = cfg.mode == SyncMode::Pps;
-        // Note(unsafe): DIER CC1IE (bit 1) on or off; the compare/update enable is kept.
-        self.tim.dier().modify(|r, w| unsafe {
-            w.bits(if pps {
-                r.bits() | DIER_CC1IE
-            } else {
-                r.bits() & !DIER_CC1IE
-            })
-        });
+        if pps != was_pps {
+            self.set_capture(pps);
+        }
         Ok(())
     }
 

@@ -13,11 +13,11 @@
 
 use heapless::spsc::Producer;
 use odo_core::protocol::TxRing;
+use odo_core::unit::RxByte;
+pub use odo_core::unit::RxErrors;
 use stm32f4xx_hal::pac;
 use stm32f4xx_hal::rcc::Enable;
 
-const SR_ORE: u16 = 1 << 3;
-const SR_RXNE: u16 = 1 << 5;
 const SR_TXE: u16 = 1 << 7;
 const CR1_RE: u16 = 1 << 2;
 const CR1_TE: u16 = 1 << 3;
@@ -33,13 +33,6 @@ fn brr(pclk: u32, baud: u32) -> u16 {
 /// The host link, USART2.
 pub struct HostUart {
     usart: pac::USART2,
-}
-
-/// Receive errors counted by the UART interrupts.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct RxErrors {
-    /// Bytes lost to overrun or a full queue.
-    pub lost: u32,
 }
 
 impl HostUart {
@@ -65,15 +58,13 @@ impl HostUart {
         errors: &mut RxErrors,
     ) -> bool {
         let sr = self.usart.sr().read().bits();
-        let received = sr & (SR_RXNE | SR_ORE) != 0;
+        let status = errors.on_status(sr);
+        let received = status != RxByte::None;
         if received {
-            // Reading DR after SR clears RXNE and ORE.
+            // Reading DR after SR clears RXNE, ORE, NF, FE and PE.
             let byte = self.usart.dr().read().bits() as u8;
-            if sr & SR_ORE != 0 {
-                errors.lost = errors.lost.wrapping_add(1);
-            }
-            if rx.enqueue(byte).is_err() {
-                errors.lost = errors.lost.wrapping_add(1);
+            if status == RxByte::Keep && rx.enqueue(byte).is_err() {
+                errors.on_queue_full();
             }
         }
         while self.usart.sr().read().bits() & SR_TXE != 0 {
@@ -119,16 +110,15 @@ impl GnssUart {
         Self { usart }
     }
 
-    /// The USART1 interrupt: the received byte, if any (overruns counted in `errors`).
+    /// The USART1 interrupt: the received byte, if any and good (errors counted in
+    /// `errors`).
     pub fn on_interrupt(&mut self, errors: &mut RxErrors) -> Option<u8> {
-        let sr = self.usart.sr().read().bits();
-        if sr & (SR_RXNE | SR_ORE) == 0 {
+        let status = errors.on_status(self.usart.sr().read().bits());
+        if status == RxByte::None {
             return None;
         }
+        // Reading DR after SR clears RXNE, ORE, NF, FE and PE.
         let byte = self.usart.dr().read().bits() as u8;
-        if sr & SR_ORE != 0 {
-            errors.lost = errors.lost.wrapping_add(1);
-        }
-        Some(byte)
+        (status == RxByte::Keep).then_some(byte)
     }
 }

@@ -22,16 +22,24 @@ pub struct DecoderStats {
     /// Frames missing according to the sequence numbers (jumps forward by less than 2^31;
     /// larger jumps, such as a restart of the unit, count as a gap only).
     pub frames_lost: u32,
+    /// Bytes before the first delimiter after [`FrameDecoder::new`] or
+    /// [`FrameDecoder::reset`] that did not decode as a frame: the tail of a frame that was
+    /// under way when the receiver joined the stream (not an error of the link).
+    pub join_bytes: u32,
 }
 
 /// Streaming decoder: feed it the received bytes in any chunking; it returns each frame as
-/// its delimiter arrives. After garbage or a corrupted frame it resynchronises at the next
-/// 0x00. Memory is fixed: one buffer of [`MAX_WIRE_FRAME`] bytes.
+/// its delimiter arrives. The run before the first 0x00 is decoded like any other, but if it
+/// fails it is the tail of a frame that was under way when the receiver joined the stream:
+/// discarded and counted in [`DecoderStats::join_bytes`], not as an error. After garbage or a corrupted frame it resynchronises at the
+/// next 0x00. Memory is fixed: one buffer of [`MAX_WIRE_FRAME`] bytes.
 #[derive(Debug, Clone)]
 pub struct FrameDecoder {
     buf: [u8; MAX_WIRE_FRAME],
     len: usize,
     overflow: bool,
+    /// A delimiter has been seen since `new`/`reset`.
+    joined: bool,
     last_seq: Option<u32>,
     stats: DecoderStats,
 }
@@ -49,6 +57,7 @@ impl FrameDecoder {
             buf: [0; MAX_WIRE_FRAME],
             len: 0,
             overflow: false,
+            joined: false,
             last_seq: None,
             stats: DecoderStats {
                 frames: 0,
@@ -59,6 +68,7 @@ impl FrameDecoder {
                 unknown_type: 0,
                 seq_gaps: 0,
                 frames_lost: 0,
+                join_bytes: 0,
             },
         }
     }
@@ -68,10 +78,12 @@ impl FrameDecoder {
         self.stats
     }
 
-    /// Forgets any partial frame and the last sequence number (counters are kept).
+    /// Forgets any partial frame and the last sequence number, and joins the stream anew at
+    /// the next delimiter (counters are kept).
     pub fn reset(&mut self) {
         self.len = 0;
         self.overflow = false;
+        self.joined = false;
         self.last_seq = None;
     }
 
@@ -84,11 +96,19 @@ impl FrameDecoder {
                 self.len += 1;
             } else {
                 self.overflow = true;
+                if !self.joined {
+                    self.stats.join_bytes = self.stats.join_bytes.wrapping_add(1);
+                }
             }
             return None;
         }
         let len = core::mem::replace(&mut self.len, 0);
+        let joining = !core::mem::replace(&mut self.joined, true);
         if core::mem::replace(&mut self.overflow, false) {
+            if joining {
+                self.stats.join_bytes = self.stats.join_bytes.wrapping_add(len as u32);
+                return None;
+            }
             self.stats.oversize = self.stats.oversize.wrapping_add(1);
             return Some(Err(DecodeError::Oversize));
         }
@@ -96,6 +116,10 @@ impl FrameDecoder {
             return None;
         }
         let result = decode_frame(&mut self.buf[..len]);
+        if joining && result.is_err() {
+            self.stats.join_bytes = self.stats.join_bytes.wrapping_add(len as u32);
+            return None;
+        }
         match &result {
             Ok(frame) => {
                 self.stats.frames = self.stats.frames.wrapping_add(1);

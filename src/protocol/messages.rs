@@ -4,7 +4,7 @@
 //! longer than the layout it knows (fields appended by a later minor revision) and ignores the
 //! extra bytes; a shorter body is an error.
 
-use super::{DecodeError, EncodeError, MsgType};
+use super::{DecodeError, EncodeError, MsgType, ResetCause};
 use crate::bytes::{Reader, Writer};
 use crate::odometry::UncertaintyModel;
 use crate::settings::SettingsSource;
@@ -68,7 +68,8 @@ impl WheelStatus {
 ///
 /// Bits: 0-1 [`SyncState`] code; 2 time tag valid; 3-6 left wheel (fault, index seen, index
 /// mismatch, calibrated); 7-10 right wheel (same order); 11 uncertainty model (0 = paper,
-/// 1 = covariance); 12-31 reserved, sent as 0, ignored by readers.
+/// 1 = covariance); 12 rate switch; 13 late sample; 14-31 reserved, sent as 0, ignored by
+/// readers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct StatusFlags {
     /// Sample clock discipline.
@@ -81,11 +82,17 @@ pub struct StatusFlags {
     pub right: WheelStatus,
     /// Which uncertainty propagation filled the sigmas.
     pub model: UncertaintyModel,
+    /// The first record at a new `rate` or `output_divider` (announced by the Status sent
+    /// just before it); set once, in the next record sent.
+    pub rate_switch: bool,
+    /// The counters were read late (the sample interrupt ran after a stall): they belong to
+    /// an instant up to one sample period after the time label.
+    pub late: bool,
 }
 
 impl StatusFlags {
     /// Mask of the bits defined by this protocol version.
-    pub const DEFINED_BITS: u32 = 0x0FFF;
+    pub const DEFINED_BITS: u32 = 0x3FFF;
 
     /// The wire word.
     pub fn to_bits(&self) -> u32 {
@@ -94,6 +101,8 @@ impl StatusFlags {
             | self.left.bits() << 3
             | self.right.bits() << 7
             | (matches!(self.model, UncertaintyModel::Covariance) as u32) << 11
+            | (self.rate_switch as u32) << 12
+            | (self.late as u32) << 13
     }
 
     /// From the wire word; reserved bits are ignored, the reserved sync code 3 is an error.
@@ -108,6 +117,8 @@ impl StatusFlags {
             } else {
                 UncertaintyModel::Paper
             },
+            rate_switch: bits & (1 << 12) != 0,
+            late: bits & (1 << 13) != 0,
         })
     }
 }
@@ -287,13 +298,31 @@ pub struct Status {
     /// a flash erase stalled the CPU: periods whose counts were folded into the next sample
     /// (wrapping).
     pub merged_samples: u32,
+    /// Why the unit last started (in the byte that was reserved at offset 38).
+    pub reset_cause: ResetCause,
+    /// Every `output_divider`-th sample is sent as a record (with `rate_hz`: the
+    /// configuration of the records that follow).
+    pub output_divider: u32,
+    /// Index pulses lost since start, both wheels: over-captures (two pulses before the
+    /// interrupt) and a full queue to the processing task (wrapping).
+    pub index_lost: u32,
+    /// Host-link receive overruns since start: each lost at least one byte, a CPU stall
+    /// (flash erase) all bytes that arrived during it (wrapping).
+    pub host_rx_overruns: u32,
+    /// Host-link bytes received with a framing, noise or parity error (wrapping).
+    pub host_rx_line_errors: u32,
+    /// GNSS receiver UART overruns since start (as `host_rx_overruns`).
+    pub gnss_rx_overruns: u32,
+    /// GNSS receiver bytes with a framing, noise or parity error (wrapping).
+    pub gnss_rx_line_errors: u32,
 }
 
 impl Status {
     /// Body length in bytes. Version 1 of the protocol first had 40 bytes (up to
     /// `settings_dirty` and 2 reserved bytes); `samples_lost`, `gnss_rx_lost` and
-    /// `merged_samples` are appended.
-    pub const BODY_LEN: usize = 52;
+    /// `merged_samples` were appended (52), then `output_divider` and the index and UART
+    /// error counters (76); `reset_cause` took the reserved byte at 38.
+    pub const BODY_LEN: usize = 76;
 
     /// Writes the body into `out`; returns its length.
     pub fn write_body(&self, out: &mut [u8]) -> Result<usize, EncodeError> {
@@ -309,10 +338,17 @@ impl Status {
             w.u32(self.rx_errors)?;
             w.u8(settings_source_code(self.settings_source))?;
             w.u8(self.settings_dirty as u8)?;
-            w.u16(0)?;
+            w.u8(self.reset_cause.code())?;
+            w.u8(0)?;
             w.u32(self.samples_lost)?;
             w.u32(self.gnss_rx_lost)?;
-            w.u32(self.merged_samples)
+            w.u32(self.merged_samples)?;
+            w.u32(self.output_divider)?;
+            w.u32(self.index_lost)?;
+            w.u32(self.host_rx_overruns)?;
+            w.u32(self.host_rx_line_errors)?;
+            w.u32(self.gnss_rx_overruns)?;
+            w.u32(self.gnss_rx_line_errors)
         })()
         .map_err(|_| EncodeError::BufferTooSmall)?;
         Ok(w.pos())
@@ -341,10 +377,17 @@ impl Status {
             1 => true,
             _ => return Err(DecodeError::BadField("settings dirty")),
         };
-        r.u16().map_err(short)?;
+        let reset_cause = ResetCause::from_code(r.u8().map_err(short)?);
+        r.u8().map_err(short)?;
         let samples_lost = r.u32().map_err(short)?;
         let gnss_rx_lost = r.u32().map_err(short)?;
         let merged_samples = r.u32().map_err(short)?;
+        let mut u32s = [0u32; 6];
+        for v in &mut u32s {
+            *v = r.u32().map_err(short)?;
+        }
+        let [output_divider, index_lost, host_rx_overruns, host_rx_line_errors, gnss_rx_overruns, gnss_rx_line_errors] =
+            u32s;
         Ok(Self {
             uptime_us,
             flags,
@@ -359,6 +402,13 @@ impl Status {
             samples_lost,
             gnss_rx_lost,
             merged_samples,
+            reset_cause,
+            output_divider,
+            index_lost,
+            host_rx_overruns,
+            host_rx_line_errors,
+            gnss_rx_overruns,
+            gnss_rx_line_errors,
         })
     }
 }
@@ -374,6 +424,8 @@ pub struct DeviceInfo {
     pub protocol_version: u8,
     /// Where the settings in use came from.
     pub settings_source: SettingsSource,
+    /// Why the unit last started (in the byte that was reserved at offset 2).
+    pub reset_cause: ResetCause,
     /// CRC-32/ISO-HDLC of the settings in use, serialised (see `settings::Settings::checksum`).
     pub settings_checksum: u32,
     /// The MCU's 96-bit unique device ID (all zero if unknown).
@@ -392,7 +444,8 @@ impl DeviceInfo {
         (|| {
             w.u8(self.protocol_version)?;
             w.u8(settings_source_code(self.settings_source))?;
-            w.u16(0)?;
+            w.u8(self.reset_cause.code())?;
+            w.u8(0)?;
             w.u32(self.settings_checksum)?;
             w.bytes(&self.uid)?;
             w.u8(self.firmware_version.len() as u8)?;
@@ -408,7 +461,8 @@ impl DeviceInfo {
         let mut r = Reader::new(body);
         let protocol_version = r.u8().map_err(short)?;
         let settings_source = settings_source_from_code(r.u8().map_err(short)?)?;
-        r.u16().map_err(short)?;
+        let reset_cause = ResetCause::from_code(r.u8().map_err(short)?);
+        r.u8().map_err(short)?;
         let settings_checksum = r.u32().map_err(short)?;
         let mut uid = [0u8; 12];
         uid.copy_from_slice(r.bytes(12).map_err(short)?);
@@ -425,6 +479,7 @@ impl DeviceInfo {
         Ok(Self {
             protocol_version,
             settings_source,
+            reset_cause,
             settings_checksum,
             uid,
             firmware_version,

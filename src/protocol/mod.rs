@@ -12,6 +12,7 @@
 pub mod cobs;
 mod decoder;
 mod messages;
+pub mod reset_cause;
 pub mod tx_ring;
 
 pub use decoder::{DecoderStats, FrameDecoder};
@@ -19,6 +20,7 @@ pub use messages::{
     CommandReply, DeviceInfo, GnssTime, PoseRecord, ReplyChunks, Status, StatusFlags, WheelStatus,
     MAX_FIRMWARE_VERSION, MAX_REPLY_TEXT,
 };
+pub use reset_cause::ResetCause;
 pub use tx_ring::{Queued, TxLink, TxRing};
 
 /// Protocol version carried in every header. Bumped on any incompatible change; appending

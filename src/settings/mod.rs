@@ -203,11 +203,13 @@ impl Settings {
     }
 
     /// True when the counters survive a CPU stall of `stall_ms` milliseconds (a flash erase)
-    /// with the wheels at `max_wheel_speed`: the stall is shorter than
+    /// with the wheels at `max_wheel_speed`: the longest gap between two counter reads, one
+    /// sample period (`1 / rate`) plus the stall, is shorter than
     /// [`Self::max_unread_interval`]. The firmware refuses an erasing `save` while the
     /// wheels turn when this is false.
     pub fn survives_stall(&self, stall_ms: u32) -> bool {
-        self.max_unread_interval() * 1000.0 > f64::from(stall_ms)
+        let gap_ms = f64::from(stall_ms) + 1000.0 / f64::from(self.rate.max(1));
+        self.max_unread_interval() * 1000.0 > gap_ms
     }
 
     /// Checks every key's range and the relations between keys; names the offending key.

@@ -118,11 +118,19 @@ pub struct CatchUp {
 /// period (plus the latency) after its tick; the next one is on time again.
 ///
 /// If `due.tick > now` (not a late interrupt, a spurious or early one), `due` is still
-/// the `sample`. Allocation-free; O(number of passed grid points).
+/// the `sample`. Allocation-free; the points of a long stall are skipped at once
+/// ([`Discipline::skip_to`]: a few operations per second of stall), so the work does not
+/// grow with the rate (a 0.8 s stall at 1 kHz is not 800 iterations).
 pub fn catch_up(disc: &mut Discipline, due: Sample, now: u64, guard: u64) -> CatchUp {
     let limit = now.saturating_add(guard);
     let mut sample = due;
-    let mut merged: u32 = 0;
+    // Points of a long stall are skipped by arithmetic; an interrupt on time (within the
+    // guard) has none to skip, and pays nothing for it.
+    let mut merged: u32 = if now > due.tick.saturating_add(guard) {
+        disc.skip_to(now)
+    } else {
+        0
+    };
     loop {
         let next = disc.next_sample(now);
         if next.tick > limit {

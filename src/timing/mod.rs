@@ -7,16 +7,20 @@
 //!   each grid second.
 //! - [`clock`]: the free-running 32-bit sample timer: counter and capture extension to 64
 //!   bits, and the catch-up of the grid after a CPU stall.
+//! - [`compare`]: the sample timer's interrupt: the order of its reads, the compare and
+//!   re-arm decision, the PPS capture on and off.
 //!
 //! All of it is pure and host-tested (`host-tests/timing.rs`); the firmware feeds it timer
 //! captures and bytes.
 
 pub mod clock;
+pub mod compare;
 pub mod nmea;
 pub mod pps;
 pub mod tag;
 
 pub use clock::{catch_up, CatchUp, TimerExtender};
+pub use compare::{compare_action, CompareAction, CompareSchedule, CompareTimer, TimerEvent};
 pub use nmea::{GpsTime, LineBuffer, NmeaError, TimeMessage, UtcDateTime, GPS_UTC_LEAP_SECONDS};
 pub use pps::{
     resolve_capture, ClockSource, ConfigError, Discipline, DisciplineConfig, PpsEvent, PpsStats,

@@ -285,8 +285,8 @@ pub struct Discipline {
     /// The next sample to commit.
     cursor_second: u32,
     cursor_index: u32,
-    /// Tick of the last committed sample.
-    last_tick: Option<u64>,
+    /// Tick and rate of the last committed sample.
+    last_tick: Option<(u64, u32)>,
     /// Last accepted edge: tick and label.
     last_edge: Option<(u64, u32)>,
     /// Seconds lost since `last_edge` (holdover).
@@ -405,7 +405,8 @@ impl Discipline {
 
     /// Commits the next sample. `now` is the current tick (the driver's view of time; it
     /// must not decrease), used to notice lost PPS edges. Grid points closer than half a
-    /// sample period after the previous committed sample are skipped (only ever at lock).
+    /// sample period (of this sample and the previous one: they differ at a rate change) after the
+    /// previous committed sample are skipped (only ever at lock).
     pub fn next_sample(&mut self, now: u64) -> Sample {
         self.check_deadline(now);
         loop {
@@ -419,15 +420,17 @@ impl Discipline {
                 self.cursor_second = self.cursor_second.wrapping_add(1);
                 self.rate = self.cfg.rate_hz;
             }
-            let min_gap = self.period / (2 * u64::from(rate));
+            // Half the shorter of the two sample periods (the rates differ at a rate change).
+            let fastest = self.last_tick.map_or(rate, |(_, r)| r.max(rate));
+            let min_gap = self.period / (2 * u64::from(fastest));
             match self.last_tick {
-                Some(last) if tick < last + min_gap => {
+                Some((last, _)) if tick < last + min_gap => {
                     self.stats.skipped += 1;
                     continue;
                 }
                 _ => {}
             }
-            self.last_tick = Some(tick);
+            self.last_tick = Some((tick, rate));
             return Sample {
                 tick,
                 second,
@@ -435,6 +438,40 @@ impl Discipline {
                 rate,
                 state: self.state,
             };
+        }
+    }
+
+    /// Moves the cursor, without committing, to the latest grid point at or before `now`
+    /// (after noticing lost edges as [`Discipline::next_sample`] does), so that the next
+    /// [`Discipline::next_sample`] commits it; returns the grid points passed over. A few
+    /// integer operations per grid second crossed, whatever the rate: what [`catch_up`]
+    /// does after a stall instead of committing every point of it.
+    ///
+    /// [`catch_up`]: super::clock::catch_up
+    pub fn skip_to(&mut self, now: u64) -> u32 {
+        self.check_deadline(now);
+        let mut skipped: u32 = 0;
+        loop {
+            let start = self.second_start(self.cursor_second);
+            if now < start {
+                return skipped;
+            }
+            let rate = u64::from(self.rate);
+            if self.second_start(self.cursor_second.wrapping_add(1)) <= now {
+                // The rest of this second and the start of the next one have passed.
+                skipped = skipped.saturating_add(self.rate - self.cursor_index);
+                self.cursor_index = 0;
+                self.cursor_second = self.cursor_second.wrapping_add(1);
+                self.rate = self.cfg.rate_hz;
+                continue;
+            }
+            // The latest k with floor(k * period / rate) <= now - start.
+            let k = (((now - start + 1) * rate - 1) / self.period).min(rate - 1) as u32;
+            if k > self.cursor_index {
+                skipped = skipped.saturating_add(k - self.cursor_index);
+                self.cursor_index = k;
+            }
+            return skipped;
         }
     }
 

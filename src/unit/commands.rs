@@ -4,7 +4,7 @@
 use super::discipline_config;
 use crate::console::{self, Action, LineAssembler, Reply};
 use crate::odometry::Pose;
-use crate::protocol::{DeviceInfo, PROTOCOL_VERSION};
+use crate::protocol::{DeviceInfo, ResetCause, PROTOCOL_VERSION};
 use crate::settings::store::{Flash, SettingsStore};
 use crate::settings::{Settings, SettingsSource};
 use crate::timing::{ClockSource, DisciplineConfig};
@@ -20,8 +20,9 @@ pub trait StallingFlash: Flash {
 pub enum Effect {
     /// Nothing.
     None,
-    /// The working settings changed (and are now unsaved): the processing task takes
-    /// `settings`, the sampler `discipline`.
+    /// The working settings changed (see [`Commands::store_state`] for whether they now
+    /// differ from the stored ones): the processing task takes `settings`, the sampler
+    /// `discipline`.
     SettingsChanged {
         /// The new working settings.
         settings: Settings,
@@ -50,7 +51,9 @@ pub struct Commands<F> {
     settings: Settings,
     store: SettingsStore<F>,
     source: SettingsSource,
-    dirty: bool,
+    /// The settings a reset would start with: the stored record's, or the defaults when
+    /// none is stored.
+    stored: Settings,
     timer_hz: u32,
     /// The clock source found at start.
     clock: ClockSource,
@@ -66,15 +69,32 @@ impl<F: StallingFlash> Commands<F> {
         timer_hz: u32,
         clock: ClockSource,
     ) -> Self {
+        let stored = match source {
+            SettingsSource::Flash => settings,
+            SettingsSource::Defaults => Settings::DEFAULT,
+        };
         Self {
             assembler: LineAssembler::new(),
             settings,
             store,
             source,
-            dirty: false,
+            stored,
             timer_hz,
             clock,
         }
+    }
+
+    /// The settings loaded at start were `stored` (they differ from the working ones when
+    /// start-up replaced them, `unit::Start::settings_replaced`).
+    pub fn with_stored(mut self, stored: Settings) -> Self {
+        self.stored = stored;
+        self
+    }
+
+    /// The working settings differ from those the unit would start with after a reset
+    /// (the stored record's, or the defaults when none is stored): `save` is pending.
+    pub fn dirty(&self) -> bool {
+        self.settings != self.stored
     }
 
     /// The working settings.
@@ -92,11 +112,11 @@ impl<F: StallingFlash> Commands<F> {
         self.clock
     }
 
-    /// Where the settings came from and whether they are unsaved.
+    /// Where the settings came from and whether they differ from the stored ones.
     pub fn store_state(&self) -> super::StoreState {
         super::StoreState {
             source: self.source,
-            dirty: self.dirty,
+            dirty: self.dirty(),
         }
     }
 
@@ -126,13 +146,10 @@ impl<F: StallingFlash> Commands<F> {
     ) -> (Reply, Effect) {
         let effect = match action {
             Action::None => Effect::None,
-            Action::SettingsChanged => {
-                self.dirty = true;
-                Effect::SettingsChanged {
-                    settings: self.settings,
-                    discipline: discipline_config(&self.settings, self.timer_hz, clock()),
-                }
-            }
+            Action::SettingsChanged => Effect::SettingsChanged {
+                settings: self.settings,
+                discipline: discipline_config(&self.settings, self.timer_hz, clock()),
+            },
             Action::Save
                 if moving()
                     && !self
@@ -148,7 +165,7 @@ impl<F: StallingFlash> Commands<F> {
             }
             Action::Save => match self.store.save(&self.settings) {
                 Ok(generation) => {
-                    self.dirty = false;
+                    self.stored = self.settings;
                     self.source = SettingsSource::Flash;
                     reply.push_line(format_args!("saved (generation {generation})"));
                     Effect::Saved { generation }
@@ -166,16 +183,23 @@ impl<F: StallingFlash> Commands<F> {
     }
 
     /// `version`: the reply lines, and the device information frame for the unit with
-    /// unique ID `uid`.
-    pub fn version(&self, reply: &mut Reply, uid: [u8; 12]) -> DeviceInfo {
+    /// unique ID `uid`, last started by `reset_cause`.
+    pub fn version(&self, reply: &mut Reply, uid: [u8; 12], reset_cause: ResetCause) -> DeviceInfo {
         reply.push_line(format_args!(
             "firmware = odo-unit {}",
             env!("CARGO_PKG_VERSION")
         ));
         reply.push_line(format_args!("protocol = {PROTOCOL_VERSION}"));
+        self.device_info(uid, reset_cause)
+    }
+
+    /// The device information frame (sent at start and after `version`) for the unit with
+    /// unique ID `uid`, last started by `reset_cause`.
+    pub fn device_info(&self, uid: [u8; 12], reset_cause: ResetCause) -> DeviceInfo {
         let mut info = DeviceInfo {
             protocol_version: PROTOCOL_VERSION,
             settings_source: self.source,
+            reset_cause,
             settings_checksum: self.settings.checksum(),
             uid,
             firmware_version: heapless::String::new(),
@@ -184,26 +208,26 @@ impl<F: StallingFlash> Commands<F> {
         info
     }
 
-    /// `status`: the unit's counters (`live`, host and receiver bytes lost) and the
+    /// `status`: the unit's counters (`live`, the host and receiver UARTs' errors) and the
     /// board's figures (`board`).
     pub fn status(
         &self,
         reply: &mut Reply,
         live: &super::Live,
-        rx_lost: u32,
-        gnss_lost: u32,
+        host: &super::RxErrors,
+        gnss: &super::RxErrors,
         board: &super::BoardReport,
     ) {
         super::status::write(
             reply,
             &super::status::StatusInputs {
                 live,
-                rx_lost,
-                gnss_lost,
+                host,
+                gnss,
                 board,
                 timer_hz: self.timer_hz,
                 source: self.source,
-                dirty: self.dirty,
+                dirty: self.dirty(),
             },
         );
     }

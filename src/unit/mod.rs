@@ -5,6 +5,7 @@
 //! - [`processor`]: one sample to a pose record and the Status heartbeat ([`Processor`]).
 //! - [`commands`]: command lines to settings changes, saves, pose resets ([`Commands`]).
 //! - [`status`]: the text of the `status` command.
+//! - [`rx_errors`]: a UART's receive errors ([`RxErrors`]).
 //! - [`start`](mod@start): the settings and sampler configuration the unit starts with.
 //! - [`event`]: what the unit logs ([`Event`]).
 //!
@@ -14,13 +15,15 @@
 pub mod commands;
 pub mod event;
 pub mod processor;
+pub mod rx_errors;
 pub mod sample;
 pub mod start;
 pub mod status;
 
 pub use commands::{Commands, Effect, StallingFlash};
 pub use event::{Event, Log};
-pub use processor::{Live, Processor, Requests, StoreState};
+pub use processor::{HeartbeatInputs, Live, Processor, Requests, StoreState};
+pub use rx_errors::{RxByte, RxErrors};
 pub use sample::{IndexCapture, PpsLatch, RawCounts, RawSample};
 pub use start::{start, Start};
 pub use status::BoardReport;

@@ -2,6 +2,7 @@
 //! index-mismatch and motion accounting, the time tag and the Status heartbeat.
 
 use super::event::{Event, Log};
+use super::rx_errors::RxErrors;
 use super::sample::{IndexCapture, RawSample};
 use super::time_tag;
 use crate::odometry::index::DEFAULT_TOLERANCE;
@@ -9,9 +10,18 @@ use crate::odometry::{
     ChassisParams, CounterExtender, IndexCheck, IndexRefs, IndexTracker, Integrator, Pose,
     StepStatus, WheelCounts,
 };
-use crate::protocol::{GnssTime, PoseRecord, Status, StatusFlags, WheelStatus};
+use crate::protocol::{GnssTime, PoseRecord, ResetCause, Status, StatusFlags, WheelStatus};
 use crate::settings::{Settings, SettingsSource};
 use crate::timing::{LineBuffer, NmeaError, PpsEvent, PpsStats, SyncState, TimeTagger};
+
+/// Increments a wheel must turn away from where it rests to count as moving (for the
+/// save-while-moving check): an encoder dithering on one edge of its code at rest changes
+/// its count by +-1 forever.
+pub const MOTION_THRESHOLD: u64 = 8;
+
+/// A sample is late when its counters were read more than 1 / `LATE_FRACTION` of a sample
+/// period after its time label (or after a stall merged grid points into it).
+pub const LATE_FRACTION: u64 = 4;
 
 /// Changes the command task asks the processing task to apply at the next sample.
 #[derive(Debug, Clone, Copy, Default)]
@@ -23,13 +33,27 @@ pub struct Requests {
 }
 
 /// Where the settings in use came from and whether they differ from the stored ones
-/// (kept by the command task, reported by the heartbeat).
+/// (kept by the command task, reported by the heartbeat and `status`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct StoreState {
     /// Flash or defaults.
     pub source: SettingsSource,
-    /// The working settings differ from the stored ones.
+    /// The working settings differ from those a reset would start with (the stored record's,
+    /// or the defaults when none is stored).
     pub dirty: bool,
+}
+
+/// What the Status heartbeat reports besides the processing task's own counters.
+#[derive(Debug, Clone, Copy)]
+pub struct HeartbeatInputs {
+    /// Where the settings came from, whether they differ from the stored ones.
+    pub store: StoreState,
+    /// Host link receive errors.
+    pub host: RxErrors,
+    /// GNSS receiver receive errors.
+    pub gnss: RxErrors,
+    /// Why the unit last started.
+    pub reset_cause: ResetCause,
 }
 
 /// What the processing task last knew, for `status`.
@@ -72,8 +96,16 @@ pub struct Live {
     pub index_lost: [u32; 2],
     /// PPS edges lost to an over-capture.
     pub pps_overcaptures: u32,
-    /// The wheels moved within the last second.
+    /// A wheel moved more than [`MOTION_THRESHOLD`] increments within the last second.
     pub moving: bool,
+    /// Samples per second of the samples now (the sampler's; a new `rate` setting applies
+    /// from the next whole second).
+    pub rate: u32,
+    /// `output_divider` in use (switched together with the rate).
+    pub output_divider: u32,
+    /// Samples whose counters were read late (more than [`LATE_FRACTION`] of a period after
+    /// their label, or after a stall).
+    pub late_samples: u32,
 }
 
 /// State of the processing task: counts to records.
@@ -88,6 +120,20 @@ pub struct Processor {
     trackers: [IndexTracker; 2],
     /// Index mismatch not yet reported in a sent record.
     mismatch: [bool; 2],
+    /// A rate switch not yet reported in a sent record.
+    rate_switch: bool,
+    /// A late sample not yet reported in a sent record.
+    late: bool,
+    late_samples: u32,
+    /// Samples per second and `output_divider` in use, and samples since they were
+    /// switched (the divider counts from the switch).
+    rate: u32,
+    divider: u32,
+    since_switch: u32,
+    /// Second label of the last sample, and whether the Status of the latest second is
+    /// still to be sent.
+    last_second: Option<u32>,
+    status_pending: bool,
     tagger: TimeTagger,
     nmea: LineBuffer,
     nmea_errors: u32,
@@ -107,8 +153,9 @@ pub struct Processor {
     latency_max: u32,
     index_lost: [u32; 2],
     pps_overcaptures: u32,
-    /// Counts of the last sample, and the sample sequence at which they last changed.
-    last_counts: Option<(u32, u32)>,
+    /// Counts where the wheels were last seen at rest (within [`MOTION_THRESHOLD`]), and
+    /// the sample sequence at which they last moved beyond it.
+    rest_counts: Option<WheelCounts>,
     last_motion: u32,
 }
 
@@ -128,6 +175,14 @@ impl Processor {
             integrator: None,
             trackers: [IndexTracker::new(tpr, DEFAULT_TOLERANCE); 2],
             mismatch: [false; 2],
+            rate_switch: false,
+            late: false,
+            late_samples: 0,
+            rate: settings.rate,
+            divider: settings.output_divider.max(1),
+            since_switch: 0,
+            last_second: None,
+            status_pending: false,
             tagger: TimeTagger::new(time_tag(settings), u64::from(timer_hz)),
             nmea: LineBuffer::new(),
             nmea_errors: 0,
@@ -147,15 +202,16 @@ impl Processor {
             latency_max: 0,
             index_lost: [0; 2],
             pps_overcaptures: 0,
-            last_counts: None,
+            rest_counts: None,
             last_motion: 0,
         }
     }
 
     /// An index pulse of `wheel` (0 left, 1 right) latched by its timer.
     pub fn on_index_capture(&mut self, wheel: usize, capture: IndexCapture, log: &mut impl Log) {
-        if capture.overcapture {
-            self.index_lost[wheel] = self.index_lost[wheel].wrapping_add(1);
+        let lost = u32::from(capture.overcapture).wrapping_add(capture.queue_lost);
+        if lost > 0 {
+            self.index_lost[wheel] = self.index_lost[wheel].wrapping_add(lost);
             log.event(Event::IndexLost { wheel });
         }
         self.on_index(wheel, capture.raw, log);
@@ -271,6 +327,19 @@ impl Processor {
         step
     }
 
+    /// Motion: a wheel more than [`MOTION_THRESHOLD`] increments from where it was last at
+    /// rest moves (and rests there from now); dithering on one edge of the code does not.
+    fn follow_motion(&mut self, counts: WheelCounts) {
+        let moved = self.rest_counts.is_none_or(|rest| {
+            (counts.left - rest.left).unsigned_abs() > MOTION_THRESHOLD
+                || (counts.right - rest.right).unsigned_abs() > MOTION_THRESHOLD
+        });
+        if moved {
+            self.rest_counts = Some(counts);
+            self.last_motion = self.sequence;
+        }
+    }
+
     /// Timing of `raw`: its PPS edge, a state change, the fault lines.
     fn follow_timing(&mut self, raw: &RawSample, log: &mut impl Log) {
         if let Some((tick, event)) = raw.pps {
@@ -319,16 +388,19 @@ impl Processor {
             });
         }
         self.latency_max = self.latency_max.max(raw.latency);
+        // latency > period / rate / LATE_FRACTION, without a 64-bit division per sample.
+        let late = u64::from(raw.latency) * u64::from(raw.sample.rate) * LATE_FRACTION;
+        if raw.merged > 0 || late > raw.period {
+            self.late = true;
+            self.late_samples = self.late_samples.wrapping_add(1);
+        }
+        self.follow_rate(raw);
         if raw.pps_overcapture {
             self.pps_overcaptures = self.pps_overcaptures.wrapping_add(1);
             log.event(Event::PpsOvercapture);
         }
-        let counts_now = (raw.counts.left, raw.counts.right);
-        if self.last_counts != Some(counts_now) {
-            self.last_counts = Some(counts_now);
-            self.last_motion = self.sequence;
-        }
         let counts = self.extend(raw);
+        self.follow_motion(counts);
         for (wheel, pulse) in raw.index_pulses.iter().enumerate() {
             if let Some(r) = pulse {
                 self.on_index(wheel, *r, log);
@@ -359,9 +431,13 @@ impl Processor {
             left: status(0, raw.faults.0, step.left_referenced),
             right: status(1, raw.faults.1, step.right_referenced),
             model: self.settings.chassis.uncertainty_model,
+            rate_switch: self.rate_switch,
+            late: self.late,
         };
         self.mcu_time_us = self.mcu_time_us(raw.sample.tick);
-        if sequence % self.settings.output_divider.max(1) != 0 {
+        let phase = self.since_switch;
+        self.since_switch = self.since_switch.wrapping_add(1);
+        if phase % self.divider != 0 {
             return Some(None);
         }
         let integrator = self.integrator.as_ref()?;
@@ -391,35 +467,70 @@ impl Processor {
         }))
     }
 
-    /// True when the sample just processed starts a new second of samples: time for the
-    /// once-a-second Status heartbeat.
-    pub fn heartbeat_due(&self) -> bool {
-        self.sequence.wrapping_sub(1) % self.settings.rate.max(1) == 0
+    /// The rate and `output_divider` in use follow the samples: at the first sample of a
+    /// second, the sampler's rate for it, and the `output_divider` setting once the samples
+    /// have the `rate` setting (the sampler switches at a whole second). A change is one
+    /// instant for the records, the heartbeat and the GNSS time: its sample is sent (the
+    /// divider counts from it) with the rate switch flag, after a Status that announces it.
+    fn follow_rate(&mut self, raw: &RawSample) {
+        let second = raw.sample.second;
+        if self.last_second == Some(second) {
+            return;
+        }
+        let first = self.last_second.is_none();
+        self.last_second = Some(second);
+        self.status_pending = true;
+        let divider = if raw.sample.rate == self.settings.rate {
+            self.settings.output_divider.max(1)
+        } else {
+            self.divider
+        };
+        if (raw.sample.rate, divider) != (self.rate, self.divider) {
+            self.rate = raw.sample.rate;
+            self.divider = divider;
+            self.since_switch = 0;
+            self.rate_switch = !first;
+        }
     }
 
-    /// The Status heartbeat after sample `raw`: `rx_errors` host bytes and `gnss_lost`
-    /// receiver bytes lost so far.
-    pub fn heartbeat(
-        &self,
-        raw: &RawSample,
-        store: StoreState,
-        rx_errors: u32,
-        gnss_lost: u32,
-    ) -> Status {
+    /// True while the Status of the latest second of samples is not sent: it is due at the
+    /// first sample of each second, before that sample's record, and tried again at each
+    /// sample until the link takes it.
+    pub fn heartbeat_due(&self) -> bool {
+        self.status_pending
+    }
+
+    /// The Status heartbeat after sample `raw`, with the counters kept elsewhere (`inputs`).
+    pub fn heartbeat(&self, raw: &RawSample, inputs: &HeartbeatInputs) -> Status {
         Status {
             uptime_us: self.mcu_time_us,
             flags: self.flags,
-            rate_hz: self.settings.rate,
+            rate_hz: self.rate,
             samples: self.sequence,
             dropped_total: self.dropped_total,
             pps_edges: raw.stats.accepted,
             pps_rejected: raw.stats.glitches,
-            rx_errors,
-            settings_source: store.source,
-            settings_dirty: store.dirty,
+            rx_errors: inputs.host.lost,
+            settings_source: inputs.store.source,
+            settings_dirty: inputs.store.dirty,
             samples_lost: raw.queue_lost,
-            gnss_rx_lost: gnss_lost,
+            gnss_rx_lost: inputs.gnss.lost,
             merged_samples: self.merged_samples,
+            reset_cause: inputs.reset_cause,
+            output_divider: self.divider,
+            index_lost: self.index_lost[0].wrapping_add(self.index_lost[1]),
+            host_rx_overruns: inputs.host.overruns,
+            host_rx_line_errors: inputs.host.line_errors(),
+            gnss_rx_overruns: inputs.gnss.overruns,
+            gnss_rx_line_errors: inputs.gnss.line_errors(),
+        }
+    }
+
+    /// The Status heartbeat was queued (true) or found no room (false: tried again with
+    /// the next sample).
+    pub fn status_sent(&mut self, sent: bool) {
+        if sent {
+            self.status_pending = false;
         }
     }
 
@@ -428,6 +539,8 @@ impl Processor {
         if sent {
             self.dropped_since = 0;
             self.mismatch = [false; 2];
+            self.rate_switch = false;
+            self.late = false;
         } else {
             self.dropped_since = self.dropped_since.saturating_add(1);
             self.dropped_total = self.dropped_total.saturating_add(1);
@@ -457,7 +570,10 @@ impl Processor {
             latency_max: self.latency_max,
             index_lost: self.index_lost,
             pps_overcaptures: self.pps_overcaptures,
-            moving: self.sequence.wrapping_sub(self.last_motion) <= self.settings.rate.max(1),
+            moving: self.sequence.wrapping_sub(self.last_motion) <= self.rate.max(1),
+            rate: self.rate,
+            output_divider: self.divider,
+            late_samples: self.late_samples,
         }
     }
 }

@@ -18,6 +18,21 @@ pub struct IndexCapture {
     pub raw: u32,
     /// An earlier pulse was overwritten before it was read (lost).
     pub overcapture: bool,
+    /// Pulses lost before this one because the queue to the processing task was full.
+    pub queue_lost: u32,
+}
+
+impl IndexCapture {
+    /// Queues the capture with `enqueue` (false: the queue is full), carrying the pulses
+    /// lost to a full queue since the last one queued (`lost`, kept by the interrupt).
+    pub fn queue(mut self, lost: &mut u32, enqueue: impl FnOnce(Self) -> bool) {
+        self.queue_lost = *lost;
+        *lost = if enqueue(self) {
+            0
+        } else {
+            lost.wrapping_add(1)
+        };
+    }
 }
 
 /// One sample, from the sample interrupt to the processing task.
@@ -112,5 +127,11 @@ impl PpsLatch {
     /// both.
     pub fn take(&mut self) -> (Option<(u64, PpsEvent)>, bool) {
         (self.edge.take(), core::mem::take(&mut self.overcapture))
+    }
+
+    /// `raw` could not be handed on (the queue was full): its PPS edge and over-capture go
+    /// with the next sample instead of being lost with it.
+    pub fn put_back(&mut self, raw: &RawSample) {
+        self.on_interrupt(raw.pps, raw.pps_overcapture);
     }
 }

@@ -1,7 +1,8 @@
 //! The text of the `status` command.
 
-use super::Live;
+use super::{Live, RxErrors};
 use crate::console::Reply;
+use crate::protocol::ResetCause;
 use crate::settings::SettingsSource;
 use crate::timing::{ClockSource, SyncState};
 
@@ -14,13 +15,15 @@ pub struct BoardReport {
     pub stack: (usize, usize),
     /// Unit of the cycle counts: `cycles` on the board, `instructions (QEMU)` in QEMU.
     pub cycles_unit: &'static str,
+    /// Why the unit last started.
+    pub reset_cause: ResetCause,
 }
 
 /// Everything `status` reports.
 pub(crate) struct StatusInputs<'a> {
     pub live: &'a Live,
-    pub rx_lost: u32,
-    pub gnss_lost: u32,
+    pub host: &'a RxErrors,
+    pub gnss: &'a RxErrors,
     pub board: &'a BoardReport,
     pub timer_hz: u32,
     pub source: SettingsSource,
@@ -42,17 +45,25 @@ pub(crate) fn write(reply: &mut Reply, s: &StatusInputs<'_>) {
         ClockSource::HsiFallback => "hsi-fallback (HSE failed)",
     };
     reply.push_line(format_args!("clock = {clock}"));
+    reply.push_line(format_args!("reset_cause = {}", s.board.reset_cause.name()));
     reply.push_line(format_args!("sync = {sync}"));
     reply.push_line(format_args!("time_valid = {}", on(live.flags.time_valid)));
     reply.push_line(format_args!("samples = {}", live.samples));
     reply.push_line(format_args!("mcu_time_us = {}", live.mcu_time_us));
+    reply.push_line(format_args!(
+        "rate = {} Hz, output_divider = {}",
+        live.rate, live.output_divider
+    ));
     reply.push_line(format_args!("records_dropped = {}", live.dropped_total));
     reply.push_line(format_args!(
         "samples_lost = {}, merged_samples = {}",
         live.samples_lost, live.merged_samples
     ));
     let latency_ns = u64::from(live.latency_max) * 1_000_000_000 / u64::from(s.timer_hz);
-    reply.push_line(format_args!("sample_latency_max = {latency_ns} ns"));
+    reply.push_line(format_args!(
+        "sample_latency_max = {latency_ns} ns, late_samples = {}",
+        live.late_samples
+    ));
     reply.push_line(format_args!("second_ticks = {}", live.period));
     reply.push_line(format_args!(
         "pps_accepted = {}, pps_glitches = {}, pps_missed = {}, pps_locks = {}, pps_overcaptures = {}",
@@ -63,9 +74,15 @@ pub(crate) fn write(reply: &mut Reply, s: &StatusInputs<'_>) {
         live.pps_overcaptures
     ));
     reply.push_line(format_args!(
-        "nmea_time_messages = {}, nmea_errors = {}, gnss_rx_lost = {}",
-        live.time_messages, live.nmea_errors, s.gnss_lost
+        "nmea_time_messages = {}, nmea_errors = {}",
+        live.time_messages, live.nmea_errors
     ));
+    for (name, e) in [("gnss", s.gnss), ("host", s.host)] {
+        reply.push_line(format_args!(
+            "{name}_rx_lost = {}, {name}_rx_overruns = {}, {name}_rx_framing = {}, {name}_rx_noise = {}, {name}_rx_parity = {}",
+            e.lost, e.overruns, e.framing, e.noise, e.parity
+        ));
+    }
     for (name, w, m, lost) in [
         (
             "left",
@@ -86,7 +103,6 @@ pub(crate) fn write(reply: &mut Reply, s: &StatusInputs<'_>) {
             on(w.index_seen)
         ));
     }
-    reply.push_line(format_args!("host_rx_lost = {}", s.rx_lost));
     let unit = s.board.cycles_unit;
     reply.push_line(format_args!(
         "sample_isr_max = {} {unit}, process_max = {} {unit}",

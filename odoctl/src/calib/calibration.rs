@@ -43,14 +43,18 @@ pub struct CalibrationOptions {
     pub windows: Vec<f64>,
     /// Where the study's fits start.
     pub window_start: WindowStart,
+    /// Harmonics of the per-angle wheel function to fit per wheel (0 = none, 1..=3).
+    pub wheel_harmonics: usize,
+    /// Segment length of the harmonics fit (m).
+    pub harmonics_window: f64,
     /// No progress bars.
     pub quiet: bool,
 }
 
 impl Default for CalibrationOptions {
     /// 10 m sub-trajectories, the BD982's 8 mm and 0.5 deg, equal coefficients, `delta` and
-    /// `delta_diff` fitted for the initial estimate's model, no polish, no stability study,
-    /// no progress bars.
+    /// `delta_diff` fitted for the initial estimate's model, no polish, no stability study
+    /// (its windows started from the whole-run estimate), no progress bars.
     fn default() -> Self {
         Self {
             delta_window: 10.0,
@@ -62,7 +66,9 @@ impl Default for CalibrationOptions {
             models: Vec::new(),
             polish: false,
             windows: Vec::new(),
-            window_start: WindowStart::Initial,
+            window_start: WindowStart::Full,
+            wheel_harmonics: 0,
+            harmonics_window: super::HARMONICS_SEGMENT,
             quiet: true,
         }
     }
@@ -94,6 +100,8 @@ pub struct Calibration {
     pub evaluation: Evaluation,
     /// The stability study.
     pub windows: Vec<WindowEstimate>,
+    /// The wheel-function fit (`wheel_harmonics` > 0).
+    pub harmonics: Option<super::HarmonicsFit>,
 }
 
 /// Runs the calibration in memory (the work of `odoctl calibrate` without the files and the
@@ -128,6 +136,20 @@ pub fn calibrate(
     pb.finish_and_clear();
     timer.lap("eq (16) fit");
     let mut params = geometry.params;
+    let harmonics = if o.wheel_harmonics > 0 {
+        let h = super::fit_harmonics(
+            &run,
+            &params,
+            geometry.heading0,
+            o.wheel_harmonics,
+            o.harmonics_window,
+        )?;
+        params = h.params;
+        timer.lap("wheel harmonics fit");
+        Some(h)
+    } else {
+        None
+    };
     let mut uncertainty = Vec::new();
     if o.fit_delta {
         let models = if o.models.is_empty() {
@@ -198,6 +220,7 @@ pub fn calibrate(
         uncertainty,
         evaluation,
         windows,
+        harmonics,
     })
 }
 

@@ -47,13 +47,14 @@
 //! `run` (a run matched to its reference, the integrator along it), `sensitivity` (forward
 //! sensitivities), `pipeline` (their two-core pass), `geometry` (the eq 16 fit), `evaluation`
 //! (errors and predicted uncertainty), `restarts` (the restarted sub-trajectories),
-//! `uncertainty` (delta, kappa), `delta_diff`, `stability` (the study on sub-trajectories) and
+//! `uncertainty` (delta, kappa), `delta_diff`, `harmonics` (the per-angle wheel function), `stability` (the study on sub-trajectories) and
 //! `calibration` (all of it in memory: [`calibrate`]).
 
 mod calibration;
 mod delta_diff;
 mod evaluation;
 mod geometry;
+mod harmonics;
 mod pipeline;
 mod restarts;
 mod run;
@@ -65,6 +66,7 @@ pub use calibration::*;
 pub use delta_diff::*;
 pub use evaluation::*;
 pub use geometry::*;
+pub use harmonics::*;
 pub use pipeline::*;
 pub use restarts::*;
 pub use run::*;

@@ -118,6 +118,9 @@ pub fn calibrate(o: &CalibrateOptions, input: &ReferenceArgs) -> Result<ExitCode
     if let Some(w) = &g.track_warning {
         eprintln!("warning: eq (16) fit: {w}");
     }
+    if let Some(hf) = &c.harmonics {
+        print_harmonics(hf, &initial);
+    }
     for u in &c.uncertainty {
         let (a, b) = match u.model {
             UncertaintyModel::Paper => (
@@ -317,12 +320,15 @@ pub fn calibrate(o: &CalibrateOptions, input: &ReferenceArgs) -> Result<ExitCode
                 per_model.push((k.into(), FitValue::Num(v)));
             }
         }
+        if let Some(hf) = &c.harmonics {
+            per_model.extend(harmonics_fit_keys(hf));
+        }
         fit.extend(per_model.iter().map(|(k, v)| (k.as_str(), v.clone())));
-        let always: &[&str] = if diff.is_some_and(|d| d.fitted) {
-            &["delta_diff"]
-        } else {
-            &[]
-        };
+        let mut always: Vec<&str> = c.harmonics.iter().flat_map(|h| h.keys.clone()).collect();
+        if diff.is_some_and(|d| d.fitted) {
+            always.push("delta_diff");
+        }
+        let always = always.as_slice();
         let text = cfg::render_params_with(
             &c.params,
             "odoctl calibrate: chassis parameters estimated by eq (16) of Jilek, Burian, Kriz",
@@ -362,14 +368,13 @@ fn se_keys(name: &str) -> &'static str {
 }
 
 fn print_window_stats(est: &[calib::WindowEstimate]) {
-    let mut lengths: Vec<f64> = est.iter().map(|e| e.length).collect();
-    lengths.sort_by(f64::total_cmp);
-    lengths.dedup();
-    crate::outln!("stability study (estimates on consecutive sub-trajectories):");
+    crate::outln!(
+        "stability study (estimates on consecutive sub-trajectories; failed windows left out):"
+    );
     crate::outln!(
         "  {:>6} {:>5} {:>5}  {:<15} {:>10} {:>10} {:>10} {:>10} {:>10}",
         "length",
-        "fits",
+        "used",
         "fail",
         "parameter",
         "mean",
@@ -378,39 +383,45 @@ fn print_window_stats(est: &[calib::WindowEstimate]) {
         "min",
         "max"
     );
-    for l in lengths {
-        let all: Vec<&calib::WindowEstimate> = est.iter().filter(|e| e.length == l).collect();
-        let ok: Vec<[f64; 4]> = all
-            .iter()
-            .filter_map(|e| e.estimate.as_ref().ok().copied())
-            .collect();
-        for (p, name) in ["left_diameter", "right_diameter", "track_width"]
-            .iter()
-            .enumerate()
-        {
-            let vals: Vec<f64> = ok.iter().map(|v| v[p]).filter(|v| v.is_finite()).collect();
-            let s = summarize(&vals);
-            let note = if vals.len() < ok.len() {
-                format!(
-                    "  ({} of {} turned too little)",
-                    ok.len() - vals.len(),
-                    ok.len()
-                )
-            } else {
-                String::new()
-            };
+    for w in calib::summarize_windows(est) {
+        for (p, name) in calib::WINDOW_PARAMS.iter().enumerate() {
+            let s = &w.stats[p];
             let head = if p == 0 {
-                format!("{:>5} m {:>5} {:>5}", l, ok.len(), all.len() - ok.len())
+                format!(
+                    "{:>5} m {:>5} {:>5}",
+                    w.length,
+                    w.accepted,
+                    w.windows - w.accepted
+                )
             } else {
                 format!("{:>7} {:>5} {:>5}", "", "", "")
             };
             crate::outln!(
-                "  {head}  {name:<15} {:>10.5} {:>10.5} {:>10.5} {:>10.5} {:>10.5}{note}",
+                "  {head}  {name:<15} {:>10.5} {:>10.5} {:>10.5} {:>10.5} {:>10.5}",
                 s.mean,
                 s.std,
                 s.median,
                 s.min,
                 s.max
+            );
+        }
+        if !w.failures.is_empty() {
+            let why: Vec<String> = w
+                .failures
+                .iter()
+                .map(|(code, n)| format!("{n} {code}"))
+                .collect();
+            crate::outln!("  {:>7} failed: {}", "", why.join(", "));
+        }
+    }
+    for e in est {
+        if let Err(f) = &e.estimate {
+            crate::outln!(
+                "  FAILED {} m window at {:.1} m ({:.2}-{:.2} s): {f}",
+                e.length,
+                e.start_dist,
+                e.t.0,
+                e.t.1
             );
         }
     }
@@ -420,26 +431,26 @@ fn write_windows_csv(path: &Path, est: &[calib::WindowEstimate]) -> Result<()> {
     let mut w = create(path)?;
     writeln!(
         w,
-        "length,start_dist,t_start,t_end,points,turning,left_diameter,right_diameter,track_width,initial_heading,mean_error,error"
+        "length,start_dist,t_start,t_end,points,turning,left_diameter,right_diameter,track_width,initial_heading,left_diameter_se,right_diameter_se,track_width_se,initial_heading_se,condition,mean_error,status,reason"
     )?;
+    let num = |x: f64| {
+        if x.is_finite() {
+            format!("{x:?}")
+        } else {
+            String::new()
+        }
+    };
     for e in est {
-        let (v, err) = match &e.estimate {
-            Ok(v) => (
-                v.map(|x| {
-                    if x.is_finite() {
-                        format!("{x:?}")
-                    } else {
-                        String::new()
-                    }
-                })
-                .join(","),
-                String::new(),
-            ),
-            Err(s) => (",,,".to_string(), s.replace(',', ";")),
+        let v = e
+            .fitted
+            .map_or_else(|| ",,,".to_string(), |v| v.map(num).join(","));
+        let (status, reason) = match &e.estimate {
+            Ok(_) => ("ok", String::new()),
+            Err(f) => ("failed", f.to_string().replace([',', '\n'], ";")),
         };
         writeln!(
             w,
-            "{},{:.3},{},{},{},{:.6},{},{:?},{}",
+            "{},{:.3},{},{},{},{:.6},{},{},{},{},{},{}",
             e.length,
             e.start_dist,
             csvio::fmt_t(e.t.0),
@@ -447,10 +458,80 @@ fn write_windows_csv(path: &Path, est: &[calib::WindowEstimate]) -> Result<()> {
             e.points,
             e.turning,
             v,
-            e.mean_error,
-            err
+            e.std_errors.map(num).join(","),
+            num(e.condition),
+            num(e.mean_error),
+            status,
+            reason
         )?;
     }
     w.flush()?;
     Ok(())
+}
+
+fn print_harmonics(hf: &calib::HarmonicsFit, initial: &odo_core::odometry::ChassisParams) {
+    crate::outln!(
+        "wheel function: {} harmonic(s) per wheel, referenced to the index, after the geometry fit (its corrections refitted alongside); {} segments of {} m restarted from the reference, {} points, residual {:.4} m",
+        hf.order,
+        hf.segments,
+        hf.segment,
+        hf.points,
+        hf.residual_sigma
+    );
+    crate::outln!(
+        "  {:<16} {:>14} {:>14} {:>12} {:>12} {:>12}",
+        "parameter",
+        "initial",
+        "estimate",
+        "std. error",
+        "(iid)",
+        "radius [mm]"
+    );
+    for (i, k) in hf.keys.iter().enumerate() {
+        let before = odo_core::settings::Key::from_name(k)
+            .and_then(|key| {
+                crate::config::chassis_value_text(initial, key)
+                    .parse::<f64>()
+                    .ok()
+            })
+            .unwrap_or(f64::NAN);
+        let radius = if k.starts_with("left") {
+            hf.params.left_diameter
+        } else {
+            hf.params.right_diameter
+        } / 2.0;
+        crate::outln!(
+            "  {k:<16} {before:>14.3e} {:>14.3e} {:>12.2e} {:>12.2e} {:>12.4}",
+            hf.values[i],
+            hf.std_errors[i],
+            hf.std_errors_iid[i],
+            1e3 * radius * hf.values[i]
+        );
+    }
+    crate::outln!(
+        "  standard errors cluster-robust over the segments; (iid): taking the residuals as independent"
+    );
+}
+
+/// The `[fit]` keys of the wheel-function fit.
+fn harmonics_fit_keys(hf: &calib::HarmonicsFit) -> Vec<(String, FitValue)> {
+    let mut v = vec![
+        (
+            "wheel_harmonics".to_string(),
+            FitValue::Int(hf.order as i64),
+        ),
+        (
+            "harmonics_segments".to_string(),
+            FitValue::Int(hf.segments as i64),
+        ),
+        ("harmonics_window".to_string(), FitValue::Num(hf.segment)),
+        (
+            "harmonics_residual_sigma".to_string(),
+            FitValue::Num(hf.residual_sigma),
+        ),
+    ];
+    for (k, se) in hf.keys.iter().zip(&hf.std_errors) {
+        v.push((format!("{k}_se"), FitValue::Num(*se)));
+    }
+    v
 }

@@ -10,6 +10,7 @@ pub mod gnss;
 pub mod sampler;
 
 use super::serial::GnssUart;
+use super::BusClocks;
 use super::FaultLines;
 use defmt_semihosting as _;
 use odo_core::timing::ClockSource;
@@ -36,15 +37,22 @@ pub fn attach_gnss(uart: GnssUart) -> (GnssRx, SamplerExtra) {
 
 /// Starts the clocks: the HSI at 16 MHz without PLL (QEMU's RCC never reports the PLL
 /// locked).
-pub fn start_clocks(rcc: pac::RCC) -> (stm32f4xx_hal::rcc::Rcc, ClockSource) {
+pub fn start_clocks(rcc: pac::RCC) -> (stm32f4xx_hal::rcc::Rcc, ClockSource, BusClocks) {
     use stm32f4xx_hal::rcc::RccExt;
-    (rcc.freeze(Config::hsi()), ClockSource::Hsi)
+    let rcc = rcc.freeze(Config::hsi());
+    let clocks = BusClocks {
+        pclk1: rcc.clocks.pclk1().raw(),
+        pclk2: rcc.clocks.pclk2().raw(),
+        // TIM2-5 in QEMU count at 1 GHz of emulated time whatever the clock tree says.
+        timer: 1_000_000_000,
+    };
+    (rcc, ClockSource::Hsi, clocks)
 }
 
 /// Frequency of the TIM5 sample timer's ticks, Hz: TIM2-5 in QEMU count at 1 GHz of emulated
 /// time whatever the clock tree says.
-pub fn timer_hz(_clocks: &stm32f4xx_hal::rcc::Clocks) -> u32 {
-    1_000_000_000
+pub fn timer_hz(clocks: &BusClocks) -> u32 {
+    clocks.timer
 }
 
 /// The unit's 96-bit unique ID: zeros (QEMU does not map that system memory).

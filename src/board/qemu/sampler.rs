@@ -4,7 +4,7 @@
 
 use super::gnss::SimGnss;
 use crate::board::sampler::{Event, Sampler};
-use odo_core::timing::{Sample, SyncMode};
+use odo_core::timing::{catch_up, Sample, SyncMode};
 use stm32f4xx_hal::pac;
 
 const SR_UIF: u32 = 1 << 0;
@@ -17,19 +17,28 @@ pub struct Timeline {
     arr: u32,
     /// The simulated GNSS receiver: PPS captures and NMEA bytes (QEMU has neither).
     gnss: SimGnss,
+    /// The sample whose update is programmed.
+    next: Sample,
+    /// Ticks of lead a new period needs: points closer than this are merged.
+    guard: u64,
 }
 
 impl Timeline {
     /// DIER bit of the sample interrupt: UIE (the update event).
     pub const DIER_SAMPLE: u32 = 1 << 0;
+    /// DIER bit of the PPS capture interrupt: none (the simulated receiver's edges are taken
+    /// at the update).
+    pub const DIER_CAPTURE: u32 = 0;
 
     /// ARR puts the first update at sample `s1`.
-    pub fn program(tim: &pac::TIM5, s0: Sample, s1: Sample, gnss: SimGnss) -> Self {
+    pub fn program(tim: &pac::TIM5, s0: Sample, s1: Sample, guard: u64, gnss: SimGnss) -> Self {
         tim.arr().write(|w| w.set((s1.tick - 1) as u32));
         Self {
             base: s0.tick,
             arr: (s1.tick - s0.tick - 1) as u32,
             gnss,
+            next: s1,
+            guard,
         }
     }
 }
@@ -48,7 +57,7 @@ impl Sampler {
         let start = self.timeline.base;
         // QEMU raises the update at the programmed instant and never runs late (no flash
         // stall); its CNT counts from the last ARR write, so the instant is taken as is.
-        self.timeline.base = self.next.tick;
+        self.timeline.base = self.timeline.next.tick;
         let now = self.timeline.base;
         if self.disc.config().mode == SyncMode::Pps {
             if let Some(ccr) = self.timeline.gnss.capture(start, now - start) {
@@ -57,7 +66,11 @@ impl Sampler {
                 event.pps = Some((edge, self.disc.on_pps(edge)));
             }
         }
-        self.sample_due(now, &mut event);
+        let c = catch_up(&mut self.disc, self.timeline.next, now, self.timeline.guard);
+        self.timeline.next = c.next;
+        event.sample = Some(c.sample);
+        event.merged = c.merged;
+        event.latency = u32::try_from(now - c.sample.tick).unwrap_or(u32::MAX);
         self.arm();
         self.timeline.gnss.transmit(now);
         event
@@ -70,10 +83,16 @@ impl Sampler {
     /// hundred emulated nanoseconds after the update, and everything (the simulated drive
     /// and receiver included) runs on the software's timeline.
     fn arm(&mut self) {
-        let arr = (self.next.tick - self.timeline.base - 1) as u32;
+        let arr = (self.timeline.next.tick - self.timeline.base - 1) as u32;
         if arr != self.timeline.arr {
             self.tim.arr().write(|w| w.set(arr));
             self.timeline.arr = arr;
         }
     }
+}
+
+impl Sampler {
+    /// The simulated receiver's edges are taken in `pps` mode only (`on_interrupt`): no
+    /// capture unit to switch.
+    pub(crate) fn set_capture(&mut self, _on: bool) {}
 }

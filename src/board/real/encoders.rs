@@ -107,7 +107,11 @@ impl Encoders {
             // Note(unsafe): SR is rc_w0: writing 0 to CC3OF alone clears it.
             unsafe { self.left.sr().write(|w| w.bits(!SR_CC3OF & 0xFFFF)) };
         }
-        Some(IndexCapture { raw, overcapture })
+        Some(IndexCapture {
+            raw,
+            overcapture,
+            queue_lost: 0,
+        })
     }
 
     /// The right index pulse latched by TIM3 CH4, if one came since the last call (TIM3
@@ -123,6 +127,10 @@ impl Encoders {
             // Note(unsafe): SR is rc_w0: writing 0 to CC4OF alone clears it.
             unsafe { self.right.sr().write(|w| w.bits(!SR_CC4OF & 0xFFFF)) };
         }
-        Some(IndexCapture { raw, overcapture })
+        Some(IndexCapture {
+            raw,
+            overcapture,
+            queue_lost: 0,
+        })
     }
 }

@@ -7,11 +7,12 @@ pub mod flash;
 pub mod sampler;
 
 use super::serial::GnssUart;
+use super::BusClocks;
 use super::FaultLines;
 use defmt_rtt as _;
 use odo_core::timing::ClockSource;
 use odo_core::unit::{IndexCapture, RawCounts};
-use stm32f4xx_hal::{pac, rcc::Config};
+use stm32f4xx_hal::pac;
 
 /// Widths of the raw counters (left, right), bits.
 pub const COUNTER_BITS: [u32; 2] = [encoders::LEFT_BITS, encoders::RIGHT_BITS];
@@ -42,12 +43,20 @@ pub fn watchdog_feed() {
 #[cfg_attr(not(feature = "hse"), allow(dead_code))]
 pub const HSE_STARTUP_MS: u32 = 100;
 
-/// Starts the clocks ([`clock_config`]) without ever hanging: with the `hse` feature, the
-/// HSE is started first and waited for at most [`HSE_STARTUP_MS`] (at the reset clock, the
-/// 16 MHz HSI); if it is not ready the PLL runs from the HSI instead and the result says
-/// so. With the HSE running, the clock security system is enabled: an HSE failure then
-/// raises the NMI, which restarts the PLL from the HSI at the same 84 MHz.
-pub fn start_clocks(rcc: pac::RCC) -> (stm32f4xx_hal::rcc::Rcc, ClockSource) {
+/// Starts the clocks (84 MHz from the PLL, [`BUS_CLOCKS`]) without ever hanging: with the
+/// `hse` feature, the HSE is started first and waited for at most [`HSE_STARTUP_MS`] (at the
+/// reset clock, the 16 MHz HSI); if it is not ready the PLL runs from the HSI instead and the
+/// result says so. With the HSE running, the clock security system is enabled: an HSE
+/// failure then raises the NMI, which restarts the PLL from the HSI at the same 84 MHz.
+///
+/// Board: the default build (feature `hse-bypass`) takes an 8 MHz external clock on OSC_IN
+/// in bypass mode, as a Nucleo-64's ST-LINK provides; a board with an 8 MHz crystal builds
+/// with `--no-default-features --features hse`; without either, the PLL runs from the 16 MHz
+/// HSI, +-1 % at 25 C and +-4 % over temperature: the PPS discipline still locks (its
+/// tolerance follows the clock, [`ClockSource::tolerance_ppm`]), but free-running (indoor)
+/// timing is only that good and the UART baud rates may leave the receivers' tolerance
+/// (docs/HARDWARE.md). APB1 = 42 MHz, so TIM2-5 count at 84 MHz; APB2 = 84 MHz.
+pub fn start_clocks(rcc: pac::RCC) -> (stm32f4xx_hal::rcc::Rcc, ClockSource, BusClocks) {
     use stm32f4xx_hal::rcc::RccExt;
     #[cfg(feature = "hse")]
     {
@@ -66,23 +75,66 @@ pub fn start_clocks(rcc: pac::RCC) -> (stm32f4xx_hal::rcc::Rcc, ClockSource) {
             }
         }
         if ready {
-            let rcc = rcc.freeze(clock_config());
+            start_pll(&rcc, true);
             // Note(unsafe): RCC_CR CSSON (bit 19): the clock security system watches the
             // HSE from now on; a failure raises the NMI (handler below).
-            unsafe {
-                (*pac::RCC::ptr())
-                    .cr()
-                    .modify(|r, w| w.bits(r.bits() | 1 << 19))
-            };
-            return (rcc, ClockSource::Hse);
+            rcc.cr()
+                .modify(|r, w| unsafe { w.bits(r.bits() | 1 << 19) });
+            return (rcc.constrain(), ClockSource::Hse, BUS_CLOCKS);
         }
         rcc.cr()
             .modify(|_, w| w.hseon().clear_bit().hsebyp().clear_bit());
-        (rcc.freeze(hsi_config()), ClockSource::HsiFallback)
+        start_pll(&rcc, false);
+        (rcc.constrain(), ClockSource::HsiFallback, BUS_CLOCKS)
     }
     #[cfg(not(feature = "hse"))]
     {
-        (rcc.freeze(clock_config()), ClockSource::Hsi)
+        start_pll(&rcc, false);
+        (rcc.constrain(), ClockSource::Hsi, BUS_CLOCKS)
+    }
+}
+
+/// The bus clocks [`start_clocks`] sets up: APB1 42 MHz (its timers 84 MHz), APB2 84 MHz.
+pub const BUS_CLOCKS: BusClocks = BusClocks {
+    pclk1: 42_000_000,
+    pclk2: 84_000_000,
+    timer: 84_000_000,
+};
+
+/// PLLCFGR for 84 MHz SYSCLK from an 8 MHz HSE (`hse`) or the 16 MHz HSI: M = 4 or 8
+/// (2 MHz VCO input), N = 168 (336 MHz VCO), P = /4 (0b01: 84 MHz), Q = 7 (48 MHz), PLLSRC
+/// (bit 22) = HSE or HSI; reserved bit 29 kept at its reset value, 1 (RM0368 sec. 6.3.2).
+/// The same values the HAL's clock solver finds for these clocks.
+const fn pllcfgr(hse: bool) -> u32 {
+    let m = if hse { HSE_HZ / 2_000_000 } else { 8 };
+    m | 168 << 6 | 0b01 << 16 | (hse as u32) << 22 | 7 << 24 | 1 << 29
+}
+
+const _: () = assert!(pllcfgr(false) == 0x2701_2A08 && pllcfgr(true) == 0x2741_2A04);
+
+/// Runs SYSCLK at 84 MHz from the PLL fed by the HSE (`hse`, already running) or the HSI:
+/// flash wait states and caches first (2 WS up to 90 MHz at 2.7-3.6 V, prefetch, I- and
+/// D-cache: RM0368 sec. 3.4), the PLL, AHB /1, APB1 /2, APB2 /1, then the switch. Also the
+/// clock security system's NMI, after the hardware stopped the PLL and switched to the HSI.
+fn start_pll(rcc: &pac::rcc::RegisterBlock, hse: bool) {
+    // Note(unsafe): raw register values from RM0368: FLASH_ACR LATENCY = 2 (bits 0-3),
+    // PRFTEN (8), ICEN (9), DCEN (10); RCC_PLLCFGR ([`pllcfgr`]); RCC_CR PLLON (24), wait for
+    // PLLRDY (25); RCC_CFGR HPRE = 0 (bits 4-7), PPRE1 = 0b100 (/2, bits 10-12), PPRE2 = 0
+    // (bits 13-15), then SW = 0b10 (PLL) and wait for SWS (bits 2-3). Only start-up and the
+    // NMI (which preempts everything) touch these, so the read-modify-writes are not raced.
+    unsafe {
+        let flash = &*pac::FLASH::ptr();
+        flash
+            .acr()
+            .modify(|r, w| w.bits((r.bits() & !0xF) | 2 | 0b111 << 8));
+        rcc.pllcfgr().write(|w| w.bits(pllcfgr(hse)));
+        rcc.cr().modify(|r, w| w.bits(r.bits() | 1 << 24));
+        while rcc.cr().read().bits() & 1 << 25 == 0 {}
+        rcc.cfgr()
+            .modify(|r, w| w.bits((r.bits() & !0xFCF0) | 0b100 << 10));
+        cortex_m::asm::delay(16);
+        rcc.cfgr().modify(|r, w| w.bits((r.bits() & !0b11) | 0b10));
+        while rcc.cfgr().read().bits() >> 2 & 0b11 != 0b10 {}
     }
 }
 
@@ -93,64 +145,20 @@ pub fn start_clocks(rcc: pac::RCC) -> (stm32f4xx_hal::rcc::Rcc, ClockSource) {
 #[cortex_m_rt::exception]
 unsafe fn NonMaskableInt() {
     // Note(unsafe): raw RCC registers, RM0368 sec. 6.3: CIR CSSC (bit 23) clears the CSS
-    // flag; PLLCFGR = HSI source, M = 16, N = 336, P = /4, Q = 7 (1 MHz VCO input, 336 MHz
-    // VCO, 84 MHz SYSCLK, 48 MHz Q); PLLON (bit 24) and wait for PLLRDY (bit 25, the HSI
-    // always runs); CFGR SW = PLL (0b10) and wait for SWS. Nothing else touches RCC after
-    // start-up, and the NMI preempts everything, so these read-modify-writes are not raced.
-    unsafe {
-        let rcc = &*pac::RCC::ptr();
-        rcc.cir().modify(|r, w| w.bits(r.bits() | 1 << 23));
-        rcc.pllcfgr()
-            .write(|w| w.bits(16 | 336 << 6 | 0b01 << 16 | 7 << 24));
-        rcc.cr().modify(|r, w| w.bits(r.bits() | 1 << 24));
-        while rcc.cr().read().bits() & 1 << 25 == 0 {}
-        rcc.cfgr().modify(|r, w| w.bits((r.bits() & !0b11) | 0b10));
-        while rcc.cfgr().read().bits() >> 2 & 0b11 != 0b10 {}
-    }
+    // flag; then the PLL from the HSI ([`start_pll`]; the HSI always runs).
+    let rcc = unsafe { &*pac::RCC::ptr() };
+    rcc.cir()
+        .modify(|r, w| unsafe { w.bits(r.bits() | 1 << 23) });
+    start_pll(rcc, false);
     super::HSE_FAILED.store(true, core::sync::atomic::Ordering::Relaxed);
 }
 
-/// The HSI variant of [`clock_config`]: the same 84 MHz from the 16 MHz HSI.
-#[cfg_attr(not(feature = "hse"), allow(dead_code))]
-pub fn hsi_config() -> Config {
-    use stm32f4xx_hal::prelude::*;
-    Config::hsi().sysclk(84.MHz()).pclk1(42.MHz())
-}
-
-/// Clock configuration.
-///
-/// Board: 84 MHz from the PLL. The default build (feature `hse-bypass`) takes an 8 MHz
-/// external clock on OSC_IN in bypass mode, as a Nucleo-64's ST-LINK provides; a board with
-/// an 8 MHz crystal builds with `--no-default-features --features hse`; without either, the
-/// PLL runs from the 16 MHz HSI, +-1 % at 25 C and +-4 % over temperature: the PPS
-/// discipline still locks (its tolerance follows the clock, [`ClockSource::tolerance_ppm`]), but
-/// free-running (indoor) timing is only that good and the UART baud rates may leave the
-/// receivers' tolerance (docs/HARDWARE.md). APB1 = 42 MHz, so TIM2-5 count at 84 MHz;
-/// APB2 = 84 MHz.
-pub fn clock_config() -> Config {
-    #[cfg(feature = "hse")]
-    {
-        use stm32f4xx_hal::prelude::*;
-        let config = Config::hse(HSE_HZ.Hz()).sysclk(84.MHz()).pclk1(42.MHz());
-        // A Nucleo-64 has no crystal: its ST-LINK feeds an 8 MHz clock (MCO) into OSC_IN,
-        // which the HSE must take in bypass mode.
-        #[cfg(feature = "hse-bypass")]
-        let config = config.bypass_hse_oscillator();
-        config
-    }
-    #[cfg(not(feature = "hse"))]
-    {
-        hsi_config()
-    }
-}
-
 /// Frequency of the HSE crystal with the `hse` feature, Hz.
-#[cfg_attr(not(feature = "hse"), allow(dead_code))]
 pub const HSE_HZ: u32 = 8_000_000;
 
 /// Frequency of the TIM5 sample timer's ticks, Hz: the APB1 timer clock.
-pub fn timer_hz(clocks: &stm32f4xx_hal::rcc::Clocks) -> u32 {
-    clocks.timclk1().raw()
+pub fn timer_hz(clocks: &BusClocks) -> u32 {
+    clocks.timer
 }
 
 /// The unit's 96-bit unique ID.
