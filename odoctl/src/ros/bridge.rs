@@ -251,6 +251,8 @@ pub fn run(o: &BridgeOptions) -> Result<ExitCode> {
         dds: None,
         foxglove: None,
     };
+    // A bad address is refused before anything starts.
+    let foxglove = o.foxglove.as_deref().map(parse_address).transpose()?;
     // Kept alive while publishing.
     let mut _node = None;
     if o.dds {
@@ -270,8 +272,7 @@ pub fn run(o: &BridgeOptions) -> Result<ExitCode> {
             o.port
         );
     }
-    if let Some(addr) = &o.foxglove {
-        let (host, port) = parse_address(addr)?;
+    if let Some((host, port)) = foxglove {
         let f = FoxgloveServer::start(&host, port)?;
         let shown = if host.contains(':') {
             format!("[{host}]")
