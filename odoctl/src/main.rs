@@ -188,6 +188,12 @@ enum Cmd {
         /// turns STALE.
         #[arg(long, default_value_t = 1.0)]
         retry: f64,
+        /// Also serve the Foxglove WebSocket protocol (pose, path so far, 1-sigma ellipse).
+        #[arg(long, value_name = "HOST:PORT", num_args = 0..=1, default_missing_value = "127.0.0.1:8765")]
+        foxglove: Option<String>,
+        /// Publish nothing over DDS (Foxglove only).
+        #[arg(long, requires = "foxglove")]
+        no_dds: bool,
     },
 }
 
@@ -600,6 +606,8 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             duration,
             count,
             retry,
+            foxglove,
+            no_dds,
         } => {
             let secs = |what: &str, v: f64| {
                 std::time::Duration::try_from_secs_f64(v)
@@ -612,6 +620,8 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 duration: duration.map(|d| secs("duration", d)).transpose()?,
                 count,
                 retry: secs("retry", retry)?,
+                foxglove,
+                dds: !no_dds,
             })
         }
         Cmd::Simulate(a) => c::simulate(

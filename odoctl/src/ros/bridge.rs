@@ -7,7 +7,10 @@
 //! reliable writer serves reliable and best-effort readers). A record is published once:
 //! a repeated sequence number is dropped and counted, and a lost link is reported on
 //! `/diagnostics` (ERROR) and reconnected; while no record arrives the status turns STALE and
-//! no pose is published.
+//! no pose is published. Across reconnections the stamps stay on the unit's clock, and a
+//! record at or before the last published one (sent again) is dropped as stale. With
+//! `--foxglove` the same messages, the path so far and the 1-sigma ellipse go to a Foxglove
+//! WebSocket server ([`super::foxglove`]).
 
 use std::process::ExitCode;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
@@ -20,9 +23,10 @@ use ros2_client::{
 };
 
 use super::conventions::{BaseTwist, PoseCovariance};
+use super::foxglove::{parse_address, FoxgloveServer};
 use super::msgs::{self, level};
 use super::stamps::gps_to_unix_nanos;
-use super::stream::{OdomSample, OdomStream};
+use super::stream::{Messages, OdomSample, OdomStream};
 use crate::link::{self, Session};
 use odo_core::odometry::{ChassisParams, Pose};
 
@@ -42,6 +46,10 @@ pub struct BridgeOptions {
     /// Wait between reconnection attempts, and without records before the status turns
     /// STALE.
     pub retry: Duration,
+    /// Serve the Foxglove WebSocket protocol on this `HOST:PORT` too.
+    pub foxglove: Option<String>,
+    /// Publish over DDS (ROS 2).
+    pub dds: bool,
 }
 
 /// What a bridge run did.
@@ -53,6 +61,9 @@ pub struct BridgeCounts {
     pub repeated: u64,
     /// Connections lost (or refused) and retried.
     pub link_losses: u64,
+    /// Records older than the last published one on the unit's clock (sent again after a
+    /// reconnection), dropped.
+    pub stale: u64,
 }
 
 fn host_now_ns() -> u64 {
@@ -68,6 +79,29 @@ fn host_now_ns() -> u64 {
 struct LiveStamps {
     rate: Option<f64>,
     origin: Option<(u64, u64)>,
+}
+
+/// What a record is, against the last one published.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Freshness {
+    /// After the last one on the unit's clock: publish.
+    New,
+    /// The unit restarted since (its clock is younger than the time since the last record):
+    /// publish, on a new clock origin.
+    Restarted,
+    /// At or before the last one on the unit's clock, from a unit that did not restart: an
+    /// old record sent again; dropped.
+    Stale,
+}
+
+/// `r` against the last published record `last`, received `since` ago.
+fn freshness(r: &PoseRecord, last: Option<&PoseRecord>, since: Duration) -> Freshness {
+    match last {
+        None => Freshness::New,
+        Some(l) if r.mcu_time_us > l.mcu_time_us => Freshness::New,
+        Some(_) if u128::from(r.mcu_time_us) < since.as_micros() => Freshness::Restarted,
+        Some(_) => Freshness::Stale,
+    }
 }
 
 impl LiveStamps {
@@ -150,6 +184,38 @@ fn parse_rate(text: &str) -> Option<f64> {
     })
 }
 
+/// Where the bridge publishes: DDS, the Foxglove WebSocket server, or both.
+struct Outlets {
+    dds: Option<Publishers>,
+    foxglove: Option<FoxgloveServer>,
+}
+
+impl Outlets {
+    fn sample(&mut self, m: Messages) -> Result<()> {
+        if let Some(f) = &mut self.foxglove {
+            f.sample(&m)?;
+        }
+        if let Some(p) = &self.dds {
+            if let Some(d) = m.diagnostics {
+                p.status(d)?;
+            }
+            p.odom.publish(m.odom).map_err(dds("write /odom"))?;
+            p.tf.publish(m.tf).map_err(dds("write /tf"))?;
+        }
+        Ok(())
+    }
+
+    fn status(&mut self, d: msgs::DiagnosticArray) -> Result<()> {
+        if let Some(f) = &mut self.foxglove {
+            f.status(&d)?;
+        }
+        if let Some(p) = &self.dds {
+            p.status(d)?;
+        }
+        Ok(())
+    }
+}
+
 /// How one connection ended.
 enum Ended {
     /// Enough records or time.
@@ -158,56 +224,102 @@ enum Ended {
     Lost(String),
 }
 
-/// `odoctl bridge`.
-pub fn run(o: &BridgeOptions) -> Result<ExitCode> {
-    let domain = match std::env::var("ROS_DOMAIN_ID") {
+/// What the bridge keeps across connections.
+struct State {
+    stream: OdomStream,
+    counts: BridgeCounts,
+    stamps: LiveStamps,
+    /// The last published record, its stamp and when it arrived.
+    last: Option<(PoseRecord, u64, Instant)>,
+}
+
+fn ros_domain() -> Result<u16> {
+    match std::env::var("ROS_DOMAIN_ID") {
         Ok(v) if !v.trim().is_empty() => v
             .trim()
             .parse::<u16>()
             .ok()
             .filter(|d| *d <= 232)
-            .ok_or_else(|| anyhow!("ROS_DOMAIN_ID `{v}` is not a domain (0..=232)"))?,
-        _ => 0,
+            .ok_or_else(|| anyhow!("ROS_DOMAIN_ID `{v}` is not a domain (0..=232)")),
+        _ => Ok(0),
+    }
+}
+
+/// `odoctl bridge`.
+pub fn run(o: &BridgeOptions) -> Result<ExitCode> {
+    let mut outlets = Outlets {
+        dds: None,
+        foxglove: None,
     };
-    let context =
-        Context::with_options(ContextOptions::new().domain_id(domain)).map_err(dds("context"))?;
-    let mut node = context
-        .new_node(
-            NodeName::new("/", "odoctl_bridge").map_err(dds("node name"))?,
-            NodeOptions::new(),
-        )
-        .map_err(dds("node"))?;
-    let publishers = Publishers::new(&mut node)?;
+    // A bad address is refused before anything starts.
+    let foxglove = o.foxglove.as_deref().map(parse_address).transpose()?;
+    // Kept alive while publishing.
+    let mut _node = None;
+    if o.dds {
+        let domain = ros_domain()?;
+        let context = Context::with_options(ContextOptions::new().domain_id(domain))
+            .map_err(dds("context"))?;
+        let mut node = context
+            .new_node(
+                NodeName::new("/", "odoctl_bridge").map_err(dds("node name"))?,
+                NodeOptions::new(),
+            )
+            .map_err(dds("node"))?;
+        outlets.dds = Some(Publishers::new(&mut node)?);
+        _node = Some(node);
+        eprintln!(
+            "bridge: publishing /odom, /tf, /diagnostics from {} (ROS 2 domain {domain})",
+            o.port
+        );
+    }
+    if let Some((host, port)) = foxglove {
+        let f = FoxgloveServer::start(&host, port)?;
+        let shown = if host.contains(':') {
+            format!("[{host}]")
+        } else {
+            host.clone()
+        };
+        eprintln!(
+            "bridge: Foxglove WebSocket server on ws://{shown}:{} (/odom, /tf, /diagnostics, /odom/path, /odom/ellipse) from {}",
+            f.port(),
+            o.port
+        );
+        outlets.foxglove = Some(f);
+    }
     let end = o.duration.map(|d| Instant::now() + d);
-    let mut stream = OdomStream::new(None);
-    let mut counts = BridgeCounts::default();
-    eprintln!(
-        "bridge: publishing /odom, /tf, /diagnostics from {} (ROS 2 domain {domain})",
-        o.port
-    );
+    let mut st = State {
+        stream: OdomStream::new(None),
+        counts: BridgeCounts::default(),
+        stamps: LiveStamps {
+            rate: None,
+            origin: None,
+        },
+        last: None,
+    };
     loop {
         if end.is_some_and(|e| Instant::now() >= e) {
             break;
         }
         let ended = match link::open(&o.port, o.baud).and_then(|l| Session::new(l, None)) {
-            Ok(mut s) => serve(o, &mut s, &publishers, &mut stream, &mut counts, end)?,
+            Ok(mut s) => serve(o, &mut s, &mut outlets, &mut st, end)?,
             Err(e) => Ended::Lost(format!("cannot connect: {e:#}")),
         };
         match ended {
             Ended::Done => break,
             Ended::Lost(why) => {
-                counts.link_losses += 1;
-                stream.set_extra(link_values(&counts));
+                st.counts.link_losses += 1;
+                st.stream.set_extra(link_values(&st.counts));
                 let msg = format!("{why}; reconnecting every {:.1} s", o.retry.as_secs_f64());
                 eprintln!("bridge: {msg}");
-                publishers.status(stream.status(host_now_ns(), level::ERROR, &msg)?)?;
+                outlets.status(st.stream.status(host_now_ns(), level::ERROR, &msg)?)?;
                 std::thread::sleep(o.retry);
             }
         }
     }
+    let c = st.counts;
     eprintln!(
-        "bridge: {} records published, {} repeated records dropped, {} link losses",
-        counts.published, counts.repeated, counts.link_losses
+        "bridge: {} records published, {} repeated records dropped, {} stale records dropped, {} link losses",
+        c.published, c.repeated, c.stale, c.link_losses
     );
     Ok(ExitCode::SUCCESS)
 }
@@ -216,26 +328,27 @@ fn link_values(c: &BridgeCounts) -> Vec<(String, String)> {
     vec![
         ("published".into(), c.published.to_string()),
         ("repeated_records_dropped".into(), c.repeated.to_string()),
+        ("stale_records_dropped".into(), c.stale.to_string()),
         ("link_losses".into(), c.link_losses.to_string()),
     ]
 }
+
+/// Margin on the unit's clock for telling a restarted unit from an old record.
+const RESTART_MARGIN: Duration = Duration::from_secs(1);
 
 /// Publishes the records of one connection until it ends.
 fn serve(
     o: &BridgeOptions,
     s: &mut Session,
-    publishers: &Publishers,
-    stream: &mut OdomStream,
-    counts: &mut BridgeCounts,
+    outlets: &mut Outlets,
+    st: &mut State,
     end: Option<Instant>,
 ) -> Result<Ended> {
-    let rate = match s.command("get rate", o.retry.max(Duration::from_secs(1))) {
+    st.stamps.rate = match s.command("get rate", o.retry.max(Duration::from_secs(1))) {
         Ok((true, text)) => parse_rate(&text),
         Ok(_) => None,
         Err(e) => return Ok(Ended::Lost(format!("link: {e:#}"))),
     };
-    let mut stamps = LiveStamps { rate, origin: None };
-    let mut prev: Option<(PoseRecord, u64)> = None;
     let mut stale = false;
     loop {
         let now = Instant::now();
@@ -257,23 +370,38 @@ fn serve(
             None => {
                 if !stale && end.is_none_or(|e| Instant::now() < e) {
                     stale = true;
-                    stream.set_extra(link_values(counts));
+                    st.stream.set_extra(link_values(&st.counts));
                     let msg = format!("no pose record for {:.1} s", o.retry.as_secs_f64());
-                    publishers.status(stream.status(host_now_ns(), level::STALE, &msg)?)?;
+                    outlets.status(st.stream.status(host_now_ns(), level::STALE, &msg)?)?;
                 }
                 continue;
             }
         };
-        if prev.is_some_and(|(p, _)| p.sequence == r.sequence) {
-            counts.repeated += 1;
+        let received = Instant::now();
+        if st.last.is_some_and(|(p, _, _)| p.sequence == r.sequence) {
+            st.counts.repeated += 1;
             continue;
         }
+        let since = st
+            .last
+            .map_or(Duration::ZERO, |(_, _, t)| received.duration_since(t));
+        let fresh = freshness(&r, st.last.as_ref().map(|l| &l.0), since + RESTART_MARGIN);
+        match fresh {
+            Freshness::New => {}
+            // A new clock: re-anchored at this record, no twist across the restart.
+            Freshness::Restarted => st.stamps.origin = None,
+            Freshness::Stale => {
+                st.counts.stale += 1;
+                continue;
+            }
+        }
         stale = false;
-        let stamp = stamps.stamp(&r);
+        let stamp = st.stamps.stamp(&r);
+        let prev = st.last.map(|(p, t, _)| (p, t));
         let zero = r.sigma_x == 0.0 && r.sigma_y == 0.0 && r.sigma_heading == 0.0;
         let was_moving = prev
             .is_some_and(|(p, _)| p.sigma_x != 0.0 || p.sigma_y != 0.0 || p.sigma_heading != 0.0);
-        let twist = prev.and_then(|(p, t)| {
+        let twist = prev.filter(|_| fresh == Freshness::New).and_then(|(p, t)| {
             let dt = stamp.saturating_sub(t) as f64 * 1e-9;
             BaseTwist::from_counts(
                 &o.params,
@@ -302,26 +430,19 @@ fn serve(
             overrange: false,
             reset: zero && was_moving,
         };
-        stream.set_extra(link_values(counts));
-        let m = match stream.next(&sample) {
+        st.stream.set_extra(link_values(&st.counts));
+        let m = match st.stream.next(&sample) {
             Ok(m) => m,
-            // A stamp before the last one (the unit restarted its clock): not published as new.
+            // A stamp before the last one: not published as new.
             Err(_) => {
-                counts.repeated += 1;
+                st.counts.stale += 1;
                 continue;
             }
         };
-        publishers
-            .odom
-            .publish(m.odom)
-            .map_err(dds("write /odom"))?;
-        publishers.tf.publish(m.tf).map_err(dds("write /tf"))?;
-        if let Some(d) = m.diagnostics {
-            publishers.status(d)?;
-        }
-        counts.published += 1;
-        prev = Some((r, stamp));
-        if o.count.is_some_and(|c| counts.published >= c) {
+        outlets.sample(m)?;
+        st.counts.published += 1;
+        st.last = Some((r, stamp, received));
+        if o.count.is_some_and(|c| st.counts.published >= c) {
             return Ok(Ended::Done);
         }
     }
@@ -330,6 +451,32 @@ fn serve(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn freshness_table() {
+        let at = |us| PoseRecord {
+            mcu_time_us: us,
+            ..Default::default()
+        };
+        let last = at(600_000_000);
+        let s = Duration::from_secs;
+        assert_eq!(freshness(&at(1), None, s(0)), Freshness::New);
+        assert_eq!(
+            freshness(&at(600_020_000), Some(&last), s(0)),
+            Freshness::New
+        );
+        // Sent again after a 2 s gap: the unit's clock says it is old.
+        assert_eq!(freshness(&last, Some(&last), s(2)), Freshness::Stale);
+        assert_eq!(
+            freshness(&at(599_000_000), Some(&last), s(2)),
+            Freshness::Stale
+        );
+        // Up for 1.5 s after 3 s away: it restarted.
+        assert_eq!(
+            freshness(&at(1_500_000), Some(&last), s(3)),
+            Freshness::Restarted
+        );
+    }
 
     #[test]
     fn rate_reply() {

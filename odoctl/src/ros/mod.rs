@@ -5,6 +5,7 @@ pub mod bridge;
 pub mod conventions;
 pub mod diff_drive;
 pub mod export;
+pub mod foxglove;
 pub mod msgs;
 pub mod recording;
 pub mod stamps;
