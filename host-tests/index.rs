@@ -97,10 +97,30 @@ fn index_counts_far_apart_do_not_overflow() {
         (20_000, i64::MAX, i64::MIN, None),
         (20_000, 0, i64::MAX, None),
         (20_000, -9_223_372_036_854_760_000, 0, None),
-        (1, i64::MIN, i64::MAX, Some(IndexCheck::Whole { turns: i64::MAX })),
-        (1, i64::MAX, i64::MIN, Some(IndexCheck::Whole { turns: i64::MIN })),
-        (2, i64::MIN, i64::MAX, Some(IndexCheck::Whole { turns: i64::MAX })),
-        (1 << 30, 0, (1 << 62) + 3, Some(IndexCheck::Whole { turns: 1 << 32 })),
+        (
+            1,
+            i64::MIN,
+            i64::MAX,
+            Some(IndexCheck::Whole { turns: i64::MAX }),
+        ),
+        (
+            1,
+            i64::MAX,
+            i64::MIN,
+            Some(IndexCheck::Whole { turns: i64::MIN }),
+        ),
+        (
+            2,
+            i64::MIN,
+            i64::MAX,
+            Some(IndexCheck::Whole { turns: i64::MAX }),
+        ),
+        (
+            1 << 30,
+            0,
+            (1 << 62) + 3,
+            Some(IndexCheck::Whole { turns: 1 << 32 }),
+        ),
     ] {
         let mut t = IndexTracker::new(tpr, index::DEFAULT_TOLERANCE);
         assert_eq!(t.on_index(a), IndexCheck::First);

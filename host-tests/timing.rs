@@ -1658,7 +1658,9 @@ fn nmea_second_60_only_at_23_59_60() {
     for t in ["000060.00", "235860.00", "225960.00", "120060"] {
         for s in [
             with_checksum(&format!("GPZDA,{t},31,12,2016,00,00")),
-            with_checksum(&format!("GPRMC,{t},A,4807.038,N,01131.000,E,0.0,0.0,311216,,")),
+            with_checksum(&format!(
+                "GPRMC,{t},A,4807.038,N,01131.000,E,0.0,0.0,311216,,"
+            )),
         ] {
             let got = parse_sentence(format!("{s}\r").as_bytes());
             assert_eq!(got, Err(NmeaError::BadDate), "{s}");
