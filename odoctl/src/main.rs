@@ -199,14 +199,20 @@ enum ConfigAction {
     },
     /// Store the settings in flash.
     Save,
-    /// Send a parameter file (a calibration result) in one atomic `set`, then `save` unless
-    /// `--no-save`.
+    /// Send a parameter file (a calibration result, or unit options) in atomic `set` lines,
+    /// then `save` unless `--no-save`.
     Push {
         /// TOML file with the shared key names.
         file: PathBuf,
         /// Do not save to flash.
         #[arg(long)]
         no_save: bool,
+    },
+    /// Write the unit's settings (its `get` reply) to a TOML file that `push` sends back
+    /// bit for bit.
+    Pull {
+        /// TOML file to write.
+        file: PathBuf,
     },
     /// Send any command line and print the reply.
     Raw {
@@ -405,6 +411,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 ConfigAction::Set { key, value } => c::ConfigAction::Set(key, value),
                 ConfigAction::Save => c::ConfigAction::Save,
                 ConfigAction::Push { file, no_save } => c::ConfigAction::Push(file, !no_save),
+                ConfigAction::Pull { file } => c::ConfigAction::Pull(file),
                 ConfigAction::Raw { line } => c::ConfigAction::Raw(line.join(" ")),
             };
             c::config(&port.port, port.baud, action)
