@@ -475,6 +475,7 @@ impl<W: Write> RecordWriter<W> {
                 sigma_y: r.sigma_y,
                 sigma_heading: r.sigma_heading,
                 sigma_xy: r.sigma_xy,
+                time: None,
             }),
         };
         let clocks: RecordFields = [
