@@ -41,6 +41,11 @@ pub fn duration(text: &str) -> Result<f64, String> {
     real(text, 0.0, 1e7, true, "s")
 }
 
+/// A time between retries, [0.01, 3600] s.
+pub fn retry(text: &str) -> Result<f64, String> {
+    real(text, 0.01, 3600.0, false, "s")
+}
+
 /// A count of records or rows, at least 1.
 pub fn count(text: &str) -> Result<u64, String> {
     integer(text, 1, u64::MAX)

@@ -180,14 +180,14 @@ enum Cmd {
         #[command(flatten)]
         params: ParamArgs,
         /// Stop after this many seconds.
-        #[arg(long)]
+        #[arg(long, allow_negative_numbers = true, value_parser = v::duration)]
         duration: Option<f64>,
         /// Stop after this many published records.
-        #[arg(long)]
+        #[arg(long, value_parser = v::count)]
         count: Option<u64>,
         /// Seconds between reconnection attempts, and without records before the status
         /// turns STALE.
-        #[arg(long, default_value_t = 1.0)]
+        #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = v::retry)]
         retry: f64,
     },
 }

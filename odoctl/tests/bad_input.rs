@@ -208,6 +208,16 @@ fn numeric_options_out_of_range_are_refused() {
             "1..",
         ),
         (
+            vec!["bridge", "--port", "tcp:127.0.0.1:1", "--retry", "nan"],
+            "--retry",
+            "[0.01, 3600] s",
+        ),
+        (
+            vec!["bridge", "--port", "tcp:127.0.0.1:1", "--duration", "-1"],
+            "--duration",
+            "(0, 10000000] s",
+        ),
+        (
             vec!["replay", f, "--x", "1e300"],
             "--x",
             "[-1073741824, 1073741824] m",
