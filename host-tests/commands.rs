@@ -329,3 +329,58 @@ proptest! {
         prop_assert!(s.validate().is_ok());
     }
 }
+
+/// Issue 20 item 10: a line of only spaces or tabs is ignored like an empty line, not
+/// answered with `error: unknown command ''`.
+#[test]
+fn blank_lines_are_ignored() {
+    assert_eq!(lines(b"   \r\n\t\t\n \t \r"), vec![]);
+    assert_eq!(
+        lines(b"  \n  status  \n\t\nx\x08 \n"),
+        vec![Ok("  status  ".into())]
+    );
+}
+
+/// Issue 20 item 8: `set KEY -0` on a key at 0 changes the stored bytes and checksum, so the
+/// unit must be told (`SettingsChanged`), and `defaults` after it must restore +0.
+#[test]
+fn negative_zero_is_a_change() {
+    let mut s = Settings::DEFAULT;
+    let before = (s.to_bytes(), s.checksum());
+    assert_eq!(run("set left_cos1 -0", &mut s).1, Action::SettingsChanged);
+    assert_ne!((s.to_bytes(), s.checksum()), before);
+    assert_eq!(run("set left_cos1 -0", &mut s).1, Action::None, "same bits");
+    assert_eq!(run("defaults", &mut s).1, Action::SettingsChanged);
+    assert_eq!((s.to_bytes(), s.checksum()), before);
+    assert_eq!(run("set left_cos1 0", &mut s).1, Action::None);
+}
+
+/// Issue 20 item 7: `reset_pose` refuses a coordinate the integrator cannot hold (clamped
+/// and wrapping before), with an error naming it; in-range extremes are accepted.
+#[test]
+fn reset_pose_out_of_range_is_refused() {
+    use odo_core::odometry::integrator::{MAX_HEADING, MAX_POSITION};
+    let mut s = Settings::DEFAULT;
+    for (line, what) in [
+        ("reset_pose 3e9 0 0", "x must be within"),
+        ("reset_pose 0 -2147483648 0", "y must be within"),
+        ("reset_pose 0 0 -6e19", "heading must be within"),
+        ("reset_pose 1e300 0 0", "x must be within"),
+        ("reset_pose 0 0 1e10", "heading must be within"),
+    ] {
+        let (r, a) = run(line, &mut s);
+        assert!(!r.ok, "{line}: {}", r.text);
+        assert!(r.text.contains(what), "{line}: {}", r.text);
+        assert!(r.text.contains("pose unchanged"), "{line}: {}", r.text);
+        assert_eq!(a, Action::None);
+    }
+    let line = format!("reset_pose {MAX_POSITION} -{MAX_POSITION} -{MAX_HEADING}");
+    assert_eq!(
+        run(&line, &mut s).1,
+        Action::ResetPose {
+            x: MAX_POSITION,
+            y: -MAX_POSITION,
+            heading: -MAX_HEADING
+        }
+    );
+}

@@ -87,3 +87,59 @@ proptest! {
         prop_assert_eq!(extend_near(bits, raw_of(abs), abs, raw_of(abs + step)), abs + step);
     }
 }
+
+/// Issue 20 item 12: latched counts about 2^63 apart (unreachable on a board, but the core
+/// promises no panic) multiplied with overflow; now exact, with saturated turns.
+#[test]
+fn index_counts_far_apart_do_not_overflow() {
+    for (tpr, a, b, expected) in [
+        (20_000u32, i64::MIN, i64::MAX, None),
+        (20_000, i64::MAX, i64::MIN, None),
+        (20_000, 0, i64::MAX, None),
+        (20_000, -9_223_372_036_854_760_000, 0, None),
+        (
+            1,
+            i64::MIN,
+            i64::MAX,
+            Some(IndexCheck::Whole { turns: i64::MAX }),
+        ),
+        (
+            1,
+            i64::MAX,
+            i64::MIN,
+            Some(IndexCheck::Whole { turns: i64::MIN }),
+        ),
+        (
+            2,
+            i64::MIN,
+            i64::MAX,
+            Some(IndexCheck::Whole { turns: i64::MAX }),
+        ),
+        (
+            1 << 30,
+            0,
+            (1 << 62) + 3,
+            Some(IndexCheck::Whole { turns: 1 << 32 }),
+        ),
+    ] {
+        let mut t = IndexTracker::new(tpr, index::DEFAULT_TOLERANCE);
+        assert_eq!(t.on_index(a), IndexCheck::First);
+        let got = t.on_index(b);
+        // The exact answer from i128.
+        let diff = i128::from(b) - i128::from(a);
+        let turns = (diff + i128::from(tpr) / 2).div_euclid(i128::from(tpr));
+        let error = diff - turns * i128::from(tpr);
+        match got {
+            IndexCheck::Whole { turns: t } => {
+                assert!(error.abs() <= 4, "{a} -> {b}: {got:?}");
+                assert_eq!(i128::from(t), turns.clamp(i64::MIN.into(), i64::MAX.into()));
+            }
+            IndexCheck::Mismatch { error: e } => assert_eq!(i128::from(e), error, "{a} -> {b}"),
+            IndexCheck::First => panic!("second pulse reported as first"),
+        }
+        if let Some(expected) = expected {
+            assert_eq!(got, expected, "{a} -> {b}");
+        }
+        assert_eq!(t.reference(), Some(b));
+    }
+}

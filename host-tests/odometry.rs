@@ -374,6 +374,58 @@ fn overrange_sample_is_flagged_and_not_integrated() {
     assert!(st.overrange);
 }
 
+/// Issue 20 item 7: a pose beyond the fixed-point range is reported by `check_range` and
+/// clamped by `reset_pose`, so the steps after it cannot overflow (they wrapped in release
+/// and panicked with overflow checks before).
+#[test]
+fn pose_beyond_the_fixed_point_range_is_refused_or_clamped() {
+    use odo_core::odometry::integrator::{MAX_HEADING, MAX_POSITION};
+    use odo_core::odometry::PoseRangeError;
+    let pose = |x, y, heading| Pose { x, y, heading };
+    assert_eq!(
+        pose(MAX_POSITION, -MAX_POSITION, -MAX_HEADING).check_range(),
+        Ok(())
+    );
+    assert_eq!(pose(2.2e9, 0.0, 0.0).check_range(), Err(PoseRangeError::X));
+    assert_eq!(
+        pose(f64::NAN, 0.0, 0.0).check_range(),
+        Err(PoseRangeError::X)
+    );
+    assert_eq!(pose(0.0, -1e300, 0.0).check_range(), Err(PoseRangeError::Y));
+    assert_eq!(
+        pose(0.0, 0.0, -6e19).check_range(),
+        Err(PoseRangeError::Heading)
+    );
+    assert_eq!(
+        pose(0.0, 0.0, f64::INFINITY).check_range(),
+        Err(PoseRangeError::Heading)
+    );
+
+    let p = ChassisParams::DESIGNED;
+    let mut integ = Integrator::new(&p, counts([0, 0]), Pose::default()).unwrap();
+    for start in [
+        pose(1e300, -1e300, -6e19),
+        pose(-2.2e9, 2.2e9, 6e19),
+        pose(MAX_POSITION, MAX_POSITION, MAX_HEADING),
+    ] {
+        integ.reset_pose(start);
+        let at = integ.pose();
+        assert_eq!(at.x.abs(), MAX_POSITION, "{start:?} -> {at:?}");
+        assert_eq!(at.y.abs(), MAX_POSITION, "{start:?} -> {at:?}");
+        assert!(
+            (at.heading.abs() - MAX_HEADING).abs() < 1e-3,
+            "{start:?} -> {at:?}"
+        );
+        // Full-range samples in every direction: no overflow, the pose moves.
+        let mut g = integ.counts();
+        for d in [[200_000, 200_000], [-200_000, -200_000], [10_000, -10_000]] {
+            g = counts([g.left + d[0], g.right + d[1]]);
+            assert!(!integ.step(g, IndexRefs::default()).overrange);
+        }
+        assert!(integ.pose().x.is_finite() && integ.pose().heading.is_finite());
+    }
+}
+
 #[test]
 fn bad_parameters_are_refused_and_change_nothing() {
     let mut p = ChassisParams::DESIGNED;

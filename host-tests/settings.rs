@@ -923,6 +923,52 @@ fn erase_stall_against_the_counter_range() {
     assert!(!slow.survives_stall(1_400));
 }
 
+/// Issue 20 item 9: a valid record of generation 0xFFFF_FFFF made the next save write
+/// generation 1, which verified, but every later load returned the old record. Generations
+/// are ordered with wrap-around (serial-number arithmetic); go across the wrap through both
+/// sectors.
+#[test]
+fn generation_wraps_around() {
+    use odo_core::settings::store::generation_is_newer;
+    for (a, b, newer) in [
+        (2, 1, true),
+        (1, 2, false),
+        (1, 1, false),
+        (1, u32::MAX, true),
+        (u32::MAX, 1, false),
+        (5, u32::MAX - 5, true),
+        (0x8000_0000, 1, true),
+        (0x8000_0001, 1, false),
+    ] {
+        assert_eq!(generation_is_newer(a, b), newer, "{a:#x} newer than {b:#x}");
+    }
+    // The issue's input: one record at 0xFFFF_FFFF.
+    let mut f = SimFlash::new(3 * SLOT_LEN);
+    f.program(0, 0, &encode_record(&variant(1), u32::MAX))
+        .unwrap();
+    assert_eq!(load(&f), (variant(1), SettingsSource::Flash, u32::MAX));
+    let mut store = SettingsStore::new(f);
+    assert_eq!(store.save(&variant(2)).unwrap(), 1, "0 is never written");
+    assert_eq!(load(store.flash()), (variant(2), SettingsSource::Flash, 1));
+
+    // From 0xFFFF_FFFB over the wrap to 8, around both 3-slot sectors twice.
+    let mut f = SimFlash::new(3 * SLOT_LEN);
+    f.program(1, 0, &encode_record(&variant(0), u32::MAX - 4))
+        .unwrap();
+    let mut store = SettingsStore::new(f);
+    let mut expected = u32::MAX - 4;
+    for i in 1..=12 {
+        expected = expected.wrapping_add(1).max(1);
+        assert_eq!(store.save(&variant(i)).unwrap(), expected, "save {i}");
+        assert_eq!(
+            load(store.flash()),
+            (variant(i), SettingsSource::Flash, expected),
+            "save {i}"
+        );
+    }
+    assert_eq!(expected, 8);
+}
+
 // ---------------------------------------------------------------------------------------
 // The key table against the format and the docs
 

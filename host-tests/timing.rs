@@ -1646,3 +1646,41 @@ fn time_tag_follows_the_discipline_through_holdover() {
     assert!(checked > 20);
     assert_eq!(tag.mismatches(), 0);
 }
+
+/// Issue 20 item 11: second 60 is a leap second only at 23:59:60 (`000060.00` became 00:01:00);
+/// the leap second itself still parses and maps onto the next second.
+#[test]
+fn nmea_second_60_only_at_23_59_60() {
+    assert_eq!(
+        parse_sentence(b"$GPZDA,000060.00,01,01,2024,00,00*64\r"),
+        Err(NmeaError::BadDate)
+    );
+    for t in ["000060.00", "235860.00", "225960.00", "120060"] {
+        for s in [
+            with_checksum(&format!("GPZDA,{t},31,12,2016,00,00")),
+            with_checksum(&format!(
+                "GPRMC,{t},A,4807.038,N,01131.000,E,0.0,0.0,311216,,"
+            )),
+        ] {
+            let got = parse_sentence(format!("{s}\r").as_bytes());
+            assert_eq!(got, Err(NmeaError::BadDate), "{s}");
+        }
+    }
+    let leap = with_checksum("GPZDA,235960.00,31,12,2016,00,00");
+    let Ok(TimeMessage::Zda(t)) = parse_sentence(format!("{leap}\r").as_bytes()) else {
+        panic!("{leap} refused");
+    };
+    assert_eq!((t.hour, t.minute, t.second), (23, 59, 60));
+    let next = UtcDateTime {
+        year: 2017,
+        month: 1,
+        day: 1,
+        hour: 0,
+        minute: 0,
+        second: 0,
+        millis: 0,
+    };
+    assert_eq!(t.gps_seconds(), next.gps_seconds());
+    let bad = UtcDateTime { minute: 58, ..t };
+    assert_eq!(bad.gps_seconds(), Err(NmeaError::BadDate));
+}

@@ -342,6 +342,24 @@ fn real<T: std::str::FromStr + Into<f64> + Copy>(v: &str) -> Result<T, &'static 
     Ok(x)
 }
 
+/// A coordinate the unit's integrator can start from (|v| <= 2^30 m).
+fn position(v: &str) -> Result<f64, &'static str> {
+    let x: f64 = real(v)?;
+    if x.abs() > odo_core::odometry::integrator::MAX_POSITION {
+        return Err("within +-1073741824 m (the integrator's range)");
+    }
+    Ok(x)
+}
+
+/// A heading the unit's integrator can start from (|v| <= 2^32 rad).
+fn heading(v: &str) -> Result<f64, &'static str> {
+    let h: f64 = real(v)?;
+    if h.abs() > odo_core::odometry::integrator::MAX_HEADING {
+        return Err("within +-4294967296 rad (the integrator's range)");
+    }
+    Ok(h)
+}
+
 fn integer(v: &str) -> Result<i64, &'static str> {
     v.parse().map_err(|_| "an integer")
 }
@@ -445,9 +463,9 @@ pub fn parse_reference(file: &str, text: &str) -> Result<Vec<RefPoint>> {
     for row in table.rows() {
         out.push(RefPoint {
             t: row.time(ct, &mut prev)?,
-            x: row.get(cx, real)?,
-            y: row.get(cy, real)?,
-            heading: row.optional(ch, real)?,
+            x: row.get(cx, position)?,
+            y: row.get(cy, position)?,
+            heading: row.optional(ch, heading)?,
         });
     }
     Ok(out)

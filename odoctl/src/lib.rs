@@ -19,6 +19,7 @@ macro_rules! outln {
 }
 
 pub mod calib;
+pub mod cli_values;
 pub mod commands;
 pub mod config;
 pub mod csvio;

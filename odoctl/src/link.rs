@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
-use anyhow::{bail, Context, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use odo_core::protocol::{DecoderStats, Frame, FrameDecoder, Message, PoseRecord, Status};
 use odo_core::timing::SyncState;
 
@@ -159,7 +159,9 @@ impl Session {
                     e.kind(),
                     ErrorKind::TimedOut | ErrorKind::WouldBlock | ErrorKind::Interrupted
                 ) => {}
-            Err(e) => return Err(e).context("reading from the unit"),
+            // As a message, not an io::Error source: a BrokenPipe here is a lost link, not
+            // the closed stdout that `main` lets pass silently.
+            Err(e) => bail!("the link to the unit failed while reading: {e}"),
         }
         Ok(())
     }
@@ -181,12 +183,16 @@ impl Session {
         }
     }
 
-    /// Sends one command line.
+    /// Sends one command line. A failed write (the unit closed the link) is an error
+    /// naming the line, as a message (see [`Session::pump`]).
     pub fn send_line(&mut self, line: &str) -> Result<()> {
-        self.link.write_all(line.as_bytes())?;
-        self.link.write_all(b"\n")?;
-        self.link.flush()?;
-        Ok(())
+        let mut bytes = Vec::with_capacity(line.len() + 1);
+        bytes.extend_from_slice(line.as_bytes());
+        bytes.push(b'\n');
+        self.link
+            .write_all(&bytes)
+            .and_then(|()| self.link.flush())
+            .map_err(|e| anyhow!("`{line}` not sent: the link to the unit is lost ({e})"))
     }
 
     /// Sends `line` and collects its reply (all frames until one without `more`); other
@@ -317,15 +323,29 @@ fn describe(f: &Frame) -> Option<String> {
         )),
         Message::DeviceInfo(d) => Some(format!(
             "# device: firmware {}, protocol {}, started by {}, settings {:?} checksum {:08x}",
-            d.firmware_version,
+            escape_control(&d.firmware_version),
             d.protocol_version,
             d.reset_cause.name(),
             d.settings_source,
             d.settings_checksum
         )),
-        Message::Reply(r) => Some(format!("# reply: {}", r.text.trim_end())),
+        Message::Reply(r) => Some(format!("# reply: {}", escape_control(r.text.trim_end()))),
         Message::Pose(_) => None,
     }
+}
+
+/// Text from the unit made safe for a terminal: control characters (escape sequences, CR,
+/// backspace, line breaks) shown escaped (`\u{1b}`, `\r`, `\n`), everything else as it is.
+pub fn escape_control(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for c in text.chars() {
+        if c.is_control() {
+            out.extend(c.escape_default());
+        } else {
+            out.push(c);
+        }
+    }
+    out
 }
 
 /// `odoctl monitor`.
@@ -345,7 +365,7 @@ pub fn monitor(
     while let Some(f) = s.next_frame(end)? {
         match &f.message {
             Message::Pose(r) => {
-                if n % every.max(1) == 0 {
+                if n.is_multiple_of(every.max(1)) {
                     writeln!(out, "{}", table_row(r))?;
                 }
                 n += 1;
@@ -366,8 +386,9 @@ pub fn monitor(
         out.flush()?;
     }
     writeln!(out, "# link: {}", health(&s.decoder_stats(), &s.stats))?;
+    out.flush()?;
     if s.closed() {
-        writeln!(out, "# the unit closed the connection")?;
+        bail!("the unit closed the connection after {n} pose records");
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -383,13 +404,20 @@ struct TimeBase {
     gnss: bool,
     /// Sample rate in use (Hz), from the latest Status (or `get rate` before the first).
     rate: Option<f64>,
+    /// GPS week of the segment's first record with GNSS time: `t` is the time of week of
+    /// that week, continuing past 604,800 s across a week rollover.
+    week0: Option<u16>,
 }
 
 impl TimeBase {
-    fn t(&self, r: &PoseRecord) -> f64 {
+    fn t(&mut self, r: &PoseRecord) -> f64 {
         match self.rate {
             Some(rate) if self.gnss && r.flags.time_valid => {
-                f64::from(r.gnss.tow_ms) * 1e-3 + f64::from(r.gnss.sample_in_second) / rate
+                let week0 = *self.week0.get_or_insert(r.gnss.week);
+                let weeks = f64::from(i32::from(r.gnss.week) - i32::from(week0));
+                weeks * f64::from(odo_core::timing::nmea::SECONDS_PER_WEEK)
+                    + f64::from(r.gnss.tow_ms) * 1e-3
+                    + f64::from(r.gnss.sample_in_second) / rate
             }
             _ => r.mcu_time_us as f64 * 1e-6,
         }
@@ -403,13 +431,24 @@ impl TimeBase {
     }
 }
 
-/// Writes pose records as SAMPLES CSV rows; skips rows whose time does not increase.
+/// Why a record does not continue the current segment.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Continuity {
+    /// Its time follows the previous record's.
+    Next,
+    /// The previous record again (same sequence and time): left out, counted.
+    Duplicate,
+    /// Its time or sample sequence goes back (the unit restarted, or its clock changed): a
+    /// new segment.
+    Restart,
+}
+
+/// Writes pose records as SAMPLES CSV rows of one segment (times increasing).
 struct RecordWriter<W: Write> {
     w: W,
     time: TimeBase,
-    last_t: Option<f64>,
+    last: Option<(f64, u32)>,
     rows: u64,
-    skipped: u64,
     buf: String,
 }
 
@@ -419,20 +458,29 @@ impl<W: Write> RecordWriter<W> {
         Ok(Self {
             w,
             time,
-            last_t: None,
+            last: None,
             rows: 0,
-            skipped: 0,
             buf: String::new(),
         })
     }
 
+    /// Whether `r` continues this segment (its time computed as [`Self::row`] would).
+    fn continuity(&self, r: &PoseRecord) -> Continuity {
+        let t = self.time.clone_t(r);
+        match self.last {
+            Some((lt, seq)) if t == lt && r.sequence == seq => Continuity::Duplicate,
+            // The time went back, or the sample sequence did (a restart of a unit on GNSS
+            // time, whose time goes on but whose counts start again).
+            Some((lt, seq)) if t <= lt || r.sequence.wrapping_sub(seq) > u32::MAX / 2 => {
+                Continuity::Restart
+            }
+            _ => Continuity::Next,
+        }
+    }
+
     fn row(&mut self, r: &PoseRecord) -> Result<()> {
         let t = self.time.t(r);
-        if self.last_t.is_some_and(|l| t <= l) {
-            self.skipped += 1;
-            return Ok(());
-        }
-        self.last_t = Some(t);
+        self.last = Some((t, r.sequence));
         let sample = Sample {
             t,
             left: r.gamma_left,
@@ -467,6 +515,217 @@ impl<W: Write> RecordWriter<W> {
     }
 }
 
+impl TimeBase {
+    /// [`TimeBase::t`] without fixing the week.
+    fn clone_t(&self, r: &PoseRecord) -> f64 {
+        let mut copy = *self;
+        copy.t(r)
+    }
+}
+
+/// Where the segments of a recording go: the first to `first`, segment `k` >= 2 to the
+/// file named like `first` with `-k` before its extension (`rec.csv`, `rec-2.csv`, ...);
+/// with `first = None` (stdout) later segments cannot be written and are counted.
+pub fn segment_path(first: &Path, k: usize) -> PathBuf {
+    if k <= 1 {
+        return first.to_path_buf();
+    }
+    let stem = first
+        .file_stem()
+        .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+    let name = match first.extension() {
+        Some(ext) => format!("{stem}-{k}.{}", ext.to_string_lossy()),
+        None => format!("{stem}-{k}"),
+    };
+    first.with_file_name(name)
+}
+
+/// The records of a capture as SAMPLES CSV segments: a new segment (file) wherever the
+/// time does not increase, duplicates left out and counted.
+struct SegmentWriter<'a> {
+    /// The first segment's file (`None`: `stdout`).
+    first: Option<&'a Path>,
+    stdout: Option<Box<dyn Write + 'a>>,
+    /// Sample rate in use (Hz), from the latest Status.
+    rate: Option<f64>,
+    current: Option<RecordWriter<Box<dyn Write + 'a>>>,
+    /// (file, rows) of each finished segment.
+    done: Vec<(String, u64)>,
+    /// Exact repeats of the previous record, left out.
+    duplicates: u64,
+    /// Records of later segments that had nowhere to go (stdout), left out.
+    unwritten: u64,
+    segments: usize,
+}
+
+impl<'a> SegmentWriter<'a> {
+    fn new(
+        first: Option<&'a Path>,
+        stdout: Option<Box<dyn Write + 'a>>,
+        rate: Option<f64>,
+    ) -> Self {
+        Self {
+            first,
+            stdout,
+            rate,
+            current: None,
+            done: Vec::new(),
+            duplicates: 0,
+            unwritten: 0,
+            segments: 0,
+        }
+    }
+
+    fn open(&mut self, r: &PoseRecord) -> Result<()> {
+        self.finish_segment()?;
+        self.segments += 1;
+        let w: Box<dyn Write + 'a> = match (self.first, self.stdout.take()) {
+            (Some(first), _) => {
+                let p = segment_path(first, self.segments);
+                Box::new(BufWriter::new(
+                    File::create(&p).with_context(|| format!("{}: cannot create", p.display()))?,
+                ))
+            }
+            (None, Some(out)) => out,
+            (None, None) => {
+                self.unwritten += 1;
+                return Ok(());
+            }
+        };
+        let time = TimeBase {
+            gnss: r.flags.time_valid,
+            rate: self.rate,
+            week0: None,
+        };
+        self.current = Some(RecordWriter::new(w, time)?);
+        Ok(())
+    }
+
+    /// A Status message: its rate applies to the records that follow it, in this segment
+    /// and the next.
+    fn on_status(&mut self, s: &Status) {
+        if s.rate_hz > 0 {
+            self.rate = Some(f64::from(s.rate_hz));
+        }
+        if let Some(w) = &mut self.current {
+            w.time.on_status(s);
+        }
+    }
+
+    /// Writes `r`: to the current segment, or a new one after a restart.
+    fn push(&mut self, r: &PoseRecord) -> Result<()> {
+        let continuity = match &self.current {
+            Some(w) => w.continuity(r),
+            None if self.segments > 0 => {
+                // Stdout is taken by the first segment: count what follows.
+                self.unwritten += 1;
+                return Ok(());
+            }
+            None => Continuity::Restart,
+        };
+        match continuity {
+            Continuity::Duplicate => {
+                self.duplicates += 1;
+                return Ok(());
+            }
+            Continuity::Restart => {
+                self.open(r)?;
+                if self.current.is_none() {
+                    return Ok(());
+                }
+            }
+            Continuity::Next => {}
+        }
+        self.current.as_mut().expect("open segment").row(r)
+    }
+
+    fn finish_segment(&mut self) -> Result<()> {
+        if let Some(mut w) = self.current.take() {
+            w.w.flush()?;
+            let name = match self.first {
+                Some(first) => segment_path(first, self.segments).display().to_string(),
+                None => "stdout".into(),
+            };
+            self.done.push((name, w.rows));
+        }
+        Ok(())
+    }
+
+    /// Flushes; the report: (file, rows) per segment, duplicates, unwritten records.
+    fn finish(mut self) -> Result<Recorded> {
+        self.finish_segment()?;
+        if self.segments == 0 {
+            // No record: an empty CSV (header only) where the first segment goes.
+            let mut w: Box<dyn Write + 'a> = match (self.first, self.stdout.take()) {
+                (Some(p), _) => Box::new(
+                    File::create(p).with_context(|| format!("{}: cannot create", p.display()))?,
+                ),
+                (None, Some(out)) => out,
+                (None, None) => unreachable!("stdout is taken by a segment only"),
+            };
+            writeln!(w, "{}", SamplesLayout::Record.header())?;
+            w.flush()?;
+        }
+        Ok(Recorded {
+            segments: self.done,
+            duplicates: self.duplicates,
+            unwritten: self.unwritten,
+        })
+    }
+}
+
+/// What `record` or `decode` wrote and left out.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Recorded {
+    /// (file, rows) of each segment, in order.
+    pub segments: Vec<(String, u64)>,
+    /// Exact repeats of the previous record (same sequence and time), left out.
+    pub duplicates: u64,
+    /// Records of segments after the first that could not be written (output to stdout).
+    pub unwritten: u64,
+}
+
+impl Recorded {
+    /// Rows written over all segments.
+    pub fn rows(&self) -> u64 {
+        self.segments.iter().map(|(_, n)| n).sum()
+    }
+
+    /// One line per segment and one per kind of record left out (each with its count).
+    pub fn report(&self) -> String {
+        let mut out = String::new();
+        let n = self.segments.len();
+        for (i, (file, rows)) in self.segments.iter().enumerate() {
+            if n > 1 {
+                out.push_str(&format!(
+                    "segment {} of {n}: {rows} records to {file}{}\n",
+                    i + 1,
+                    if i > 0 {
+                        " (the unit restarted or its time went back: a new segment)"
+                    } else {
+                        ""
+                    }
+                ));
+            } else {
+                out.push_str(&format!("{rows} records to {file}\n"));
+            }
+        }
+        if self.duplicates > 0 {
+            out.push_str(&format!(
+                "left out: {} duplicate records (same sequence and time as the one before)\n",
+                self.duplicates
+            ));
+        }
+        if self.unwritten > 0 {
+            out.push_str(&format!(
+                "left out: {} records after a restart (a new segment cannot go to stdout: use --out)\n",
+                self.unwritten
+            ));
+        }
+        out
+    }
+}
+
 fn parse_rate(text: &str) -> Option<f64> {
     text.lines().find_map(|l| {
         l.trim()
@@ -489,7 +748,7 @@ pub fn record(
     let mut s = Session::new(open(port, baud)?, raw)?;
     // The sample rate turns the GNSS time tag (second + sample index) into seconds.
     let (ok, text) = s.command("get rate", REPLY_TIMEOUT)?;
-    let mut rate = if ok { parse_rate(&text) } else { None };
+    let rate = if ok { parse_rate(&text) } else { None };
     let mut early = Vec::new();
     let mut started = !reset_pose;
     if reset_pose {
@@ -512,12 +771,11 @@ pub fn record(
             && r.sigma_y == 0.0
             && r.sigma_heading == 0.0
     };
-    let file = File::create(out).with_context(|| format!("{}: cannot create", out.display()))?;
-    let mut writer: Option<RecordWriter<BufWriter<File>>> = None;
-    let mut file = Some(BufWriter::new(file));
+    let mut writer = SegmentWriter::new(Some(out), None, rate);
     let end = duration.map(|d| Instant::now() + Duration::from_secs_f64(d));
     let start_deadline = Instant::now() + REPLY_TIMEOUT;
     let mut queue: VecDeque<PoseRecord> = early.into();
+    let mut received = 0u64;
     loop {
         let r = match queue.pop_front() {
             Some(r) => r,
@@ -528,11 +786,7 @@ pub fn record(
                 }) => r,
                 Some(f) => {
                     if let Message::Status(st) = &f.message {
-                        match &mut writer {
-                            Some(w) => w.time.on_status(st),
-                            None if st.rate_hz > 0 => rate = Some(f64::from(st.rate_hz)),
-                            None => {}
-                        }
+                        writer.on_status(st);
                     }
                     if let Some(d) = describe(&f) {
                         eprintln!("{d}");
@@ -554,47 +808,29 @@ pub fn record(
                 continue;
             }
         }
-        let w = match &mut writer {
-            Some(w) => w,
-            None => {
-                let time = TimeBase {
-                    gnss: r.flags.time_valid,
-                    rate,
-                };
-                writer.insert(RecordWriter::new(file.take().expect("file once"), time)?)
-            }
-        };
-        w.row(&r)?;
-        if count.is_some_and(|c| w.rows >= c) {
+        writer.push(&r)?;
+        received += 1;
+        if count.is_some_and(|c| received >= c) {
             break;
         }
     }
     s.finish()?;
-    let (rows, skipped) = match &mut writer {
-        Some(w) => {
-            w.w.flush()?;
-            (w.rows, w.skipped)
-        }
-        None => {
-            if let Some(mut f) = file.take() {
-                writeln!(f, "{}", SamplesLayout::Record.header())?;
-                f.flush()?;
-            }
-            (0, 0)
-        }
-    };
-    eprintln!(
-        "recorded {rows} records to {}{}",
-        out.display(),
-        if skipped > 0 {
-            format!(" ({skipped} skipped: time not increasing)")
-        } else {
-            String::new()
-        }
-    );
+    let recorded = writer.finish()?;
+    let rows = recorded.rows();
+    eprint!("recorded {}", recorded.report());
     eprintln!("link: {}", health(&s.decoder_stats(), &s.stats));
     if s.stats.record_gaps > 0 || s.stats.dropped_by_unit > 0 {
         eprintln!("warning: records are missing; a replay integrates across the gaps and will differ from the unit there");
+    }
+    if s.closed() && count.is_none_or(|c| received < c) {
+        bail!(
+            "the unit closed the connection after {received} pose records{}",
+            if rows > 0 {
+                " (those received are kept)"
+            } else {
+                ""
+            }
+        );
     }
     if rows == 0 {
         bail!("no pose record received");
@@ -602,8 +838,15 @@ pub fn record(
     Ok(ExitCode::SUCCESS)
 }
 
-/// Decodes a raw capture into the `record` CSV; returns (rows, decoder stats, stream stats).
-pub fn decode_bytes(bytes: &[u8], out: &mut dyn Write) -> Result<(u64, DecoderStats, StreamStats)> {
+/// Decodes a raw capture into the `record` CSV: the first segment to `out` (or `stdout`
+/// when `out` is `None`), each later segment (after a restart) to its own file
+/// ([`segment_path`]); returns what was written and left out, and the decoder and stream
+/// counters.
+pub fn decode_bytes<'a>(
+    bytes: &[u8],
+    out: Option<&'a Path>,
+    stdout: Option<Box<dyn Write + 'a>>,
+) -> Result<(Recorded, DecoderStats, StreamStats)> {
     let mut decoder = FrameDecoder::new();
     let mut frames = Vec::new();
     decoder.feed(bytes, |f| {
@@ -612,62 +855,52 @@ pub fn decode_bytes(bytes: &[u8], out: &mut dyn Write) -> Result<(u64, DecoderSt
         }
     });
     let mut stats = StreamStats::default();
-    let first_valid = frames.iter().find_map(|f| match &f.message {
-        Message::Pose(r) => Some(r.flags.time_valid),
-        _ => None,
-    });
     // Records before the first Status (a capture started mid-second) take its rate.
     let rate = frames.iter().find_map(|f| match &f.message {
         Message::Status(s) if s.rate_hz > 0 => Some(f64::from(s.rate_hz)),
         _ => None,
     });
-    let time = TimeBase {
-        gnss: first_valid == Some(true),
-        rate,
-    };
-    let mut w = RecordWriter::new(out, time)?;
+    let mut w = SegmentWriter::new(out, stdout, rate);
     for f in &frames {
         match &f.message {
             Message::Pose(r) => {
                 stats.on_record(r);
-                w.row(r)?;
+                w.push(r)?;
             }
-            Message::Status(st) => w.time.on_status(st),
+            Message::Status(st) => w.on_status(st),
             _ => {}
         }
     }
-    Ok((w.rows, decoder.stats(), stats))
+    Ok((w.finish()?, decoder.stats(), stats))
 }
 
 /// `odoctl decode`.
 pub fn decode(file: &Path, out: Option<&Path>) -> Result<ExitCode> {
     let bytes = std::fs::read(file).with_context(|| format!("{}: cannot read", file.display()))?;
-    let (rows, d, s) = match out {
-        Some(p) => {
-            let mut w = BufWriter::new(
-                File::create(p).with_context(|| format!("{}: cannot create", p.display()))?,
-            );
-            let r = decode_bytes(&bytes, &mut w)?;
-            w.flush()?;
-            r
-        }
-        None => {
-            let mut w = BufWriter::new(std::io::stdout().lock());
-            let r = decode_bytes(&bytes, &mut w)?;
-            w.flush()?;
-            r
-        }
+    let stdout: Option<Box<dyn Write>> = match out {
+        Some(_) => None,
+        None => Some(Box::new(BufWriter::new(std::io::stdout().lock()))),
     };
+    let (recorded, d, s) = decode_bytes(&bytes, out, stdout)?;
+    eprint!("{}: {}", file.display(), recorded.report());
     eprintln!(
-        "{}: {rows} pose records; {}",
+        "{}: {} pose records; {}",
         file.display(),
+        recorded.rows(),
         health(&d, &s)
     );
-    if rows == 0 {
+    if recorded.rows() == 0 {
         bail!(
             "{}: no pose record in {} bytes",
             file.display(),
             bytes.len()
+        );
+    }
+    if recorded.unwritten > 0 {
+        bail!(
+            "{}: {} records after a restart not written (give --out FILE to write each segment)",
+            file.display(),
+            recorded.unwritten
         );
     }
     Ok(ExitCode::SUCCESS)
@@ -692,6 +925,24 @@ pub enum ConfigAction {
 
 /// `odoctl config`: prints the unit's replies; exit code 1 on an error reply.
 pub fn config(port: &str, baud: u32, action: ConfigAction) -> Result<ExitCode> {
+    // A key or value is one word: `set rate "50 baud 9600"` would send two pairs.
+    let one_word = |what: &str, w: &str| {
+        if w.is_empty() || w.chars().any(|c| c.is_whitespace() || c.is_control()) {
+            bail!(
+                "{what} `{}` must be one word (no spaces or control characters)",
+                escape_control(w)
+            );
+        }
+        Ok(())
+    };
+    match &action {
+        ConfigAction::Get(Some(k)) => one_word("key", k)?,
+        ConfigAction::Set(k, v) => {
+            one_word("key", k)?;
+            one_word("value", v)?;
+        }
+        _ => {}
+    }
     let lines: Vec<String> = match &action {
         ConfigAction::Get(None) => vec!["get".into()],
         ConfigAction::Get(Some(k)) => vec![format!("get {k}")],
@@ -715,7 +966,7 @@ pub fn config(port: &str, baud: u32, action: ConfigAction) -> Result<ExitCode> {
         let (ok, text) = s.command(line, REPLY_TIMEOUT)?;
         crate::outln!("> {line}");
         for l in text.lines() {
-            crate::outln!("{l}");
+            crate::outln!("{}", escape_control(l));
         }
         if !ok {
             eprintln!("odoctl: the unit rejected `{line}`");

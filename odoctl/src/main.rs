@@ -8,6 +8,7 @@ use clap::{Args, Parser, Subcommand};
 
 use odo_core::odometry::UncertaintyModel;
 use odoctl::calib::{CalibrationOptions, DeltaMode, WindowStart};
+use odoctl::cli_values as v;
 use odoctl::reference::cli::{ReceiverArgs, ReferenceArgs};
 use odoctl::simulate::{PathKind, SimSettings};
 
@@ -28,7 +29,7 @@ struct PortArgs {
     #[arg(long, short)]
     port: String,
     /// Baud rate of a serial port.
-    #[arg(long, default_value_t = 115_200)]
+    #[arg(long, default_value_t = 115_200, value_parser = v::baud)]
     baud: u32,
 }
 
@@ -49,13 +50,13 @@ enum Cmd {
         #[command(flatten)]
         port: PortArgs,
         /// Stop after this many seconds.
-        #[arg(long)]
+        #[arg(long, allow_negative_numbers = true, value_parser = v::duration)]
         duration: Option<f64>,
         /// Stop after this many pose records.
-        #[arg(long)]
+        #[arg(long, value_parser = v::count)]
         count: Option<u64>,
         /// Print every N-th record only.
-        #[arg(long, default_value_t = 1)]
+        #[arg(long, default_value_t = 1, value_parser = v::count)]
         every: u64,
     },
     /// Record the live pose stream to a SAMPLES CSV (with the unit's pose columns).
@@ -69,10 +70,10 @@ enum Cmd {
         #[arg(long)]
         raw: Option<PathBuf>,
         /// Stop after this many seconds.
-        #[arg(long)]
+        #[arg(long, allow_negative_numbers = true, value_parser = v::duration)]
         duration: Option<f64>,
         /// Stop after this many pose records.
-        #[arg(long)]
+        #[arg(long, value_parser = v::count)]
         count: Option<u64>,
         /// Send `reset_pose` first, so the recording starts at zero pose and zero sigmas and
         /// `replay --check` can reproduce it bit for bit.
@@ -108,13 +109,13 @@ enum Cmd {
         #[command(flatten)]
         params: ParamArgs,
         /// Initial x (m).
-        #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+        #[arg(long, default_value_t = 0.0, allow_negative_numbers = true, value_parser = v::position)]
         x: f64,
         /// Initial y (m).
-        #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+        #[arg(long, default_value_t = 0.0, allow_negative_numbers = true, value_parser = v::position)]
         y: f64,
         /// Initial heading (rad, clockwise from +y).
-        #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+        #[arg(long, default_value_t = 0.0, allow_negative_numbers = true, value_parser = v::heading)]
         heading: f64,
         /// Compare with the unit's own pose columns of the file, bit for bit; exit non-zero
         /// on any difference.
@@ -143,7 +144,7 @@ enum Cmd {
         #[command(flatten)]
         params: ParamArgs,
         /// Initial heading (rad); when absent, the heading minimising eq (16) on this run.
-        #[arg(long, allow_negative_numbers = true)]
+        #[arg(long, allow_negative_numbers = true, value_parser = v::heading)]
         heading: Option<f64>,
         /// Per-point errors and sigmas to this CSV.
         #[arg(long)]
@@ -158,11 +159,11 @@ enum Cmd {
         /// Horizontal RMS noise of the reference (m): also reported is the coverage of the
         /// bands widened by it, `sqrt((k sigma_h)^2 + (k sigma_ref)^2)`, as the calibration's
         /// criterion uses.
-        #[arg(long, default_value_t = 0.008)]
+        #[arg(long, default_value_t = 0.008, allow_negative_numbers = true, value_parser = v::sigma_m)]
         reference_sigma: f64,
         /// Heading noise of the reference (degrees, 1 sigma): also reported is the coverage of
         /// the heading bands widened by it, as `calibrate`'s `delta_diff` criterion uses.
-        #[arg(long, default_value_t = 0.5)]
+        #[arg(long, default_value_t = 0.5, allow_negative_numbers = true, value_parser = v::sigma_deg)]
         reference_heading_sigma_deg: f64,
         /// Also write the reference track and the odometry path (`nav_msgs/Path`) to this
         /// MCAP file, for Foxglove (docs/ROS.md).
@@ -179,14 +180,14 @@ enum Cmd {
         #[command(flatten)]
         params: ParamArgs,
         /// Stop after this many seconds.
-        #[arg(long)]
+        #[arg(long, allow_negative_numbers = true, value_parser = v::duration)]
         duration: Option<f64>,
         /// Stop after this many published records.
-        #[arg(long)]
+        #[arg(long, value_parser = v::count)]
         count: Option<u64>,
         /// Seconds between reconnection attempts, and without records before the status
         /// turns STALE.
-        #[arg(long, default_value_t = 1.0)]
+        #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = v::retry)]
         retry: f64,
         /// Also serve the Foxglove WebSocket protocol (pose, path so far, 1-sigma ellipse).
         #[arg(long, value_name = "HOST:PORT", num_args = 0..=1, default_missing_value = "127.0.0.1:8765")]
@@ -282,10 +283,10 @@ struct CalibrateArgs {
     #[arg(long, short)]
     out: Option<PathBuf>,
     /// Sub-trajectory length for the uncertainty fit (m of reference path; 0 = whole run).
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true, value_parser = v::window)]
     delta_window: f64,
     /// Horizontal RMS noise of the reference (m), added to sigma_h in the coverage criterion.
-    #[arg(long, default_value_t = 0.008)]
+    #[arg(long, default_value_t = 0.008, allow_negative_numbers = true, value_parser = v::sigma_m)]
     reference_sigma: f64,
     /// How the left and right uncertainty coefficients relate.
     #[arg(long, value_enum, default_value_t = DeltaMode::Equal)]
@@ -300,7 +301,7 @@ struct CalibrateArgs {
     no_fit_delta_diff: bool,
     /// Reference heading noise (degrees, 1 sigma), added to sigma_heading in the `delta_diff`
     /// criterion; the default is `simulate --heading-sigma-deg`'s (a BD982-like dual antenna).
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = 0.5, allow_negative_numbers = true, value_parser = v::sigma_deg)]
     reference_heading_sigma_deg: f64,
     /// Which uncertainty models' coefficients to fit: the initial estimate's
     /// `uncertainty_model` (`config`), one, or `all` (the result keeps the initial model).
@@ -314,7 +315,7 @@ struct CalibrateArgs {
     #[arg(long, hide = true, conflicts_with = "polish")]
     no_polish: bool,
     /// Stability study: sub-trajectory lengths in metres, e.g. `1,2,4,8`.
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true, value_parser = v::window_length)]
     windows: Vec<f64>,
     /// Where the stability study's fits start: the whole-run estimate (`full`), or the
     /// initial estimate as the paper did (`initial`).
@@ -370,45 +371,45 @@ struct SimulateArgs {
     #[arg(long, value_enum, default_value_t = PathKind::Estimation)]
     path: PathKind,
     /// Path length (m; the shape is scaled to it).
-    #[arg(long, default_value_t = 70.0)]
+    #[arg(long, default_value_t = 70.0, allow_negative_numbers = true, value_parser = v::path_length)]
     length: f64,
     /// Sample rate (Hz).
-    #[arg(long, default_value_t = 50.0)]
+    #[arg(long, default_value_t = 50.0, allow_negative_numbers = true, value_parser = v::sample_rate)]
     rate: f64,
     /// Speed (m/s).
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = 0.5, allow_negative_numbers = true, value_parser = v::speed)]
     speed: f64,
     /// Slip: standard deviation of each wheel's relative turn error.
-    #[arg(long, default_value_t = 0.001)]
+    #[arg(long, default_value_t = 0.001, allow_negative_numbers = true, value_parser = v::fraction)]
     slip: f64,
     /// Correlation length of the slip (m of wheel travel).
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(long, default_value_t = 0.1, allow_negative_numbers = true, value_parser = v::correlation_length)]
     slip_corr: f64,
     /// Opposite-phase slip when turning (what `delta_diff` models): standard deviation of the
     /// relative error of the differential travel |ds1 - ds2|/2, added to wheel 1 and taken
     /// from wheel 2; 0 = none.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true, value_parser = v::fraction)]
     slip_turn: f64,
     /// Correlation length of the turning slip (m of differential travel |ds1 - ds2|/2).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = v::correlation_length)]
     slip_turn_corr: f64,
     /// Horizontal RMS noise of the reference position (m); the BD982's RTK figure.
-    #[arg(long, default_value_t = 0.008)]
+    #[arg(long, default_value_t = 0.008, allow_negative_numbers = true, value_parser = v::sigma_m)]
     rtk_sigma: f64,
     /// Noise of the reference heading (degrees).
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = 0.5, allow_negative_numbers = true, value_parser = v::sigma_deg)]
     heading_sigma_deg: f64,
     /// Write no heading column in the reference.
     #[arg(long)]
     no_heading: bool,
     /// Initial x (m).
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true, value_parser = v::position)]
     x0: f64,
     /// Initial y (m).
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true, value_parser = v::position)]
     y0: f64,
     /// Initial heading (rad).
-    #[arg(long, default_value_t = 0.3, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 0.3, allow_negative_numbers = true, value_parser = v::heading)]
     heading0: f64,
     /// Seed of the noise generator.
     #[arg(long, default_value_t = 1)]

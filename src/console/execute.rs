@@ -120,7 +120,8 @@ pub fn execute(line: &str, settings: &mut Settings) -> (Reply, Action) {
             (r, Action::None)
         }
         Command::Defaults => {
-            let changed = *settings != Settings::DEFAULT;
+            // Bitwise (the stored record), so that -0 against 0 counts as a change.
+            let changed = settings.to_bytes() != Settings::DEFAULT.to_bytes();
             *settings = Settings::DEFAULT;
             let mut r = Reply::ok();
             r.push_line(format_args!("defaults loaded (not saved; use save)"));
@@ -141,7 +142,9 @@ pub fn execute(line: &str, settings: &mut Settings) -> (Reply, Action) {
                     for (k, _) in &pairs {
                         r.push_line(format_args!("{} = {}", k.name(), settings.get(*k)));
                     }
-                    let action = if *settings != before {
+                    // Bitwise (the stored record): `set left_cos1 -0` changes the bytes and
+                    // the checksum though -0.0 == 0.0.
+                    let action = if settings.to_bytes() != before.to_bytes() {
                         Action::SettingsChanged
                     } else {
                         Action::None

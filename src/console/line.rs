@@ -23,7 +23,7 @@ impl core::fmt::Display for LineError {
 
 /// Assembles lines from received bytes.
 ///
-/// CR, LF and CRLF end a line; empty lines are ignored. Backspace (0x08) and DEL (0x7F)
+/// CR, LF and CRLF end a line; empty lines, and lines of only spaces and tabs, are ignored. Backspace (0x08) and DEL (0x7F)
 /// remove the last byte; TAB counts as a space; other control bytes (including 0x00) are
 /// ignored. A line longer than [`MAX_LINE`] is discarded up to its terminator and reported
 /// once as [`LineError::TooLong`], so the next line is received intact. Memory is fixed.
@@ -56,7 +56,9 @@ impl LineAssembler {
                     self.buf.clear();
                     return Some(Err(LineError::TooLong));
                 }
-                if self.buf.is_empty() {
+                if self.buf.iter().all(|&b| b == b' ') {
+                    // Empty, or blank (TAB is stored as a space): ignored like an empty line.
+                    self.buf.clear();
                     return None;
                 }
                 self.complete = true;

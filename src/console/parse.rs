@@ -2,6 +2,7 @@
 
 use super::LineError;
 use super::{MAX_SET_PAIRS, MAX_WORDS};
+use crate::odometry::{Pose, PoseRangeError};
 use crate::settings::{Key, SettingError};
 use heapless::Vec;
 
@@ -56,6 +57,8 @@ pub enum CommandError<'a> {
     NotFinite(&'a str),
     /// A value refused by the settings.
     Setting(SettingError),
+    /// `reset_pose` with a coordinate the integrator cannot hold.
+    PoseRange(PoseRangeError),
 }
 
 impl core::fmt::Display for CommandError<'_> {
@@ -70,6 +73,7 @@ impl core::fmt::Display for CommandError<'_> {
             Self::BadNumber(w) => write!(f, "bad number '{w}'"),
             Self::NotFinite(w) => write!(f, "NaN/inf not allowed: '{w}'"),
             Self::Setting(e) => e.fmt(f),
+            Self::PoseRange(e) => write!(f, "reset_pose: {e}; pose unchanged"),
         }
     }
 }
@@ -155,11 +159,19 @@ pub fn parse(line: &str) -> Result<Command<'_>, CommandError<'_>> {
                 y: 0.0,
                 heading: 0.0,
             }),
-            [x, y, h] => Ok(Command::ResetPose {
-                x: number(x)?,
-                y: number(y)?,
-                heading: number(h)?,
-            }),
+            [x, y, h] => {
+                let pose = Pose {
+                    x: number(x)?,
+                    y: number(y)?,
+                    heading: number(h)?,
+                };
+                pose.check_range().map_err(CommandError::PoseRange)?;
+                Ok(Command::ResetPose {
+                    x: pose.x,
+                    y: pose.y,
+                    heading: pose.heading,
+                })
+            }
             [_] | [_, _] => Err(CommandError::MissingArgument(USAGE_RESET)),
             _ => Err(CommandError::TooManyArguments(USAGE_RESET)),
         },

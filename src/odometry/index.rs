@@ -65,10 +65,16 @@ impl IndexTracker {
             return IndexCheck::First;
         };
         let tpr = i64::from(self.ticks_per_rev);
-        let diff = count.wrapping_sub(previous);
-        // Nearest whole number of turns and the remainder from it, in -tpr/2..=tpr/2.
-        let turns = diff.div_euclid(tpr) + i64::from(diff.rem_euclid(tpr) > tpr / 2);
-        let error = diff - turns * tpr;
+        // Turns to the nearest whole number and the remainder from it, in -tpr/2..=tpr/2;
+        // checked: latched counts 2^63 apart (no board reaches them) take the exact path.
+        let (turns, error) = count
+            .checked_sub(previous)
+            .and_then(|diff| {
+                let rem = diff.rem_euclid(tpr);
+                let error = if rem > tpr / 2 { rem - tpr } else { rem };
+                Some(((diff.checked_sub(error)?) / tpr, error))
+            })
+            .unwrap_or_else(|| nearest_turns_wide(previous, count, tpr));
         if error.unsigned_abs() <= u64::from(self.tolerance) {
             IndexCheck::Whole { turns }
         } else {
@@ -97,6 +103,19 @@ impl IndexTracker {
     pub fn mismatches(&self) -> u32 {
         self.mismatches
     }
+}
+
+/// [`IndexTracker::on_index`]'s (turns, error) from `previous` to `count` in i128, turns
+/// saturated to i64 (more than 2^63 turns only at one increment per turn).
+#[cold]
+fn nearest_turns_wide(previous: i64, count: i64, tpr: i64) -> (i64, i64) {
+    let (diff, tpr) = (i128::from(count) - i128::from(previous), i128::from(tpr));
+    let rem = diff.rem_euclid(tpr);
+    let error = if rem > tpr / 2 { rem - tpr } else { rem };
+    let turns = (diff - error) / tpr;
+    let saturated = if turns < 0 { i64::MIN } else { i64::MAX };
+    // |error| <= tpr / 2 < 2^31.
+    (i64::try_from(turns).unwrap_or(saturated), error as i64)
 }
 
 /// The absolute count of a raw counter value read close in time to a reference reading:

@@ -44,6 +44,13 @@ use super::wheel::{WheelModel, DISTANCE_SCALE};
 pub const MAX_STEP_COUNTS: u64 = 1 << 18;
 /// Largest heading change of one sample that is integrated, radians (pi/2).
 pub const MAX_STEP_DALPHA: f32 = core::f32::consts::FRAC_PI_2;
+/// Largest |x| and |y| a pose may be set to, metres (2^30 m, 1.07e9 m): half the position's
+/// fixed-point range, so that the steps after it cannot overflow the `i64` (a further
+/// 1.07e9 m of travel).
+pub const MAX_POSITION: f64 = 1_073_741_824.0;
+/// Largest |heading| a pose may be set to, radians (2^32 rad, 6.8e8 turns): the turn count
+/// stays far inside `i64`, and the f64 heading keeps 1e-6 rad.
+pub const MAX_HEADING: f64 = 4_294_967_296.0;
 
 /// Position units per metre: 2^32.
 const POSITION_SCALE: f64 = 4_294_967_296.0;
@@ -63,6 +70,52 @@ pub struct Pose {
     pub y: f64,
     /// Heading alpha, radians, clockwise from +y, cumulative.
     pub heading: f64,
+}
+
+impl Pose {
+    /// Whether the integrator can hold this pose: finite, |x|, |y| <= [`MAX_POSITION`] and
+    /// |heading| <= [`MAX_HEADING`]; the first coordinate that cannot, otherwise.
+    pub fn check_range(&self) -> Result<(), PoseRangeError> {
+        let within = |v: f64, max: f64| v.is_finite() && v.abs() <= max;
+        if !within(self.x, MAX_POSITION) {
+            Err(PoseRangeError::X)
+        } else if !within(self.y, MAX_POSITION) {
+            Err(PoseRangeError::Y)
+        } else if !within(self.heading, MAX_HEADING) {
+            Err(PoseRangeError::Heading)
+        } else {
+            Ok(())
+        }
+    }
+}
+
+/// A pose coordinate the integrator cannot represent (see [`Pose::check_range`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PoseRangeError {
+    /// x is NaN, infinite or beyond +-[`MAX_POSITION`].
+    X,
+    /// y is NaN, infinite or beyond +-[`MAX_POSITION`].
+    Y,
+    /// The heading is NaN, infinite or beyond +-[`MAX_HEADING`].
+    Heading,
+}
+
+impl core::fmt::Display for PoseRangeError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::X | Self::Y => write!(
+                f,
+                "{} must be within -{MAX_POSITION:.0}..={MAX_POSITION:.0} m",
+                if *self == Self::X { "x" } else { "y" }
+            ),
+            Self::Heading => {
+                write!(
+                    f,
+                    "heading must be within -{MAX_HEADING:.0}..={MAX_HEADING:.0} rad"
+                )
+            }
+        }
+    }
 }
 
 /// The uncertainty of a pose: standard uncertainties of x and y (metres) and heading
@@ -230,7 +283,9 @@ impl Integrator {
         &self.params
     }
 
-    /// Sets the pose and zeroes the uncertainty (counts are kept).
+    /// Sets the pose and zeroes the uncertainty (counts are kept). A coordinate outside
+    /// [`Pose::check_range`] is clamped to it (NaN to 0), so the steps after it cannot
+    /// overflow; callers taking a pose from outside check it first and refuse it.
     pub fn reset_pose(&mut self, pose: Pose) {
         self.x = metres_to_position(pose.x);
         self.y = metres_to_position(pose.y);
@@ -507,9 +562,9 @@ fn mul_q30_shift16(a: i64, b: i32) -> i64 {
     ((i128::from(a) * i128::from(b) + (1 << 45)) >> 46) as i64
 }
 
-/// Metres to position units (2^-32 m), rounded, saturating.
+/// Metres to position units (2^-32 m), rounded, clamped to +-[`MAX_POSITION`].
 fn metres_to_position(v: f64) -> i64 {
-    let scaled = v * POSITION_SCALE;
+    let scaled = v.clamp(-MAX_POSITION, MAX_POSITION) * POSITION_SCALE;
     if scaled.is_nan() {
         0
     } else if scaled >= 0.0 {
@@ -519,12 +574,12 @@ fn metres_to_position(v: f64) -> i64 {
     }
 }
 
-/// Radians to (whole turns, binary fraction of a turn).
+/// Radians to (whole turns, binary fraction of a turn), clamped to +-[`MAX_HEADING`].
 fn radians_to_binary(heading: f64) -> (i64, u64) {
     if !heading.is_finite() {
         return (0, 0);
     }
-    let t = heading / TAU;
+    let t = heading.clamp(-MAX_HEADING, MAX_HEADING) / TAU;
     let mut turns = t as i64;
     if (turns as f64) > t {
         turns -= 1;

@@ -13,4 +13,6 @@ pub mod wheel;
 
 pub use encoder::CounterExtender;
 pub use index::{extend_near, IndexCheck, IndexTracker};
-pub use integrator::{IndexRefs, Integrator, Pose, PoseSigma, PoseStep, StepStatus, WheelCounts};
+pub use integrator::{
+    IndexRefs, Integrator, Pose, PoseRangeError, PoseSigma, PoseStep, StepStatus, WheelCounts,
+};

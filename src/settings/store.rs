@@ -3,7 +3,8 @@
 //! Each sector is a log of fixed [`SLOT_LEN`]-byte slots. A save appends one record to the
 //! sector that holds the newest usable record; when that sector is full, the *other* sector
 //! is erased and the record goes to its first slot. A record carries a generation number
-//! (+1 per save) and a CRC-32; loading takes the usable record with the highest generation.
+//! (+1 per save, wrapping from 0xFFFF_FFFF to 1) and a CRC-32; loading takes the usable
+//! record with the newest generation in serial-number order ([`generation_is_newer`]).
 //! The sector holding the newest usable record is never erased and a record is never
 //! overwritten, so a power cut at any moment of a save (during the erase, or after any
 //! programmed word) leaves the previous settings loadable; the new ones are loadable once
@@ -114,8 +115,8 @@ pub struct Loaded {
 
 #[derive(Debug, Clone, Copy, Default)]
 struct Scan {
-    /// Highest generation of any record with a valid CRC (usable or not).
-    max_generation: u32,
+    /// Newest generation of any record with a valid CRC (usable or not).
+    max_generation: Option<u32>,
     /// Newest usable record: (generation, sector, settings).
     best: Option<(u32, usize, Settings)>,
     /// Per sector: first slot after the last non-erased slot, if inside the sector.
@@ -174,9 +175,17 @@ impl<F: Flash> SettingsStore<F> {
                 let Some((generation, settings)) = parse_record(&buf) else {
                     continue;
                 };
-                scan.max_generation = scan.max_generation.max(generation);
+                if scan
+                    .max_generation
+                    .is_none_or(|g| generation_is_newer(generation, g))
+                {
+                    scan.max_generation = Some(generation);
+                }
                 if let Some(settings) = settings {
-                    if scan.best.is_none_or(|(g, _, _)| generation > g) {
+                    if scan
+                        .best
+                        .is_none_or(|(g, _, _)| generation_is_newer(generation, g))
+                    {
                         scan.best = Some((generation, sector, settings));
                     }
                 }
@@ -229,7 +238,8 @@ impl<F: Flash> SettingsStore<F> {
     pub fn save(&mut self, settings: &Settings) -> Result<u32, StoreError<F::Error>> {
         settings.validate().map_err(|_| StoreError::Invalid)?;
         let scan = self.scan()?;
-        let generation = scan.max_generation.wrapping_add(1).max(1);
+        // 0 is never written (it stands for the defaults): 0xFFFF_FFFF is followed by 1.
+        let generation = scan.max_generation.unwrap_or(0).wrapping_add(1).max(1);
         let target = scan.best.map_or(0, |(_, sector, _)| sector);
         let (sector, slot) = match scan.next_free[target] {
             Some(slot) => (target, slot),
@@ -252,6 +262,14 @@ impl<F: Flash> SettingsStore<F> {
         }
         Ok(generation)
     }
+}
+
+/// Whether generation `a` is newer than `b` in serial-number arithmetic (RFC 1982 with 32
+/// bits): `a` follows `b` by 1 to 2^31 - 1 saves, across the wrap from 0xFFFF_FFFF to 1.
+/// The records in the two sectors span at most a few hundred saves, far inside that window.
+pub const fn generation_is_newer(a: u32, b: u32) -> bool {
+    let ahead = a.wrapping_sub(b);
+    ahead != 0 && ahead < 1 << 31
 }
 
 /// The bytes of one record.

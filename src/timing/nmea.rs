@@ -58,7 +58,7 @@ pub struct UtcDateTime {
     pub hour: u8,
     /// Minute, 0..=59.
     pub minute: u8,
-    /// Second, 0..=60 (60 only in a leap second).
+    /// Second, 0..=60 (60 only in a leap second, at 23:59:60).
     pub second: u8,
     /// Milliseconds of the fractional second (truncated).
     pub millis: u16,
@@ -223,10 +223,16 @@ fn parse_time(field: &[u8]) -> Result<(u8, u8, u8, u16), NmeaError> {
         millis += u16::from(b - b'0') * scale;
         scale /= 10;
     }
-    if hour > 23 || minute > 59 || second > 60 {
+    if !is_time_of_day(hour, minute, second) {
         return Err(NmeaError::BadDate);
     }
     Ok((hour, minute, second, millis))
+}
+
+/// A UTC time of day: 00:00:00..=23:59:59, or the leap second 23:59:60 (the only minute
+/// that can have 61 seconds).
+fn is_time_of_day(hour: u8, minute: u8, second: u8) -> bool {
+    hour <= 23 && minute <= 59 && (second <= 59 || (second == 60 && hour == 23 && minute == 59))
 }
 
 fn is_leap(year: u32) -> bool {
@@ -380,7 +386,7 @@ impl UtcDateTime {
             u32::from(self.month),
             u32::from(self.day),
         )?;
-        if self.hour > 23 || self.minute > 59 || self.second > 60 {
+        if !is_time_of_day(self.hour, self.minute, self.second) {
             return Err(NmeaError::BadDate);
         }
         let days = days_from_civil(

@@ -32,6 +32,10 @@ pub struct SimulateOptions {
     /// Rate, speed, noise, start and seed.
     pub settings: simulate::SimSettings,
 }
+
+/// Most samples `simulate` writes (about 10 GB of CSV).
+pub const MAX_SAMPLES: f64 = 1e8;
+
 /// `odoctl simulate`.
 pub fn simulate(o: &SimulateOptions, logs: &ReceiverArgs) -> Result<ExitCode> {
     let mut truth = match &o.truth {
@@ -52,6 +56,16 @@ pub fn simulate(o: &SimulateOptions, logs: &ReceiverArgs) -> Result<ExitCode> {
         || !(run.slip >= 0.0 && run.slip_turn >= 0.0 && run.rtk_sigma >= 0.0)
     {
         bail!("--length must be positive, --slip, --slip-turn and --rtk-sigma non-negative");
+    }
+    // Each option is in range (main.rs, cli_values); together they must stay a finite run.
+    let samples = o.length / run.speed * run.rate;
+    if samples > MAX_SAMPLES {
+        bail!(
+            "--length {} m at --speed {} m/s and --rate {} Hz makes {samples:.3e} samples; at most {MAX_SAMPLES:e}",
+            o.length,
+            run.speed,
+            run.rate
+        );
     }
     let receiver = logs.receiver(run.rtk_sigma, run.heading_sigma, run.seed)?;
     let mut sim = simulate::simulate_path(o.path, o.length, truth, o.settings);

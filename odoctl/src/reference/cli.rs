@@ -32,7 +32,7 @@ pub struct ReferenceArgs {
     #[arg(long, value_name = "LAT,LON,H", allow_hyphen_values = true)]
     pub origin: Option<String>,
     /// GPS - UTC (s) for the UTC times of NMEA logs (18 since 2017-01-01).
-    #[arg(long, default_value_t = gps_time::DEFAULT_LEAP_SECONDS, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = gps_time::DEFAULT_LEAP_SECONDS, allow_negative_numbers = true, value_parser = crate::cli_values::leap_seconds)]
     pub leap_seconds: i32,
 }
 
@@ -104,13 +104,13 @@ pub struct ReceiverArgs {
     #[arg(long, value_name = "F,L", allow_hyphen_values = true)]
     pub antenna: Option<String>,
     /// Epoch rate of the receiver logs (Hz; a divisor of `--rate`).
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, value_parser = crate::cli_values::gnss_rate)]
     pub gnss_rate: f64,
     /// Share of 2-s blocks of RTK-float epochs in the receiver logs.
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(long, default_value_t = 0.1, value_parser = crate::cli_values::fraction)]
     pub float_fraction: f64,
     /// Horizontal RMS noise of RTK-float epochs (m).
-    #[arg(long, default_value_t = 0.05)]
+    #[arg(long, default_value_t = 0.05, value_parser = crate::cli_values::sigma_m)]
     pub float_sigma: f64,
     /// WGS84 position of the local origin in the logs, `LAT,LON,H`.
     #[arg(
@@ -124,7 +124,7 @@ pub struct ReceiverArgs {
     #[arg(long, value_name = "WEEK,TOW")]
     pub gps_start: Option<String>,
     /// GPS - UTC (s) written into the NMEA log's UTC times.
-    #[arg(long = "gnss-leap-seconds", default_value_t = gps_time::DEFAULT_LEAP_SECONDS)]
+    #[arg(long = "gnss-leap-seconds", default_value_t = gps_time::DEFAULT_LEAP_SECONDS, value_parser = crate::cli_values::leap_seconds)]
     pub leap_seconds: i32,
 }
 

@@ -177,7 +177,7 @@ pub fn parse(file: &str, text: &str, leap_seconds: i32) -> Result<GeodeticLog> {
             Ok(p) => p,
             Err(e) => {
                 let time = s.split(',').nth(1).unwrap_or("");
-                if kind != "HDT" && time.len() >= 6 && &time[4..6] == "60" {
+                if kind != "HDT" && time.get(4..6) == Some("60") {
                     report.unusable(format!(
                         "{file}:{line}: {kind} in a leap second ({time}): skipped"
                     ));
@@ -506,6 +506,25 @@ mod tests {
         assert_eq!(l.epochs[0].gps_time, want);
         assert_eq!((l.report.unusable, l.report.used["RMC"]), (1, 1));
         assert!(l.report.problems[0].starts_with("r.nmea:1: RMC with status V"));
+    }
+
+    /// Found by the `reference` fuzz target: a malformed GGA whose time field has a
+    /// multi-byte character across bytes 4..6 panicked slicing it (leap-second check).
+    #[test]
+    fn malformed_time_with_multibyte_characters_is_counted_not_a_panic() {
+        let zda = zda("120000.00", 7, 1, 2026);
+        for time in [
+            "1234\u{FFFD}",
+            "12345\u{e9}",
+            "\u{e9}\u{e9}\u{e9}",
+            "1200\u{1F600}",
+        ] {
+            let bad = gga("GP", time, "4912.0", "N", "01636.0", "E", 4);
+            let good = gga("GP", "120000.00", "4912.0", "N", "01636.0", "E", 4);
+            let log = format!("{zda}\r\n{bad}\r\n{good}\r\n");
+            let r = parse("n.nmea", &log, 18).unwrap();
+            assert_eq!(r.epochs.len(), 1, "{time}");
+        }
     }
 
     #[test]
