@@ -11,9 +11,10 @@ use crate::config as cfg;
 use crate::csvio;
 
 use super::{
-    evaluate, fit_delta_diff, fit_geometry, fit_uncertainty_on, windows_study, DeltaMode,
-    DiffOptions, Evaluation, GeomFit, GeomOptions, Restarts, Run, UncertaintyFit, WindowEstimate,
-    WindowStart,
+    evaluate, fit_delta_diff, fit_geometry, fit_kappa_filter, fit_likelihood, fit_uncertainty_on,
+    windows_study, DeltaMode, DiffOptions, Evaluation, GeomFit, GeomOptions, Innovations,
+    LikelihoodData, LikelihoodOptions, Restarts, Run, UncertaintyCriterion, UncertaintyFit,
+    WindowEstimate, WindowStart, OBSERVATION_BLOCK,
 };
 
 /// Options of the calibration (`odoctl calibrate`'s fitting options; the defaults are the
@@ -37,6 +38,11 @@ pub struct CalibrationOptions {
     /// `uncertainty_model`). The result keeps the initial model when it is among them, else
     /// the last one.
     pub models: Vec<UncertaintyModel>,
+    /// The model the result selects (`uncertainty_model`), added to `models` when missing;
+    /// `None`: the initial estimate's model when it was fitted, else the last fitted.
+    pub select: Option<UncertaintyModel>,
+    /// How the uncertainty coefficients are fitted.
+    pub criterion: UncertaintyCriterion,
     /// Nelder-Mead polish of eq (16).
     pub polish: bool,
     /// Stability study lengths (m); empty: no study.
@@ -60,6 +66,8 @@ impl Default for CalibrationOptions {
             fit_delta_diff: true,
             reference_heading_sigma: 0.5f64.to_radians(),
             models: Vec::new(),
+            select: None,
+            criterion: UncertaintyCriterion::Likelihood,
             polish: false,
             windows: Vec::new(),
             window_start: WindowStart::Initial,
@@ -130,50 +138,93 @@ pub fn calibrate(
     let mut params = geometry.params;
     let mut uncertainty = Vec::new();
     if o.fit_delta {
-        let models = if o.models.is_empty() {
+        let mut models = if o.models.is_empty() {
             vec![initial.uncertainty_model]
         } else {
             o.models.clone()
         };
-        let restarts = Restarts::new(&run, &params, geometry.heading0, o.delta_window)?;
-        timer.lap("restart headings");
-        for &m in &models {
-            let pb = bar(o.quiet, &format!("{} model fit", cfg::model_name(m)));
-            let mut p = params;
-            p.uncertainty_model = m;
-            let mut u = fit_uncertainty_on(
-                &run,
-                &restarts,
-                &p,
-                initial,
-                o.reference_sigma,
-                o.delta_mode,
-                &pb,
-            )?;
-            pb.finish_and_clear();
-            timer.lap("uncertainty fit");
-            if m == UncertaintyModel::Paper {
-                let pb = bar(o.quiet, "delta_diff fit");
-                u = fit_delta_diff(
-                    &run,
-                    &restarts,
-                    u,
-                    initial,
-                    DiffOptions {
-                        fit: o.fit_delta_diff,
-                        ref_heading_sigma: o.reference_heading_sigma,
-                        ref_sigma: o.reference_sigma,
-                        mode: o.delta_mode,
-                    },
-                    &pb,
-                )?;
-                pb.finish_and_clear();
-                timer.lap("delta_diff fit");
+        if let Some(m) = o.select {
+            if !models.contains(&m) {
+                models.push(m);
             }
-            params = u.params;
-            uncertainty.push(u);
         }
-        params.uncertainty_model = if models.contains(&initial.uncertainty_model) {
+        match o.criterion {
+            UncertaintyCriterion::Likelihood => {
+                let lo = LikelihoodOptions {
+                    window: o.delta_window,
+                    ref_sigma: o.reference_sigma,
+                    ref_heading_sigma: o.reference_heading_sigma,
+                    mode: o.delta_mode,
+                    fit_delta_diff: o.fit_delta_diff,
+                };
+                let data = LikelihoodData::new(&run, &params, &lo)?;
+                timer.lap("restart headings");
+                for &m in &models {
+                    let mut p = params;
+                    p.uncertainty_model = m;
+                    let u = match m {
+                        UncertaintyModel::Covariance => {
+                            let innovations = Innovations::new(
+                                &run,
+                                &p,
+                                geometry.heading0,
+                                o.reference_sigma,
+                                o.reference_heading_sigma,
+                                OBSERVATION_BLOCK,
+                            )?;
+                            fit_kappa_filter(&innovations, &p, initial, o.delta_mode).0
+                        }
+                        UncertaintyModel::Paper => fit_likelihood(&run, &data, &p, initial, &lo)?,
+                    };
+                    timer.lap("uncertainty fit");
+                    params = u.params;
+                    uncertainty.push(u);
+                }
+            }
+            UncertaintyCriterion::Coverage => {
+                let restarts = Restarts::new(&run, &params, geometry.heading0, o.delta_window)?;
+                timer.lap("restart headings");
+                for &m in &models {
+                    let pb = bar(o.quiet, &format!("{} model fit", cfg::model_name(m)));
+                    let mut p = params;
+                    p.uncertainty_model = m;
+                    let mut u = fit_uncertainty_on(
+                        &run,
+                        &restarts,
+                        &p,
+                        initial,
+                        o.reference_sigma,
+                        o.delta_mode,
+                        &pb,
+                    )?;
+                    pb.finish_and_clear();
+                    timer.lap("uncertainty fit");
+                    if m == UncertaintyModel::Paper {
+                        let pb = bar(o.quiet, "delta_diff fit");
+                        u = fit_delta_diff(
+                            &run,
+                            &restarts,
+                            u,
+                            initial,
+                            DiffOptions {
+                                fit: o.fit_delta_diff,
+                                ref_heading_sigma: o.reference_heading_sigma,
+                                ref_sigma: o.reference_sigma,
+                                mode: o.delta_mode,
+                            },
+                            &pb,
+                        )?;
+                        pb.finish_and_clear();
+                        timer.lap("delta_diff fit");
+                    }
+                    params = u.params;
+                    uncertainty.push(u);
+                }
+            }
+        }
+        params.uncertainty_model = if let Some(m) = o.select {
+            m
+        } else if models.contains(&initial.uncertainty_model) {
             initial.uncertainty_model
         } else {
             *models.last().expect("one model")

@@ -52,8 +52,11 @@
 
 mod calibration;
 mod delta_diff;
+mod ensemble;
 mod evaluation;
 mod geometry;
+mod innovations;
+mod likelihood;
 mod pipeline;
 mod restarts;
 mod run;
@@ -63,8 +66,11 @@ mod uncertainty;
 
 pub use calibration::*;
 pub use delta_diff::*;
+pub use ensemble::*;
 pub use evaluation::*;
 pub use geometry::*;
+pub use innovations::*;
+pub use likelihood::*;
 pub use pipeline::*;
 pub use restarts::*;
 pub use run::*;
