@@ -11,11 +11,25 @@ use crate::config as cfg;
 use crate::csvio;
 
 use super::{
-    evaluate, fit_delta_diff, fit_geometry, fit_kappa_filter, fit_likelihood, fit_uncertainty_on,
-    windows_study, DeltaMode, DiffOptions, Evaluation, GeomFit, GeomOptions, Innovations,
-    LikelihoodData, LikelihoodOptions, Restarts, Run, UncertaintyCriterion, UncertaintyFit,
-    WindowEstimate, WindowStart, OBSERVATION_BLOCK,
+    evaluate, fit_delta_diff, fit_geometry, fit_kappa_filter, fit_uncertainty_on, windows_study,
+    DeltaMode, DiffOptions, Evaluation, GeomFit, GeomOptions, Innovations, Restarts, Run,
+    UncertaintyFit, WindowEstimate, WindowStart, OBSERVATION_BLOCK,
 };
+
+/// How `calibrate` fits the uncertainty coefficients.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum UncertaintyCriterion {
+    /// The covariance model's kappa by the likelihood of the reference's observations under
+    /// an error-state Kalman filter (`innovations.rs`: nothing a point is judged on is fitted
+    /// to it); the paper's model by the coverage criterion (the default).
+    #[default]
+    Likelihood,
+    /// The paper's statistical fitting for both models: the smallest coefficient whose
+    /// 1-sigma band (widened by the reference noise) covers 68.27 % of the pooled horizontal
+    /// errors of restarted sub-trajectories, restart headings fitted by eq (16) on each;
+    /// `delta_diff` by the heading-change coverage.
+    Coverage,
+}
 
 /// Options of the calibration (`odoctl calibrate`'s fitting options; the defaults are the
 /// command line's).
@@ -41,7 +55,8 @@ pub struct CalibrationOptions {
     /// The model the result selects (`uncertainty_model`), added to `models` when missing;
     /// `None`: the initial estimate's model when it was fitted, else the last fitted.
     pub select: Option<UncertaintyModel>,
-    /// How the uncertainty coefficients are fitted.
+    /// How the covariance model's kappa is fitted (the paper's model always by the coverage
+    /// criterion).
     pub criterion: UncertaintyCriterion,
     /// Nelder-Mead polish of eq (16).
     pub polish: bool,
@@ -148,79 +163,67 @@ pub fn calibrate(
                 models.push(m);
             }
         }
-        match o.criterion {
-            UncertaintyCriterion::Likelihood => {
-                let lo = LikelihoodOptions {
-                    window: o.delta_window,
-                    ref_sigma: o.reference_sigma,
-                    ref_heading_sigma: o.reference_heading_sigma,
-                    mode: o.delta_mode,
-                    fit_delta_diff: o.fit_delta_diff,
-                };
-                let data = LikelihoodData::new(&run, &params, &lo)?;
-                timer.lap("restart headings");
-                for &m in &models {
-                    let mut p = params;
-                    p.uncertainty_model = m;
-                    let u = match m {
-                        UncertaintyModel::Covariance => {
-                            let innovations = Innovations::new(
-                                &run,
-                                &p,
-                                geometry.heading0,
-                                o.reference_sigma,
-                                o.reference_heading_sigma,
-                                OBSERVATION_BLOCK,
-                            )?;
-                            fit_kappa_filter(&innovations, &p, initial, o.delta_mode).0
-                        }
-                        UncertaintyModel::Paper => fit_likelihood(&run, &data, &p, initial, &lo)?,
-                    };
-                    timer.lap("uncertainty fit");
-                    params = u.params;
-                    uncertainty.push(u);
-                }
+        // The restarted sub-trajectories of the coverage criterion, made when first needed.
+        let mut restarts: Option<Restarts> = None;
+        for &m in &models {
+            let mut p = params;
+            p.uncertainty_model = m;
+            if m == UncertaintyModel::Covariance && o.criterion == UncertaintyCriterion::Likelihood
+            {
+                let innovations = Innovations::new(
+                    &run,
+                    &p,
+                    geometry.heading0,
+                    o.reference_sigma,
+                    o.reference_heading_sigma,
+                    OBSERVATION_BLOCK,
+                )?;
+                let u = fit_kappa_filter(&innovations, &p, initial, o.delta_mode).0;
+                timer.lap("uncertainty fit (filter)");
+                params = u.params;
+                uncertainty.push(u);
+                continue;
             }
-            UncertaintyCriterion::Coverage => {
-                let restarts = Restarts::new(&run, &params, geometry.heading0, o.delta_window)?;
-                timer.lap("restart headings");
-                for &m in &models {
-                    let pb = bar(o.quiet, &format!("{} model fit", cfg::model_name(m)));
-                    let mut p = params;
-                    p.uncertainty_model = m;
-                    let mut u = fit_uncertainty_on(
-                        &run,
-                        &restarts,
-                        &p,
-                        initial,
-                        o.reference_sigma,
-                        o.delta_mode,
-                        &pb,
-                    )?;
-                    pb.finish_and_clear();
-                    timer.lap("uncertainty fit");
-                    if m == UncertaintyModel::Paper {
-                        let pb = bar(o.quiet, "delta_diff fit");
-                        u = fit_delta_diff(
-                            &run,
-                            &restarts,
-                            u,
-                            initial,
-                            DiffOptions {
-                                fit: o.fit_delta_diff,
-                                ref_heading_sigma: o.reference_heading_sigma,
-                                ref_sigma: o.reference_sigma,
-                                mode: o.delta_mode,
-                            },
-                            &pb,
-                        )?;
-                        pb.finish_and_clear();
-                        timer.lap("delta_diff fit");
-                    }
-                    params = u.params;
-                    uncertainty.push(u);
+            let restarts = match &mut restarts {
+                Some(r) => &*r,
+                None => {
+                    let r = Restarts::new(&run, &params, geometry.heading0, o.delta_window)?;
+                    timer.lap("restart headings");
+                    &*restarts.insert(r)
                 }
+            };
+            let pb = bar(o.quiet, &format!("{} model fit", cfg::model_name(m)));
+            let mut u = fit_uncertainty_on(
+                &run,
+                restarts,
+                &p,
+                initial,
+                o.reference_sigma,
+                o.delta_mode,
+                &pb,
+            )?;
+            pb.finish_and_clear();
+            timer.lap("uncertainty fit");
+            if m == UncertaintyModel::Paper {
+                let pb = bar(o.quiet, "delta_diff fit");
+                u = fit_delta_diff(
+                    &run,
+                    restarts,
+                    u,
+                    initial,
+                    DiffOptions {
+                        fit: o.fit_delta_diff,
+                        ref_heading_sigma: o.reference_heading_sigma,
+                        ref_sigma: o.reference_sigma,
+                        mode: o.delta_mode,
+                    },
+                    &pb,
+                )?;
+                pb.finish_and_clear();
+                timer.lap("delta_diff fit");
             }
+            params = u.params;
+            uncertainty.push(u);
         }
         params.uncertainty_model = if let Some(m) = o.select {
             m
