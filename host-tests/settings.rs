@@ -913,3 +913,230 @@ fn erase_stall_against_the_counter_range() {
     assert!(slow.survives_stall(800));
     assert!(!slow.survives_stall(1_400));
 }
+
+// ---------------------------------------------------------------------------------------
+// The key table against the format and the docs
+
+/// The version 2 layout written field by field as docs/PROTOCOL.md section 5 lists it (the
+/// encoder before the key table): the table's codec must give the same bytes.
+fn layout_v2_by_hand(s: &Settings) -> Vec<u8> {
+    let c = &s.chassis;
+    let mut b = Vec::new();
+    for v in [c.left_diameter, c.right_diameter, c.track_width] {
+        b.extend_from_slice(&v.to_le_bytes());
+    }
+    b.extend_from_slice(&c.ticks_per_rev.to_le_bytes());
+    for v in [
+        c.delta_left,
+        c.delta_right,
+        c.delta_diff,
+        c.kappa_left,
+        c.kappa_right,
+    ] {
+        b.extend_from_slice(&v.to_le_bytes());
+    }
+    for w in [&c.left_wheel, &c.right_wheel] {
+        for v in w.cos.iter().chain(w.sin.iter()) {
+            b.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    b.push(match c.uncertainty_model {
+        odo_core::odometry::UncertaintyModel::Paper => 0,
+        odo_core::odometry::UncertaintyModel::Covariance => 1,
+    });
+    b.push(match s.mode {
+        odo_core::timing::SyncMode::Pps => 0,
+        odo_core::timing::SyncMode::Free => 1,
+    });
+    b.push(match s.time_tag_pps {
+        odo_core::timing::TimeTagPps::Previous => 0,
+        odo_core::timing::TimeTagPps::Next => 1,
+    });
+    b.push(0);
+    for v in [s.rate, s.output_divider, s.baud] {
+        b.extend_from_slice(&v.to_le_bytes());
+    }
+    b.extend_from_slice(&s.max_wheel_speed.to_le_bytes());
+    b
+}
+
+#[test]
+fn table_codec_is_the_documented_layout_byte_for_byte() {
+    let mut s = variant(9);
+    s.chassis.uncertainty_model = odo_core::odometry::UncertaintyModel::Covariance;
+    s.chassis.right_wheel.sin[2] = -0.031;
+    s.time_tag_pps = odo_core::timing::TimeTagPps::Next;
+    s.mode = odo_core::timing::SyncMode::Pps;
+    s.max_wheel_speed = 3.25;
+    for s in [Settings::DEFAULT, variant(1), s] {
+        assert_eq!(s.to_bytes().to_vec(), layout_v2_by_hand(&s));
+        // Version 1 is its first 112 bytes.
+        let v1 = Settings::from_bytes_version(1, &layout_v2_by_hand(&s)[..112]).unwrap();
+        assert_eq!(
+            v1,
+            Settings {
+                max_wheel_speed: Settings::DEFAULT_MAX_WHEEL_SPEED,
+                ..s
+            }
+        );
+    }
+    // The checksum of the defaults, as every firmware so far reported it.
+    assert_eq!(
+        Settings::DEFAULT.checksum(),
+        crc32(&layout_v2_by_hand(&Settings::DEFAULT))
+    );
+    // Every byte belongs to one key, but the reserved byte 99.
+    let mut owner = [0u32; Settings::SERIALIZED_LEN];
+    for k in Key::ALL {
+        let r = k.info().record;
+        for o in &mut owner[usize::from(r.offset)..][..k.info().kind.record_size()] {
+            *o += 1;
+        }
+    }
+    for (i, n) in owner.iter().enumerate() {
+        assert_eq!(*n, u32::from(i != 99), "byte {i}");
+    }
+    assert_eq!(serialized_len(1), Settings::SERIALIZED_LEN_V1);
+    assert_eq!(serialized_len(2), Settings::SERIALIZED_LEN);
+}
+
+/// docs/PROTOCOL.md's key table (section 4, "Keys and values") lists the table's keys in its
+/// order, with the same type, unit and default.
+#[test]
+fn docs_list_the_table_keys() {
+    let doc =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/docs/PROTOCOL.md")).unwrap();
+    let section = doc
+        .split("### Keys and values")
+        .nth(1)
+        .unwrap()
+        .split("\n## ")
+        .next()
+        .unwrap();
+    let mut rows: Vec<(String, Vec<String>)> = Vec::new();
+    for line in section.lines().filter(|l| l.starts_with("| ")) {
+        let cells: Vec<String> = line
+            .replace("\\|", "/")
+            .trim_matches('|')
+            .split('|')
+            .map(|c| c.trim().to_string())
+            .collect();
+        if cells[0] == "key" || cells[0].starts_with("---") {
+            continue;
+        }
+        // `left_cos1..3, left_sin1..3` stands for six keys.
+        for name in cells[0].split(", ") {
+            match name.strip_suffix("1..3") {
+                Some(stem) => {
+                    for n in 1..=3 {
+                        rows.push((format!("{stem}{n}"), cells.clone()));
+                    }
+                }
+                None => rows.push((name.to_string(), cells.clone())),
+            }
+        }
+    }
+    let names: Vec<&str> = rows.iter().map(|(n, _)| n.as_str()).collect();
+    let keys: Vec<&str> = Key::ALL.iter().map(|k| k.name()).collect();
+    // The docs group each wheel's cosines before its sines, as the table does.
+    assert_eq!(names, keys);
+    for ((_, cells), k) in rows.iter().zip(Key::ALL) {
+        let info = k.info();
+        let ty = match info.kind {
+            Kind::F64 { .. } => "f64",
+            Kind::F32 { .. } => "f32",
+            Kind::U32 { .. } | Kind::U32Set(_) => "u32",
+            Kind::Word(_) => "word",
+        };
+        assert_eq!(cells[1], ty, "{}", info.name);
+        assert!(
+            cells[2].starts_with(info.unit),
+            "{}: {}",
+            info.name,
+            cells[2]
+        );
+        assert_eq!(
+            parse_value(k, &cells[4]),
+            Ok(Settings::DEFAULT.get(k)),
+            "{}",
+            info.name
+        );
+        assert!(!k.doc().is_empty());
+    }
+}
+
+/// Errors are values naming the key: callers match on them instead of their text.
+#[test]
+fn errors_are_values_naming_the_key() {
+    let mut s = Settings::DEFAULT;
+    let cases: &[(Key, &str, SettingError)] = &[
+        (Key::Rate, "abc", SettingError::BadNumber(Key::Rate)),
+        (Key::Rate, "-1", SettingError::OutOfRange(Key::Rate)),
+        (
+            Key::TrackWidth,
+            "nan",
+            SettingError::NotFinite(Key::TrackWidth),
+        ),
+        (
+            Key::TrackWidth,
+            "1e999",
+            SettingError::NotFinite(Key::TrackWidth),
+        ),
+        (
+            Key::DeltaRight,
+            "1e39",
+            SettingError::OutOfRange(Key::DeltaRight),
+        ),
+        (Key::Mode, "gps", SettingError::BadChoice(Key::Mode)),
+        (Key::Baud, "1000", SettingError::OutOfRange(Key::Baud)),
+    ];
+    for (k, text, e) in cases {
+        assert_eq!(s.set(*k, text), Err(*e), "{} {text}", k.name());
+        assert_eq!(e.key(), Some(*k));
+        assert_eq!(
+            parse_value(*k, text).and_then(|v| check_value(*k, v)),
+            Err(*e)
+        );
+    }
+    assert_eq!(s, Settings::DEFAULT);
+    let relation = |pairs: &[(&'static str, &'static str)]| {
+        let mut t = Settings::DEFAULT;
+        match t.set_many(pairs.iter().copied()) {
+            Err(SetManyError::Value(e)) => e,
+            r => panic!("{pairs:?}: {r:?}"),
+        }
+    };
+    assert_eq!(
+        relation(&[("ticks_per_rev", "100")]),
+        SettingError::Chassis(Key::TicksPerRev)
+    );
+    assert_eq!(
+        relation(&[("mode", "pps"), ("rate", "7")]),
+        SettingError::PpsRate
+    );
+    assert_eq!(relation(&[("rate", "1000")]), SettingError::RecordsOverBaud);
+    assert!(matches!(
+        relation(&[("rate", "1")]),
+        SettingError::CountsPerSample { counts: 48_971 }
+    ));
+    assert_eq!(
+        Settings::from_bytes_version(3, &Settings::DEFAULT.to_bytes()),
+        Err(SettingError::UnknownFormatVersion(3))
+    );
+    assert_eq!(
+        Settings::from_bytes(&[0; 115]),
+        Err(SettingError::BadRecord)
+    );
+    // Chassis parameters alone, as odoctl checks them.
+    let mut c = ChassisParams::DESIGNED;
+    assert_eq!(validate_chassis(&c), Ok(()));
+    c.left_wheel.sin[1] = 0.06;
+    assert_eq!(
+        validate_chassis(&c),
+        Err(SettingError::OutOfRange(Key::LeftSin2))
+    );
+    // The default of every key is in its range, and the table's defaults validate.
+    for k in Key::ALL {
+        check_value(k, Settings::DEFAULT.get(k)).unwrap();
+    }
+}

@@ -1,240 +1,296 @@
-//! Chassis parameters by their shared key names: TOML files, `--set KEY=VALUE`, and the
-//! calibration result file.
+//! Settings by their shared key names, all from the core's key table
+//! (`odo_core::settings::keys`): parameter TOML files, `--set KEY=VALUE`, the calibration
+//! result file, and the `set` lines of `odoctl config push`.
 //!
-//! A parameter TOML holds any of the shared keys at top level (missing keys keep the designed
-//! values of Tables 2-3, `ChassisParams::DESIGNED`); a `[fit]` table (written by `calibrate`)
-//! is ignored when reading. Unknown keys, wrong types and values that fail
-//! `ChassisParams::validate` are errors naming the file and line.
+//! Values are parsed by the unit's own parser ([`odo_core::settings::parse_value`]: f32
+//! keys correctly rounded straight from the decimal text, never through f64) and written in
+//! the unit's text form, so a value goes from a file to the unit bit for bit. A parameter
+//! TOML holds any of the chassis keys at top level (missing keys keep the designed values of
+//! Tables 2-3, `ChassisParams::DESIGNED`); a `[fit]` table (written by `calibrate`) is
+//! ignored when reading. A unit configuration for `config push` may hold every key. Unknown
+//! keys, wrong types and values the unit would refuse are errors naming the file and line
+//! ([`ConfigError`]).
 
-use std::fmt::Write as _;
+use std::fmt::{self, Write as _};
 use std::path::Path;
 
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{Context, Result};
+use odo_core::settings::{
+    validate_chassis, Choice, Group, Key, SettingError, Settings, RELATED_KEYS,
+};
 
 use odo_core::odometry::{ChassisParams, UncertaintyModel};
 
-/// Every shared key, in the order files list them.
-pub const KEYS: &[&str] = &[
-    "left_diameter",
-    "right_diameter",
-    "track_width",
-    "ticks_per_rev",
-    "delta_left",
-    "delta_right",
-    "delta_diff",
-    "uncertainty_model",
-    "kappa_left",
-    "kappa_right",
-    "left_cos1",
-    "left_cos2",
-    "left_cos3",
-    "left_sin1",
-    "left_sin2",
-    "left_sin3",
-    "right_cos1",
-    "right_cos2",
-    "right_cos3",
-    "right_sin1",
-    "right_sin2",
-    "right_sin3",
-];
+/// Why a file, an assignment or a value was refused. `origin` names the file (or `--set`).
+#[derive(Debug, Clone, PartialEq)]
+pub enum ConfigError {
+    /// The text is not TOML (the parser's message).
+    Toml {
+        /// File.
+        origin: String,
+        /// The TOML parser's message.
+        message: String,
+    },
+    /// No key of that name.
+    UnknownKey {
+        /// File or `--set`.
+        origin: String,
+        /// Line, 1-based (0: not from a file).
+        line: usize,
+        /// The name given.
+        key: String,
+    },
+    /// A unit option (`rate`, `mode`, ...) where only chassis parameters belong.
+    NotChassis {
+        /// File or `--set`.
+        origin: String,
+        /// Line, 1-based (0: not from a file).
+        line: usize,
+        /// The key.
+        key: Key,
+    },
+    /// A TOML value that is neither a number nor a string (table, array, boolean, date).
+    NotAValue {
+        /// File.
+        origin: String,
+        /// Line, 1-based.
+        line: usize,
+        /// The key.
+        key: Key,
+    },
+    /// A value refused by the key table or chassis relations, as the unit would refuse it.
+    Setting {
+        /// File or `--set`.
+        origin: String,
+        /// Line of the key the error names, 1-based (0: not from a file, or no such line).
+        line: usize,
+        /// The unit's error.
+        error: SettingError,
+    },
+    /// A `--set` argument without `=`.
+    NotAnAssignment(String),
+    /// A file for `config push` without any key.
+    NothingToSend(String),
+}
+
+impl fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let at = |f: &mut fmt::Formatter<'_>, origin: &str, line: usize| {
+            if line > 0 {
+                write!(f, "{origin}:{line}: ")
+            } else {
+                write!(f, "{origin}: ")
+            }
+        };
+        match self {
+            Self::Toml { origin, message } => write!(f, "{origin}: {message}"),
+            Self::UnknownKey { origin, line, key } => {
+                at(f, origin, *line)?;
+                write!(f, "unknown key `{key}` (keys: ")?;
+                for (i, k) in Key::ALL.iter().enumerate() {
+                    write!(f, "{}{}", if i == 0 { "" } else { ", " }, k.name())?;
+                }
+                f.write_str(")")
+            }
+            Self::NotChassis { origin, line, key } => {
+                at(f, origin, *line)?;
+                write!(
+                    f,
+                    "`{}` is a unit option, not a chassis parameter (send it with `odoctl config push`)",
+                    key.name()
+                )
+            }
+            Self::NotAValue { origin, line, key } => {
+                at(f, origin, *line)?;
+                write!(f, "`{}` must be a number or a string", key.name())
+            }
+            Self::Setting {
+                origin,
+                line,
+                error,
+            } => {
+                at(f, origin, *line)?;
+                write!(f, "{error}")
+            }
+            Self::NotAnAssignment(s) => write!(f, "--set {s}: expected KEY=VALUE"),
+            Self::NothingToSend(origin) => write!(f, "{origin}: no parameter keys to send"),
+        }
+    }
+}
+
+impl std::error::Error for ConfigError {}
+
+/// The chassis keys, in the order files list them.
+pub fn chassis_keys() -> impl Iterator<Item = Key> {
+    Key::ALL
+        .into_iter()
+        .filter(|k| k.info().group == Group::Chassis)
+}
 
 /// The keys every calibration file carries (issue 5); the others are written when they differ
 /// from the designed values.
-pub const MAIN_KEYS: &[&str] = &[
-    "left_diameter",
-    "right_diameter",
-    "track_width",
-    "ticks_per_rev",
-    "delta_left",
-    "delta_right",
+pub const MAIN_KEYS: [Key; 6] = [
+    Key::LeftDiameter,
+    Key::RightDiameter,
+    Key::TrackWidth,
+    Key::TicksPerRev,
+    Key::DeltaLeft,
+    Key::DeltaRight,
 ];
 
-/// A key's value as text (as files and the unit print it).
-pub fn get_key(p: &ChassisParams, key: &str) -> Result<String> {
-    Ok(match key {
-        "left_diameter" => fmt_f64(p.left_diameter),
-        "right_diameter" => fmt_f64(p.right_diameter),
-        "track_width" => fmt_f64(p.track_width),
-        "ticks_per_rev" => p.ticks_per_rev.to_string(),
-        "delta_left" => fmt_f32(p.delta_left),
-        "delta_right" => fmt_f32(p.delta_right),
-        "delta_diff" => fmt_f32(p.delta_diff),
-        "uncertainty_model" => model_name(p.uncertainty_model).to_string(),
-        "kappa_left" => fmt_f32(p.kappa_left),
-        "kappa_right" => fmt_f32(p.kappa_right),
-        _ => match read_harmonic(p, key) {
-            Some(v) => fmt_f32(v),
-            None => bail!("unknown key `{key}` (keys: {})", KEYS.join(", ")),
-        },
-    })
-}
-
-fn read_harmonic(p: &ChassisParams, key: &str) -> Option<f32> {
-    let (wheel, rest) = match key.split_once('_')? {
-        ("left", r) => (&p.left_wheel, r),
-        ("right", r) => (&p.right_wheel, r),
-        _ => return None,
-    };
-    let (arr, n) = if let Some(n) = rest.strip_prefix("cos") {
-        (&wheel.cos, n)
-    } else {
-        (&wheel.sin, rest.strip_prefix("sin")?)
-    };
-    let i: usize = n.parse().ok()?;
-    arr.get(i.checked_sub(1)?).copied()
-}
-
-fn write_harmonic(p: &mut ChassisParams, key: &str, v: f32) -> bool {
-    let (wheel, rest) = match key.split_once('_') {
-        Some(("left", r)) => (&mut p.left_wheel, r),
-        Some(("right", r)) => (&mut p.right_wheel, r),
-        _ => return false,
-    };
-    let (arr, n) = if let Some(n) = rest.strip_prefix("cos") {
-        (&mut wheel.cos, n)
-    } else if let Some(n) = rest.strip_prefix("sin") {
-        (&mut wheel.sin, n)
-    } else {
-        return false;
-    };
-    match n
-        .parse::<usize>()
-        .ok()
-        .and_then(|i| i.checked_sub(1))
-        .and_then(|i| arr.get_mut(i))
-    {
-        Some(slot) => {
-            *slot = v;
-            true
-        }
-        None => false,
+fn with_chassis(p: &ChassisParams) -> Settings {
+    Settings {
+        chassis: *p,
+        ..Settings::DEFAULT
     }
+}
+
+/// A key's value in the unit's text form (as `get` prints it).
+pub fn value_text(s: &Settings, key: Key) -> String {
+    s.get(key).to_string()
+}
+
+/// A chassis key's value in the unit's text form.
+pub fn chassis_value_text(p: &ChassisParams, key: Key) -> String {
+    value_text(&with_chassis(p), key)
 }
 
 /// The name of an uncertainty model as the key `uncertainty_model` spells it.
 pub fn model_name(m: UncertaintyModel) -> &'static str {
-    match m {
-        UncertaintyModel::Paper => "paper",
-        UncertaintyModel::Covariance => "covariance",
-    }
+    m.word()
 }
 
-fn parse_model(v: &str) -> Result<UncertaintyModel> {
-    match v {
-        "paper" => Ok(UncertaintyModel::Paper),
-        "covariance" => Ok(UncertaintyModel::Covariance),
-        _ => bail!("`{v}` is not an uncertainty model (paper, covariance)"),
-    }
-}
-
-/// Shortest text that reads back as the same f64, always with a decimal point or exponent.
-pub fn fmt_f64(v: f64) -> String {
-    format!("{v:?}")
-}
-
-/// Shortest text that reads back as the same f32, always with a decimal point or exponent.
-pub fn fmt_f32(v: f32) -> String {
-    format!("{v:?}")
-}
-
-/// Sets one key from its text value; the result is not validated (see [`validated`]).
-pub fn set_key(p: &mut ChassisParams, key: &str, value: &str) -> Result<()> {
-    let value = value.trim();
-    let num = || -> Result<f64> {
-        let v: f64 = value
-            .parse()
-            .map_err(|_| anyhow!("{key}: `{value}` is not a number"))?;
-        if !v.is_finite() {
-            bail!("{key}: `{value}` is not a finite number");
-        }
-        Ok(v)
-    };
-    match key {
-        "left_diameter" => p.left_diameter = num()?,
-        "right_diameter" => p.right_diameter = num()?,
-        "track_width" => p.track_width = num()?,
-        "ticks_per_rev" => {
-            p.ticks_per_rev = value
-                .parse()
-                .map_err(|_| anyhow!("{key}: `{value}` is not a positive integer"))?
-        }
-        "delta_left" => p.delta_left = num()? as f32,
-        "delta_right" => p.delta_right = num()? as f32,
-        "delta_diff" => p.delta_diff = num()? as f32,
-        "uncertainty_model" => p.uncertainty_model = parse_model(value.trim_matches('"'))?,
-        "kappa_left" => p.kappa_left = num()? as f32,
-        "kappa_right" => p.kappa_right = num()? as f32,
-        _ => {
-            if read_harmonic(p, key).is_none() {
-                bail!("unknown key `{key}` (keys: {})", KEYS.join(", "));
-            }
-            write_harmonic(p, key, num()? as f32);
-        }
-    }
-    Ok(())
-}
-
-/// Applies `KEY=VALUE` assignments (from `--set`).
+/// Applies `KEY=VALUE` assignments (from `--set`) to chassis parameters; each value is
+/// parsed and range-checked as the unit does (relations: [`validated`]).
 pub fn apply_sets(p: &mut ChassisParams, sets: &[String]) -> Result<()> {
-    for s in sets {
-        let (k, v) = s
+    let mut s = with_chassis(p);
+    for a in sets {
+        let (k, v) = a
             .split_once('=')
-            .ok_or_else(|| anyhow!("--set {s}: expected KEY=VALUE"))?;
-        set_key(p, k.trim(), v).with_context(|| format!("--set {s}"))?;
+            .ok_or_else(|| ConfigError::NotAnAssignment(a.clone()))?;
+        let origin = format!("--set {a}");
+        let key = chassis_key(&origin, 0, k.trim())?;
+        s.set(key, v.trim()).map_err(|error| ConfigError::Setting {
+            origin,
+            line: 0,
+            error,
+        })?;
     }
+    *p = s.chassis;
     Ok(())
 }
 
-/// Checks parameters, naming the offending key and where they came from.
+/// The chassis key of a name, or why it is none.
+fn chassis_key(origin: &str, line: usize, name: &str) -> Result<Key, ConfigError> {
+    let key = Key::from_name(name).ok_or_else(|| ConfigError::UnknownKey {
+        origin: origin.into(),
+        line,
+        key: name.into(),
+    })?;
+    if key.info().group != Group::Chassis {
+        return Err(ConfigError::NotChassis {
+            origin: origin.into(),
+            line,
+            key,
+        });
+    }
+    Ok(key)
+}
+
+/// Checks chassis parameters as the unit does (each key's range, then their relations),
+/// naming the offending key and where they came from.
 pub fn validated(p: ChassisParams, origin: &str) -> Result<ChassisParams> {
-    p.validate().map_err(|e| anyhow!("{origin}: {e}"))?;
+    validate_chassis(&p).map_err(|error| ConfigError::Setting {
+        origin: origin.into(),
+        line: 0,
+        error,
+    })?;
     Ok(p)
 }
 
-fn line_of(text: &str, key: &str) -> usize {
-    text.lines()
-        .position(|l| {
-            let l = l.trim_start();
-            l.strip_prefix(key)
-                .is_some_and(|r| r.trim_start().starts_with('='))
-        })
-        .map_or(1, |i| i + 1)
+/// One top-level entry of a TOML file: the key, its line and the value's text.
+struct Entry {
+    key: Key,
+    line: usize,
+    text: String,
 }
 
-/// Parses a parameter TOML text over `base`; `file` names it in errors.
-pub fn parse_params(file: &str, text: &str, base: ChassisParams) -> Result<ChassisParams> {
-    let table: toml::Table =
-        toml::from_str(text).map_err(|e| anyhow!("{file}: {}", e.to_string().trim_end()))?;
-    let mut p = base;
-    for (key, value) in &table {
-        let line = line_of(text, key);
-        let text_value = match value {
-            toml::Value::Table(_) if key == "fit" => continue,
-            toml::Value::Float(f) => fmt_f64(*f),
-            toml::Value::Integer(i) => i.to_string(),
+/// Reads the top-level keys of a TOML text in file order, with the text of each value as
+/// the unit would read it: a number exactly as written (TOML's digit separators `_`
+/// removed; never through a float of the TOML parser), a string's content.
+fn entries(origin: &str, text: &str) -> Result<Vec<Entry>, ConfigError> {
+    type Table = std::collections::BTreeMap<String, toml::Spanned<toml::Value>>;
+    let table: Table = toml::from_str(text).map_err(|e| ConfigError::Toml {
+        origin: origin.into(),
+        message: e.to_string().trim_end().into(),
+    })?;
+    let mut items: Vec<(&String, &toml::Spanned<toml::Value>)> = table.iter().collect();
+    items.sort_by_key(|(_, v)| v.span().start);
+    let mut out = Vec::new();
+    for (name, value) in items {
+        let span = value.span();
+        let line = text[..span.start].matches('\n').count() + 1;
+        if name == "fit" && value.get_ref().is_table() {
+            continue;
+        }
+        let key = Key::from_name(name).ok_or_else(|| ConfigError::UnknownKey {
+            origin: origin.into(),
+            line,
+            key: name.clone(),
+        })?;
+        let text = match value.get_ref() {
+            toml::Value::Integer(_) | toml::Value::Float(_) => text[span].replace('_', ""),
             toml::Value::String(s) => s.clone(),
-            _ => bail!("{file}:{line}: `{key}` must be a number or a string"),
+            _ => {
+                return Err(ConfigError::NotAValue {
+                    origin: origin.into(),
+                    line,
+                    key,
+                })
+            }
         };
-        if !KEYS.contains(&key.as_str()) {
-            bail!(
-                "{file}:{line}: unknown key `{key}` (keys: {})",
-                KEYS.join(", ")
-            );
-        }
-        set_key(&mut p, key, &text_value).map_err(|e| anyhow!("{file}:{line}: {e}"))?;
-        if let Err(e) = check_one(&p, key) {
-            bail!("{file}:{line}: {e}");
-        }
+        out.push(Entry { key, line, text });
     }
-    validated(p, file)
+    Ok(out)
 }
 
-fn check_one(p: &ChassisParams, key: &str) -> Result<()> {
-    match p.validate() {
-        Err(e) if e.to_string().starts_with(key) => Err(anyhow!("{e}")),
-        _ => Ok(()),
+/// Parses a TOML text of any keys over `base`: each value parsed and range-checked as the
+/// unit does, the chassis keys checked together; the relations with the unit's options are
+/// left to the unit (they depend on its current settings). Returns the settings and the keys
+/// the file gives, in file order.
+pub fn parse_settings(
+    origin: &str,
+    text: &str,
+    base: Settings,
+) -> Result<(Settings, Vec<Key>), ConfigError> {
+    let entries = entries(origin, text)?;
+    let mut s = base;
+    for e in &entries {
+        s.set(e.key, &e.text)
+            .map_err(|error| ConfigError::Setting {
+                origin: origin.into(),
+                line: e.line,
+                error,
+            })?;
     }
+    validate_chassis(&s.chassis).map_err(|error| ConfigError::Setting {
+        origin: origin.into(),
+        // The line of the key the error names, when the file gives it.
+        line: entries
+            .iter()
+            .find(|e| Some(e.key) == error.key())
+            .map_or(0, |e| e.line),
+        error,
+    })?;
+    Ok((s, entries.iter().map(|e| e.key).collect()))
+}
+
+/// Parses a parameter TOML text (chassis keys only) over `base`; `file` names it in errors.
+pub fn parse_params(file: &str, text: &str, base: ChassisParams) -> Result<ChassisParams> {
+    for e in entries(file, text)? {
+        chassis_key(file, e.line, e.key.name())?;
+    }
+    Ok(parse_settings(file, text, with_chassis(&base))?.0.chassis)
 }
 
 /// Reads a parameter TOML file over `base`.
@@ -254,13 +310,88 @@ pub fn load(config: Option<&Path>, sets: &[String]) -> Result<ChassisParams> {
     validated(p, "--set")
 }
 
-/// The keys a parameter file lists: the main keys, and any other key whose value differs from
-/// the designed one.
-pub fn keys_to_write(p: &ChassisParams) -> Vec<&'static str> {
-    let d = ChassisParams::DESIGNED;
-    KEYS.iter()
-        .copied()
-        .filter(|k| MAIN_KEYS.contains(k) || get_key(p, k).ok() != get_key(&d, k).ok())
+/// The `set` lines that send a TOML text of any keys to the unit: every key the file gives,
+/// the related keys ([`RELATED_KEYS`]) first, then in the table's order, in the unit's text
+/// form, at most
+/// [`odo_core::console::MAX_SET_PAIRS`] pairs per (atomic) `set`. The values are
+/// checked first as in [`parse_settings`] (over the defaults).
+pub fn push_lines_of(origin: &str, text: &str) -> Result<Vec<String>> {
+    let (s, given) = parse_settings(origin, text, Settings::DEFAULT)?;
+    // The keys checked against each other first, so that they share one atomic `set` (at
+    // most 9 of the 16 pairs): no intermediate combination of old and new values is refused.
+    let order = RELATED_KEYS
+        .into_iter()
+        .chain(Key::ALL.into_iter().filter(|k| !RELATED_KEYS.contains(k)));
+    let pairs: Vec<String> = order
+        .filter(|k| given.contains(k))
+        .map(|k| format!("{} {}", k.name(), value_text(&s, k)))
+        .collect();
+    if pairs.is_empty() {
+        return Err(ConfigError::NothingToSend(origin.into()).into());
+    }
+    Ok(pairs
+        .chunks(odo_core::console::MAX_SET_PAIRS)
+        .map(|c| format!("set {}", c.join(" ")))
+        .collect())
+}
+
+/// [`push_lines_of`] a file.
+pub fn push_lines(path: &Path) -> Result<Vec<String>> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read", path.display()))?;
+    push_lines_of(&path.display().to_string(), &text)
+}
+
+/// The settings in a unit's `get` reply (`key = value` lines; an `ok` line and unknown
+/// lines are errors, so nothing is dropped): each value parsed as the unit does, over the
+/// defaults. Returns the settings and the keys given, in reply order.
+pub fn parse_get_reply(reply: &str) -> Result<(Settings, Vec<Key>), ConfigError> {
+    let mut s = Settings::DEFAULT;
+    let mut keys = Vec::new();
+    for (i, line) in reply.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || (i == 0 && line == "ok") {
+            continue;
+        }
+        let (name, value) = line.split_once(" = ").unwrap_or((line, ""));
+        let key = Key::from_name(name).ok_or_else(|| ConfigError::UnknownKey {
+            origin: "get reply".into(),
+            line: i + 1,
+            key: name.into(),
+        })?;
+        s.set(key, value).map_err(|error| ConfigError::Setting {
+            origin: "get reply".into(),
+            line: i + 1,
+            error,
+        })?;
+        keys.push(key);
+    }
+    Ok((s, keys))
+}
+
+/// A TOML text of the `keys` of `s`, in the table's order, values in the unit's text form
+/// (words quoted); `comment` lines first. [`push_lines_of`] reads it back bit for bit.
+pub fn render_settings(s: &Settings, keys: &[Key], comment: &str) -> String {
+    let mut out = String::new();
+    for line in comment.lines() {
+        let _ = writeln!(out, "# {line}");
+    }
+    for k in Key::ALL.into_iter().filter(|k| keys.contains(k)) {
+        let v = value_text(s, k);
+        let _ = match k.info().kind {
+            odo_core::settings::Kind::Word(_) => writeln!(out, "{} = \"{v}\"", k.name()),
+            _ => writeln!(out, "{} = {v}", k.name()),
+        };
+    }
+    out
+}
+
+/// The keys a parameter file lists: the main keys, and any other chassis key whose value
+/// differs from the designed one.
+pub fn keys_to_write(p: &ChassisParams) -> Vec<Key> {
+    let (s, d) = (with_chassis(p), with_chassis(&ChassisParams::DESIGNED));
+    chassis_keys()
+        .filter(|k| MAIN_KEYS.contains(k) || s.get(*k) != d.get(*k))
         .collect()
 }
 
@@ -275,7 +406,7 @@ pub enum FitValue {
     Text(String),
 }
 
-/// Renders a parameter file: a comment header, the shared keys at top level, then `[fit]`.
+/// Renders a parameter file: a comment header, the chassis keys at top level, then `[fit]`.
 pub fn render_params(p: &ChassisParams, comment: &str, fit: &[(&str, FitValue)]) -> String {
     render_params_with(p, comment, fit, &[])
 }
@@ -287,23 +418,9 @@ pub fn render_params_with(
     fit: &[(&str, FitValue)],
     always: &[&str],
 ) -> String {
-    let mut s = String::new();
-    for line in comment.lines() {
-        let _ = writeln!(s, "# {line}");
-    }
-    let listed = keys_to_write(p);
-    for k in KEYS
-        .iter()
-        .copied()
-        .filter(|k| listed.contains(k) || always.contains(k))
-    {
-        let v = get_key(p, k).expect("known key");
-        if k == "uncertainty_model" {
-            let _ = writeln!(s, "{k} = \"{v}\"");
-        } else {
-            let _ = writeln!(s, "{k} = {v}");
-        }
-    }
+    let mut keys = keys_to_write(p);
+    keys.extend(always.iter().filter_map(|k| Key::from_name(k)));
+    let mut s = render_settings(&with_chassis(p), &keys, comment);
     if !fit.is_empty() {
         s.push_str("\n[fit]\n");
         for (k, v) in fit {
@@ -333,51 +450,140 @@ mod tests {
     use super::*;
 
     #[test]
-    fn every_key_roundtrips() {
+    fn every_chassis_key_roundtrips() {
         let mut p = ChassisParams::DESIGNED;
-        for (i, k) in KEYS.iter().enumerate() {
-            let v = match *k {
-                "ticks_per_rev" => "4096".to_string(),
-                "uncertainty_model" => "covariance".to_string(),
-                "left_diameter" | "right_diameter" | "track_width" => format!("0.{}", 250 + i),
+        let mut sets = Vec::new();
+        for (i, k) in chassis_keys().enumerate() {
+            let v = match k {
+                Key::TicksPerRev => "4096".to_string(),
+                Key::UncertaintyModel => "covariance".to_string(),
+                Key::LeftDiameter | Key::RightDiameter | Key::TrackWidth => {
+                    format!("0.{}", 250 + i)
+                }
                 _ => format!("{}e-4", i + 1),
             };
-            set_key(&mut p, k, &v).unwrap();
+            sets.push(format!("{}={v}", k.name()));
         }
-        p.validate().unwrap();
+        apply_sets(&mut p, &sets).unwrap();
+        validated(p, "test").unwrap();
         let text = render_params(&p, "test", &[("initial_heading", FitValue::Num(0.5))]);
         let back = parse_params("x.toml", &text, ChassisParams::DESIGNED).unwrap();
         assert_eq!(back, p);
-        assert_eq!(get_key(&back, "right_sin3").unwrap(), "0.0022");
+        assert_eq!(chassis_value_text(&back, Key::RightSin3), "0.0022");
+    }
+
+    fn error_of(r: Result<ChassisParams>) -> ConfigError {
+        r.unwrap_err()
+            .downcast::<ConfigError>()
+            .expect("a ConfigError")
     }
 
     #[test]
     fn errors_name_file_line_and_key() {
-        let e = parse_params(
+        let d = ChassisParams::DESIGNED;
+        let e = error_of(parse_params("c.toml", "left_diameter = 0.26\nfoo = 1\n", d));
+        assert!(
+            matches!(&e, ConfigError::UnknownKey { line: 2, key, .. } if key == "foo"),
+            "{e:?}"
+        );
+        assert!(
+            e.to_string().starts_with("c.toml:2: unknown key `foo`"),
+            "{e}"
+        );
+        let e = error_of(parse_params("c.toml", "track_width = 99.0\n", d));
+        assert_eq!(
+            e,
+            ConfigError::Setting {
+                origin: "c.toml".into(),
+                line: 1,
+                error: SettingError::OutOfRange(Key::TrackWidth)
+            }
+        );
+        assert!(e.to_string().starts_with("c.toml:1: track_width"), "{e}");
+        let e = error_of(parse_params("c.toml", "track_width = \n", d));
+        assert!(matches!(&e, ConfigError::Toml { origin, .. } if origin == "c.toml"));
+        let e = error_of(parse_params("c.toml", "ticks_per_rev = 1.5\n", d));
+        assert!(
+            matches!(
+                e,
+                ConfigError::Setting {
+                    error: SettingError::BadNumber(Key::TicksPerRev),
+                    ..
+                }
+            ),
+            "{e:?}"
+        );
+        // A relation between chassis keys: reported at the line of the key it names.
+        let e = error_of(parse_params(
             "c.toml",
-            "left_diameter = 0.26\nfoo = 1\n",
-            ChassisParams::DESIGNED,
-        )
-        .unwrap_err();
-        assert!(
-            e.to_string().contains("c.toml:2") && e.to_string().contains("foo"),
-            "{e}"
+            "track_width = 0.5\nticks_per_rev = 100\n",
+            d,
+        ));
+        assert_eq!(
+            e,
+            ConfigError::Setting {
+                origin: "c.toml".into(),
+                line: 2,
+                error: SettingError::Chassis(Key::TicksPerRev)
+            }
         );
-        let e =
-            parse_params("c.toml", "track_width = 99.0\n", ChassisParams::DESIGNED).unwrap_err();
+        // Unit options belong to `config push`, not to parameter files.
+        let e = error_of(parse_params("c.toml", "\nrate = 100\n", d));
         assert!(
-            e.to_string().contains("c.toml:1") && e.to_string().contains("track_width"),
-            "{e}"
+            matches!(
+                e,
+                ConfigError::NotChassis {
+                    line: 2,
+                    key: Key::Rate,
+                    ..
+                }
+            ),
+            "{e:?}"
         );
-        let e = parse_params("c.toml", "track_width = \n", ChassisParams::DESIGNED).unwrap_err();
-        assert!(e.to_string().contains("c.toml"), "{e}");
-        let e =
-            parse_params("c.toml", "ticks_per_rev = 1.5\n", ChassisParams::DESIGNED).unwrap_err();
-        assert!(e.to_string().contains("ticks_per_rev"), "{e}");
+        let e = error_of(parse_params("c.toml", "left_diameter = true\n", d));
+        assert!(matches!(e, ConfigError::NotAValue { line: 1, .. }), "{e:?}");
         let mut p = ChassisParams::DESIGNED;
-        assert!(apply_sets(&mut p, &["left_cos4=0.1".into()]).is_err());
-        assert!(apply_sets(&mut p, &["left_diameter".into()]).is_err());
+        let e = apply_sets(&mut p, &["left_cos4=0.1".into()]).unwrap_err();
+        assert!(
+            matches!(e.downcast_ref(), Some(ConfigError::UnknownKey { .. })),
+            "{e}"
+        );
+        let e = apply_sets(&mut p, &["left_diameter".into()]).unwrap_err();
+        assert!(
+            matches!(e.downcast_ref(), Some(ConfigError::NotAnAssignment(_))),
+            "{e}"
+        );
+        assert_eq!(p, ChassisParams::DESIGNED);
         apply_sets(&mut p, &["left_diameter=0.3".into()]).unwrap();
         assert_eq!(p.left_diameter, 0.3);
+    }
+
+    /// TOML numbers reach the unit's parser as written: an f32 key gets the f32 nearest to
+    /// the decimal (not the f32 nearest to the f64 nearest to it), `-0` keeps its sign, and
+    /// digit separators are allowed.
+    #[test]
+    fn toml_numbers_are_parsed_as_the_unit_parses_them() {
+        // 1.00000005960464477539062500001 lies just above the halfway point between the
+        // f32 values 1 and 1 + 2^-23; its nearest f64 is the halfway point itself, which
+        // rounds (to even) to 1: parsing through f64 gives the wrong f32.
+        let text = "1.00000005960464477539062500001";
+        assert_eq!(text.parse::<f64>().unwrap() as f32, 1.0);
+        let s = Settings::DEFAULT;
+        let mut unit = s;
+        unit.set(Key::MaxWheelSpeed, text).unwrap();
+        assert_eq!(unit.max_wheel_speed, 1.0 + f32::EPSILON);
+        let (got, keys) = parse_settings(
+            "t.toml",
+            &format!("max_wheel_speed = {text}\nleft_cos1 = -0\nticks_per_rev = 20_000\n"),
+            s,
+        )
+        .unwrap();
+        assert_eq!(keys, [Key::MaxWheelSpeed, Key::LeftCos1, Key::TicksPerRev]);
+        assert_eq!(
+            got.max_wheel_speed.to_bits(),
+            unit.max_wheel_speed.to_bits()
+        );
+        assert_eq!(got.chassis.left_wheel.cos[0].to_bits(), (-0.0f32).to_bits());
+        assert_eq!(got.chassis.ticks_per_rev, 20_000);
     }
 }

@@ -40,7 +40,7 @@ pub const POSE_COLUMNS: [&str; 9] = [
 ];
 
 /// The SAMPLES columns of the record's clocks and link counters, as `record` and `decode`
-/// write them (ignored when read).
+/// write them (the first three are read into [`UnitPose::time`], the ROS exports' stamps).
 pub const RECORD_COLUMNS: [&str; 5] = [
     "mcu_time_us",
     "gps_week",
@@ -143,6 +143,19 @@ pub struct UnitPose {
     pub sigma_heading: f32,
     /// Signed x-y covariance term as the unit sends it (m), 0 when absent.
     pub sigma_xy: f32,
+    /// The record's time tag (`mcu_time_us`, `gps_week`, `gps_tow_ms`), when the file has it.
+    pub time: Option<RecordTime>,
+}
+
+/// The time fields of a recorded pose record (what `record` writes after the pose columns).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct RecordTime {
+    /// MCU time of the sample, microseconds since the unit started.
+    pub mcu_time_us: u64,
+    /// GPS week (meaningful when the flags' time-valid bit is set).
+    pub gps_week: u16,
+    /// GPS time of week of the sample's second, milliseconds.
+    pub gps_tow_ms: u32,
 }
 
 /// One SAMPLES row.
@@ -365,6 +378,8 @@ pub fn parse_samples(file: &str, text: &str) -> Result<Vec<Sample>> {
     let pose_cols = [x, y, heading, sigma_x, sigma_y, sigma_heading].map(|c| table.column(c));
     let has_pose = pose_cols.iter().all(Option::is_some);
     let cxy = table.column(sigma_xy);
+    let [mcu_time_us, gps_week, gps_tow_ms, _, _] = RECORD_COLUMNS;
+    let time_cols = [mcu_time_us, gps_week, gps_tow_ms].map(|c| table.column(c));
     let mut out = Vec::with_capacity(table.lines.len());
     let mut prev = None;
     for row in table.rows() {
@@ -390,6 +405,25 @@ pub fn parse_samples(file: &str, text: &str) -> Result<Vec<Sample>> {
                     sigma_y: row.get(g(4), real)?,
                     sigma_heading: row.get(g(5), real)?,
                     sigma_xy: row.optional(cxy, real)?.unwrap_or(0.0),
+                    time: match [0, 1, 2].map(|i| row.optional(time_cols[i], unsigned)) {
+                        [Ok(Some(m)), Ok(Some(w)), Ok(Some(t))] => Some(RecordTime {
+                            mcu_time_us: m,
+                            gps_week: w.try_into().map_err(|_| {
+                                anyhow!("{file}:{}: `{gps_week}` out of range", row.line)
+                            })?,
+                            gps_tow_ms: t.try_into().map_err(|_| {
+                                anyhow!("{file}:{}: `{gps_tow_ms}` out of range", row.line)
+                            })?,
+                        }),
+                        [m, w, t] => {
+                            // Empty fields: no time tag; anything else that is not a number
+                            // is an error naming the column.
+                            m?;
+                            w?;
+                            t?;
+                            None
+                        }
+                    },
                 });
             }
         }

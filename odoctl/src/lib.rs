@@ -28,5 +28,6 @@ pub mod optim;
 pub mod plots;
 pub mod reference;
 pub mod replay;
+pub mod ros;
 pub mod simulate;
 pub mod stats;

@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{bail, Context, Result};
 use odo_core::protocol::{DecoderStats, Frame, FrameDecoder, Message, PoseRecord};
 use odo_core::timing::SyncState;
 
@@ -424,6 +424,7 @@ impl<W: Write> RecordWriter<W> {
                 sigma_y: r.sigma_y,
                 sigma_heading: r.sigma_heading,
                 sigma_xy: r.sigma_xy,
+                time: None,
             }),
         };
         let clocks: RecordFields = [
@@ -648,39 +649,10 @@ pub enum ConfigAction {
     Save,
     /// Send a parameter file; then `save` when true.
     Push(PathBuf, bool),
+    /// `get`, written to a TOML file.
+    Pull(PathBuf),
     /// Any command line.
     Raw(String),
-}
-
-/// The `set` lines that send a parameter file: all its top-level shared keys (in groups of
-/// at most 16 pairs per atomic `set`).
-pub fn push_lines(path: &Path) -> Result<Vec<String>> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("{}: cannot read", path.display()))?;
-    // Validate as a whole first (names file and line on error).
-    let params = cfg::parse_params(
-        &path.display().to_string(),
-        &text,
-        odo_core::odometry::ChassisParams::DESIGNED,
-    )?;
-    let table: toml::Table =
-        toml::from_str(&text).map_err(|e| anyhow!("{}: {e}", path.display()))?;
-    let keys: Vec<&str> = cfg::KEYS
-        .iter()
-        .copied()
-        .filter(|k| table.contains_key(*k))
-        .collect();
-    if keys.is_empty() {
-        bail!("{}: no parameter keys to send", path.display());
-    }
-    let pairs: Vec<String> = keys
-        .iter()
-        .map(|k| format!("{k} {}", cfg::get_key(&params, k).expect("known key")))
-        .collect();
-    Ok(pairs
-        .chunks(odo_core::console::MAX_SET_PAIRS)
-        .map(|c| format!("set {}", c.join(" ")))
-        .collect())
 }
 
 /// `odoctl config`: prints the unit's replies; exit code 1 on an error reply.
@@ -691,12 +663,13 @@ pub fn config(port: &str, baud: u32, action: ConfigAction) -> Result<ExitCode> {
         ConfigAction::Set(k, v) => vec![format!("set {k} {v}")],
         ConfigAction::Save => vec!["save".into()],
         ConfigAction::Push(p, save) => {
-            let mut l = push_lines(p)?;
+            let mut l = cfg::push_lines(p)?;
             if *save {
                 l.push("save".into());
             }
             l
         }
+        ConfigAction::Pull(_) => vec!["get".into()],
         ConfigAction::Raw(l) => vec![l.clone()],
     };
     if lines.iter().any(|l| l.contains('\n') || l.contains('\r')) {
@@ -712,6 +685,14 @@ pub fn config(port: &str, baud: u32, action: ConfigAction) -> Result<ExitCode> {
         if !ok {
             eprintln!("odoctl: the unit rejected `{line}`");
             return Ok(ExitCode::FAILURE);
+        }
+        if let ConfigAction::Pull(path) = &action {
+            let (settings, keys) = cfg::parse_get_reply(&text)?;
+            let toml =
+                cfg::render_settings(&settings, &keys, "odoctl config pull: the unit's settings");
+            std::fs::write(path, toml)
+                .with_context(|| format!("{}: cannot write", path.display()))?;
+            crate::outln!("wrote {}", path.display());
         }
     }
     Ok(ExitCode::SUCCESS)

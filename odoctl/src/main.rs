@@ -78,6 +78,13 @@ enum Cmd {
         /// `replay --check` can reproduce it bit for bit.
         #[arg(long)]
         reset_pose: bool,
+        /// Also write the unit's poses as ROS 2 topics (/odom, /tf, /diagnostics) to this
+        /// MCAP file once recording ends (docs/ROS.md); the twist needs the unit's parameters
+        /// (`--config`, `--set`).
+        #[arg(long)]
+        mcap: Option<PathBuf>,
+        #[command(flatten)]
+        params: ParamArgs,
     },
     /// Decode a captured raw byte stream to a SAMPLES CSV.
     Decode {
@@ -116,6 +123,10 @@ enum Cmd {
         /// Write the CSV here instead of stdout.
         #[arg(long, short)]
         out: Option<PathBuf>,
+        /// Also record the replay as ROS 2 topics (/odom, /tf, /diagnostics) in this MCAP
+        /// file (docs/ROS.md).
+        #[arg(long)]
+        mcap: Option<PathBuf>,
     },
     /// Estimate the chassis parameters from a run and its RTK GNSS reference (eq 16).
     Calibrate(CalibrateArgs),
@@ -159,9 +170,31 @@ enum Cmd {
         /// the heading bands widened by it, as `calibrate`'s `delta_diff` criterion uses.
         #[arg(long, default_value_t = 0.5)]
         reference_heading_sigma_deg: f64,
+        /// Also write the reference track and the odometry path (`nav_msgs/Path`) to this
+        /// MCAP file, for Foxglove (docs/ROS.md).
+        #[arg(long)]
+        mcap: Option<PathBuf>,
     },
     /// Write a synthetic run (SAMPLES and REFERENCE CSVs) with known true parameters.
     Simulate(SimulateArgs),
+    /// Publish the live pose on ROS 2 (/odom, /tf, /diagnostics) over DDS (docs/ROS.md).
+    Bridge {
+        #[command(flatten)]
+        port: PortArgs,
+        /// The unit's parameters, for the twist from the counts.
+        #[command(flatten)]
+        params: ParamArgs,
+        /// Stop after this many seconds.
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Stop after this many published records.
+        #[arg(long)]
+        count: Option<u64>,
+        /// Seconds between reconnection attempts, and without records before the status
+        /// turns STALE.
+        #[arg(long, default_value_t = 1.0)]
+        retry: f64,
+    },
 }
 
 /// One uncertainty model.
@@ -214,14 +247,20 @@ enum ConfigAction {
     },
     /// Store the settings in flash.
     Save,
-    /// Send a parameter file (a calibration result) in one atomic `set`, then `save` unless
-    /// `--no-save`.
+    /// Send a parameter file (a calibration result, or unit options) in atomic `set` lines,
+    /// then `save` unless `--no-save`.
     Push {
         /// TOML file with the shared key names.
         file: PathBuf,
         /// Do not save to flash.
         #[arg(long)]
         no_save: bool,
+    },
+    /// Write the unit's settings (its `get` reply) to a TOML file that `push` sends back
+    /// bit for bit.
+    Pull {
+        /// TOML file to write.
+        file: PathBuf,
     },
     /// Send any command line and print the reply.
     Raw {
@@ -306,6 +345,14 @@ struct CalibrateArgs {
     /// No progress bars.
     #[arg(long, short)]
     quiet: bool,
+    /// Also write the result as ros2_control diff_drive_controller parameters (YAML:
+    /// wheel_separation, wheel_radius, the wheel radius multipliers; docs/ROS.md).
+    #[arg(long, requires = "out")]
+    export_ros: Option<PathBuf>,
+    /// Also write the reference track and the calibrated odometry path (`nav_msgs/Path`, the
+    /// paper's Fig. 4) to this MCAP file, as `validate --mcap` with the result (docs/ROS.md).
+    #[arg(long, requires = "out")]
+    mcap: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -414,15 +461,23 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             duration,
             count,
             reset_pose,
-        } => c::record(
-            &port.port,
-            port.baud,
-            &out,
-            raw.as_deref(),
-            duration,
-            count,
-            reset_pose,
-        ),
+            mcap,
+            params,
+        } => {
+            let code = c::record(
+                &port.port,
+                port.baud,
+                &out,
+                raw.as_deref(),
+                duration,
+                count,
+                reset_pose,
+            )?;
+            if let Some(m) = &mcap {
+                odoctl::ros::export::record_hook(m, &out, params.config.as_deref(), &params.sets)?;
+            }
+            Ok(code)
+        }
         Cmd::Decode { file, out } => c::decode(&file, out.as_deref()),
         Cmd::Config { port, action } => {
             let action = match action {
@@ -430,6 +485,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 ConfigAction::Set { key, value } => c::ConfigAction::Set(key, value),
                 ConfigAction::Save => c::ConfigAction::Save,
                 ConfigAction::Push { file, no_save } => c::ConfigAction::Push(file, !no_save),
+                ConfigAction::Pull { file } => c::ConfigAction::Pull(file),
                 ConfigAction::Raw { line } => c::ConfigAction::Raw(line.join(" ")),
             };
             c::config(&port.port, port.baud, action)
@@ -442,47 +498,82 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             heading,
             check,
             out,
-        } => c::replay(
-            &samples,
-            params.config.as_deref(),
-            &params.sets,
-            (x, y, heading),
-            check,
-            out.as_deref(),
-        ),
-        Cmd::Calibrate(a) => c::calibrate(
-            &c::CalibrateOptions {
-                samples: a.samples,
-                reference: a.reference,
-                initial: a.initial,
-                sets: a.sets,
-                out: a.out,
-                windows_out: a.windows_out,
-                plots: a.plots,
-                calibration: CalibrationOptions {
-                    delta_window: a.delta_window,
-                    reference_sigma: a.reference_sigma,
-                    delta_mode: a.delta_mode,
-                    fit_delta: !a.no_delta,
-                    fit_delta_diff: !a.no_fit_delta_diff,
-                    reference_heading_sigma: a.reference_heading_sigma_deg.to_radians(),
-                    models: a.models.list(),
-                    select: match (a.uncertainty_model, a.models) {
-                        (Some(ModelChoice::Paper), _) => Some(UncertaintyModel::Paper),
-                        (Some(ModelChoice::Covariance), _) => Some(UncertaintyModel::Covariance),
-                        (None, Models::Config) => None,
-                        (None, Models::Paper) => Some(UncertaintyModel::Paper),
-                        (None, _) => Some(UncertaintyModel::Covariance),
+            mcap,
+        } => {
+            if let Some(m) = &mcap {
+                odoctl::ros::export::replay_hook(
+                    m,
+                    &samples,
+                    params.config.as_deref(),
+                    &params.sets,
+                    (x, y, heading),
+                )?;
+            }
+            c::replay(
+                &samples,
+                params.config.as_deref(),
+                &params.sets,
+                (x, y, heading),
+                check,
+                out.as_deref(),
+            )
+        }
+        Cmd::Calibrate(a) => {
+            let ros = a.export_ros.clone().zip(a.out.clone());
+            let tracks = a.mcap.clone().zip(a.out.clone());
+            let files = (a.samples.clone(), a.reference.clone());
+            let reference_input = a.reference_input.clone();
+            let code = c::calibrate(
+                &c::CalibrateOptions {
+                    samples: a.samples,
+                    reference: a.reference,
+                    initial: a.initial,
+                    sets: a.sets,
+                    out: a.out,
+                    windows_out: a.windows_out,
+                    plots: a.plots,
+                    calibration: CalibrationOptions {
+                        delta_window: a.delta_window,
+                        reference_sigma: a.reference_sigma,
+                        delta_mode: a.delta_mode,
+                        fit_delta: !a.no_delta,
+                        fit_delta_diff: !a.no_fit_delta_diff,
+                        reference_heading_sigma: a.reference_heading_sigma_deg.to_radians(),
+                        models: a.models.list(),
+                        select: match (a.uncertainty_model, a.models) {
+                            (Some(ModelChoice::Paper), _) => Some(UncertaintyModel::Paper),
+                            (Some(ModelChoice::Covariance), _) => {
+                                Some(UncertaintyModel::Covariance)
+                            }
+                            (None, Models::Config) => None,
+                            (None, Models::Paper) => Some(UncertaintyModel::Paper),
+                            (None, _) => Some(UncertaintyModel::Covariance),
+                        },
+                        criterion: a.uncertainty_criterion,
+                        polish: a.polish && !a.no_polish,
+                        windows: a.windows,
+                        window_start: a.window_start,
+                        quiet: a.quiet,
                     },
-                    criterion: a.uncertainty_criterion,
-                    polish: a.polish && !a.no_polish,
-                    windows: a.windows,
-                    window_start: a.window_start,
-                    quiet: a.quiet,
                 },
-            },
-            &a.reference_input,
-        ),
+                &a.reference_input,
+            )?;
+            if let Some((yaml, result)) = &ros {
+                odoctl::ros::diff_drive::export_hook(yaml, result)?;
+            }
+            if let Some((m, result)) = &tracks {
+                odoctl::ros::tracks::validate_hook(
+                    m,
+                    &files.0,
+                    &files.1,
+                    &reference_input,
+                    Some(result),
+                    &[],
+                    None,
+                )?;
+            }
+            Ok(code)
+        }
         Cmd::Validate {
             samples,
             reference,
@@ -494,8 +585,14 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             reference_sigma,
             reference_heading_sigma_deg,
             reference_input,
+            mcap,
             ..
         } if runs.is_some() || samples.len() > 1 || reference.len() > 1 => {
+            if mcap.is_some() {
+                anyhow::bail!(
+                    "--mcap takes one run (--samples and --reference once), not an ensemble"
+                );
+            }
             let list = match &runs {
                 Some(f) => c::read_run_list(f),
                 None if samples.len() == reference.len() => {
@@ -534,20 +631,54 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             reference_sigma,
             reference_heading_sigma_deg,
             reference_input,
+            mcap,
             ..
-        } => c::validate(
-            &samples[0],
-            &reference[0],
-            params.config.as_deref(),
-            &params.sets,
-            heading,
-            errors.as_deref(),
-            plots.as_deref(),
-            &models.list(),
-            reference_sigma,
-            reference_heading_sigma_deg.to_radians(),
-            &reference_input,
-        ),
+        } => {
+            if let Some(m) = &mcap {
+                odoctl::ros::tracks::validate_hook(
+                    m,
+                    &samples[0],
+                    &reference[0],
+                    &reference_input,
+                    params.config.as_deref(),
+                    &params.sets,
+                    heading,
+                )?;
+            }
+            c::validate(
+                &samples[0],
+                &reference[0],
+                params.config.as_deref(),
+                &params.sets,
+                heading,
+                errors.as_deref(),
+                plots.as_deref(),
+                &models.list(),
+                reference_sigma,
+                reference_heading_sigma_deg.to_radians(),
+                &reference_input,
+            )
+        }
+        Cmd::Bridge {
+            port,
+            params,
+            duration,
+            count,
+            retry,
+        } => {
+            let secs = |what: &str, v: f64| {
+                std::time::Duration::try_from_secs_f64(v)
+                    .map_err(|_| anyhow::anyhow!("--{what} {v}: not a duration in seconds"))
+            };
+            odoctl::ros::bridge::run(&odoctl::ros::bridge::BridgeOptions {
+                port: port.port,
+                baud: port.baud,
+                params: odoctl::config::load(params.config.as_deref(), &params.sets)?,
+                duration: duration.map(|d| secs("duration", d)).transpose()?,
+                count,
+                retry: secs("retry", retry)?,
+            })
+        }
         Cmd::Simulate(a) => c::simulate(
             &c::SimulateOptions {
                 samples: a.samples,

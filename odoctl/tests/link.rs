@@ -107,7 +107,8 @@ fn config_against_a_unit_on_tcp() {
     let out = success_stdout(&o);
     assert!(
         out.contains(
-            "> set left_diameter 0.2611 right_diameter 0.2605 track_width 0.565 delta_left 2e-8"
+            // Values in the unit's own text form (what `get` prints).
+            "> set left_diameter 0.2611 right_diameter 0.2605 track_width 0.565 delta_left 0.00000002"
         ),
         "{out}"
     );
@@ -212,4 +213,42 @@ fn record_and_monitor_against_a_unit_on_tcp() {
         "{out}"
     );
     unit.join().unwrap();
+}
+
+/// `config pull` writes the unit's settings as TOML that `config push` sends back whole.
+#[test]
+fn config_pull_writes_what_push_sends_back() {
+    let (port, unit) = common::fake_unit(Vec::new(), Duration::from_millis(5));
+    let d = scratch("link_pull");
+    let file = d.join("unit.toml");
+    let o = odoctl(&[
+        "config",
+        "--port",
+        &format!("tcp:127.0.0.1:{port}"),
+        "pull",
+        s(&file),
+    ]);
+    let out = success_stdout(&o);
+    assert!(out.contains("wrote"), "{out}");
+    let unit = unit.join().unwrap();
+    let text = std::fs::read_to_string(&file).unwrap();
+    assert!(
+        text.contains("\nmode = \"free\"\n") && text.contains("\nrate = 50\n"),
+        "{text}"
+    );
+    let lines = odoctl::config::push_lines(&file).unwrap();
+    let mut back = odo_core::settings::Settings::DEFAULT;
+    back.chassis.track_width = 0.7;
+    back.rate = 100;
+    for l in &lines {
+        assert!(odo_core::console::execute(l, &mut back).0.ok, "{l}");
+    }
+    assert_eq!(back.to_bytes(), unit.to_bytes());
+    assert_eq!(
+        lines
+            .iter()
+            .map(|l| l.split_whitespace().count() / 2)
+            .sum::<usize>(),
+        odo_core::settings::Key::COUNT
+    );
 }

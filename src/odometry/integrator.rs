@@ -291,6 +291,15 @@ impl Integrator {
         }
     }
 
+    /// The position-heading covariances `(cov(x, alpha), cov(y, alpha))`, m rad: carried by
+    /// the covariance model; zero for the paper's model, which has no correlation terms.
+    pub fn heading_covariance(&self) -> (f32, f32) {
+        match self.params.uncertainty_model {
+            UncertaintyModel::Paper => (0.0, 0.0),
+            UncertaintyModel::Covariance => self.covariance.heading_terms(),
+        }
+    }
+
     /// The change of wheel `i`'s periodic distance term between `before` and `now`, if its
     /// phase is referenced by an index pulse (metres).
     fn periodic_delta(

@@ -208,4 +208,9 @@ impl CovarianceUncertainty {
             self.xy.value(),
         )
     }
+
+    /// `(cov(x, alpha), cov(y, alpha))`: m rad.
+    pub fn heading_terms(&self) -> (f32, f32) {
+        (self.xa.value(), self.ya.value())
+    }
 }

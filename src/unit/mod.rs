@@ -25,8 +25,8 @@ pub use sample::{IndexCapture, PpsLatch, RawCounts, RawSample};
 pub use start::{start, Start};
 pub use status::BoardReport;
 
-use crate::settings::{SampleMode, Settings, TimeTagRef};
-use crate::timing::{ClockSource, DisciplineConfig, SyncMode, TimeTagPps};
+use crate::settings::Settings;
+use crate::timing::{ClockSource, DisciplineConfig, TimeTagPps};
 
 /// The discipline configuration that `settings` ask for, with the PPS lock range of the
 /// clock running now (`clock`), the sample timer at `timer_hz`.
@@ -37,17 +37,11 @@ pub fn discipline_config(
 ) -> DisciplineConfig {
     let mut cfg = DisciplineConfig::for_clock(timer_hz, clock.tolerance_ppm());
     cfg.rate_hz = settings.rate;
-    cfg.mode = match settings.mode {
-        SampleMode::Pps => SyncMode::Pps,
-        SampleMode::Free => SyncMode::Free,
-    };
+    cfg.mode = settings.mode;
     cfg
 }
 
 /// Which PPS edge a time message names, as `settings` say.
 pub fn time_tag(settings: &Settings) -> TimeTagPps {
-    match settings.time_tag_pps {
-        TimeTagRef::Previous => TimeTagPps::Previous,
-        TimeTagRef::Next => TimeTagPps::Next,
-    }
+    settings.time_tag_pps
 }

@@ -1,0 +1,12 @@
+//! Exports to ROS 2 (REP-103/105): MCAP recordings of `/odom`, `/tf` and `/diagnostics` as
+//! ros2msg/CDR. The conversions and their table: docs/ROS.md.
+
+pub mod bridge;
+pub mod conventions;
+pub mod diff_drive;
+pub mod export;
+pub mod msgs;
+pub mod recording;
+pub mod stamps;
+pub mod stream;
+pub mod tracks;

@@ -1,0 +1,151 @@
+//! `odoctl bridge` received by an independent DDS subscriber: Eclipse Cyclone DDS through the
+//! Python `cyclonedds` package with the ROS 2 types written from the .msg definitions
+//! (tests/ros/dds_subscriber.py), on 127.0.0.1, against the fake unit on TCP. Skipped with a
+//! message when python3 or `cyclonedds` is missing, unless `ODO_PY_REQUIRED=1` (CI).
+
+mod common;
+
+use std::fmt::Write as _;
+use std::io::{BufRead, BufReader, Write as _};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+
+use common::scratch;
+use odo_core::odometry::ChassisParams;
+use odoctl::simulate::PathKind;
+
+fn cyclonedds_ready() -> bool {
+    let ok = Command::new("python3")
+        .args(["-c", "import cyclonedds.domain"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !ok {
+        assert!(
+            std::env::var("ODO_PY_REQUIRED").as_deref() != Ok("1"),
+            "ODO_PY_REQUIRED=1 but python3 with the `cyclonedds` package is missing"
+        );
+        let _ = writeln!(
+            std::io::stderr(),
+            "ros_bridge: skipped: python3 with `cyclonedds` not found (python3 -m pip install cyclonedds)"
+        );
+    }
+    ok
+}
+
+/// Starts the subscriber on `domain` and waits until its readers exist.
+fn subscriber(domain: u16, args: &[&str]) -> Child {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/ros/dds_subscriber.py");
+    let mut child = Command::new("python3")
+        .arg(script)
+        .args(args)
+        .env("ROS_DOMAIN_ID", domain.to_string())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("python3 runs");
+    let mut line = String::new();
+    BufReader::new(child.stdout.as_mut().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    assert_eq!(line.trim(), "ready", "subscriber did not start");
+    child
+}
+
+fn finish(child: Child) -> String {
+    let o = child.wait_with_output().unwrap();
+    let out = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(
+        o.status.success(),
+        "{out}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    out
+}
+
+#[test]
+fn bridge_publishes_the_units_records_to_an_independent_dds_subscriber() {
+    if !cyclonedds_ready() {
+        return;
+    }
+    let sim = common::sim(PathKind::Validation, 10.0, 12);
+    let samples: Vec<_> = sim.samples[..400].to_vec();
+    // The fake unit integrates with its defaults, the designed parameters.
+    let records = common::records(&ChassisParams::DESIGNED, &samples);
+    let dir = scratch("ros_bridge");
+    let mut e = String::from("x,y,heading,sigma_x,sigma_y,sigma_heading,sigma_xy\n");
+    for r in &records {
+        let _ = writeln!(
+            e,
+            "{:?},{:?},{:?},{:?},{:?},{:?},{:?}",
+            r.x, r.y, r.heading, r.sigma_x, r.sigma_y, r.sigma_heading, r.sigma_xy
+        );
+    }
+    let expect = dir.join("expect.csv");
+    std::fs::write(&expect, e).unwrap();
+    let domain = 61;
+    let sub = subscriber(
+        domain,
+        &[
+            "--expect",
+            expect.to_str().unwrap(),
+            "--count",
+            "50",
+            "--timeout",
+            "40",
+        ],
+    );
+    let (port, unit) = common::fake_unit(samples, std::time::Duration::from_millis(20));
+    let o = Command::new(common::bin())
+        .args(["bridge", "--port", &format!("tcp:127.0.0.1:{port}")])
+        .args(["--count", "250"])
+        .env("ROS_DOMAIN_ID", domain.to_string())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("250 records published"), "{err}");
+    unit.join().unwrap();
+    let out = finish(sub);
+    assert!(out.contains("dds_subscriber: ok"), "{out}");
+    eprintln!("{}", out.trim());
+}
+
+#[test]
+fn bridge_without_a_unit_reports_the_lost_link_and_publishes_no_pose() {
+    if !cyclonedds_ready() {
+        return;
+    }
+    let domain = 62;
+    let sub = subscriber(
+        domain,
+        &["--expect-error", "cannot connect", "--timeout", "30"],
+    );
+    let o = Command::new(common::bin())
+        .args([
+            "bridge",
+            "--port",
+            "tcp:127.0.0.1:1",
+            "--duration",
+            "4",
+            "--retry",
+            "0.5",
+        ])
+        .env("ROS_DOMAIN_ID", domain.to_string())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("0 records published") && err.contains("cannot connect"),
+        "{err}"
+    );
+    let out = finish(sub);
+    assert!(out.contains("ERROR"), "{out}");
+    // A bad domain is refused.
+    let o = Command::new(common::bin())
+        .args(["bridge", "--port", "tcp:127.0.0.1:1", "--duration", "1"])
+        .env("ROS_DOMAIN_ID", "999")
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+}
