@@ -28,6 +28,9 @@
 //! is smoother over a few centimetres than white slip of the same long-range rate, and a
 //! white-slip fit alone took it for less slip (a third of it at `L` = 2 m).
 
+// Dense 8x8 matrix arithmetic reads best by index.
+#![allow(clippy::needless_range_loop)]
+
 use anyhow::{anyhow, Result};
 use odo_core::odometry::ChassisParams;
 
@@ -314,7 +317,7 @@ impl Innovations {
             let v = [o.dx - x[0], o.dy - x[1]];
             let s = [[p[0][0] + o.r, p[0][1]], [p[1][0], p[1][1] + o.r]];
             let det = s[0][0] * s[1][1] - s[0][1] * s[1][0];
-            if !(det > 0.0) {
+            if det.is_nan() || det <= 0.0 {
                 return FilterScore {
                     nll: f64::INFINITY,
                     ..FilterScore::default()
