@@ -18,7 +18,12 @@ pub struct Geodetic {
 }
 
 impl Geodetic {
-    /// Checks the ranges: latitude within +-90, longitude within +-180, all finite.
+    /// Highest ellipsoidal height accepted (m, either sign): a receiver on or near the
+    /// Earth; beyond it the local-plane conversion loses all precision.
+    pub const MAX_HEIGHT: f64 = 100_000.0;
+
+    /// Checks the ranges: latitude within +-90, longitude within +-180, height within
+    /// +-[`Self::MAX_HEIGHT`], all finite.
     pub fn checked(self) -> Result<Self> {
         if !(self.lat_deg.is_finite() && self.lon_deg.is_finite() && self.height.is_finite()) {
             bail!("not finite");
@@ -28,6 +33,13 @@ impl Geodetic {
         }
         if self.lon_deg.abs() > 180.0 {
             bail!("longitude {} is outside -180..180 degrees", self.lon_deg);
+        }
+        if self.height.abs() > Self::MAX_HEIGHT {
+            bail!(
+                "height {} m is outside -{max}..{max} m",
+                self.height,
+                max = Self::MAX_HEIGHT
+            );
         }
         Ok(self)
     }
@@ -116,6 +128,22 @@ impl LocalFrame {
 
 #[cfg(test)]
 mod tests {
+    /// Fuzz finding: a `.pos` height of 1e101 m turned every local coordinate into NaN.
+    #[test]
+    fn heights_beyond_the_earth_are_refused() {
+        let at = |height| Geodetic {
+            lat_deg: 49.2,
+            lon_deg: 16.6,
+            height,
+        };
+        assert!(at(299.9).checked().is_ok());
+        assert!(at(-Geodetic::MAX_HEIGHT).checked().is_ok());
+        let e = at(2.1e101).checked().unwrap_err().to_string();
+        assert!(e.contains("height") && e.contains("100000"), "{e}");
+        assert!(at(-1.0e6).checked().is_err());
+        assert!(parse_origin("49.2,16.6,1e9").is_err());
+    }
+
     use super::*;
 
     /// (origin lat, lon, h, point lat, lon, h, east, north, up): ENU computed independently by

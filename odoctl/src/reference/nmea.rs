@@ -198,6 +198,20 @@ pub fn parse(file: &str, text: &str, leap_seconds: i32) -> Result<GeodeticLog> {
                     ));
                     continue;
                 };
+                let position = match (Geodetic {
+                    lat_deg: lat,
+                    lon_deg: lon,
+                    // Ellipsoidal = above mean sea level + geoid separation.
+                    height: f64::from(alt) + f64::from(g.geoid_separation.unwrap_or(0.0)),
+                })
+                .checked()
+                {
+                    Ok(p) => p,
+                    Err(e) => {
+                        report.unusable(format!("{file}:{line}: GGA position: {e}"));
+                        continue;
+                    }
+                };
                 let sod = seconds_of_day(t);
                 let sigma = pending_gst
                     .iter()
@@ -217,12 +231,7 @@ pub fn parse(file: &str, text: &str, leap_seconds: i32) -> Result<GeodeticLog> {
                 }
                 undated.push(Undated {
                     sod,
-                    position: Geodetic {
-                        lat_deg: lat,
-                        lon_deg: lon,
-                        // Ellipsoidal = above mean sea level + geoid separation.
-                        height: f64::from(alt) + f64::from(g.geoid_separation.unwrap_or(0.0)),
-                    },
+                    position,
                     fix: fix_quality(g.fix_type),
                     heading,
                     sigma,
