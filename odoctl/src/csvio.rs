@@ -7,7 +7,8 @@
 //!   ignored. The first row is the starting point; each later row integrates the counts since
 //!   the previous row.
 //! * REFERENCE: header row; `t`, `x`, `y` (m, x east, y north), optional `heading` (rad,
-//!   clockwise from +y). Rows are matched to samples by equal `t` within [`MATCH_TOLERANCE`].
+//!   clockwise from +y) and `sigma_h` (the row's horizontal RMS noise, m, as a receiver's GST
+//!   or `.pos` sigmas give it; the uncertainty fit uses it instead of `--reference-sigma`). Rows are matched to samples by equal `t` within [`MATCH_TOLERANCE`].
 //!
 //! Columns are found by their header name, in any order. Blank lines and lines starting with
 //! `#` are skipped. Time must increase strictly from row to row. Every error names the file and
@@ -187,6 +188,9 @@ pub struct RefPoint {
     pub y: f64,
     /// Heading (rad, clockwise from +y), when the reference has one.
     pub heading: Option<f64>,
+    /// Horizontal RMS noise of this position, `hypot(sigma_east, sigma_north)` (m), when the
+    /// reference gives it (GST, `.pos` sigmas, a `sigma_h` column).
+    pub sigma_h: Option<f64>,
 }
 
 /// A parsed CSV table: header and rows with their 1-based line numbers.
@@ -458,6 +462,7 @@ pub fn parse_reference(file: &str, text: &str) -> Result<Vec<RefPoint>> {
     let cx = table.required("x")?;
     let cy = table.required("y")?;
     let ch = table.column("heading");
+    let cs = table.column("sigma_h");
     let mut out = Vec::with_capacity(table.lines.len());
     let mut prev = None;
     for row in table.rows() {
@@ -466,6 +471,9 @@ pub fn parse_reference(file: &str, text: &str) -> Result<Vec<RefPoint>> {
             x: row.get(cx, position)?,
             y: row.get(cy, position)?,
             heading: row.optional(ch, heading)?,
+            sigma_h: row
+                .optional(cs, real)?
+                .filter(|s: &f64| s.is_finite() && *s > 0.0),
         });
     }
     Ok(out)
@@ -554,16 +562,23 @@ pub fn write_samples(w: &mut dyn Write, samples: &[Sample], layout: SamplesLayou
 /// Writes REFERENCE CSV (`t,x,y[,heading]`).
 pub fn write_reference(w: &mut dyn Write, reference: &[RefPoint]) -> Result<()> {
     let with_heading = reference.iter().any(|r| r.heading.is_some());
-    let mut buf = String::from(if with_heading {
-        "t,x,y,heading\n"
-    } else {
-        "t,x,y\n"
-    });
+    let with_sigma = reference.iter().any(|r| r.sigma_h.is_some());
+    let mut buf = String::from("t,x,y");
+    if with_heading {
+        buf.push_str(",heading");
+    }
+    if with_sigma {
+        buf.push_str(",sigma_h");
+    }
+    buf.push('\n');
     for r in reference {
         buf.clear_if_large(w)?;
         let _ = write!(buf, "{},{},{}", fmt_t(r.t), fmt_real(r.x), fmt_real(r.y));
         if with_heading {
             let _ = write!(buf, ",{}", r.heading.map(fmt_real).unwrap_or_default());
+        }
+        if with_sigma {
+            let _ = write!(buf, ",{}", r.sigma_h.map(fmt_real).unwrap_or_default());
         }
         buf.push('\n');
     }

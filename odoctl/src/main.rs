@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use clap::{Args, Parser, Subcommand};
 
 use odo_core::odometry::UncertaintyModel;
-use odoctl::calib::{CalibrationOptions, DeltaMode, WindowStart};
+use odoctl::calib::{CalibrationOptions, DeltaMode, UncertaintyCriterion, WindowStart};
 use odoctl::cli_values as v;
 use odoctl::reference::cli::{ReceiverArgs, ReferenceArgs};
 use odoctl::simulate::{PathKind, SimSettings};
@@ -133,12 +133,18 @@ enum Cmd {
     Calibrate(CalibrateArgs),
     /// Errors of calibrated parameters on another run, against their predicted uncertainty.
     Validate {
-        /// SAMPLES CSV.
-        #[arg(long)]
-        samples: PathBuf,
-        /// Reference: REFERENCE CSV, NMEA 0183 log or RTKLIB `.pos` file.
-        #[arg(long)]
-        reference: PathBuf,
+        /// SAMPLES CSV; repeat with `--reference` for an ensemble of runs.
+        #[arg(long, required_unless_present = "runs")]
+        samples: Vec<PathBuf>,
+        /// Reference: REFERENCE CSV, NMEA 0183 log or RTKLIB `.pos` file (one per `--samples`).
+        #[arg(long, required_unless_present = "runs")]
+        reference: Vec<PathBuf>,
+        /// A list of runs, one `SAMPLES REFERENCE` a line: the ensemble coverage by distance.
+        #[arg(long, conflicts_with_all = ["samples", "reference"])]
+        runs: Option<PathBuf>,
+        /// Checkpoints of the ensemble coverage (m of reference path from each start).
+        #[arg(long, value_delimiter = ',', default_values_t = odoctl::calib::CHECKPOINTS)]
+        checkpoints: Vec<f64>,
         #[command(flatten)]
         reference_input: ReferenceArgs,
         #[command(flatten)]
@@ -196,6 +202,15 @@ enum Cmd {
         #[arg(long, requires = "foxglove")]
         no_dds: bool,
     },
+}
+
+/// One uncertainty model.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum ModelChoice {
+    /// The paper's eqs (19)-(28).
+    Paper,
+    /// The first-order covariance propagation.
+    Covariance,
 }
 
 /// A choice of uncertainty models.
@@ -303,10 +318,20 @@ struct CalibrateArgs {
     /// criterion; the default is `simulate --heading-sigma-deg`'s (a BD982-like dual antenna).
     #[arg(long, default_value_t = 0.5, allow_negative_numbers = true, value_parser = v::sigma_deg)]
     reference_heading_sigma_deg: f64,
-    /// Which uncertainty models' coefficients to fit: the initial estimate's
-    /// `uncertainty_model` (`config`), one, or `all` (the result keeps the initial model).
-    #[arg(long, value_enum, default_value_t = Models::Config)]
+    /// Which uncertainty models' coefficients to fit: both (`all`, the default), one, or the
+    /// initial estimate's `uncertainty_model` (`config`).
+    #[arg(long, value_enum, default_value_t = Models::All)]
     models: Models,
+    /// The model the result selects (`uncertainty_model`). Default: `covariance` (the model
+    /// that holds its coverage against the truth in the ensemble test), or with `--models
+    /// config` the initial estimate's.
+    #[arg(long, value_enum)]
+    uncertainty_model: Option<ModelChoice>,
+    /// How the uncertainty coefficients are fitted: `likelihood` (maximum likelihood of the
+    /// errors of restarted sub-trajectories, start headings not fitted to them) or
+    /// `coverage` (the paper's statistical fitting: the 1-sigma band covers 68.27 %).
+    #[arg(long, value_enum, default_value_t = UncertaintyCriterion::Likelihood)]
+    uncertainty_criterion: UncertaintyCriterion,
     /// Add a Nelder-Mead polish of eq (16) after the Newton fit (up to 600 integrator runs;
     /// it finds only the cost's arithmetic noise, about 1e-7 of it).
     #[arg(long)]
@@ -536,6 +561,16 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                         fit_delta_diff: !a.no_fit_delta_diff,
                         reference_heading_sigma: a.reference_heading_sigma_deg.to_radians(),
                         models: a.models.list(),
+                        select: match (a.uncertainty_model, a.models) {
+                            (Some(ModelChoice::Paper), _) => Some(UncertaintyModel::Paper),
+                            (Some(ModelChoice::Covariance), _) => {
+                                Some(UncertaintyModel::Covariance)
+                            }
+                            (None, Models::Config) => None,
+                            (None, Models::Paper) => Some(UncertaintyModel::Paper),
+                            (None, _) => Some(UncertaintyModel::Covariance),
+                        },
+                        criterion: a.uncertainty_criterion,
                         polish: a.polish && !a.no_polish,
                         windows: a.windows,
                         window_start: a.window_start,
@@ -566,6 +601,52 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Cmd::Validate {
             samples,
             reference,
+            runs,
+            checkpoints,
+            params,
+            plots,
+            models,
+            reference_sigma,
+            reference_heading_sigma_deg,
+            reference_input,
+            mcap,
+            ..
+        } if runs.is_some() || samples.len() > 1 || reference.len() > 1 => {
+            if mcap.is_some() {
+                anyhow::bail!(
+                    "--mcap takes one run (--samples and --reference once), not an ensemble"
+                );
+            }
+            let list = match &runs {
+                Some(f) => c::read_run_list(f),
+                None if samples.len() == reference.len() => {
+                    Ok(samples.into_iter().zip(reference).collect())
+                }
+                None => Err(anyhow::anyhow!(
+                    "--samples and --reference: give them in pairs ({} and {})",
+                    samples.len(),
+                    reference.len()
+                )),
+            };
+            list.and_then(|list| {
+                c::validate_ensemble(
+                    &c::EnsembleOptions {
+                        runs: list,
+                        config: params.config.as_deref(),
+                        sets: &params.sets,
+                        models: &models.list(),
+                        reference_sigma,
+                        reference_heading_sigma: reference_heading_sigma_deg.to_radians(),
+                        checkpoints,
+                        plots: plots.as_deref(),
+                    },
+                    &reference_input,
+                )
+            })
+        }
+        Cmd::Validate {
+            samples,
+            reference,
             params,
             heading,
             errors,
@@ -575,12 +656,13 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             reference_heading_sigma_deg,
             reference_input,
             mcap,
+            ..
         } => {
             if let Some(m) = &mcap {
                 odoctl::ros::tracks::validate_hook(
                     m,
-                    &samples,
-                    &reference,
+                    &samples[0],
+                    &reference[0],
                     &reference_input,
                     params.config.as_deref(),
                     &params.sets,
@@ -588,8 +670,8 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 )?;
             }
             c::validate(
-                &samples,
-                &reference,
+                &samples[0],
+                &reference[0],
                 params.config.as_deref(),
                 &params.sets,
                 heading,

@@ -543,3 +543,161 @@ fn histogram(
         .map_err(pe)?;
     Ok(())
 }
+
+/// The ensemble coverage of several runs (issue 21): `<prefix>_coverage.png`, the share of
+/// horizontal and heading errors inside 1 and 3 sigma at each checkpoint against the distance
+/// travelled, with the nominal 68.3 % and 99.7 % and the band 60-76 % a calibrated model's
+/// 1-sigma coverage should stay in; and `<prefix>_reliability.png`, the observed against the
+/// nominal coverage at levels 10-90 % (the diagonal is a calibrated model). `models` are the
+/// names and ensembles of the models evaluated. Returns the paths.
+pub fn ensemble_figures(
+    dir: &Path,
+    prefix: &str,
+    models: &[(&str, &crate::calib::Ensemble)],
+) -> Result<Vec<PathBuf>> {
+    register_font()?;
+    let cov = dir.join(format!("{prefix}_coverage.png"));
+    draw_ensemble_coverage(&cov, models)?;
+    let rel = dir.join(format!("{prefix}_reliability.png"));
+    draw_reliability(&rel, models)?;
+    Ok(vec![cov, rel])
+}
+
+fn draw_ensemble_coverage(path: &Path, models: &[(&str, &crate::calib::Ensemble)]) -> Result<()> {
+    let root = BitMapBackend::new(path, (1400, 600)).into_drawing_area();
+    root.fill(&WHITE).map_err(pe)?;
+    let xmax = models
+        .iter()
+        .flat_map(|(_, e)| e.distances.iter().copied())
+        .fold(1.0, f64::max)
+        * 1.05;
+    let panels = root.split_evenly((1, 2));
+    for (panel, heading) in panels.iter().zip([false, true]) {
+        let mut chart = ChartBuilder::on(panel)
+            .caption(
+                if heading {
+                    "Heading: share inside 1 and 3 sigma"
+                } else {
+                    "Horizontal: share inside 1 and 3 sigma_h"
+                },
+                (FAMILY, 22),
+            )
+            .margin(12)
+            .x_label_area_size(42)
+            .y_label_area_size(56)
+            .build_cartesian_2d(0.0..xmax, 0.0..105.0)
+            .map_err(pe)?;
+        chart
+            .configure_mesh()
+            .x_desc("distance travelled [m]")
+            .y_desc("coverage [%]")
+            .label_style((FAMILY, 15))
+            .draw()
+            .map_err(pe)?;
+        chart
+            .draw_series(std::iter::once(Rectangle::new(
+                [(0.0, 60.0), (xmax, 76.0)],
+                BAND1.mix(0.12).filled(),
+            )))
+            .map_err(pe)?
+            .label("1-sigma target 60-76 %")
+            .legend(|(x, y)| {
+                Rectangle::new([(x, y - 5), (x + 20, y + 5)], BAND1.mix(0.3).filled())
+            });
+        for (nominal, label) in [(68.27, "nominal 68.3 %"), (99.73, "nominal 99.7 %")] {
+            chart
+                .draw_series(LineSeries::new(
+                    [(0.0, nominal), (xmax, nominal)],
+                    BLACK.stroke_width(1),
+                ))
+                .map_err(pe)?
+                .label(label)
+                .legend(legend_line(BLACK.stroke_width(1)));
+        }
+        for (i, (name, e)) in models.iter().enumerate() {
+            let color = palette(i);
+            let c = e.coverage();
+            let pick = |k: &crate::calib::CheckpointCoverage, three: bool| {
+                let (one, three_v) = if heading { k.heading } else { k.horizontal };
+                100.0 * if three { three_v } else { one }
+            };
+            for three in [false, true] {
+                let pts: Vec<(f64, f64)> = c
+                    .iter()
+                    .map(|k| (k.distance, pick(k, three)))
+                    .filter(|p| p.1.is_finite())
+                    .collect();
+                let width = if three { 1 } else { 2 };
+                let series = chart
+                    .draw_series(LineSeries::new(pts.clone(), color.stroke_width(width)))
+                    .map_err(pe)?;
+                if !three {
+                    series
+                        .label(format!("{name} (1 sigma bold, 3 sigma thin)"))
+                        .legend(legend_line(color.stroke_width(2)));
+                }
+                chart
+                    .draw_series(pts.iter().map(|&p| Circle::new(p, 4, color.filled())))
+                    .map_err(pe)?;
+            }
+        }
+        legend_box(&mut chart, 14, SeriesLabelPosition::LowerRight)?;
+    }
+    root.present().map_err(pe)
+}
+
+fn draw_reliability(path: &Path, models: &[(&str, &crate::calib::Ensemble)]) -> Result<()> {
+    let root = BitMapBackend::new(path, (1400, 650)).into_drawing_area();
+    root.fill(&WHITE).map_err(pe)?;
+    let panels = root.split_evenly((1, 2));
+    for (panel, heading) in panels.iter().zip([false, true]) {
+        let mut chart = ChartBuilder::on(panel)
+            .caption(
+                if heading {
+                    "Reliability: heading (normal)"
+                } else {
+                    "Reliability: horizontal (round 2-D normal)"
+                },
+                (FAMILY, 22),
+            )
+            .margin(12)
+            .x_label_area_size(42)
+            .y_label_area_size(56)
+            .build_cartesian_2d(0.0..100.0, 0.0..100.0)
+            .map_err(pe)?;
+        chart
+            .configure_mesh()
+            .x_desc("nominal coverage [%]")
+            .y_desc("observed coverage [%]")
+            .label_style((FAMILY, 15))
+            .draw()
+            .map_err(pe)?;
+        chart
+            .draw_series(LineSeries::new(
+                [(0.0, 0.0), (100.0, 100.0)],
+                BLACK.stroke_width(1),
+            ))
+            .map_err(pe)?
+            .label("calibrated")
+            .legend(legend_line(BLACK.stroke_width(1)));
+        for (i, (name, e)) in models.iter().enumerate() {
+            let color = palette(i);
+            let pts: Vec<(f64, f64)> = e
+                .reliability()
+                .into_iter()
+                .map(|(p, h, a)| (100.0 * p, 100.0 * if heading { a } else { h }))
+                .filter(|p| p.1.is_finite())
+                .collect();
+            chart
+                .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
+                .map_err(pe)?
+                .label(name.to_string())
+                .legend(legend_line(color.stroke_width(2)));
+            chart
+                .draw_series(pts.iter().map(|&p| Circle::new(p, 4, color.filled())))
+                .map_err(pe)?;
+        }
+        legend_box(&mut chart, 14, SeriesLabelPosition::UpperLeft)?;
+    }
+    root.present().map_err(pe)
+}

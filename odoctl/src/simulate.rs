@@ -316,6 +316,7 @@ pub fn simulate(o: &SimOptions) -> SimRun {
             x: x + s * rng.normal(),
             y: y + s * rng.normal(),
             heading: heading_sigma.map(|hs| crate::stats::wrap_angle(h + hs * rng.normal())),
+            sigma_h: None,
         });
         truth.push((x, y, h));
     };

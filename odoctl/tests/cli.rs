@@ -444,3 +444,134 @@ fn wheel_harmonics_reach_the_output_and_config_push() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("index latches"), "{err}");
 }
+
+#[test]
+fn validate_an_ensemble_of_runs_from_a_list_and_from_repeated_options() {
+    let d = scratch("cli_ensemble");
+    let mut list = String::from("# samples reference\n");
+    for seed in ["31", "32", "33"] {
+        let (sm, rf) = (
+            d.join(format!("s{seed}.csv")),
+            d.join(format!("r{seed}.csv")),
+        );
+        success_stdout(&odoctl(&[
+            "simulate",
+            "--samples",
+            s(&sm),
+            "--reference",
+            s(&rf),
+            "--seed",
+            seed,
+            "--length",
+            "25",
+        ]));
+        list += &format!("s{seed}.csv r{seed}.csv\n");
+    }
+    std::fs::write(d.join("runs.txt"), &list).unwrap();
+    let cal = d.join("cal.toml");
+    let out = success_stdout(&odoctl(&[
+        "calibrate",
+        "--samples",
+        s(&d.join("s31.csv")),
+        "--reference",
+        s(&d.join("r31.csv")),
+        "--out",
+        s(&cal),
+    ]));
+    assert!(out.contains("covariance model fit: likelihood"), "{out}");
+    assert!(read(&cal).contains("uncertainty_model = \"covariance\""));
+    let plots = d.join("plots");
+    let out = success_stdout(&odoctl(&[
+        "validate",
+        "--runs",
+        s(&d.join("runs.txt")),
+        "--config",
+        s(&cal),
+        "--models",
+        "all",
+        "--checkpoints",
+        "5,10,20,40",
+        "--plots",
+        s(&plots),
+    ]));
+    assert!(out.contains("ensemble validation: 3 runs"), "{out}");
+    // Every run reaches 5, 10 and 20 m; none 40 m of a 25 m path.
+    for m in ["paper", "covariance"] {
+        for (dist, runs) in [("5.0", 3), ("10.0", 3), ("20.0", 3), ("40.0", 0)] {
+            let row = out
+                .lines()
+                .find(|l| {
+                    let f: Vec<&str> = l.split_whitespace().collect();
+                    f.len() > 3 && f[0] == m && f[1] == dist
+                })
+                .unwrap_or_else(|| panic!("no {m} row at {dist} m:\n{out}"));
+            assert_eq!(
+                row.split_whitespace().nth(3),
+                Some(runs.to_string().as_str()),
+                "{row}"
+            );
+        }
+    }
+    assert!(out.contains("reliability"));
+    for f in [
+        "validate_ensemble_coverage.png",
+        "validate_ensemble_reliability.png",
+    ] {
+        let png = std::fs::read(plots.join(f)).unwrap();
+        assert_eq!(&png[1..4], b"PNG", "{f}");
+    }
+    // The same runs by repeated --samples/--reference give the same table.
+    let mut args = vec!["validate".to_string()];
+    for seed in ["31", "32", "33"] {
+        args.extend([
+            "--samples".into(),
+            s(&d.join(format!("s{seed}.csv"))).to_string(),
+            "--reference".into(),
+            s(&d.join(format!("r{seed}.csv"))).to_string(),
+        ]);
+    }
+    args.extend(
+        [
+            "--config",
+            s(&cal),
+            "--models",
+            "all",
+            "--checkpoints",
+            "5,10,20,40",
+        ]
+        .map(String::from),
+    );
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let again = success_stdout(&odoctl(&args));
+    let table = |t: &str| -> Vec<String> {
+        t.lines()
+            .filter(|l| l.starts_with("  paper") || l.starts_with("  covariance"))
+            .map(String::from)
+            .collect()
+    };
+    assert_eq!(table(&out), table(&again));
+    // Unpaired files and a bad list are refused.
+    let o = odoctl(&[
+        "validate",
+        "--samples",
+        s(&d.join("s31.csv")),
+        "--samples",
+        s(&d.join("s32.csv")),
+        "--reference",
+        s(&d.join("r31.csv")),
+        "--config",
+        s(&cal),
+    ]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("in pairs"));
+    std::fs::write(d.join("bad.txt"), "only-one-path\n").unwrap();
+    let o = odoctl(&[
+        "validate",
+        "--runs",
+        s(&d.join("bad.txt")),
+        "--config",
+        s(&cal),
+    ]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("bad.txt:1"));
+}

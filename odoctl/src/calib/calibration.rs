@@ -11,11 +11,11 @@ use crate::config as cfg;
 use crate::csvio;
 
 use super::{
-    evaluate, fit_delta_diff, fit_geometry, fit_restart_heading, fit_subtrajectories,
-    fit_uncertainty_on, paper_cluster_errors, standard_errors, track_width_warning, windows_study,
-    DeltaMode, DiffOptions, Evaluation, GeomFit, GeomOptions, LeverArm, Restarts, Run,
-    SubtrajectoryFit, SubtrajectoryOptions, UncertaintyFit, WindowEstimate, WindowStart,
-    SUBTRAJECTORY_LENGTH,
+    evaluate, fit_delta_diff, fit_geometry, fit_kappa_filter, fit_restart_heading,
+    fit_subtrajectories, fit_uncertainty_on, paper_cluster_errors, standard_errors,
+    track_width_warning, windows_study, DeltaMode, DiffOptions, Evaluation, GeomFit, GeomOptions,
+    Innovations, LeverArm, Restarts, Run, SubtrajectoryFit, SubtrajectoryOptions, UncertaintyFit,
+    WindowEstimate, WindowStart, OBSERVATION_BLOCK, SUBTRAJECTORY_LENGTH,
 };
 
 /// How the diameters and the track width are estimated.
@@ -27,6 +27,21 @@ pub enum Method {
     Subtrajectory,
     /// The paper's eq (16) over the whole run ([`fit_geometry`]).
     Paper,
+}
+
+/// How `calibrate` fits the uncertainty coefficients.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum UncertaintyCriterion {
+    /// The covariance model's kappa by the likelihood of the reference's observations under
+    /// an error-state Kalman filter (`innovations.rs`: nothing a point is judged on is fitted
+    /// to it); the paper's model by the coverage criterion (the default).
+    #[default]
+    Likelihood,
+    /// The paper's statistical fitting for both models: the smallest coefficient whose
+    /// 1-sigma band (widened by the reference noise) covers 68.27 % of the pooled horizontal
+    /// errors of restarted sub-trajectories, restart headings fitted by eq (16) on each;
+    /// `delta_diff` by the heading-change coverage.
+    Coverage,
 }
 
 /// Options of the calibration (`odoctl calibrate`'s fitting options; the defaults are the
@@ -57,6 +72,12 @@ pub struct CalibrationOptions {
     pub subtrajectory_length: f64,
     /// The antenna lever arm: measured (held) or fitted with the geometry.
     pub antenna: LeverArm,
+    /// The model the result selects (`uncertainty_model`), added to `models` when missing;
+    /// `None`: the initial estimate's model when it was fitted, else the last fitted.
+    pub select: Option<UncertaintyModel>,
+    /// How the covariance model's kappa is fitted (the paper's model always by the coverage
+    /// criterion).
+    pub criterion: UncertaintyCriterion,
     /// Nelder-Mead polish of eq (16).
     pub polish: bool,
     /// Stability study lengths (m); empty: no study.
@@ -88,6 +109,8 @@ impl Default for CalibrationOptions {
             method: Method::Subtrajectory,
             subtrajectory_length: SUBTRAJECTORY_LENGTH,
             antenna: LeverArm::Fixed(0.0, 0.0),
+            select: None,
+            criterion: UncertaintyCriterion::Likelihood,
             polish: false,
             windows: Vec::new(),
             window_start: WindowStart::Full,
@@ -203,20 +226,49 @@ pub fn calibrate(
     };
     let mut uncertainty = Vec::new();
     if o.fit_delta {
-        let models = if o.models.is_empty() {
+        let mut models = if o.models.is_empty() {
             vec![initial.uncertainty_model]
         } else {
             o.models.clone()
         };
-        let restarts = Restarts::new(&run, &params, geometry.heading0, o.delta_window)?;
-        timer.lap("restart headings");
+        if let Some(m) = o.select {
+            if !models.contains(&m) {
+                models.push(m);
+            }
+        }
+        // The restarted sub-trajectories of the coverage criterion, made when first needed.
+        let mut restarts: Option<Restarts> = None;
         for &m in &models {
-            let pb = bar(o.quiet, &format!("{} model fit", cfg::model_name(m)));
             let mut p = params;
             p.uncertainty_model = m;
+            if m == UncertaintyModel::Covariance && o.criterion == UncertaintyCriterion::Likelihood
+            {
+                let innovations = Innovations::new(
+                    &run,
+                    &p,
+                    geometry.heading0,
+                    o.reference_sigma,
+                    o.reference_heading_sigma,
+                    OBSERVATION_BLOCK,
+                )?;
+                let u = fit_kappa_filter(&innovations, &p, initial, o.delta_mode).0;
+                timer.lap("uncertainty fit (filter)");
+                params = u.params;
+                uncertainty.push(u);
+                continue;
+            }
+            let restarts = match &mut restarts {
+                Some(r) => &*r,
+                None => {
+                    let r = Restarts::new(&run, &params, geometry.heading0, o.delta_window)?;
+                    timer.lap("restart headings");
+                    &*restarts.insert(r)
+                }
+            };
+            let pb = bar(o.quiet, &format!("{} model fit", cfg::model_name(m)));
             let mut u = fit_uncertainty_on(
                 &run,
-                &restarts,
+                restarts,
                 &p,
                 initial,
                 o.reference_sigma,
@@ -229,7 +281,7 @@ pub fn calibrate(
                 let pb = bar(o.quiet, "delta_diff fit");
                 u = fit_delta_diff(
                     &run,
-                    &restarts,
+                    restarts,
                     u,
                     initial,
                     DiffOptions {
@@ -246,7 +298,9 @@ pub fn calibrate(
             params = u.params;
             uncertainty.push(u);
         }
-        params.uncertainty_model = if models.contains(&initial.uncertainty_model) {
+        params.uncertainty_model = if let Some(m) = o.select {
+            m
+        } else if models.contains(&initial.uncertainty_model) {
             initial.uncertainty_model
         } else {
             *models.last().expect("one model")

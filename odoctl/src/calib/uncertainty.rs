@@ -43,6 +43,11 @@ pub struct UncertaintyFit {
     pub warning: Option<String>,
     /// The `delta_diff` fit and heading coverage (paper model, reference with a heading).
     pub diff: Option<DiffFit>,
+    /// The criterion that fitted the coefficients.
+    pub criterion: UncertaintyCriterion,
+    /// Heading 1- and 3-sigma coverage of the fit's points (likelihood criterion, reference
+    /// with a heading).
+    pub heading_coverage: Option<(f64, f64)>,
 }
 
 /// Cuts matches `0..len` into consecutive sub-trajectories of `window` metres (the whole run
@@ -332,6 +337,8 @@ pub(super) fn fit_coefficient(
         coverage3: horizontal_coverage(&ev, ref_sigma, 3.0),
         warning,
         diff: None,
+        criterion: UncertaintyCriterion::Coverage,
+        heading_coverage: None,
     })
 }
 

@@ -248,15 +248,30 @@ pub fn calibrate(o: &CalibrateOptions, input: &ReferenceArgs) -> Result<ExitCode
         };
         crate::outln!("  {:<16} {:>14.4e} {:>14.4e}", u.keys.0, a.0, b.0);
         crate::outln!("  {:<16} {:>14.4e} {:>14.4e}", u.keys.1, a.1, b.1);
-        crate::outln!(
-            "{} model fit: {} sub-trajectories of {} m, {} points; 1-sigma band covers {:.1} % (target 68.3 %), 3-sigma {:.1} %",
-            cfg::model_name(u.model),
-            u.windows,
-            opts.delta_window,
-            u.points,
-            100.0 * u.coverage1,
-            100.0 * u.coverage3
-        );
+        if u.criterion == calib::UncertaintyCriterion::Likelihood {
+            crate::outln!(
+                "{} model fit: likelihood of {} reference observations (1 m averages) under a Kalman filter of the odometry's and the geometry's errors; innovations inside 1 and 3 sigma: horizontal {:.1} % / {:.1} %{}",
+                cfg::model_name(u.model),
+                u.points,
+                100.0 * u.coverage1,
+                100.0 * u.coverage3,
+                u.heading_coverage.map_or(String::new(), |(h1, h3)| format!(
+                    ", heading {:.1} % / {:.1} %",
+                    100.0 * h1,
+                    100.0 * h3
+                ))
+            );
+        } else {
+            crate::outln!(
+                "{} model fit: {} sub-trajectories of {} m, {} points; 1-sigma band covers {:.1} % (target 68.3 %), 3-sigma {:.1} %",
+                cfg::model_name(u.model),
+                u.windows,
+                opts.delta_window,
+                u.points,
+                100.0 * u.coverage1,
+                100.0 * u.coverage3
+            );
+        }
         if let Some(w) = &u.warning {
             eprintln!("warning: uncertainty fit: {w}");
         }
@@ -432,6 +447,12 @@ pub fn calibrate(o: &CalibrateOptions, input: &ReferenceArgs) -> Result<ExitCode
                     }
                 )),
             ));
+            if opts.criterion == calib::UncertaintyCriterion::Likelihood {
+                fit.push((
+                    "kappa_criterion",
+                    FitValue::Text("maximum likelihood of the reference's observations (1 m averages) under an error-state Kalman filter of the odometry, the geometry's relative errors and the wheels' slip (white or Gauss-Markov; kappa = the long-range variance rate)".into()),
+                ));
+            }
             fit.push(("uncertainty_window", FitValue::Num(opts.delta_window)));
             fit.push(("reference_sigma", FitValue::Num(opts.reference_sigma)));
         }

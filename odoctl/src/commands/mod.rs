@@ -11,12 +11,14 @@ mod calibrate;
 mod replay;
 mod simulate;
 mod validate;
+mod validate_ensemble;
 
 pub use crate::link::{config, decode, monitor, record, ConfigAction};
 pub use calibrate::{calibrate, CalibrateOptions, GeometryArgs};
 pub use replay::replay;
 pub use simulate::{simulate, SimulateOptions};
 pub use validate::{validate, validation_report};
+pub use validate_ensemble::{read_run_list, validate_ensemble, EnsembleOptions};
 
 fn create(path: &Path) -> Result<BufWriter<File>> {
     Ok(BufWriter::new(File::create(path).with_context(|| {

@@ -422,7 +422,7 @@ impl Reference {
                 y: r.y,
                 up: None,
                 heading: r.heading,
-                sigma_xy: None,
+                sigma_xy: r.sigma_h.map(|s| [s / 2f64.sqrt(); 2]),
                 fix: FixQuality::RtkFixed,
                 line: 0,
             })
@@ -575,6 +575,10 @@ impl Reference {
                 x: e.x,
                 y: e.y,
                 heading: e.heading,
+                sigma_h: e
+                    .sigma_xy
+                    .map(|s| s[0].hypot(s[1]))
+                    .filter(|s| s.is_finite() && *s > 0.0),
             })
             .collect())
     }

@@ -136,6 +136,7 @@ mod tests {
             x,
             y,
             heading: h,
+            sigma_h: None,
         };
         // North, then east, then a standstill, then a point with a heading of its own.
         let track = [
