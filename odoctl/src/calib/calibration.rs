@@ -13,9 +13,9 @@ use crate::csvio;
 use super::{
     evaluate, fit_delta_diff, fit_geometry, fit_kappa_filter, fit_restart_heading,
     fit_subtrajectories, fit_uncertainty_on, paper_cluster_errors, standard_errors,
-    track_width_warning, windows_study, DeltaMode, DiffOptions, Evaluation, GeomFit, GeomOptions,
-    Innovations, LeverArm, Restarts, Run, SubtrajectoryFit, SubtrajectoryOptions, UncertaintyFit,
-    WindowEstimate, WindowStart, OBSERVATION_BLOCK, SUBTRAJECTORY_LENGTH,
+    track_width_warning, windows_study, Cuts, DeltaMode, DiffOptions, Evaluation, GeomFit,
+    GeomOptions, Innovations, LeverArm, Restarts, Run, SubtrajectoryFit, SubtrajectoryOptions,
+    UncertaintyFit, WindowEstimate, WindowStart, OBSERVATION_BLOCK, SUBTRAJECTORY_LENGTH,
 };
 
 /// How the diameters and the track width are estimated.
@@ -70,6 +70,8 @@ pub struct CalibrationOptions {
     /// Sub-trajectory length of [`Method::Subtrajectory`], and of the stretches of the
     /// paper method's cluster-robust standard errors (m of reference path).
     pub subtrajectory_length: f64,
+    /// Where [`Method::Subtrajectory`] cuts the run.
+    pub subtrajectory_cuts: Cuts,
     /// The antenna lever arm: measured (held) or fitted with the geometry.
     pub antenna: LeverArm,
     /// The model the result selects (`uncertainty_model`), added to `models` when missing;
@@ -93,7 +95,7 @@ pub struct CalibrationOptions {
 }
 
 impl Default for CalibrationOptions {
-    /// The sub-trajectory method on 10 m, no lever arm; 10 m sub-trajectories of the
+    /// The sub-trajectory method on about 10 m cut on straights, no lever arm; 10 m sub-trajectories of the
     /// uncertainty fit, the BD982's 8 mm and 0.5 deg, equal coefficients, `delta` and
     /// `delta_diff` fitted for the initial estimate's model, no polish, no stability study
     /// (its windows started from the whole-run estimate), no wheel harmonics, no progress bars.
@@ -108,6 +110,7 @@ impl Default for CalibrationOptions {
             models: Vec::new(),
             method: Method::Subtrajectory,
             subtrajectory_length: SUBTRAJECTORY_LENGTH,
+            subtrajectory_cuts: Cuts::default(),
             antenna: LeverArm::Fixed(0.0, 0.0),
             select: None,
             criterion: UncertaintyCriterion::Likelihood,
@@ -198,6 +201,7 @@ pub fn calibrate(
                 SubtrajectoryOptions {
                     length: o.subtrajectory_length,
                     antenna: o.antenna,
+                    cuts: o.subtrajectory_cuts,
                     ..Default::default()
                 },
             )?;

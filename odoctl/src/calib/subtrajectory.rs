@@ -96,16 +96,34 @@ pub struct SubtrajectoryOptions {
     pub min_turning: f64,
     /// Largest number of accepted iterations.
     pub max_iter: usize,
+    /// Where one sub-trajectory ends and the next begins.
+    pub cuts: Cuts,
+}
+
+/// Where the run is cut into sub-trajectories.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum Cuts {
+    /// Every `length` metres of reference path, wherever that falls; a last piece shorter
+    /// than half a length is left out (the estimator of issue 16 before cut placement).
+    Distance,
+    /// Near every `length` metres (between a half and one and a half lengths), at the point
+    /// farthest from any turning ([`straight_cuts`]): every arc and spin stays whole inside
+    /// one sub-trajectory with straight path before and after it, where the reference fixes
+    /// the heading on both sides of the turn; the last piece joins the one before when
+    /// shorter than half a length.
+    #[default]
+    Straights,
 }
 
 impl Default for SubtrajectoryOptions {
-    /// 10 m, no lever arm, 30 degrees, 100 iterations.
+    /// 10 m cut on straights, no lever arm, 30 degrees, 100 iterations.
     fn default() -> Self {
         Self {
             length: SUBTRAJECTORY_LENGTH,
             antenna: LeverArm::default(),
             min_turning: 30f64.to_radians(),
             max_iter: 100,
+            cuts: Cuts::default(),
         }
     }
 }
@@ -377,6 +395,130 @@ fn eval_all(
     .map(|v| v.concat())
 }
 
+/// A match is taken as turning when the heading changes from it to the next by more than
+/// this curvature (rad per metre of the chassis centre's travel; a 20 m radius) ...
+const TURNING_CURVATURE: f64 = 0.05;
+
+/// ... plus this (rad): about two increments of differential travel on a 0.57 m track.
+const TURNING_FLOOR: f64 = 2e-4;
+
+/// The clearance [`straight_cuts`] asks of a cut is capped at this fraction of the length:
+/// among the points that far from any turning, the one nearest the nominal cut is taken.
+const CLEARANCE_CAP: f64 = 0.25;
+
+/// Sub-trajectories of about `length` metres of reference path cut on straights
+/// ([`Cuts::Straights`]): `(first, last)` matches, consecutive (the last of one is the first
+/// of the next), each with at least `min_points` matches. The turning is that of the
+/// encoder counts at `params` (the diameters and track width only scale it); a match's
+/// clearance is the reference path distance to the nearest turning match. Each cut is taken
+/// among the matches between 0.5 and 1.5 `length` after the previous one, the one of largest
+/// clearance (capped at [`CLEARANCE_CAP`] `length`), of those the nearest to `length`.
+pub fn straight_cuts(
+    run: &Run,
+    params: &ChassisParams,
+    length: f64,
+    min_points: usize,
+) -> Vec<(usize, usize)> {
+    let n = run.len();
+    if n < 2 || !(length > 0.0) {
+        return windows(run, length, min_points);
+    }
+    let ticks = f64::from(params.ticks_per_rev.max(1));
+    let (cl, cr) = (
+        std::f64::consts::PI * params.left_diameter / ticks,
+        std::f64::consts::PI * params.right_diameter / ticks,
+    );
+    let b = params.track_width;
+    let turning: Vec<bool> = (0..n - 1)
+        .map(|k| {
+            let (s0, s1) = (
+                &run.samples[run.matches[k].0],
+                &run.samples[run.matches[k + 1].0],
+            );
+            let dl = (s1.left - s0.left) as f64 * cl;
+            let dr = (s1.right - s0.right) as f64 * cr;
+            let dh = ((dl - dr) / b).abs();
+            dh > TURNING_CURVATURE * (0.5 * (dl + dr)).abs() + TURNING_FLOOR
+        })
+        .collect();
+    // Clearance: path distance to the nearest turning step (a step k..k+1 sits at both ends).
+    let mut clearance = vec![f64::INFINITY; n];
+    let mut last: Option<f64> = None;
+    for k in 0..n {
+        if k > 0 && turning[k - 1] {
+            last = Some(run.dist[k - 1]);
+        }
+        if k + 1 < n && turning[k] {
+            last = Some(run.dist[k]);
+        }
+        if let Some(d) = last {
+            clearance[k] = run.dist[k] - d;
+        }
+    }
+    let mut next: Option<f64> = None;
+    for k in (0..n).rev() {
+        if k + 1 < n && turning[k] {
+            next = Some(run.dist[k + 1]);
+        }
+        if k > 0 && turning[k - 1] {
+            next = Some(run.dist[k]);
+        }
+        if let Some(d) = next {
+            clearance[k] = clearance[k].min(d - run.dist[k]);
+        }
+    }
+    let cap = CLEARANCE_CAP * length;
+    let last = n - 1;
+    let mut out = Vec::new();
+    let mut a = 0;
+    while a < last {
+        let (lo, hi) = (run.dist[a] + 0.5 * length, run.dist[a] + 1.5 * length);
+        if run.dist[last] - run.dist[a] < 1.5 * length {
+            // The rest: one sub-trajectory (it joins the previous one if too short).
+            if run.dist[last] - run.dist[a] < 0.5 * length || last - a < min_points {
+                if let Some(prev) = out.last_mut() {
+                    let (_, e): &mut (usize, usize) = prev;
+                    *e = last;
+                }
+            } else {
+                out.push((a, last));
+            }
+            break;
+        }
+        let mut best: Option<(usize, f64, f64)> = None;
+        for k in a + min_points..=last {
+            let d = run.dist[k];
+            if d < lo {
+                continue;
+            }
+            if d > hi {
+                break;
+            }
+            let c = clearance[k].min(cap);
+            let off = (d - run.dist[a] - length).abs();
+            let better = match best {
+                None => true,
+                Some((_, bc, bo)) => c > bc || (c == bc && off < bo),
+            };
+            if better {
+                best = Some((k, c, off));
+            }
+        }
+        let Some((k, _, _)) = best else {
+            // No match in range (a gap in the reference): fall back to the nominal cut.
+            let b = run.last_within(a, length).max(a + 1);
+            if b - a >= min_points {
+                out.push((a, b));
+            }
+            a = b;
+            continue;
+        };
+        out.push((a, k));
+        a = k;
+    }
+    out
+}
+
 /// Stop when the predicted relative reduction of the cost falls below this (the
 /// fixed-point integrator's cost is not smooth below about 1e-7 of it).
 const PRED_TOL: f64 = 1e-10;
@@ -400,7 +542,10 @@ pub fn fit_subtrajectories(
             opts.length
         );
     }
-    let blocks = windows(run, opts.length, MIN_POINTS);
+    let blocks = match opts.cuts {
+        Cuts::Distance => windows(run, opts.length, MIN_POINTS),
+        Cuts::Straights => straight_cuts(run, start, opts.length, MIN_POINTS),
+    };
     if blocks.len() < 2 {
         bail!(
             "the run is too short for sub-trajectories of {} m ({} of at least {} m with {MIN_POINTS} points; at least 2): use a shorter --subtrajectory-length or --method paper",
@@ -571,4 +716,129 @@ pub fn fit_subtrajectories(
         track_estimated,
         turning: turned,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::csvio::match_times;
+    use crate::simulate::{self, default_truth, PathKind, Segment, SimOptions, SimSettings};
+
+    /// True heading change (rad) over the samples of matches `k - 1 ..= k + 1`.
+    fn true_turn_at(run: &Run, truth: &[(f64, f64, f64)], k: usize) -> f64 {
+        let lo = run.matches[k.saturating_sub(1)].0;
+        let hi = run.matches[(k + 1).min(run.len() - 1)].0;
+        (truth[hi].2 - truth[lo].2).abs()
+    }
+
+    fn check_cover(blocks: &[(usize, usize)], run: &Run, length: f64) {
+        assert_eq!(blocks.first().unwrap().0, 0);
+        assert_eq!(blocks.last().unwrap().1, run.len() - 1);
+        for w in blocks.windows(2) {
+            assert_eq!(w[0].1, w[1].0, "consecutive: {blocks:?}");
+        }
+        for &(a, b) in blocks {
+            let l = run.dist[b] - run.dist[a];
+            assert!(
+                (0.5 * length - 1e-9..=2.0 * length + 1e-9).contains(&l),
+                "{a}..{b}: {l} m of {length}"
+            );
+        }
+    }
+
+    /// Boundary table: on the estimation path (arcs and a spin) no cut of 10 or 20 m falls in
+    /// a turn and every 10 m cut has straight path on both sides (5 m ones cannot avoid its
+    /// 9 m arc); a path without turns is cut at the nominal
+    /// lengths; a run shorter than a length and a half is one piece; the pieces are
+    /// consecutive and cover the run.
+    #[test]
+    fn cuts_fall_on_straights_and_cover_the_run() {
+        let s = simulate::simulate_path(
+            PathKind::Estimation,
+            70.0,
+            default_truth(),
+            SimSettings::default(),
+        );
+        let run = Run::new(
+            &s.samples,
+            &s.reference,
+            match_times(&s.samples, &s.reference),
+        );
+        let start = ChassisParams {
+            track_width: 0.7,
+            ..default_truth()
+        };
+        for length in [5.0, 10.0, 20.0] {
+            let blocks = straight_cuts(&run, &start, length, MIN_POINTS);
+            check_cover(&blocks, &run, length);
+            if length < 10.0 {
+                continue;
+            }
+            for &(_, b) in &blocks[..blocks.len() - 1] {
+                assert!(
+                    true_turn_at(&run, &s.truth, b) < 1e-6,
+                    "{length} m: cut at {b} ({} m) turns",
+                    run.dist[b]
+                );
+            }
+            // The nominal cuts of the same length do fall in turns (what the placement is for).
+            let nominal = windows(&run, length, MIN_POINTS);
+            assert!(
+                nominal
+                    .iter()
+                    .any(|&(_, b)| true_turn_at(&run, &s.truth, b) > 1e-3),
+                "{length} m"
+            );
+        }
+        // 10 m: every cut at least 1 m of straight from the nearest turn on either side.
+        let blocks = straight_cuts(&run, &start, 10.0, MIN_POINTS);
+        for &(_, b) in &blocks[..blocks.len() - 1] {
+            for k in [run.last_within(b, 1.0), back_within(&run, b, 1.0)] {
+                assert!(
+                    true_turn_at(&run, &s.truth, k) < 1e-6,
+                    "cut {b}: turn at {k}"
+                );
+            }
+        }
+
+        // A straight line: cut every `length` metres (to a match), the rest joined.
+        let straight = simulate::simulate(&SimOptions {
+            truth: default_truth(),
+            segments: vec![Segment::Straight(44.0)],
+            settings: SimSettings::default(),
+        });
+        let run = Run::new(
+            &straight.samples,
+            &straight.reference,
+            match_times(&straight.samples, &straight.reference),
+        );
+        let blocks = straight_cuts(&run, &start, 10.0, MIN_POINTS);
+        check_cover(&blocks, &run, 10.0);
+        assert_eq!(blocks.len(), 4, "{blocks:?}");
+        for &(a, b) in &blocks[..3] {
+            assert!((run.dist[b] - run.dist[a] - 10.0).abs() < 0.05);
+        }
+        assert!(run.dist[blocks[3].1] - run.dist[blocks[3].0] > 13.0);
+        // Shorter than a length and a half: one piece (too few for the fit).
+        let one = straight_cuts(&run, &start, 40.0, MIN_POINTS);
+        assert_eq!(one, vec![(0, run.len() - 1)]);
+        assert!(fit_subtrajectories(
+            &run,
+            &start,
+            SubtrajectoryOptions {
+                length: 40.0,
+                ..Default::default()
+            }
+        )
+        .is_err());
+    }
+
+    /// First match `a <= b` whose path distance to match `b` is at most `length`.
+    fn back_within(run: &Run, b: usize, length: f64) -> usize {
+        let mut a = b;
+        while a > 0 && run.dist[b] - run.dist[a - 1] <= length {
+            a -= 1;
+        }
+        a
+    }
 }

@@ -51,6 +51,12 @@ pub struct GeometryArgs {
     /// cluster-robust standard errors (m of reference path).
     #[arg(long, default_value_t = calib::SUBTRAJECTORY_LENGTH)]
     pub subtrajectory_length: f64,
+    /// Where the default method cuts the run: `straights` (near every
+    /// --subtrajectory-length metres, at the point farthest from any turning, so that no arc
+    /// or spin is split; the default) or `distance` (exactly every --subtrajectory-length
+    /// metres, the method before cut placement).
+    #[arg(long, value_enum, default_value_t = calib::Cuts::Straights)]
+    pub subtrajectory_cuts: calib::Cuts,
     /// Measured antenna position from the axle centre, `FORWARD,LEFT` (m, chassis frame):
     /// the reference is the antenna's path (held; the first guess with --fit-antenna).
     #[arg(long, value_name = "F,L", allow_hyphen_values = true)]
@@ -75,6 +81,7 @@ impl GeometryArgs {
         };
         o.method = self.method;
         o.subtrajectory_length = self.subtrajectory_length;
+        o.subtrajectory_cuts = self.subtrajectory_cuts;
         o.antenna = if self.fit_antenna {
             LeverArm::Fitted(f, l)
         } else {
@@ -171,9 +178,13 @@ pub fn calibrate(o: &CalibrateOptions, input: &ReferenceArgs) -> Result<ExitCode
             }
         }
         crate::outln!(
-            "  method subtrajectory: {} sub-trajectories of {} m restarted at their fitted start position and heading, {} points, {} iterations, {} passes; residual sigma {:.4} m",
+            "  method subtrajectory: {} sub-trajectories of about {} m (cut {}) restarted at their fitted start position and heading, {} points, {} iterations, {} passes; residual sigma {:.4} m",
             s.blocks.len(),
             opts.subtrajectory_length,
+            match opts.subtrajectory_cuts {
+                calib::Cuts::Straights => "on straights",
+                calib::Cuts::Distance => "by distance",
+            },
             s.points,
             s.iterations,
             s.evaluations,
