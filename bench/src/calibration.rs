@@ -14,6 +14,8 @@
 //! of the default calibration on 3 km; the speed figures below it are those of
 //! `--method paper` (the eq 16 fit, comparable with the figures before issue 11).
 //!
+//! Then the time of the `--wheel-harmonics` fit on a 300 m run with an eccentric wheel.
+//!
 //! `BENCH_REPS` (default 5) sets the repetitions of the 70 m figures; the 3 km figures use
 //! `BENCH_REPS_LONG` (default 3); `BENCH_SEEDS` (default 5) the seeds of the accuracy table.
 
@@ -335,11 +337,63 @@ fn accuracy_table() {
     );
 }
 
+/// The `--wheel-harmonics` fit (`calib::fit_harmonics`, `CalibrationOptions::wheel_harmonics`)
+/// on a 300 m random path (seed 1, simulator defaults) whose left wheel has a first harmonic
+/// of 0.1 mm in the radius: the default calibration without the uncertainty fits, with 0, 1
+/// and 3 harmonics, medians of `n`; the difference to 0 is the harmonics fit's own time. The
+/// recovered `left_cos1` (mm of radius) with its standard error is printed beside it.
+fn harmonics_timing(n: usize) {
+    let mut truth = default_truth();
+    let rl = truth.left_diameter / 2.0;
+    truth.left_wheel.cos[0] = (1e-4 / rl) as f32;
+    let run = simulate::simulate_path(PathKind::Random, 300.0, truth, SimSettings::default());
+    let mut base = f64::NAN;
+    for order in [0, 1, 3] {
+        let o = CalibrationOptions {
+            fit_delta: false,
+            wheel_harmonics: order,
+            ..Default::default()
+        };
+        let mut times = Vec::new();
+        let mut last = None;
+        for _ in 0..n {
+            let t = Instant::now();
+            let c = calib::calibrate(&run.samples, &run.reference, ("s", "r"), &poor(), &o);
+            times.push(t.elapsed().as_secs_f64());
+            last = Some(c);
+        }
+        let t = median(times);
+        match last {
+            Some(Ok(c)) => {
+                if order == 0 {
+                    base = t;
+                    println!(
+                        "300 m random path, left wheel eccentric by 0.1 mm: default geometry fit without --wheel-harmonics {t:.4} s (median of {n})"
+                    );
+                } else if let Some(h) = &c.harmonics {
+                    println!(
+                        "  --wheel-harmonics {order}: {t:.4} s, the harmonics fit {:.4} s ({} segments of {} m, {} points); left_cos1 {:.4} mm of radius (truth 0.1000), standard error {:.4} mm",
+                        t - base,
+                        h.segments,
+                        h.segment,
+                        h.points,
+                        h.values[0] * rl * 1e3,
+                        h.std_errors[0] * rl * 1e3
+                    );
+                }
+            }
+            Some(Err(e)) => println!("  --wheel-harmonics {order}: failed: {e}"),
+            None => {}
+        }
+    }
+}
+
 /// Prints the calibration figures.
 pub fn run() {
     let n = reps("BENCH_REPS", 5);
     let n_long = reps("BENCH_REPS_LONG", 3);
     accuracy_table();
+    harmonics_timing(n);
     let s70 = sim(PathKind::Estimation, 70.0);
     case("70 m estimation path", &s70, n, &BEFORE_70);
     let s3k = sim(PathKind::Random, 3000.0);
