@@ -1,5 +1,6 @@
 //! The sub-trajectory estimator, `odoctl calibrate`'s default: the run is cut into consecutive
-//! sub-trajectories of about `length` metres of reference path; on each the odometry path
+//! sub-trajectories of about `length` metres of reference path, by default on straights
+//! ([`Cuts`], [`straight_cuts`]) so that no turn is split; on each the odometry path
 //! restarts, its start position and heading fitted as nuisance parameters, while
 //! `left_diameter`, `right_diameter`, `track_width` (and the antenna lever arm with
 //! `--fit-antenna`) are shared. Least squares on the x and y differences between the
@@ -35,7 +36,8 @@
 //! The trade of the length: shorter sub-trajectories follow less drift but each spends three
 //! unknowns and needs turning to see the track width; longer ones carry more drift into the
 //! fit. 10 m (20 s at 0.5 m/s) loses about a twentieth of the information to the nuisance
-//! parameters at a slip of 0.1 % and keeps the drift at millimetres.
+//! parameters at a slip of 0.1 % and keeps the drift at millimetres. On a short run the
+//! track width is set by the slip during the turns (odoctl/README.md has the measured table).
 
 use anyhow::{anyhow, bail, Result};
 use odo_core::odometry::ChassisParams;
@@ -420,7 +422,7 @@ pub fn straight_cuts(
     min_points: usize,
 ) -> Vec<(usize, usize)> {
     let n = run.len();
-    if n < 2 || !(length > 0.0) {
+    if n < 2 || length.is_nan() || length <= 0.0 {
         return windows(run, length, min_points);
     }
     let ticks = f64::from(params.ticks_per_rev.max(1));
@@ -486,15 +488,15 @@ pub fn straight_cuts(
             break;
         }
         let mut best: Option<(usize, f64, f64)> = None;
-        for k in a + min_points..=last {
-            let d = run.dist[k];
+        let from = a + min_points;
+        for (k, (&d, &clear)) in run.dist.iter().zip(&clearance).enumerate().skip(from) {
             if d < lo {
                 continue;
             }
             if d > hi {
                 break;
             }
-            let c = clearance[k].min(cap);
+            let c = clear.min(cap);
             let off = (d - run.dist[a] - length).abs();
             let better = match best {
                 None => true,
