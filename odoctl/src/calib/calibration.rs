@@ -95,7 +95,7 @@ pub struct CalibrationOptions {
 }
 
 impl Default for CalibrationOptions {
-    /// The sub-trajectory method on about 10 m cut on straights, no lever arm; 10 m sub-trajectories of the
+    /// The sub-trajectory method on 10 m (cut by distance), no lever arm; 10 m sub-trajectories of the
     /// uncertainty fit, the BD982's 8 mm and 0.5 deg, equal coefficients, `delta` and
     /// `delta_diff` fitted for the initial estimate's model, no polish, no stability study
     /// (its windows started from the whole-run estimate), no wheel harmonics, no progress bars.

@@ -51,11 +51,11 @@ pub struct GeometryArgs {
     /// cluster-robust standard errors (m of reference path).
     #[arg(long, default_value_t = calib::SUBTRAJECTORY_LENGTH)]
     pub subtrajectory_length: f64,
-    /// Where the default method cuts the run: `straights` (near every
+    /// Where the default method cuts the run: `distance` (exactly every
+    /// --subtrajectory-length metres, the default) or `straights` (near every
     /// --subtrajectory-length metres, at the point farthest from any turning, so that no arc
-    /// or spin is split; the default) or `distance` (exactly every --subtrajectory-length
-    /// metres, the method before cut placement).
-    #[arg(long, value_enum, default_value_t = calib::Cuts::Straights)]
+    /// or spin is split: better on short runs' track width, see odoctl/README.md).
+    #[arg(long, value_enum, default_value_t = calib::Cuts::Distance)]
     pub subtrajectory_cuts: calib::Cuts,
     /// Measured antenna position from the axle centre, `FORWARD,LEFT` (m, chassis frame):
     /// the reference is the antenna's path (held; the first guess with --fit-antenna).
