@@ -241,6 +241,24 @@ fn calibrated_uncertainty_covers_the_true_errors_across_slip_regimes() {
     let mut target_missed = Vec::new();
     for r in regimes() {
         let params = calibrate(r.settings, UncertaintyCriterion::Likelihood);
+        let t = default_truth();
+        println!(
+            "{}: geometry error of the calibration {:.4} / {:.4} / {:.4} mm",
+            r.name,
+            (params.left_diameter - t.left_diameter) * 1e3,
+            (params.right_diameter - t.right_diameter) * 1e3,
+            (params.track_width - t.track_width) * 1e3
+        );
+        let params = if std::env::var_os("EXP_TRUE_GEOMETRY").is_some() {
+            ChassisParams {
+                left_diameter: t.left_diameter,
+                right_diameter: t.right_diameter,
+                track_width: t.track_width,
+                ..params
+            }
+        } else {
+            params
+        };
         let [paper, covariance] = ensemble(r.settings, &params);
         for (name, m, e) in [
             ("paper", UncertaintyModel::Paper, &paper),
