@@ -764,7 +764,7 @@ fn serialisation_round_trip_and_checksum() {
     assert_eq!(Settings::from_bytes(&b).unwrap(), s);
     assert!(
         Settings::from_bytes(&b[..116]).is_err(),
-        "version 3 needs 140 bytes"
+        "version 3 needs 144 bytes"
     );
     assert!(Settings::from_bytes_version(4, &b).is_err());
     assert!(Settings::from_bytes_version(0, &b).is_err());
@@ -806,12 +806,12 @@ fn v2_record(settings: &Settings, generation: u32) -> Vec<u8> {
 #[test]
 fn record_layout_of_format_version_3() {
     let r = encode_record(&variant(4), 9);
-    assert_eq!(RECORD_LEN, 156);
+    assert_eq!(RECORD_LEN, 160);
     assert_eq!(r.len(), RECORD_LEN);
     assert_eq!(RECORD_LEN % WORD, 0);
-    assert_eq!(&r[4..8], &[3, 0, 140, 0]);
-    assert_eq!(&r[12..152], &variant(4).to_bytes());
-    assert_eq!(&r[152..156], &crc32(&r[..152]).to_le_bytes());
+    assert_eq!(&r[4..8], &[3, 0, 144, 0]);
+    assert_eq!(&r[12..156], &variant(4).to_bytes());
+    assert_eq!(&r[156..160], &crc32(&r[..156]).to_le_bytes());
     // The v1 record is the same bytes up to the payload's end, but its own header and CRC.
     let old = v1_record(&variant(4), 9);
     assert_eq!(&old[12..124], &r[12..124]);
@@ -838,7 +838,7 @@ fn format_version_1_record_loads_with_the_default_max_wheel_speed() {
     let mut store = SettingsStore::new(&mut f);
     assert_eq!(store.save(&variant(5)).unwrap(), 42);
     assert_eq!(load(&f), (variant(5), SettingsSource::Flash, 42));
-    assert_eq!(&f.mem[0][SLOT_LEN + 4..SLOT_LEN + 8], &[3, 0, 140, 0]);
+    assert_eq!(&f.mem[0][SLOT_LEN + 4..SLOT_LEN + 8], &[3, 0, 144, 0]);
     assert_eq!(f.violations, 0);
     // The v1 record is still the fallback if the new one is damaged.
     f.mem[0][SLOT_LEN + 20] ^= 0x10;
@@ -849,11 +849,13 @@ fn format_version_1_record_loads_with_the_default_max_wheel_speed() {
 fn format_version_2_record_loads_with_an_exact_geometry() {
     let mut old = variant(3);
     old.chassis.geometry_uncertainty.track_width_se = 5e-4;
+    old.chassis.kappa_diff = 2e-5;
     let mut f = SimFlash::new(4 * SLOT_LEN);
     f.program(0, 0, &v2_record(&old, 7)).unwrap();
     let expect = Settings {
         chassis: odo_core::odometry::ChassisParams {
             geometry_uncertainty: odo_core::odometry::GeometryUncertainty::EXACT,
+            kappa_diff: 0.0,
             ..old.chassis
         },
         ..old
@@ -1010,7 +1012,7 @@ fn generation_wraps_around() {
 // ---------------------------------------------------------------------------------------
 // The key table against the format and the docs
 
-/// The version 2 layout written field by field as docs/PROTOCOL.md section 5 lists it (the
+/// The version 3 layout written field by field as docs/PROTOCOL.md section 5 lists it (the
 /// encoder before the key table): the table's codec must give the same bytes.
 fn layout_v3_by_hand(s: &Settings) -> Vec<u8> {
     let c = &s.chassis;
@@ -1058,6 +1060,7 @@ fn layout_v3_by_hand(s: &Settings) -> Vec<u8> {
         g.diameters_correlation,
         g.left_track_correlation,
         g.right_track_correlation,
+        c.kappa_diff,
     ] {
         b.extend_from_slice(&v.to_le_bytes());
     }
@@ -1080,12 +1083,14 @@ fn table_codec_is_the_documented_layout_byte_for_byte() {
         left_track_correlation: 0.5,
         right_track_correlation: 0.25,
     };
+    s.chassis.kappa_diff = 3.5e-5;
     for s in [Settings::DEFAULT, variant(1), s] {
         assert_eq!(s.to_bytes().to_vec(), layout_v3_by_hand(&s));
         // Version 1 is its first 112 bytes.
         let without_se = Settings {
             chassis: odo_core::odometry::ChassisParams {
                 geometry_uncertainty: odo_core::odometry::GeometryUncertainty::EXACT,
+                kappa_diff: 0.0,
                 ..s.chassis
             },
             ..s
@@ -1102,7 +1107,7 @@ fn table_codec_is_the_documented_layout_byte_for_byte() {
         let v2 = Settings::from_bytes_version(2, &layout_v3_by_hand(&s)[..116]).unwrap();
         assert_eq!(v2, without_se);
     }
-    // The checksum of the defaults: over the 140 bytes of version 3 (firmware of version 2
+    // The checksum of the defaults: over the 144 bytes of version 3 (firmware of version 2
     // reported the CRC of the first 116).
     assert_eq!(
         Settings::DEFAULT.checksum(),
@@ -1255,7 +1260,7 @@ fn errors_are_values_naming_the_key() {
         SettingError::Correlations
     );
     assert_eq!(
-        Settings::from_bytes(&[0; 139]),
+        Settings::from_bytes(&[0; 143]),
         Err(SettingError::BadRecord)
     );
     // Chassis parameters alone, as odoctl checks them.

@@ -307,3 +307,74 @@ fn covariance_model_covers_the_calibrations_geometry_error() {
     let s = integ.sigma();
     assert_eq!([s.x, s.y, s.heading, s.xy], [0.0; 4]);
 }
+
+/// Opposite-phase slip in the covariance model (`kappa_diff`): each sample's true wheel
+/// distances are `s_1 + e`, `s_2 - e` with `e` of variance `kappa_diff |s_1 - s_2|`; the
+/// model's bands must cover the errors at the nominal rates, and a straight drive must add
+/// nothing.
+#[test]
+fn covariance_model_covers_opposite_phase_slip() {
+    const KAPPA_DIFF: f64 = 4.0e-5;
+    let params = ChassisParams {
+        uncertainty_model: UncertaintyModel::Covariance,
+        kappa_left: 0.0,
+        kappa_right: 0.0,
+        kappa_diff: KAPPA_DIFF as f32,
+        ..ChassisParams::DESIGNED
+    };
+    let c = PI * params.left_diameter / f64::from(params.ticks_per_rev);
+    let w = params.track_width;
+    let steps = path(c);
+    let mut rng = Rng::new(0x0DD_0002);
+    let (mut errors, mut sigmas) = (vec![], vec![]);
+    for _ in 0..RUNS {
+        let mut integ = Integrator::new(&params, WheelCounts::default(), Pose::default()).unwrap();
+        let (mut x, mut y, mut a) = (0.0f64, 0.0f64, 0.0f64);
+        let mut g = [0i64; 2];
+        for d in &steps {
+            g = [g[0] + d[0], g[1] + d[1]];
+            integ.step(
+                WheelCounts {
+                    left: g[0],
+                    right: g[1],
+                },
+                IndexRefs::default(),
+            );
+            let s = [c * d[0] as f64, c * d[1] as f64];
+            let e = (KAPPA_DIFF * (s[0] - s[1]).abs()).sqrt() * rng.normal();
+            let s = [s[0] + e, s[1] - e];
+            let (ds, da) = ((s[0] + s[1]) / 2.0, (s[0] - s[1]) / w);
+            let dd = if da == 0.0 {
+                ds
+            } else {
+                ds * 2.0 / da * (da / 2.0).sin()
+            };
+            x += dd * (a + da / 2.0).sin();
+            y += dd * (a + da / 2.0).cos();
+            a += da;
+        }
+        let pose = integ.pose();
+        errors.push([pose.x - x, pose.y - y, pose.heading - a]);
+        sigmas.push(integ.sigma());
+    }
+    let (c1, c3) = (
+        coverage(&errors, &sigmas, 1.0),
+        coverage(&errors, &sigmas, 3.0),
+    );
+    println!("opposite-phase slip: 1-sigma {c1:.3?}, 3-sigma {c3:.3?}");
+    for i in 0..3 {
+        assert!((0.63..=0.74).contains(&c1[i]), "1-sigma {c1:?}");
+        assert!(c3[i] >= 0.99, "3-sigma {c3:?}");
+    }
+    // Equal wheel distances: no opposite-phase term.
+    let mut integ = Integrator::new(&params, WheelCounts::default(), Pose::default()).unwrap();
+    integ.step(
+        WheelCounts {
+            left: 1000,
+            right: 1000,
+        },
+        IndexRefs::default(),
+    );
+    let s = integ.sigma();
+    assert_eq!([s.x, s.y, s.heading, s.xy], [0.0; 4]);
+}

@@ -126,6 +126,10 @@ pub struct ChassisParams {
     pub kappa_left: f32,
     /// `kappa_right`: the same for wheel 2, m^2/m.
     pub kappa_right: f32,
+    /// `kappa_diff`: for the covariance model, variance of an opposite-phase error `e`
+    /// (`s_1 + e`, `s_2 - e`: slip when turning) per metre of wheel-distance difference
+    /// `|ds_1 - ds_2|`, m^2/m (0: none).
+    pub kappa_diff: f32,
     /// Per-angle wheel function of wheel 1 (`left_cos1`.. `left_sin3`).
     pub left_wheel: WheelHarmonics,
     /// Per-angle wheel function of wheel 2 (`right_cos1`.. `right_sin3`).
@@ -149,6 +153,7 @@ impl ChassisParams {
         uncertainty_model: UncertaintyModel::Paper,
         kappa_left: 1.0e-7,
         kappa_right: 1.0e-7,
+        kappa_diff: 0.0,
         left_wheel: WheelHarmonics::ROUND,
         right_wheel: WheelHarmonics::ROUND,
         geometry_uncertainty: GeometryUncertainty::EXACT,
@@ -198,6 +203,7 @@ impl ChassisParams {
         let kappa = (0.0, Self::MAX_KAPPA);
         check("kappa_left", self.kappa_left, kappa)?;
         check("kappa_right", self.kappa_right, kappa)?;
+        check("kappa_diff", self.kappa_diff, kappa)?;
         let harmonic = (-Self::MAX_HARMONIC, Self::MAX_HARMONIC);
         for (wheel, [cos_keys, sin_keys]) in [
             (&self.left_wheel, HARMONIC_KEYS[0]),

@@ -133,6 +133,8 @@ pub struct UncertaintyCoefficients {
     pub delta_diff: f32,
     /// `kappa_left`, `kappa_right`: m^2 per metre rolled (covariance model).
     pub kappa: [f32; 2],
+    /// `kappa_diff`: m^2 per metre of `|ds_1 - ds_2|` (covariance model).
+    pub kappa_diff: f32,
     /// Covariance of the geometry's relative calibration errors (left and right diameter,
     /// track width), upper triangle `[ll, rr, ww, lr, lw, rw]`
     /// (`GeometryUncertainty::relative_covariance`; covariance model).
@@ -200,7 +202,11 @@ impl CovarianceUncertainty {
     pub fn step(&mut self, k: &UncertaintyCoefficients, g: &StepGeometry, j: &StepJacobian) {
         let v1 = k.kappa[0] * g.wheel_distance[0].abs();
         let v2 = k.kappa[1] * g.wheel_distance[1].abs();
-        let q = |u: [f32; 2], w: [f32; 2]| u[0] * w[0] * v1 + u[1] * w[1] * v2;
+        // The opposite-phase error moves s_1 by +e and s_2 by -e.
+        let ve = k.kappa_diff * (g.wheel_distance[0] - g.wheel_distance[1]).abs();
+        let q = |u: [f32; 2], w: [f32; 2]| {
+            u[0] * w[0] * v1 + u[1] * w[1] * v2 + (u[0] - u[1]) * (w[0] - w[1]) * ve
+        };
         let (a, b) = (j.dx_dalpha, j.dy_dalpha);
         let (paa, pxa, pya) = (self.aa.value(), self.xa.value(), self.ya.value());
         self.xx.add(2.0 * a * pxa + a * a * paa + q(j.dx, j.dx));

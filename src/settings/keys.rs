@@ -416,6 +416,12 @@ key_table! {
         name: "kappa_right", unit: "m^2/m", kind: KAPPA, default: D.kappa_right,
         field: [chassis.kappa_right], record: 44 since 1, group: Chassis,
     }
+    /// `kappa_diff`: covariance model, variance of opposite-phase slip per metre of
+    /// wheel-distance difference, m^2/m.
+    KappaDiff {
+        name: "kappa_diff", unit: "m^2/m", kind: KAPPA, default: D.kappa_diff,
+        field: [chassis.kappa_diff], record: 140 since 3, group: Chassis,
+    }
     /// `left_cos1`: wheel 1's radius function, first cosine harmonic (relative).
     LeftCos1 {
         name: "left_cos1", unit: "", kind: HARM, default: D.left_wheel.cos[0],

@@ -155,6 +155,7 @@ impl Settings {
             uncertainty_model: UncertaintyModel::Paper,
             kappa_left: 0.0,
             kappa_right: 0.0,
+            kappa_diff: 0.0,
             left_wheel: WheelHarmonics::ROUND,
             right_wheel: WheelHarmonics::ROUND,
             geometry_uncertainty: GeometryUncertainty::EXACT,

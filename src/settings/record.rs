@@ -7,7 +7,7 @@ use super::{Key, SettingError, Settings};
 
 /// Version of the serialised settings layout ([`Settings::to_bytes`]). Version 2 appended
 /// `max_wheel_speed` to version 1, version 3 the geometry's standard errors and correlations
-/// (`left_diameter_se`.. `right_track_correlation`); [`Settings::from_bytes_version`] reads
+/// (`left_diameter_se`.. `right_track_correlation`) and `kappa_diff`; [`Settings::from_bytes_version`] reads
 /// all three.
 pub const SETTINGS_FORMAT_VERSION: u16 = 3;
 
@@ -48,7 +48,7 @@ const _: () = assert!(no_overlap(), "two keys share bytes of the settings record
 
 impl Settings {
     /// Length of the serialised form of format version [`SETTINGS_FORMAT_VERSION`] (3),
-    /// bytes: 140 (from the key table).
+    /// bytes: 144 (from the key table).
     pub const SERIALIZED_LEN: usize = serialized_len(SETTINGS_FORMAT_VERSION);
 
     /// Length of the serialised form of format version 1, bytes: 112, the version 2 layout
@@ -56,7 +56,7 @@ impl Settings {
     pub const SERIALIZED_LEN_V1: usize = serialized_len(1);
 
     /// Length of the serialised form of format version 2, bytes: 116, the version 3 layout
-    /// without the geometry's standard errors and correlations.
+    /// without the geometry's standard errors and correlations and `kappa_diff`.
     pub const SERIALIZED_LEN_V2: usize = serialized_len(2);
 
     /// Serialises into the fixed little-endian layout of format version

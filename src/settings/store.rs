@@ -17,12 +17,12 @@
 //! |---|---|---|
 //! | 0 | 4 | magic `0x534F444F` (bytes `4F 44 4F 53`, "ODOS") |
 //! | 4 | 2 | settings format version ([`super::SETTINGS_FORMAT_VERSION`], 3) |
-//! | 6 | 2 | payload length `n` ([`Settings::SERIALIZED_LEN`], 140) |
+//! | 6 | 2 | payload length `n` ([`Settings::SERIALIZED_LEN`], 144) |
 //! | 8 | 4 | generation, 1 for the first save |
 //! | 12 | n | payload ([`Settings::to_bytes`]) |
 //! | 12 + n | 4 | CRC-32/ISO-HDLC of bytes 0..12 + n |
 //!
-//! Saves write format version 3 ([`RECORD_LEN`] = 156 bytes). Loading also accepts the
+//! Saves write format version 3 ([`RECORD_LEN`] = 160 bytes). Loading also accepts the
 //! records of format version 2 (payload 116 bytes, 132 bytes in all), written before the
 //! geometry's standard errors existed, and of format version 1 (payload 112 bytes, 128 bytes),
 //! written before `max_wheel_speed` existed: keys newer than a record load at their defaults.
