@@ -763,10 +763,10 @@ fn serialisation_round_trip_and_checksum() {
     assert_eq!(&b[112..116], &1.25f32.to_le_bytes());
     assert_eq!(Settings::from_bytes(&b).unwrap(), s);
     assert!(
-        Settings::from_bytes(&b[..112]).is_err(),
-        "version 2 needs 116 bytes"
+        Settings::from_bytes(&b[..116]).is_err(),
+        "version 3 needs 144 bytes"
     );
-    assert!(Settings::from_bytes_version(3, &b).is_err());
+    assert!(Settings::from_bytes_version(4, &b).is_err());
     assert!(Settings::from_bytes_version(0, &b).is_err());
 }
 
@@ -788,15 +788,30 @@ fn v1_record(settings: &Settings, generation: u32) -> Vec<u8> {
     r
 }
 
+/// A record exactly as the firmware of format version 2 wrote it: 116-byte payload (the
+/// version 3 payload without the geometry's standard errors), CRC at 128, 132 bytes.
+fn v2_record(settings: &Settings, generation: u32) -> Vec<u8> {
+    let mut r = Vec::new();
+    r.extend_from_slice(&MAGIC.to_le_bytes());
+    r.extend_from_slice(&2u16.to_le_bytes());
+    r.extend_from_slice(&116u16.to_le_bytes());
+    r.extend_from_slice(&generation.to_le_bytes());
+    r.extend_from_slice(&settings.to_bytes()[..Settings::SERIALIZED_LEN_V2]);
+    let crc = crc32(&r);
+    r.extend_from_slice(&crc.to_le_bytes());
+    assert_eq!(r.len(), 132);
+    r
+}
+
 #[test]
-fn record_layout_of_format_version_2() {
+fn record_layout_of_format_version_3() {
     let r = encode_record(&variant(4), 9);
-    assert_eq!(RECORD_LEN, 132);
+    assert_eq!(RECORD_LEN, 160);
     assert_eq!(r.len(), RECORD_LEN);
     assert_eq!(RECORD_LEN % WORD, 0);
-    assert_eq!(&r[4..8], &[2, 0, 116, 0]);
-    assert_eq!(&r[12..128], &variant(4).to_bytes());
-    assert_eq!(&r[128..132], &crc32(&r[..128]).to_le_bytes());
+    assert_eq!(&r[4..8], &[3, 0, 144, 0]);
+    assert_eq!(&r[12..156], &variant(4).to_bytes());
+    assert_eq!(&r[156..160], &crc32(&r[..156]).to_le_bytes());
     // The v1 record is the same bytes up to the payload's end, but its own header and CRC.
     let old = v1_record(&variant(4), 9);
     assert_eq!(&old[12..124], &r[12..124]);
@@ -823,11 +838,36 @@ fn format_version_1_record_loads_with_the_default_max_wheel_speed() {
     let mut store = SettingsStore::new(&mut f);
     assert_eq!(store.save(&variant(5)).unwrap(), 42);
     assert_eq!(load(&f), (variant(5), SettingsSource::Flash, 42));
-    assert_eq!(&f.mem[0][SLOT_LEN + 4..SLOT_LEN + 8], &[2, 0, 116, 0]);
+    assert_eq!(&f.mem[0][SLOT_LEN + 4..SLOT_LEN + 8], &[3, 0, 144, 0]);
     assert_eq!(f.violations, 0);
     // The v1 record is still the fallback if the new one is damaged.
     f.mem[0][SLOT_LEN + 20] ^= 0x10;
     assert_eq!(load(&f), (expect, SettingsSource::Flash, 41));
+}
+
+#[test]
+fn format_version_2_record_loads_with_an_exact_geometry() {
+    let mut old = variant(3);
+    old.chassis.geometry_uncertainty.track_width_se = 5e-4;
+    old.chassis.kappa_diff = 2e-5;
+    let mut f = SimFlash::new(4 * SLOT_LEN);
+    f.program(0, 0, &v2_record(&old, 7)).unwrap();
+    let expect = Settings {
+        chassis: odo_core::odometry::ChassisParams {
+            geometry_uncertainty: odo_core::odometry::GeometryUncertainty::EXACT,
+            kappa_diff: 0.0,
+            ..old.chassis
+        },
+        ..old
+    };
+    assert_eq!(load(&f), (expect, SettingsSource::Flash, 7));
+    // The next save writes version 3 and wins; the v2 record stays the fallback.
+    let mut store = SettingsStore::new(&mut f);
+    assert_eq!(store.save(&old).unwrap(), 8);
+    assert_eq!(load(&f), (old, SettingsSource::Flash, 8));
+    f.mem[0][SLOT_LEN + 20] ^= 0x10;
+    assert_eq!(load(&f), (expect, SettingsSource::Flash, 7));
+    assert_eq!(f.violations, 0);
 }
 
 /// Damaged or mislabelled v1 records are refused like any other, and saving over them
@@ -972,9 +1012,9 @@ fn generation_wraps_around() {
 // ---------------------------------------------------------------------------------------
 // The key table against the format and the docs
 
-/// The version 2 layout written field by field as docs/PROTOCOL.md section 5 lists it (the
+/// The version 3 layout written field by field as docs/PROTOCOL.md section 5 lists it (the
 /// encoder before the key table): the table's codec must give the same bytes.
-fn layout_v2_by_hand(s: &Settings) -> Vec<u8> {
+fn layout_v3_by_hand(s: &Settings) -> Vec<u8> {
     let c = &s.chassis;
     let mut b = Vec::new();
     for v in [c.left_diameter, c.right_diameter, c.track_width] {
@@ -1012,6 +1052,18 @@ fn layout_v2_by_hand(s: &Settings) -> Vec<u8> {
         b.extend_from_slice(&v.to_le_bytes());
     }
     b.extend_from_slice(&s.max_wheel_speed.to_le_bytes());
+    let g = &c.geometry_uncertainty;
+    for v in [
+        g.left_diameter_se,
+        g.right_diameter_se,
+        g.track_width_se,
+        g.diameters_correlation,
+        g.left_track_correlation,
+        g.right_track_correlation,
+        c.kappa_diff,
+    ] {
+        b.extend_from_slice(&v.to_le_bytes());
+    }
     b
 }
 
@@ -1023,22 +1075,43 @@ fn table_codec_is_the_documented_layout_byte_for_byte() {
     s.time_tag_pps = odo_core::timing::TimeTagPps::Next;
     s.mode = odo_core::timing::SyncMode::Pps;
     s.max_wheel_speed = 3.25;
+    s.chassis.geometry_uncertainty = odo_core::odometry::GeometryUncertainty {
+        left_diameter_se: 2.5e-5,
+        right_diameter_se: 2.25e-5,
+        track_width_se: 4.0e-4,
+        diameters_correlation: 0.75,
+        left_track_correlation: 0.5,
+        right_track_correlation: 0.25,
+    };
+    s.chassis.kappa_diff = 3.5e-5;
     for s in [Settings::DEFAULT, variant(1), s] {
-        assert_eq!(s.to_bytes().to_vec(), layout_v2_by_hand(&s));
+        assert_eq!(s.to_bytes().to_vec(), layout_v3_by_hand(&s));
         // Version 1 is its first 112 bytes.
-        let v1 = Settings::from_bytes_version(1, &layout_v2_by_hand(&s)[..112]).unwrap();
+        let without_se = Settings {
+            chassis: odo_core::odometry::ChassisParams {
+                geometry_uncertainty: odo_core::odometry::GeometryUncertainty::EXACT,
+                kappa_diff: 0.0,
+                ..s.chassis
+            },
+            ..s
+        };
+        let v1 = Settings::from_bytes_version(1, &layout_v3_by_hand(&s)[..112]).unwrap();
         assert_eq!(
             v1,
             Settings {
                 max_wheel_speed: Settings::DEFAULT_MAX_WHEEL_SPEED,
-                ..s
+                ..without_se
             }
         );
+        // Version 2 is its first 116 bytes.
+        let v2 = Settings::from_bytes_version(2, &layout_v3_by_hand(&s)[..116]).unwrap();
+        assert_eq!(v2, without_se);
     }
-    // The checksum of the defaults, as every firmware so far reported it.
+    // The checksum of the defaults: over the 144 bytes of version 3 (firmware of version 2
+    // reported the CRC of the first 116).
     assert_eq!(
         Settings::DEFAULT.checksum(),
-        crc32(&layout_v2_by_hand(&Settings::DEFAULT))
+        crc32(&layout_v3_by_hand(&Settings::DEFAULT))
     );
     // Every byte belongs to one key, but the reserved byte 99.
     let mut owner = [0u32; Settings::SERIALIZED_LEN];
@@ -1052,7 +1125,8 @@ fn table_codec_is_the_documented_layout_byte_for_byte() {
         assert_eq!(*n, u32::from(i != 99), "byte {i}");
     }
     assert_eq!(serialized_len(1), Settings::SERIALIZED_LEN_V1);
-    assert_eq!(serialized_len(2), Settings::SERIALIZED_LEN);
+    assert_eq!(serialized_len(2), Settings::SERIALIZED_LEN_V2);
+    assert_eq!(serialized_len(3), Settings::SERIALIZED_LEN);
 }
 
 /// docs/PROTOCOL.md's key table (section 4, "Keys and values") lists the table's keys in its
@@ -1175,11 +1249,18 @@ fn errors_are_values_naming_the_key() {
         SettingError::CountsPerSample { counts: 48_971 }
     ));
     assert_eq!(
-        Settings::from_bytes_version(3, &Settings::DEFAULT.to_bytes()),
-        Err(SettingError::UnknownFormatVersion(3))
+        Settings::from_bytes_version(4, &Settings::DEFAULT.to_bytes()),
+        Err(SettingError::UnknownFormatVersion(4))
     );
     assert_eq!(
-        Settings::from_bytes(&[0; 115]),
+        relation(&[
+            ("diameters_correlation", "0.9"),
+            ("left_track_correlation", "0.9"),
+        ]),
+        SettingError::Correlations
+    );
+    assert_eq!(
+        Settings::from_bytes(&[0; 143]),
         Err(SettingError::BadRecord)
     );
     // Chassis parameters alone, as odoctl checks them.

@@ -179,3 +179,202 @@ fn covariance_model_coverage_is_near_nominal_and_paper_model_is_stated() {
     }
     assert!(mean_ratio < 0.2);
 }
+
+/// The calibration's geometry error in the covariance model: each run's true chassis has
+/// diameters and a track width off by a draw from the stated standard errors and
+/// correlations (`left_diameter_se`.. `right_track_correlation`); the integrator, with the
+/// nominal values and no slip, must cover the resulting errors at the nominal rates.
+#[test]
+fn covariance_model_covers_the_calibrations_geometry_error() {
+    use odo_core::odometry::GeometryUncertainty;
+    let g = GeometryUncertainty {
+        left_diameter_se: 2.0e-5,
+        right_diameter_se: 2.5e-5,
+        track_width_se: 5.0e-4,
+        diameters_correlation: 0.8,
+        left_track_correlation: 0.3,
+        right_track_correlation: -0.2,
+    };
+    let params = ChassisParams {
+        uncertainty_model: UncertaintyModel::Covariance,
+        kappa_left: 0.0,
+        kappa_right: 0.0,
+        geometry_uncertainty: g,
+        ..ChassisParams::DESIGNED
+    };
+    let c = PI * params.left_diameter / f64::from(params.ticks_per_rev);
+    let w = params.track_width;
+    let steps = path(c);
+    // The integrator sees the same counts every run: one prediction.
+    let mut integ = Integrator::new(&params, WheelCounts::default(), Pose::default()).unwrap();
+    let mut gc = [0i64; 2];
+    for d in &steps {
+        gc = [gc[0] + d[0], gc[1] + d[1]];
+        integ.step(
+            WheelCounts {
+                left: gc[0],
+                right: gc[1],
+            },
+            IndexRefs::default(),
+        );
+    }
+    let (nominal, sigma) = (integ.pose(), integ.sigma());
+    // Relative standard errors and their Cholesky factor.
+    let sd = [
+        f64::from(g.left_diameter_se) / params.left_diameter,
+        f64::from(g.right_diameter_se) / params.right_diameter,
+        f64::from(g.track_width_se) / w,
+    ];
+    let r = [
+        [
+            1.0,
+            f64::from(g.diameters_correlation),
+            f64::from(g.left_track_correlation),
+        ],
+        [
+            f64::from(g.diameters_correlation),
+            1.0,
+            f64::from(g.right_track_correlation),
+        ],
+        [
+            f64::from(g.left_track_correlation),
+            f64::from(g.right_track_correlation),
+            1.0,
+        ],
+    ];
+    let cov: Vec<Vec<f64>> = (0..3)
+        .map(|i| (0..3).map(|j| r[i][j] * sd[i] * sd[j]).collect())
+        .collect();
+    let mut l = [[0.0f64; 3]; 3];
+    for i in 0..3 {
+        for j in 0..=i {
+            let s: f64 = (0..j).map(|k| l[i][k] * l[j][k]).sum();
+            l[i][j] = if i == j {
+                (cov[i][i] - s).sqrt()
+            } else {
+                (cov[i][j] - s) / l[j][j]
+            };
+        }
+    }
+    let mut rng = Rng::new(0x6E0_0001);
+    let mut errors = vec![];
+    for _ in 0..RUNS {
+        let z = [rng.normal(), rng.normal(), rng.normal()];
+        let e: Vec<f64> = (0..3)
+            .map(|i| (0..3).map(|k| l[i][k] * z[k]).sum())
+            .collect();
+        let (cl, cr, wt) = (c * (1.0 + e[0]), c * (1.0 + e[1]), w * (1.0 + e[2]));
+        let (mut x, mut y, mut a) = (0.0f64, 0.0f64, 0.0f64);
+        for d in &steps {
+            let s = [cl * d[0] as f64, cr * d[1] as f64];
+            let (ds, da) = ((s[0] + s[1]) / 2.0, (s[0] - s[1]) / wt);
+            let dd = if da == 0.0 {
+                ds
+            } else {
+                ds * 2.0 / da * (da / 2.0).sin()
+            };
+            x += dd * (a + da / 2.0).sin();
+            y += dd * (a + da / 2.0).cos();
+            a += da;
+        }
+        errors.push([nominal.x - x, nominal.y - y, nominal.heading - a]);
+    }
+    let sigmas = vec![sigma; errors.len()];
+    let (c1, c3) = (
+        coverage(&errors, &sigmas, 1.0),
+        coverage(&errors, &sigmas, 3.0),
+    );
+    println!("geometry error: 1-sigma {c1:.3?}, 3-sigma {c3:.3?}, sigma {sigma:?}");
+    for i in 0..3 {
+        assert!((0.63..=0.74).contains(&c1[i]), "1-sigma {c1:?}");
+        assert!(c3[i] >= 0.99, "3-sigma {c3:?}");
+    }
+    let e = ellipse_coverage(&errors, &sigmas, 1.0);
+    assert!((0.34..=0.45).contains(&e), "1-sigma ellipse {e}");
+    // An exact geometry adds nothing: the same steps give zero sigmas without slip.
+    let exact = ChassisParams {
+        geometry_uncertainty: GeometryUncertainty::EXACT,
+        ..params
+    };
+    let mut integ = Integrator::new(&exact, WheelCounts::default(), Pose::default()).unwrap();
+    integ.step(
+        WheelCounts {
+            left: 1000,
+            right: 900,
+        },
+        IndexRefs::default(),
+    );
+    let s = integ.sigma();
+    assert_eq!([s.x, s.y, s.heading, s.xy], [0.0; 4]);
+}
+
+/// Opposite-phase slip in the covariance model (`kappa_diff`): each sample's true wheel
+/// distances are `s_1 + e`, `s_2 - e` with `e` of variance `kappa_diff |s_1 - s_2|`; the
+/// model's bands must cover the errors at the nominal rates, and a straight drive must add
+/// nothing.
+#[test]
+fn covariance_model_covers_opposite_phase_slip() {
+    const KAPPA_DIFF: f64 = 4.0e-5;
+    let params = ChassisParams {
+        uncertainty_model: UncertaintyModel::Covariance,
+        kappa_left: 0.0,
+        kappa_right: 0.0,
+        kappa_diff: KAPPA_DIFF as f32,
+        ..ChassisParams::DESIGNED
+    };
+    let c = PI * params.left_diameter / f64::from(params.ticks_per_rev);
+    let w = params.track_width;
+    let steps = path(c);
+    let mut rng = Rng::new(0x0DD_0002);
+    let (mut errors, mut sigmas) = (vec![], vec![]);
+    for _ in 0..RUNS {
+        let mut integ = Integrator::new(&params, WheelCounts::default(), Pose::default()).unwrap();
+        let (mut x, mut y, mut a) = (0.0f64, 0.0f64, 0.0f64);
+        let mut g = [0i64; 2];
+        for d in &steps {
+            g = [g[0] + d[0], g[1] + d[1]];
+            integ.step(
+                WheelCounts {
+                    left: g[0],
+                    right: g[1],
+                },
+                IndexRefs::default(),
+            );
+            let s = [c * d[0] as f64, c * d[1] as f64];
+            let e = (KAPPA_DIFF * (s[0] - s[1]).abs()).sqrt() * rng.normal();
+            let s = [s[0] + e, s[1] - e];
+            let (ds, da) = ((s[0] + s[1]) / 2.0, (s[0] - s[1]) / w);
+            let dd = if da == 0.0 {
+                ds
+            } else {
+                ds * 2.0 / da * (da / 2.0).sin()
+            };
+            x += dd * (a + da / 2.0).sin();
+            y += dd * (a + da / 2.0).cos();
+            a += da;
+        }
+        let pose = integ.pose();
+        errors.push([pose.x - x, pose.y - y, pose.heading - a]);
+        sigmas.push(integ.sigma());
+    }
+    let (c1, c3) = (
+        coverage(&errors, &sigmas, 1.0),
+        coverage(&errors, &sigmas, 3.0),
+    );
+    println!("opposite-phase slip: 1-sigma {c1:.3?}, 3-sigma {c3:.3?}");
+    for i in 0..3 {
+        assert!((0.63..=0.74).contains(&c1[i]), "1-sigma {c1:?}");
+        assert!(c3[i] >= 0.99, "3-sigma {c3:?}");
+    }
+    // Equal wheel distances: no opposite-phase term.
+    let mut integ = Integrator::new(&params, WheelCounts::default(), Pose::default()).unwrap();
+    integ.step(
+        WheelCounts {
+            left: 1000,
+            right: 1000,
+        },
+        IndexRefs::default(),
+    );
+    let s = integ.sigma();
+    assert_eq!([s.x, s.y, s.heading, s.xy], [0.0; 4]);
+}

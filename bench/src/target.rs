@@ -140,6 +140,8 @@ fn main() -> ! {
         delta: [3.9e-8; 2],
         delta_diff: 0.0,
         kappa: [1e-7; 2],
+        kappa_diff: 1e-6,
+        geometry: [1e-8, 1e-8, 1e-6, 5e-9, 1e-9, -1e-9],
     };
     let mut paper = PaperUncertainty::default();
     let mut unc = [0u32; SAMPLES];

@@ -469,7 +469,7 @@ mod tests {
         let text = render_params(&p, "test", &[("initial_heading", FitValue::Num(0.5))]);
         let back = parse_params("x.toml", &text, ChassisParams::DESIGNED).unwrap();
         assert_eq!(back, p);
-        assert_eq!(chassis_value_text(&back, Key::RightSin3), "0.0022");
+        assert_eq!(chassis_value_text(&back, Key::RightSin3), "0.0023");
     }
 
     fn error_of(r: Result<ChassisParams>) -> ConfigError {

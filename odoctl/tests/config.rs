@@ -48,6 +48,26 @@ fn every_key_changed(rng: &mut Rng) -> Settings {
     c.uncertainty_model = odo_core::odometry::UncertaintyModel::Covariance;
     c.kappa_left = rng.f32_bits_to(1e-2, false);
     c.kappa_right = rng.f32_bits_to(1e-2, false);
+    c.kappa_diff = rng.f32_bits_to(1e-2, false).max(f32::from_bits(1));
+    let g = &mut c.geometry_uncertainty;
+    for v in [
+        &mut g.left_diameter_se,
+        &mut g.right_diameter_se,
+        &mut g.track_width_se,
+    ] {
+        *v = rng.f32_bits_to(0.01, false).max(f32::from_bits(1));
+    }
+    // Correlations of at most 0.4 in magnitude always form a valid correlation matrix.
+    for v in [
+        &mut g.diameters_correlation,
+        &mut g.left_track_correlation,
+        &mut g.right_track_correlation,
+    ] {
+        *v = rng.f32_bits_to(0.4, true);
+        if *v == 0.0 {
+            *v = -0.0;
+        }
+    }
     for wheel in [&mut c.left_wheel, &mut c.right_wheel] {
         for v in wheel.cos.iter_mut().chain(wheel.sin.iter_mut()) {
             *v = rng.f32_bits_to(0.05, true);
@@ -170,7 +190,7 @@ fn odoctl_and_the_unit_know_the_same_keys() {
     assert_eq!(sent_sorted, names_sorted);
     // Parameter files: exactly the chassis keys, the unit options refused by name.
     let chassis: Vec<Key> = config::chassis_keys().collect();
-    assert_eq!(chassis.len(), 22);
+    assert_eq!(chassis.len(), 29);
     for k in Key::ALL {
         let line = format!("{} = {}\n", k.name(), Settings::DEFAULT.get(k));
         let line = match k.info().kind {

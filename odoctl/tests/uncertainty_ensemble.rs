@@ -1,16 +1,20 @@
 //! Issue 21: the calibrated uncertainty against the truth, over an ensemble of simulated runs.
 //!
-//! Per slip regime: one 70 m estimation run (seed 1) is calibrated as a user would
-//! (`calib::calibrate`, both models, the default criterion), then runs of other seeds, both
-//! path kinds in turn, are replayed through the core integrator from their true start pose
-//! with those coefficients and compared with the true poses at 10, 20, ..., 60 m of travel.
+//! Per slip regime: ten 70 m estimation runs (seeds 1-10) are each calibrated as a user
+//! would (`calib::calibrate`, both models, the default criterion: sub-trajectory geometry
+//! with its standard errors and correlations, which the covariance model carries), then
+//! twenty runs of other seeds per calibration, both path kinds in turn, are replayed through
+//! the core integrator from their true start pose with those parameters and compared with
+//! the true poses at 10, 20, ..., 60 m of travel. Several calibrations, because every run
+//! replayed with one calibration shares its geometry error.
 //! Horizontal: `|e| <= k sigma_h`; heading: `|e| <= k sigma_heading`. Target for the model
 //! `calibrate` selects by default (covariance): 1-sigma coverage in 60-76 % and 3-sigma at
 //! least 97 % at every checkpoint, horizontal and heading; where it is not met, the measured
 //! figures are held as floors and the misses printed (see [`regimes`]). The other model's
 //! figures are printed (`--nocapture`) for the README's table;
 //! `ODOCTL_ENSEMBLE_COVERAGE_CRITERION=1` adds the covariance model fitted by the paper's
-//! coverage criterion (the default before issue 21).
+//! coverage criterion (the default before issue 21); `ODOCTL_ENSEMBLE_FIGURES=DIR` draws each
+//! regime's coverage and reliability figures there (the README's, `docs/figures/`).
 //!
 //! Slip regimes are named by the random-walk intensity `q` of a wheel's distance error
 //! (m per sqrt(m) of its travel): the simulator's Gauss-Markov slip of standard deviation
@@ -26,7 +30,11 @@ use odoctl::replay::{counts, index_refs};
 use odoctl::simulate::{default_truth, simulate_path, PathKind, SimSettings};
 
 /// Runs per regime replayed against the truth.
-const RUNS: u64 = 400;
+const RUNS: u64 = 200;
+/// Calibrations per regime (estimation runs of seeds 1..): each serves `RUNS /
+/// CALIBRATIONS` of the replayed runs, so that the coverage also spans the calibration's own
+/// error, which every run replayed with one calibration shares.
+const CALIBRATIONS: u64 = 10;
 
 /// What a regime is held to. The issue's target is 1-sigma coverage in 60-76 % and 3-sigma
 /// at least 97 % at every checkpoint; where the default model does not meet it, the measured
@@ -35,11 +43,13 @@ const RUNS: u64 = 400;
 #[derive(Clone, Copy)]
 struct Floor {
     one_sigma: f64,
+    one_sigma_max: f64,
     three_sigma: f64,
 }
 
 const TARGET: Floor = Floor {
     one_sigma: 0.60,
+    one_sigma_max: 0.76,
     three_sigma: 0.97,
 };
 
@@ -64,50 +74,49 @@ fn regime(name: &'static str, q: f64, corr: f64, slip_turn: f64, floor: Floor) -
 }
 
 fn regimes() -> Vec<Regime> {
-    let floor = |one_sigma, three_sigma| Floor {
+    let band = |one_sigma, one_sigma_max, three_sigma| Floor {
         one_sigma,
+        one_sigma_max,
         three_sigma,
     };
+    // Measured with 10 calibrations x 20 runs each: the target (60-76 % / 97 %) holds under
+    // random-walk and Gauss-Markov slip; where it is missed, the band holds the measured
+    // figures with a margin of about 3 points, so they cannot get worse unnoticed.
     vec![
-        // Target missed: the 70 m calibration run's kappa is 0.62 of the truth (its own
-        // standard error is 0.44 in ln kappa at this slip, where the reference noise
-        // dominates): 46-61 % inside 1 sigma.
-        regime("q 0.0002", 0.0002, 0.1, 0.0, floor(0.44, 0.95)),
-        // Target met at 10-30 m; 56-59 % at 40-60 m (horizontal), 58 % heading at 60 m.
-        regime("q 0.001", 0.001, 0.1, 0.0, floor(0.54, 0.97)),
-        // Target met but 59.2 % horizontal at 40 m.
-        regime("q 0.003", 0.003, 0.1, 0.0, floor(0.57, 0.97)),
-        // Slip correlated over 2 m: 49-61 % inside 1 sigma, 3-sigma 95-99 %.
+        // 76.5 % heading at 40 m: the target's upper end by half a point.
+        regime("q 0.0002", 0.0002, 0.1, 0.0, band(0.60, 0.78, 0.97)),
+        regime("q 0.001", 0.001, 0.1, 0.0, band(0.60, 0.76, 0.97)),
+        regime("q 0.003", 0.003, 0.1, 0.0, band(0.60, 0.76, 0.97)),
         regime(
             "q 0.001, Gauss-Markov 2 m",
             0.001,
             2.0,
             0.0,
-            floor(0.47, 0.93),
+            band(0.60, 0.76, 0.97),
         ),
-        // Opposite-phase slip when turning, which the covariance model does not have: its
-        // kappa covers the first 10 m, then the heading error outgrows it (22-68 %).
+        // Target missed: opposite-phase slip when turning, correlated over a metre of wheel
+        // distance difference, against the unit's white `kappa_diff`, which one 70 m run
+        // measures only to within a factor of 40 (4e-5 .. 1.8e-3, truth 4e-4): 55-81 %
+        // inside 1 sigma, 93.5-99 % inside 3 (without `kappa_diff`: 21-63 % and 60-92 %).
         regime(
             "q 0.0005, turning slip 0.02",
             0.0005,
             0.1,
             0.02,
-            floor(0.19, 0.56),
+            band(0.52, 0.84, 0.90),
         ),
     ]
 }
 
-/// Calibrates on one estimation run: the parameters with both models' coefficients.
-fn calibrate(settings: SimSettings, criterion: UncertaintyCriterion) -> ChassisParams {
+/// Calibrates on the estimation run of `seed`: the parameters with both models'
+/// coefficients.
+fn calibrate(settings: SimSettings, criterion: UncertaintyCriterion, seed: u64) -> ChassisParams {
     let truth = default_truth();
     let run = simulate_path(
         PathKind::Estimation,
         70.0,
         truth,
-        SimSettings {
-            seed: 1,
-            ..settings
-        },
+        SimSettings { seed, ..settings },
     );
     let c = calib::calibrate(
         &run.samples,
@@ -124,12 +133,17 @@ fn calibrate(settings: SimSettings, criterion: UncertaintyCriterion) -> ChassisP
     c.params
 }
 
-/// Replays `RUNS` runs from their true start with `params` under each model.
-fn ensemble(settings: SimSettings, params: &ChassisParams) -> [Ensemble; 2] {
+/// Replays the runs of `seeds` from their true start with `params` under each model (paper,
+/// covariance) into `out`.
+fn replay_runs(
+    settings: SimSettings,
+    params: &ChassisParams,
+    seeds: std::ops::Range<u64>,
+    out: &mut [Ensemble; 2],
+) {
     let truth = default_truth();
     let models = [UncertaintyModel::Paper, UncertaintyModel::Covariance];
-    let mut out = [Ensemble::new(&CHECKPOINTS), Ensemble::new(&CHECKPOINTS)];
-    for seed in 0..RUNS {
+    for seed in seeds {
         let kind = if seed % 2 == 0 {
             PathKind::Estimation
         } else {
@@ -176,7 +190,57 @@ fn ensemble(settings: SimSettings, params: &ChassisParams) -> [Ensemble; 2] {
             ens.add_run(&dist, |i| rows[i]);
         }
     }
-    out
+}
+
+/// Calibrates `CALIBRATIONS` times by `criterion` and replays `RUNS` runs, each with one of
+/// the calibrations; prints the calibrations' geometry errors against their standard
+/// errors. Returns the ensembles (paper, covariance) and the first calibration.
+fn ensemble(
+    name: &str,
+    settings: SimSettings,
+    criterion: UncertaintyCriterion,
+) -> ([Ensemble; 2], ChassisParams) {
+    let t = default_truth();
+    let mut out = [Ensemble::new(&CHECKPOINTS), Ensemble::new(&CHECKPOINTS)];
+    let per = RUNS / CALIBRATIONS;
+    let (mut first, mut err2, mut se2, mut within2) = (None, [0.0; 3], [0.0; 3], [0usize; 3]);
+    let mut coefficients = Vec::new();
+    for k in 0..CALIBRATIONS {
+        let p = calibrate(settings, criterion, 1 + k);
+        let g = p.geometry_uncertainty;
+        let e = [
+            p.left_diameter - t.left_diameter,
+            p.right_diameter - t.right_diameter,
+            p.track_width - t.track_width,
+        ];
+        let se = [g.left_diameter_se, g.right_diameter_se, g.track_width_se].map(f64::from);
+        for i in 0..3 {
+            err2[i] += e[i] * e[i];
+            se2[i] += se[i] * se[i];
+            within2[i] += usize::from(e[i].abs() <= 2.0 * se[i]);
+        }
+        first.get_or_insert(p);
+        coefficients.push(format!("{:.2e}/{:.2e}", p.kappa_left, p.kappa_diff));
+        replay_runs(settings, &p, 1000 + k * per..1000 + (k + 1) * per, &mut out);
+    }
+    let rms = |v: f64| (v / CALIBRATIONS as f64).sqrt() * 1e3;
+    println!(
+        "{name}: {CALIBRATIONS} calibrations, geometry error RMS {:.4} / {:.4} / {:.4} mm \
+         (left / right / track), RMS standard error {:.4} / {:.4} / {:.4} mm, within 2 SE \
+         {:?} of {CALIBRATIONS}",
+        rms(err2[0]),
+        rms(err2[1]),
+        rms(err2[2]),
+        rms(se2[0]),
+        rms(se2[1]),
+        rms(se2[2]),
+        within2
+    );
+    println!(
+        "{name}: kappa/kappa_diff per calibration {}",
+        coefficients.join(" ")
+    );
+    (out, first.expect("one calibration"))
 }
 
 fn print_table(
@@ -192,7 +256,10 @@ fn print_table(
             p.delta_left, p.delta_diff
         )
     } else {
-        format!("kappa {:.3e}", p.kappa_left)
+        format!(
+            "kappa {:.3e}, kappa_diff {:.3e}",
+            p.kappa_left, p.kappa_diff
+        )
     };
     println!("{regime} | {model} ({criterion}; {coefficient})");
     for k in c {
@@ -220,7 +287,7 @@ fn misses(regime: &str, c: &[CheckpointCoverage], floor: Floor) -> Vec<String> {
             ));
         }
         for (what, (c1, c3)) in [("horizontal", k.horizontal), ("heading", k.heading)] {
-            if !(floor.one_sigma..=0.76).contains(&c1) || c3 < floor.three_sigma {
+            if !(floor.one_sigma..=floor.one_sigma_max).contains(&c1) || c3 < floor.three_sigma {
                 out.push(format!(
                     "{regime}: {what} at {} m: 1-sigma {:.1} %, 3-sigma {:.1} %",
                     k.distance,
@@ -240,8 +307,21 @@ fn calibrated_uncertainty_covers_the_true_errors_across_slip_regimes() {
     let mut failed = Vec::new();
     let mut target_missed = Vec::new();
     for r in regimes() {
-        let params = calibrate(r.settings, UncertaintyCriterion::Likelihood);
-        let [paper, covariance] = ensemble(r.settings, &params);
+        let ([paper, covariance], params) =
+            ensemble(r.name, r.settings, UncertaintyCriterion::Likelihood);
+        if let Some(dir) = std::env::var_os("ODOCTL_ENSEMBLE_FIGURES") {
+            let slug: String = r
+                .name
+                .chars()
+                .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+                .collect();
+            odoctl::plots::ensemble_figures(
+                std::path::Path::new(&dir),
+                &format!("ensemble_{slug}"),
+                &[("paper", &paper), ("covariance", &covariance)],
+            )
+            .expect("figures");
+        }
         for (name, m, e) in [
             ("paper", UncertaintyModel::Paper, &paper),
             ("covariance", UncertaintyModel::Covariance, &covariance),
@@ -260,8 +340,8 @@ fn calibrated_uncertainty_covers_the_true_errors_across_slip_regimes() {
             }
         }
         if std::env::var_os("ODOCTL_ENSEMBLE_COVERAGE_CRITERION").is_some() {
-            let params = calibrate(r.settings, UncertaintyCriterion::Coverage);
-            let [paper, covariance] = ensemble(r.settings, &params);
+            let ([paper, covariance], params) =
+                ensemble(r.name, r.settings, UncertaintyCriterion::Coverage);
             print_table(r.name, "paper", "coverage", &params, &paper.coverage());
             print_table(
                 r.name,

@@ -266,6 +266,8 @@ impl Integrator {
             delta: [p.delta_left, p.delta_right],
             delta_diff: p.delta_diff,
             kappa: [p.kappa_left, p.kappa_right],
+            kappa_diff: p.kappa_diff,
+            geometry: p.geometry_uncertainty.relative_covariance(p),
         };
         self.periodic = [None; 2];
     }

@@ -3,7 +3,10 @@
 
 pub mod params;
 
-pub use params::{ChassisParams, ParamError, UncertaintyModel, WheelHarmonics, WHEEL_HARMONICS};
+pub use params::{
+    ChassisParams, GeometryUncertainty, ParamError, UncertaintyModel, WheelHarmonics,
+    WHEEL_HARMONICS,
+};
 pub mod encoder;
 pub mod index;
 pub mod integrator;

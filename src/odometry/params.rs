@@ -34,6 +34,72 @@ impl WheelHarmonics {
     }
 }
 
+/// The calibration's own uncertainty of the geometry: standard errors of `left_diameter`,
+/// `right_diameter` and `track_width` and their correlations, as the calibration estimated
+/// them (keys `left_diameter_se`, `right_diameter_se`, `track_width_se`,
+/// `diameters_correlation`, `left_track_correlation`, `right_track_correlation`). The
+/// covariance model adds the pose error they cause to its bands; all zero (the default)
+/// means a geometry taken as exact.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct GeometryUncertainty {
+    /// `left_diameter_se`: standard error of `left_diameter`, metres.
+    pub left_diameter_se: f32,
+    /// `right_diameter_se`: standard error of `right_diameter`, metres.
+    pub right_diameter_se: f32,
+    /// `track_width_se`: standard error of `track_width`, metres.
+    pub track_width_se: f32,
+    /// `diameters_correlation`: correlation of the two diameters' errors (-1..=1).
+    pub diameters_correlation: f32,
+    /// `left_track_correlation`: correlation of `left_diameter`'s and `track_width`'s errors.
+    pub left_track_correlation: f32,
+    /// `right_track_correlation`: correlation of `right_diameter`'s and `track_width`'s
+    /// errors.
+    pub right_track_correlation: f32,
+}
+
+impl GeometryUncertainty {
+    /// An exact geometry (no calibration uncertainty).
+    pub const EXACT: Self = Self {
+        left_diameter_se: 0.0,
+        right_diameter_se: 0.0,
+        track_width_se: 0.0,
+        diameters_correlation: 0.0,
+        left_track_correlation: 0.0,
+        right_track_correlation: 0.0,
+    };
+
+    /// Largest accepted standard error, metres.
+    pub const MAX_SE: f32 = 0.01;
+
+    /// True when the three correlations form a valid (positive semi-definite) correlation
+    /// matrix, to within f32 rounding: `1 + 2 r_lr r_lw r_rw - r_lr^2 - r_lw^2 - r_rw^2 >= 0`.
+    pub fn correlations_consistent(&self) -> bool {
+        let (a, b, c) = (
+            self.diameters_correlation,
+            self.left_track_correlation,
+            self.right_track_correlation,
+        );
+        1.0 + 2.0 * a * b * c - a * a - b * b - c * c >= -1.0e-6
+    }
+
+    /// The covariance of the relative errors `(d left_diameter / left_diameter, d
+    /// right_diameter / right_diameter, d track_width / track_width)` of `p`, as the upper
+    /// triangle `[ll, rr, ww, lr, lw, rw]` (dimensionless^2).
+    pub fn relative_covariance(&self, p: &ChassisParams) -> [f32; 6] {
+        let l = self.left_diameter_se / p.left_diameter as f32;
+        let r = self.right_diameter_se / p.right_diameter as f32;
+        let w = self.track_width_se / p.track_width as f32;
+        [
+            l * l,
+            r * r,
+            w * w,
+            self.diameters_correlation * l * r,
+            self.left_track_correlation * l * w,
+            self.right_track_correlation * r * w,
+        ]
+    }
+}
+
 /// Kinematic and uncertainty parameters of the chassis.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ChassisParams {
@@ -60,10 +126,17 @@ pub struct ChassisParams {
     pub kappa_left: f32,
     /// `kappa_right`: the same for wheel 2, m^2/m.
     pub kappa_right: f32,
+    /// `kappa_diff`: for the covariance model, variance of an opposite-phase error `e`
+    /// (`s_1 + e`, `s_2 - e`: slip when turning) per metre of wheel-distance difference
+    /// `|ds_1 - ds_2|`, m^2/m (0: none).
+    pub kappa_diff: f32,
     /// Per-angle wheel function of wheel 1 (`left_cos1`.. `left_sin3`).
     pub left_wheel: WheelHarmonics,
     /// Per-angle wheel function of wheel 2 (`right_cos1`.. `right_sin3`).
     pub right_wheel: WheelHarmonics,
+    /// The calibration's uncertainty of the geometry (`left_diameter_se`.. ), used by the
+    /// covariance model.
+    pub geometry_uncertainty: GeometryUncertainty,
 }
 
 impl ChassisParams {
@@ -80,8 +153,10 @@ impl ChassisParams {
         uncertainty_model: UncertaintyModel::Paper,
         kappa_left: 1.0e-7,
         kappa_right: 1.0e-7,
+        kappa_diff: 0.0,
         left_wheel: WheelHarmonics::ROUND,
         right_wheel: WheelHarmonics::ROUND,
+        geometry_uncertainty: GeometryUncertainty::EXACT,
     };
 
     /// Smallest accepted wheel diameter or track width, metres.
@@ -128,6 +203,7 @@ impl ChassisParams {
         let kappa = (0.0, Self::MAX_KAPPA);
         check("kappa_left", self.kappa_left, kappa)?;
         check("kappa_right", self.kappa_right, kappa)?;
+        check("kappa_diff", self.kappa_diff, kappa)?;
         let harmonic = (-Self::MAX_HARMONIC, Self::MAX_HARMONIC);
         for (wheel, [cos_keys, sin_keys]) in [
             (&self.left_wheel, HARMONIC_KEYS[0]),
@@ -137,6 +213,18 @@ impl ChassisParams {
                 check(cos_keys[h], wheel.cos[h], harmonic)?;
                 check(sin_keys[h], wheel.sin[h], harmonic)?;
             }
+        }
+        let g = &self.geometry_uncertainty;
+        let se = (0.0, GeometryUncertainty::MAX_SE);
+        check("left_diameter_se", g.left_diameter_se, se)?;
+        check("right_diameter_se", g.right_diameter_se, se)?;
+        check("track_width_se", g.track_width_se, se)?;
+        let r = (-1.0, 1.0);
+        check("diameters_correlation", g.diameters_correlation, r)?;
+        check("left_track_correlation", g.left_track_correlation, r)?;
+        check("right_track_correlation", g.right_track_correlation, r)?;
+        if !g.correlations_consistent() {
+            return Err(ParamError::Inconsistent("right_track_correlation"));
         }
         Ok(())
     }
@@ -193,6 +281,8 @@ pub enum ParamError {
     NotFinite(&'static str),
     /// The value is outside its documented range.
     OutOfRange(&'static str),
+    /// The value does not fit with the others (three correlations that no covariance has).
+    Inconsistent(&'static str),
 }
 
 impl core::fmt::Display for ParamError {
@@ -200,6 +290,10 @@ impl core::fmt::Display for ParamError {
         match self {
             Self::NotFinite(k) => write!(f, "{k}: not a finite number"),
             Self::OutOfRange(k) => write!(f, "{k}: out of range"),
+            Self::Inconsistent(k) => write!(
+                f,
+                "{k}: the three correlations do not form a valid correlation matrix"
+            ),
         }
     }
 }

@@ -133,6 +133,12 @@ pub struct UncertaintyCoefficients {
     pub delta_diff: f32,
     /// `kappa_left`, `kappa_right`: m^2 per metre rolled (covariance model).
     pub kappa: [f32; 2],
+    /// `kappa_diff`: m^2 per metre of `|ds_1 - ds_2|` (covariance model).
+    pub kappa_diff: f32,
+    /// Covariance of the geometry's relative calibration errors (left and right diameter,
+    /// track width), upper triangle `[ll, rr, ww, lr, lw, rw]`
+    /// (`GeometryUncertainty::relative_covariance`; covariance model).
+    pub geometry: [f32; 6],
 }
 
 /// The paper's accumulated sigmas, eqs (26)-(28).
@@ -172,7 +178,9 @@ impl PaperUncertainty {
     }
 }
 
-/// The covariance of (x, y, alpha), carried from sample to sample.
+/// The covariance of (x, y, alpha), carried from sample to sample: the wheels' slip
+/// (`kappa`) propagated as a covariance, plus the calibration's geometry errors carried as
+/// the pose's sensitivity to them and added as `S G S^T` when read.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct CovarianceUncertainty {
     xx: CompensatedSum,
@@ -181,6 +189,12 @@ pub struct CovarianceUncertainty {
     xy: CompensatedSum,
     xa: CompensatedSum,
     ya: CompensatedSum,
+    /// `d(x, y, alpha) / d(relative left diameter, relative right diameter, relative
+    /// track width)`: rows x, y (m), alpha (rad).
+    sensitivity: [[f32; 3]; 3],
+    /// The geometry covariance of the last step's coefficients (see
+    /// [`UncertaintyCoefficients::geometry`]).
+    geometry: [f32; 6],
 }
 
 impl CovarianceUncertainty {
@@ -188,7 +202,11 @@ impl CovarianceUncertainty {
     pub fn step(&mut self, k: &UncertaintyCoefficients, g: &StepGeometry, j: &StepJacobian) {
         let v1 = k.kappa[0] * g.wheel_distance[0].abs();
         let v2 = k.kappa[1] * g.wheel_distance[1].abs();
-        let q = |u: [f32; 2], w: [f32; 2]| u[0] * w[0] * v1 + u[1] * w[1] * v2;
+        // The opposite-phase error moves s_1 by +e and s_2 by -e.
+        let ve = k.kappa_diff * (g.wheel_distance[0] - g.wheel_distance[1]).abs();
+        let q = |u: [f32; 2], w: [f32; 2]| {
+            u[0] * w[0] * v1 + u[1] * w[1] * v2 + (u[0] - u[1]) * (w[0] - w[1]) * ve
+        };
         let (a, b) = (j.dx_dalpha, j.dy_dalpha);
         let (paa, pxa, pya) = (self.aa.value(), self.xa.value(), self.ya.value());
         self.xx.add(2.0 * a * pxa + a * a * paa + q(j.dx, j.dx));
@@ -197,20 +215,65 @@ impl CovarianceUncertainty {
         self.xa.add(a * paa + q(j.dx, j.dalpha));
         self.ya.add(b * paa + q(j.dy, j.dalpha));
         self.aa.add(q(j.dalpha, j.dalpha));
+        self.step_sensitivity(g, j);
+        self.geometry = k.geometry;
+    }
+
+    /// Carries the pose's sensitivity to the geometry's relative errors through one sample:
+    /// a relative diameter error `e_i` scales wheel `i`'s distance `s_i` by `1 + e_i`; a
+    /// relative track error `e_w` scales `dalpha` by `1 - e_w` at the same `ds`.
+    fn step_sensitivity(&mut self, g: &StepGeometry, j: &StepJacobian) {
+        let [s1, s2] = g.wheel_distance;
+        // d(dx)/d(dalpha) and d(dy)/d(dalpha) at a fixed ds: (w/2) (J_1 - J_2).
+        let half_w = 0.5 / g.inv_track;
+        let turn_x = (j.dx[0] - j.dx[1]) * half_w;
+        let turn_y = (j.dy[0] - j.dy[1]) * half_w;
+        let inputs = [
+            [j.dx[0] * s1, j.dx[1] * s2, -g.dalpha * turn_x],
+            [j.dy[0] * s1, j.dy[1] * s2, -g.dalpha * turn_y],
+            [j.dalpha[0] * s1, j.dalpha[1] * s2, -g.dalpha],
+        ];
+        let [sx, sy, sa] = &mut self.sensitivity;
+        for c in 0..3 {
+            sx[c] += j.dx_dalpha * sa[c] + inputs[0][c];
+            sy[c] += j.dy_dalpha * sa[c] + inputs[1][c];
+            sa[c] += inputs[2][c];
+        }
+    }
+
+    /// The geometry part of the covariance, `S G S^T`, as `[xx, yy, aa, xy, xa, ya]`.
+    fn geometry_terms(&self) -> [f32; 6] {
+        let [ll, rr, ww, lr, lw, rw] = self.geometry;
+        let g = [[ll, lr, lw], [lr, rr, rw], [lw, rw, ww]];
+        let sg = self
+            .sensitivity
+            .map(|row| [0, 1, 2].map(|c| row[0] * g[0][c] + row[1] * g[1][c] + row[2] * g[2][c]));
+        let dot = |a: [f32; 3], b: [f32; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        let [x, y, a] = self.sensitivity;
+        [
+            dot(sg[0], x),
+            dot(sg[1], y),
+            dot(sg[2], a),
+            dot(sg[0], y),
+            dot(sg[0], a),
+            dot(sg[1], a),
+        ]
     }
 
     /// `(sigma_x, sigma_y, sigma_alpha, cov_xy)`: metres, metres, radians, m^2.
     pub fn sigmas(&self) -> (f32, f32, f32, f32) {
+        let [gxx, gyy, gaa, gxy, _, _] = self.geometry_terms();
         (
-            trig::sqrt(self.xx.value()),
-            trig::sqrt(self.yy.value()),
-            trig::sqrt(self.aa.value()),
-            self.xy.value(),
+            trig::sqrt(self.xx.value() + gxx),
+            trig::sqrt(self.yy.value() + gyy),
+            trig::sqrt(self.aa.value() + gaa),
+            self.xy.value() + gxy,
         )
     }
 
     /// `(cov(x, alpha), cov(y, alpha))`: m rad.
     pub fn heading_terms(&self) -> (f32, f32) {
-        (self.xa.value(), self.ya.value())
+        let [_, _, _, _, gxa, gya] = self.geometry_terms();
+        (self.xa.value() + gxa, self.ya.value() + gya)
     }
 }

@@ -9,7 +9,7 @@
 
 use super::{Settings, BAUD_RATES, MAX_RATE_HZ};
 use crate::decimal;
-use crate::odometry::{ChassisParams, UncertaintyModel};
+use crate::odometry::{ChassisParams, GeometryUncertainty, UncertaintyModel};
 use crate::timing::{SyncMode, TimeTagPps};
 use core::fmt;
 
@@ -245,6 +245,14 @@ const HARM: Kind = Kind::F32 {
     min: -ChassisParams::MAX_HARMONIC,
     max: ChassisParams::MAX_HARMONIC,
 };
+const SE: Kind = Kind::F32 {
+    min: 0.0,
+    max: GeometryUncertainty::MAX_SE,
+};
+const CORRELATION: Kind = Kind::F32 {
+    min: -1.0,
+    max: 1.0,
+};
 const D: ChassisParams = ChassisParams::DESIGNED;
 
 /// Generates [`Key`], its tables, `Settings::get`/`put` and
@@ -408,6 +416,12 @@ key_table! {
         name: "kappa_right", unit: "m^2/m", kind: KAPPA, default: D.kappa_right,
         field: [chassis.kappa_right], record: 44 since 1, group: Chassis,
     }
+    /// `kappa_diff`: covariance model, variance of opposite-phase slip per metre of
+    /// wheel-distance difference, m^2/m.
+    KappaDiff {
+        name: "kappa_diff", unit: "m^2/m", kind: KAPPA, default: D.kappa_diff,
+        field: [chassis.kappa_diff], record: 140 since 3, group: Chassis,
+    }
     /// `left_cos1`: wheel 1's radius function, first cosine harmonic (relative).
     LeftCos1 {
         name: "left_cos1", unit: "", kind: HARM, default: D.left_wheel.cos[0],
@@ -467,6 +481,36 @@ key_table! {
     RightSin3 {
         name: "right_sin3", unit: "", kind: HARM, default: D.right_wheel.sin[2],
         field: [chassis.right_wheel.sin[2]], record: 92 since 1, group: Chassis,
+    }
+    /// `left_diameter_se`: standard error of `left_diameter` from the calibration, metres (covariance model).
+    LeftDiameterSe {
+        name: "left_diameter_se", unit: "m", kind: SE, default: D.geometry_uncertainty.left_diameter_se,
+        field: [chassis.geometry_uncertainty.left_diameter_se], record: 116 since 3, group: Chassis,
+    }
+    /// `right_diameter_se`: standard error of `right_diameter` from the calibration, metres.
+    RightDiameterSe {
+        name: "right_diameter_se", unit: "m", kind: SE, default: D.geometry_uncertainty.right_diameter_se,
+        field: [chassis.geometry_uncertainty.right_diameter_se], record: 120 since 3, group: Chassis,
+    }
+    /// `track_width_se`: standard error of `track_width` from the calibration, metres.
+    TrackWidthSe {
+        name: "track_width_se", unit: "m", kind: SE, default: D.geometry_uncertainty.track_width_se,
+        field: [chassis.geometry_uncertainty.track_width_se], record: 124 since 3, group: Chassis,
+    }
+    /// `diameters_correlation`: correlation of the two diameters' calibration errors.
+    DiametersCorrelation {
+        name: "diameters_correlation", unit: "", kind: CORRELATION, default: D.geometry_uncertainty.diameters_correlation,
+        field: [chassis.geometry_uncertainty.diameters_correlation], record: 128 since 3, group: Chassis,
+    }
+    /// `left_track_correlation`: correlation of `left_diameter`'s and `track_width`'s calibration errors.
+    LeftTrackCorrelation {
+        name: "left_track_correlation", unit: "", kind: CORRELATION, default: D.geometry_uncertainty.left_track_correlation,
+        field: [chassis.geometry_uncertainty.left_track_correlation], record: 132 since 3, group: Chassis,
+    }
+    /// `right_track_correlation`: correlation of `right_diameter`'s and `track_width`'s calibration errors.
+    RightTrackCorrelation {
+        name: "right_track_correlation", unit: "", kind: CORRELATION, default: D.geometry_uncertainty.right_track_correlation,
+        field: [chassis.geometry_uncertainty.right_track_correlation], record: 136 since 3, group: Chassis,
     }
     /// `mode`: `pps` (samples locked to the GNSS 1-PPS) or `free` (MCU clock alone).
     Mode {

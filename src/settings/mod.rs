@@ -14,7 +14,9 @@ pub mod store;
 use crate::crc::crc32;
 use crate::decimal::{self, DecimalError, Shortest};
 use crate::odometry::integrator::MAX_STEP_COUNTS;
-use crate::odometry::{ChassisParams, ParamError, UncertaintyModel, WheelHarmonics};
+use crate::odometry::{
+    ChassisParams, GeometryUncertainty, ParamError, UncertaintyModel, WheelHarmonics,
+};
 use crate::timing::{SyncMode, TimeTagPps};
 use core::fmt::{self, Write};
 
@@ -153,8 +155,10 @@ impl Settings {
             uncertainty_model: UncertaintyModel::Paper,
             kappa_left: 0.0,
             kappa_right: 0.0,
+            kappa_diff: 0.0,
             left_wheel: WheelHarmonics::ROUND,
             right_wheel: WheelHarmonics::ROUND,
+            geometry_uncertainty: GeometryUncertainty::EXACT,
         },
         mode: SyncMode::Pps,
         rate: 0,
@@ -331,6 +335,9 @@ pub enum SettingError {
     /// The chassis keys are each in range but refused together by
     /// `ChassisParams::validate` (the key it named).
     Chassis(Key),
+    /// `diameters_correlation`, `left_track_correlation` and `right_track_correlation`
+    /// are each in -1..=1 but no covariance has all three (set them together).
+    Correlations,
     /// `ChassisParams::validate` refused a key the table does not know (not expected).
     Params(ParamError),
     /// `mode pps` with a `rate` that does not divide 1,000,000.
@@ -371,6 +378,7 @@ impl From<ParamError> for SettingError {
         match e {
             ParamError::NotFinite(name) => Key::from_name(name).map(Self::NotFinite),
             ParamError::OutOfRange(name) => Key::from_name(name).map(Self::Chassis),
+            ParamError::Inconsistent(_) => Some(Self::Correlations),
         }
         .unwrap_or(Self::Params(e))
     }
@@ -415,6 +423,10 @@ impl fmt::Display for SettingError {
                 "does not fit the other chassis keys (one increment must stay within {} m and {} rad)",
                 Shortest(ChassisParams::MAX_DISTANCE_PER_COUNT),
                 Shortest(ChassisParams::MAX_HEADING_PER_COUNT)
+            ),
+            Self::Correlations => f.write_str(
+                "diameters_correlation/left_track_correlation/right_track_correlation: no \
+                 covariance has these three correlations (set them together in one line)",
             ),
             Self::Params(e) => e.fmt(f),
             Self::PpsRate => f.write_str(

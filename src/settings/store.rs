@@ -16,16 +16,17 @@
 //! | offset | size | field |
 //! |---|---|---|
 //! | 0 | 4 | magic `0x534F444F` (bytes `4F 44 4F 53`, "ODOS") |
-//! | 4 | 2 | settings format version ([`super::SETTINGS_FORMAT_VERSION`], 2) |
-//! | 6 | 2 | payload length `n` ([`Settings::SERIALIZED_LEN`], 116) |
+//! | 4 | 2 | settings format version ([`super::SETTINGS_FORMAT_VERSION`], 3) |
+//! | 6 | 2 | payload length `n` ([`Settings::SERIALIZED_LEN`], 144) |
 //! | 8 | 4 | generation, 1 for the first save |
 //! | 12 | n | payload ([`Settings::to_bytes`]) |
 //! | 12 + n | 4 | CRC-32/ISO-HDLC of bytes 0..12 + n |
 //!
-//! Saves write format version 2 ([`RECORD_LEN`] = 132 bytes). Loading also accepts the
-//! records of format version 1 (payload 112 bytes, CRC at 124, 128 bytes), written by
-//! firmware before `max_wheel_speed` existed: they load with that key at its default. The
-//! version and length must be one of these two pairs, else the record is skipped.
+//! Saves write format version 3 ([`RECORD_LEN`] = 160 bytes). Loading also accepts the
+//! records of format version 2 (payload 116 bytes, 132 bytes in all), written before the
+//! geometry's standard errors existed, and of format version 1 (payload 112 bytes, 128 bytes),
+//! written before `max_wheel_speed` existed: keys newer than a record load at their defaults.
+//! The version and length must be one of these three pairs, else the record is skipped.
 
 use super::{Settings, SETTINGS_FORMAT_VERSION};
 use crate::bytes::Reader;
@@ -44,8 +45,9 @@ pub const WORD: usize = 4;
 const CRC_AT: usize = 12 + Settings::SERIALIZED_LEN;
 
 /// The (format version, payload length) pairs a record may carry, bytes.
-const FORMATS: [(u16, usize); 2] = [
+const FORMATS: [(u16, usize); 3] = [
     (1, Settings::SERIALIZED_LEN_V1),
+    (2, Settings::SERIALIZED_LEN_V2),
     (SETTINGS_FORMAT_VERSION, Settings::SERIALIZED_LEN),
 ];
 

@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Result};
 use indicatif::{ProgressBar, ProgressStyle};
-use odo_core::odometry::{ChassisParams, UncertaintyModel};
+use odo_core::odometry::{ChassisParams, GeometryUncertainty, UncertaintyModel};
 
 use crate::config as cfg;
 use crate::csvio;
@@ -157,6 +157,46 @@ pub struct Calibration {
     pub harmonics: Option<super::HarmonicsFit>,
 }
 
+/// The geometry's calibration uncertainty as the unit's keys (`left_diameter_se`..
+/// `right_track_correlation`): the sub-trajectory fit's cluster-robust covariance, or for the
+/// paper's method its robust standard errors without correlations. A held unknown has none;
+/// standard errors beyond [`GeometryUncertainty::MAX_SE`] are capped there, and correlations
+/// that f32 rounding would make inconsistent are shrunk until they are not.
+pub fn geometry_uncertainty(
+    geometry: &GeomFit,
+    subtrajectories: Option<&SubtrajectoryFit>,
+) -> GeometryUncertainty {
+    let se = |i: usize| -> f64 {
+        let v = match subtrajectories {
+            Some(s) => s.covariance_of(i, i).map(f64::sqrt),
+            None => geometry.robust_std_errors[i],
+        };
+        v.filter(|v| v.is_finite()).unwrap_or(0.0)
+    };
+    let corr = |i: usize, j: usize| -> f64 {
+        let c = subtrajectories.and_then(|s| s.covariance_of(i, j));
+        match (c, se(i) * se(j)) {
+            (Some(c), d) if d > 0.0 && c.is_finite() => (c / d).clamp(-1.0, 1.0),
+            _ => 0.0,
+        }
+    };
+    let cap = |v: f64| v.min(f64::from(GeometryUncertainty::MAX_SE)) as f32;
+    let mut g = GeometryUncertainty {
+        left_diameter_se: cap(se(0)),
+        right_diameter_se: cap(se(1)),
+        track_width_se: cap(se(2)),
+        diameters_correlation: corr(0, 1) as f32,
+        left_track_correlation: corr(0, 2) as f32,
+        right_track_correlation: corr(1, 2) as f32,
+    };
+    while !g.correlations_consistent() {
+        g.diameters_correlation *= 0.999;
+        g.left_track_correlation *= 0.999;
+        g.right_track_correlation *= 0.999;
+    }
+    g
+}
+
 /// Runs the calibration in memory (the work of `odoctl calibrate` without the files and the
 /// printing); `names` are the two inputs' names for error messages.
 pub fn calibrate(
@@ -214,6 +254,7 @@ pub fn calibrate(
     };
     run.antenna = geometry.antenna;
     let mut params = geometry.params;
+    params.geometry_uncertainty = geometry_uncertainty(&geometry, subtrajectories.as_ref());
     let harmonics = if o.wheel_harmonics > 0 {
         let h = super::fit_harmonics(
             &run,

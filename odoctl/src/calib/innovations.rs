@@ -26,7 +26,9 @@
 //! together (Nelder-Mead over their logarithms from two starts); the more likely is kept and
 //! its kappa, the long-range rate, is what the unit's white-slip model gets: correlated slip
 //! is smoother over a few centimetres than white slip of the same long-range rate, and a
-//! white-slip fit alone took it for less slip (a third of it at `L` = 2 m).
+//! white-slip fit alone took it for less slip (a third of it at `L` = 2 m). Then opposite-phase
+//! slip when turning ([`Turning`], the unit's `kappa_diff`), white or correlated over the
+//! wheel-distance difference, kept only when the likelihood says it is there.
 
 // Dense 8x8 matrix arithmetic reads best by index.
 #![allow(clippy::needless_range_loop)]
@@ -244,6 +246,11 @@ impl Innovations {
     /// `corr` (m of wheel travel) and variance `kappa / (2 corr)`, whose distance error has
     /// the variance `kappa d` over `d >> corr`.
     pub fn score_correlated(&self, kappa: f64, corr: f64) -> FilterScore {
+        self.score_with(kappa, corr, Turning::NONE)
+    }
+
+    /// [`Innovations::score_correlated`] with opposite-phase slip beside it ([`Turning`]).
+    pub fn score_with(&self, kappa: f64, corr: f64, turning: Turning) -> FilterScore {
         let mut p: M = [[0.0; N]; N];
         p[0][0] = self.p0.0;
         p[1][1] = self.p0.0;
@@ -258,6 +265,12 @@ impl Innovations {
         };
         p[6][6] = slip_var;
         p[7][7] = slip_var;
+        let turn_var = if turning.corr > 0.0 {
+            turning.kappa_diff / (2.0 * turning.corr)
+        } else {
+            0.0
+        };
+        p[8][8] = turn_var;
         let mut x = [0.0f64; N];
         let w = self.track;
         let mut nll = 0.0;
@@ -276,6 +289,7 @@ impl Innovations {
                 0.5 * cs + st.chord * sn * half_w,
             ];
             let dads = [1.0 / w, -1.0 / w];
+            let diff = (st.s[0] - st.s[1]).abs();
             let mut a: M = [[0.0; N]; N];
             for (i, row) in a.iter_mut().enumerate() {
                 row[i] = 1.0;
@@ -297,8 +311,24 @@ impl Innovations {
                     a[6 + j][6 + j] = rho[j];
                 }
             }
+            let mut rho_turn = 0.0;
+            if turning.corr > 0.0 {
+                let ge0 = [
+                    0.5 * sn + st.chord * cs * half_w - (0.5 * sn - st.chord * cs * half_w),
+                    0.5 * cs - st.chord * sn * half_w - (0.5 * cs + st.chord * sn * half_w),
+                    2.0 / w,
+                ];
+                for (r, g) in ge0.iter().enumerate() {
+                    a[r][8] = g * diff;
+                }
+                rho_turn = (-diff / turning.corr).exp();
+                a[8][8] = rho_turn;
+            }
             x = mat_vec(&a, &x);
             p = mat_mul_t(&mat_mul(&a, &p), &a);
+            if turning.corr > 0.0 {
+                p[8][8] += (1.0 - rho_turn * rho_turn) * turn_var;
+            }
             if corr > 0.0 {
                 for j in 0..2 {
                     p[6 + j][6 + j] += (1.0 - rho[j] * rho[j]) * slip_var;
@@ -307,9 +337,18 @@ impl Innovations {
             let white = if corr > 0.0 { 0.0 } else { kappa };
             let q = [white * st.s[0].abs(), white * st.s[1].abs()];
             let g = [[dxds[0], dxds[1]], [dyds[0], dyds[1]], [dads[0], dads[1]]];
+            let ge = g.map(|row| row[0] - row[1]);
+            let qe = if turning.corr > 0.0 {
+                // The correlated opposite-phase slip moves the pose through the state, as
+                // the wheel slip does (added to `a` before the propagation below).
+                0.0
+            } else {
+                turning.kappa_diff * diff
+            };
             for r in 0..3 {
                 for c in 0..3 {
-                    p[r][c] += g[r][0] * g[c][0] * q[0] + g[r][1] * g[c][1] * q[1];
+                    p[r][c] +=
+                        g[r][0] * g[c][0] * q[0] + g[r][1] * g[c][1] * q[1] + ge[r] * ge[c] * qe;
                 }
             }
             let Some(o) = st.obs else { continue };
@@ -396,46 +435,55 @@ impl Innovations {
     /// The kappa of the largest likelihood in `[lo, hi]` (a grid in log scale, then golden
     /// sections).
     pub fn fit(&self, lo: f64, hi: f64) -> f64 {
-        let f = |l: f64| self.score(l.exp()).nll;
-        let (a, b) = (lo.ln(), hi.ln());
-        let n = 24;
-        let step = (b - a) / n as f64;
-        let (mut best, mut best_f) = (a, f64::INFINITY);
-        for i in 0..=n {
-            let l = a + step * i as f64;
-            let v = f(l);
-            if v < best_f {
-                best = l;
-                best_f = v;
-            }
-        }
-        let (mut l, mut h) = ((best - step).max(a), (best + step).min(b));
-        let g = 0.5 * (5f64.sqrt() - 1.0);
-        let (mut c, mut d) = (h - g * (h - l), l + g * (h - l));
-        let (mut fc, mut fd) = (f(c), f(d));
-        while h - l > 1e-4 {
-            if fc < fd {
-                h = d;
-                d = c;
-                fd = fc;
-                c = h - g * (h - l);
-                fc = f(c);
-            } else {
-                l = c;
-                c = d;
-                fc = fd;
-                d = l + g * (h - l);
-                fd = f(d);
-            }
-        }
-        let m = 0.5 * (l + h);
-        if f(m) <= best_f {
-            m.exp()
-        } else {
-            best.exp()
-        }
+        largest_likelihood(|k| self.score(k).nll, lo, hi)
     }
 }
+
+/// The value in `[lo, hi]` where `nll` is least: a grid in log scale, then golden sections.
+fn largest_likelihood(nll: impl Fn(f64) -> f64, lo: f64, hi: f64) -> f64 {
+    let f = |l: f64| nll(l.exp());
+    let (a, b) = (lo.ln(), hi.ln());
+    let n = 24;
+    let step = (b - a) / n as f64;
+    let (mut best, mut best_f) = (a, f64::INFINITY);
+    for i in 0..=n {
+        let l = a + step * i as f64;
+        let v = f(l);
+        if v < best_f {
+            best = l;
+            best_f = v;
+        }
+    }
+    let (mut l, mut h) = ((best - step).max(a), (best + step).min(b));
+    let g = 0.5 * (5f64.sqrt() - 1.0);
+    let (mut c, mut d) = (h - g * (h - l), l + g * (h - l));
+    let (mut fc, mut fd) = (f(c), f(d));
+    while h - l > 1e-4 {
+        if fc < fd {
+            h = d;
+            d = c;
+            fd = fc;
+            c = h - g * (h - l);
+            fc = f(c);
+        } else {
+            l = c;
+            c = d;
+            fc = fd;
+            d = l + g * (h - l);
+            fd = f(d);
+        }
+    }
+    let m = 0.5 * (l + h);
+    if f(m) <= best_f {
+        m.exp()
+    } else {
+        best.exp()
+    }
+}
+
+/// Least decrease of the negative log-likelihood for which opposite-phase slip is kept:
+/// the 95 % point of a likelihood-ratio test with one degree of freedom (3.84 / 2).
+const OPPOSITE_PHASE_EVIDENCE: f64 = 1.92;
 
 /// Shortest and longest slip correlation length the fit considers (m of wheel travel).
 pub const SLIP_CORR_RANGE: (f64, f64) = (0.05, 20.0);
@@ -473,11 +521,87 @@ impl Innovations {
         }
         (best.0, best.1)
     }
+
+    /// [`Innovations::fit_correlated`], then opposite-phase slip ([`Turning`]): white (a
+    /// search over `kappa_diff`) and correlated (Nelder-Mead over `ln kappa_diff` and
+    /// `ln corr`), kept only when it raises the likelihood by more than
+    /// [`OPPOSITE_PHASE_EVIDENCE`] per parameter it adds, and then kappa fitted again beside
+    /// it. Returns `(kappa, corr, turning)`.
+    pub fn fit_with_turning(&self, lo: f64, hi: f64) -> (f64, f64, Turning) {
+        let (kappa, corr) = self.fit_correlated(lo, hi);
+        let without = self.score_correlated(kappa, corr).nll;
+        let white = |d: f64| Turning {
+            kappa_diff: d,
+            corr: 0.0,
+        };
+        let kd = largest_likelihood(|d| self.score_with(kappa, corr, white(d)).nll, lo, hi);
+        let mut best = (white(kd), self.score_with(kappa, corr, white(kd)).nll, 1.0);
+        let (cl, ch) = SLIP_CORR_RANGE;
+        for start in [0.3f64, 3.0] {
+            let r = nelder_mead(
+                |x: &[f64]| {
+                    let t = Turning {
+                        kappa_diff: x[0].exp(),
+                        corr: x[1].exp(),
+                    };
+                    if !(lo..=hi).contains(&t.kappa_diff) || !(cl..=ch).contains(&t.corr) {
+                        return None;
+                    }
+                    Some(self.score_with(kappa, corr, t).nll)
+                },
+                &[kd.ln(), start.ln()],
+                &[0.5, 1.0],
+                NmOptions {
+                    max_evals: 80,
+                    ftol: 1e-10,
+                    restarts: 0,
+                },
+            );
+            if r.cost + OPPOSITE_PHASE_EVIDENCE < best.1 {
+                best = (
+                    Turning {
+                        kappa_diff: r.x[0].exp(),
+                        corr: r.x[1].exp(),
+                    },
+                    r.cost,
+                    2.0,
+                );
+            }
+        }
+        if best.1 > without - OPPOSITE_PHASE_EVIDENCE * best.2 {
+            return (kappa, corr, Turning::NONE);
+        }
+        let turning = best.0;
+        let kappa = largest_likelihood(|k| self.score_with(k, corr, turning).nll, lo, hi);
+        (kappa, corr, turning)
+    }
+}
+
+/// Opposite-phase slip in the filter: an error `e` on wheel 1's distance and `-e` on wheel
+/// 2's, growing by `eps |s_1 - s_2|` per sample. White (`corr` 0): `e` of variance
+/// `kappa_diff |s_1 - s_2|` per sample, the core's `kappa_diff`. Correlated: `eps` a
+/// Gauss-Markov process over the wheel-distance difference, of correlation length `corr` (m)
+/// and variance `kappa_diff / (2 corr)`, which has the same long-range variance
+/// `kappa_diff D` over a difference `D >> corr`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Turning {
+    /// Long-range variance of `e` per metre of `|s_1 - s_2|` (m^2/m).
+    pub kappa_diff: f64,
+    /// Correlation length (m of `|s_1 - s_2|`; 0: white).
+    pub corr: f64,
+}
+
+impl Turning {
+    /// No opposite-phase slip.
+    pub const NONE: Self = Self {
+        kappa_diff: 0.0,
+        corr: 0.0,
+    };
 }
 
 /// Filter state: position and heading errors, the geometry's relative errors (wheel 1 and 2
-/// scale, track width), the two wheels' correlated slip.
-const N: usize = 8;
+/// scale, track width), the two wheels' correlated slip, the correlated opposite-phase slip.
+const N: usize = 9;
 type M = [[f64; N]; N];
 
 fn mat_mul(a: &M, b: &M) -> M {
@@ -526,8 +650,8 @@ pub fn fit_kappa_filter(
 ) -> (UncertaintyFit, f64) {
     let hi = f64::from(ChassisParams::MAX_KAPPA);
     let lo = hi * 1e-12;
-    let (kappa, corr) = innovations.fit_correlated(lo, hi);
-    let params = set_coefficient(
+    let (kappa, corr, turning) = innovations.fit_with_turning(lo, hi);
+    let mut params = set_coefficient(
         &ChassisParams {
             uncertainty_model: odo_core::odometry::UncertaintyModel::Covariance,
             ..*geometry
@@ -536,7 +660,8 @@ pub fn fit_kappa_filter(
         initial,
         kappa,
     );
-    let score = innovations.score_correlated(kappa, corr);
+    params.kappa_diff = turning.kappa_diff as f32;
+    let score = innovations.score_with(kappa, corr, turning);
     let warning = if kappa <= lo * 1.01 {
         Some(
             "the errors are explained by the reference noise alone: kappa is not identifiable"

@@ -182,6 +182,8 @@ pub struct SubtrajectoryFit {
     /// The cluster-robust covariance of the free unknowns (row-major, in the order of
     /// [`SHARED_UNKNOWNS`] with the held ones left out).
     pub covariance: Vec<f64>,
+    /// The [`SHARED_UNKNOWNS`] index of each row (and column) of `covariance`.
+    pub covariance_unknowns: Vec<usize>,
     /// RMS of the x and y residuals with the nuisance parameters' degrees of freedom taken
     /// out (m).
     pub residual_sigma: f64,
@@ -189,6 +191,17 @@ pub struct SubtrajectoryFit {
     pub track_estimated: bool,
     /// Total absolute heading change of the run (rad, from the initial estimate).
     pub turning: f64,
+}
+
+impl SubtrajectoryFit {
+    /// The cluster-robust covariance of two [`SHARED_UNKNOWNS`] (m^2), `None` when either
+    /// was held.
+    pub fn covariance_of(&self, i: usize, j: usize) -> Option<f64> {
+        let n = self.covariance_unknowns.len();
+        let a = self.covariance_unknowns.iter().position(|&u| u == i)?;
+        let b = self.covariance_unknowns.iter().position(|&u| u == j)?;
+        self.covariance.get(a * n + b).copied()
+    }
 }
 
 /// One sub-trajectory's share at given shared unknowns: its cost, its reduced normal
@@ -738,6 +751,7 @@ pub fn fit_subtrajectories(
         std_errors,
         independent_std_errors,
         covariance: robust,
+        covariance_unknowns: cols.iter().map(|&c| slot(c)).collect(),
         residual_sigma: s2.sqrt(),
         track_estimated,
         turning: turned,
