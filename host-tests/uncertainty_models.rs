@@ -16,6 +16,7 @@ use odo_core::odometry::{
 };
 use std::f64::consts::PI;
 
+use odo_testkit::reference::increments;
 use odo_testkit::Rng;
 
 const KAPPA: f64 = 2.0e-6; // m^2 per metre rolled: 1.4 mm after 1 m, 4.5 mm after 10 m
@@ -106,15 +107,8 @@ fn monte_carlo(params: &ChassisParams) -> (Vec<[f64; 3]>, Vec<PoseSigma>) {
             for si in &mut s {
                 *si += (KAPPA * si.abs()).sqrt() * rng.normal();
             }
-            let (ds, da) = ((s[0] + s[1]) / 2.0, (s[0] - s[1]) / w);
-            let dd = if da == 0.0 {
-                ds
-            } else {
-                ds * 2.0 / da * (da / 2.0).sin()
-            };
-            x += dd * (a + da / 2.0).sin();
-            y += dd * (a + da / 2.0).cos();
-            a += da;
+            let [da, dx, dy] = increments(s, a, w);
+            (x, y, a) = (x + dx, y + dy, a + da);
         }
         let pose = integ.pose();
         errors.push([pose.x - x, pose.y - y, pose.heading - a]);
@@ -267,15 +261,8 @@ fn covariance_model_covers_the_calibrations_geometry_error() {
         let (mut x, mut y, mut a) = (0.0f64, 0.0f64, 0.0f64);
         for d in &steps {
             let s = [cl * d[0] as f64, cr * d[1] as f64];
-            let (ds, da) = ((s[0] + s[1]) / 2.0, (s[0] - s[1]) / wt);
-            let dd = if da == 0.0 {
-                ds
-            } else {
-                ds * 2.0 / da * (da / 2.0).sin()
-            };
-            x += dd * (a + da / 2.0).sin();
-            y += dd * (a + da / 2.0).cos();
-            a += da;
+            let [da, dx, dy] = increments(s, a, wt);
+            (x, y, a) = (x + dx, y + dy, a + da);
         }
         errors.push([nominal.x - x, nominal.y - y, nominal.heading - a]);
     }
@@ -343,15 +330,8 @@ fn covariance_model_covers_opposite_phase_slip() {
             let s = [c * d[0] as f64, c * d[1] as f64];
             let e = (KAPPA_DIFF * (s[0] - s[1]).abs()).sqrt() * rng.normal();
             let s = [s[0] + e, s[1] - e];
-            let (ds, da) = ((s[0] + s[1]) / 2.0, (s[0] - s[1]) / w);
-            let dd = if da == 0.0 {
-                ds
-            } else {
-                ds * 2.0 / da * (da / 2.0).sin()
-            };
-            x += dd * (a + da / 2.0).sin();
-            y += dd * (a + da / 2.0).cos();
-            a += da;
+            let [da, dx, dy] = increments(s, a, w);
+            (x, y, a) = (x + dx, y + dy, a + da);
         }
         let pose = integ.pose();
         errors.push([pose.x - x, pose.y - y, pose.heading - a]);
