@@ -103,17 +103,20 @@ pub enum PoseRangeError {
 impl core::fmt::Display for PoseRangeError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
+            // The limits are whole numbers, written as integers: formatting an f64 would link
+            // core's float formatting (about 12 KiB of flash).
             Self::X | Self::Y => write!(
                 f,
-                "{} must be within -{MAX_POSITION:.0}..={MAX_POSITION:.0} m",
-                if *self == Self::X { "x" } else { "y" }
+                "{} must be within -{}..={} m",
+                if *self == Self::X { "x" } else { "y" },
+                MAX_POSITION as i64,
+                MAX_POSITION as i64
             ),
-            Self::Heading => {
-                write!(
-                    f,
-                    "heading must be within -{MAX_HEADING:.0}..={MAX_HEADING:.0} rad"
-                )
-            }
+            Self::Heading => write!(
+                f,
+                "heading must be within -{}..={} rad",
+                MAX_HEADING as i64, MAX_HEADING as i64
+            ),
         }
     }
 }
