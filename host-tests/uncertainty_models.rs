@@ -81,13 +81,26 @@ fn ellipse_coverage(errors: &[[f64; 3]], sigmas: &[PoseSigma], k: f64) -> f64 {
     inside as f64 / errors.len() as f64
 }
 
-/// Runs the Monte Carlo with `params` (the integrator's model) and returns final errors and
-/// predicted sigmas, one per run.
-fn monte_carlo(params: &ChassisParams) -> (Vec<[f64; 3]>, Vec<PoseSigma>) {
+/// Independent slip of variance `KAPPA |s_i|` on each wheel's distances `s` of one sample.
+fn wheel_slip(rng: &mut Rng, mut s: [f64; 2]) -> [f64; 2] {
+    for si in &mut s {
+        *si += (KAPPA * si.abs()).sqrt() * rng.normal();
+    }
+    s
+}
+
+/// Runs the Monte Carlo with `params` (the integrator's model), the truth's wheel distances
+/// of each sample being the nominal ones through `slip`, from the generator's `seed`; returns
+/// final errors and predicted sigmas, one per run.
+fn monte_carlo(
+    params: &ChassisParams,
+    seed: u64,
+    slip: impl Fn(&mut Rng, [f64; 2]) -> [f64; 2],
+) -> (Vec<[f64; 3]>, Vec<PoseSigma>) {
     let c = PI * params.left_diameter / f64::from(params.ticks_per_rev);
     let w = params.track_width;
     let steps = path(c);
-    let mut rng = Rng::new(0x5EED_1234);
+    let mut rng = Rng::new(seed);
     let (mut errors, mut sigmas) = (vec![], vec![]);
     for _ in 0..RUNS {
         let mut integ = Integrator::new(params, WheelCounts::default(), Pose::default()).unwrap();
@@ -103,10 +116,7 @@ fn monte_carlo(params: &ChassisParams) -> (Vec<[f64; 3]>, Vec<PoseSigma>) {
                 IndexRefs::default(),
             );
             // Truth: nominal distances plus slip.
-            let mut s = [c * d[0] as f64, c * d[1] as f64];
-            for si in &mut s {
-                *si += (KAPPA * si.abs()).sqrt() * rng.normal();
-            }
+            let s = slip(&mut rng, [c * d[0] as f64, c * d[1] as f64]);
             let [da, dx, dy] = increments(s, a, w);
             (x, y, a) = (x + dx, y + dy, a + da);
         }
@@ -125,7 +135,7 @@ fn covariance_model_coverage_is_near_nominal_and_paper_model_is_stated() {
         kappa_right: KAPPA as f32,
         ..ChassisParams::DESIGNED
     };
-    let (errors, sigmas) = monte_carlo(&covariance);
+    let (errors, sigmas) = monte_carlo(&covariance, 0x5EED_1234, wheel_slip);
     let one = coverage(&errors, &sigmas, 1.0);
     let three = coverage(&errors, &sigmas, 3.0);
     let ellipse = ellipse_coverage(&errors, &sigmas, 1.0);
@@ -152,7 +162,7 @@ fn covariance_model_coverage_is_near_nominal_and_paper_model_is_stated() {
         delta_right: delta,
         ..ChassisParams::DESIGNED
     };
-    let (errors, sigmas) = monte_carlo(&paper);
+    let (errors, sigmas) = monte_carlo(&paper, 0x5EED_1234, wheel_slip);
     let one = coverage(&errors, &sigmas, 1.0);
     let three = coverage(&errors, &sigmas, 3.0);
     let mean_ratio: f64 = errors
@@ -309,34 +319,10 @@ fn covariance_model_covers_opposite_phase_slip() {
         kappa_diff: KAPPA_DIFF as f32,
         ..ChassisParams::DESIGNED
     };
-    let c = PI * params.left_diameter / f64::from(params.ticks_per_rev);
-    let w = params.track_width;
-    let steps = path(c);
-    let mut rng = Rng::new(0x0DD_0002);
-    let (mut errors, mut sigmas) = (vec![], vec![]);
-    for _ in 0..RUNS {
-        let mut integ = Integrator::new(&params, WheelCounts::default(), Pose::default()).unwrap();
-        let (mut x, mut y, mut a) = (0.0f64, 0.0f64, 0.0f64);
-        let mut g = [0i64; 2];
-        for d in &steps {
-            g = [g[0] + d[0], g[1] + d[1]];
-            integ.step(
-                WheelCounts {
-                    left: g[0],
-                    right: g[1],
-                },
-                IndexRefs::default(),
-            );
-            let s = [c * d[0] as f64, c * d[1] as f64];
-            let e = (KAPPA_DIFF * (s[0] - s[1]).abs()).sqrt() * rng.normal();
-            let s = [s[0] + e, s[1] - e];
-            let [da, dx, dy] = increments(s, a, w);
-            (x, y, a) = (x + dx, y + dy, a + da);
-        }
-        let pose = integ.pose();
-        errors.push([pose.x - x, pose.y - y, pose.heading - a]);
-        sigmas.push(integ.sigma());
-    }
+    let (errors, sigmas) = monte_carlo(&params, 0x0DD_0002, |rng, s| {
+        let e = (KAPPA_DIFF * (s[0] - s[1]).abs()).sqrt() * rng.normal();
+        [s[0] + e, s[1] - e]
+    });
     let (c1, c3) = (
         coverage(&errors, &sigmas, 1.0),
         coverage(&errors, &sigmas, 3.0),
