@@ -154,6 +154,13 @@ pub struct FilterScore {
     pub horizontal: (f64, f64),
     /// Share of heading innovations within 1 and 3 sigma (NaN without headings).
     pub heading: (f64, f64),
+    /// The geometry's relative errors after the last observation, `(c_1, c_2, b)`: the
+    /// true wheel distance is `(1 + c_i)` times the odometry's, the true track `(1 + b)`
+    /// times the one integrated with; a generalised least-squares estimate that weights each
+    /// observation by the slip's noise at the kappa scored.
+    pub geometry: [f64; 3],
+    /// Covariance of [`FilterScore::geometry`].
+    pub geometry_cov: [[f64; 3]; 3],
 }
 
 impl Innovations {
@@ -448,6 +455,8 @@ impl Innovations {
             nll: if nll.is_finite() { nll } else { f64::INFINITY },
             horizontal: (share(h1, hn), share(h3, hn)),
             heading: (share(a1, an), share(a3, an)),
+            geometry: [x[3], x[4], x[5]],
+            geometry_cov: [0, 1, 2].map(|r| [0, 1, 2].map(|c| p[3 + r][3 + c])),
         }
     }
 
