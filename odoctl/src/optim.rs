@@ -735,9 +735,108 @@ where
     }
 }
 
+/// Brent's minimisation of a function of one variable on `[a, b]` (golden sections with
+/// parabolic steps; no derivatives), to an absolute tolerance `tol` in `x`. Returns
+/// `(x, f(x), evaluations)`. For a unimodal `f` on the interval it finds the minimum; at an
+/// end of the interval it returns that end's neighbourhood.
+pub fn brent_min(mut f: impl FnMut(f64) -> f64, a: f64, b: f64, tol: f64) -> (f64, f64, usize) {
+    const GOLD: f64 = 0.381_966_011_250_105_1;
+    let (mut a, mut b) = if a <= b { (a, b) } else { (b, a) };
+    let mut x = a + GOLD * (b - a);
+    let (mut w, mut v) = (x, x);
+    let mut fx = f(x);
+    let (mut fw, mut fv) = (fx, fx);
+    let mut evals = 1;
+    let (mut d, mut e) = (0.0f64, 0.0f64);
+    for _ in 0..200 {
+        let m = 0.5 * (a + b);
+        let tol1 = tol + 1e-12 * x.abs();
+        let tol2 = 2.0 * tol1;
+        if (x - m).abs() <= tol2 - 0.5 * (b - a) {
+            break;
+        }
+        let mut golden = true;
+        if e.abs() > tol1 {
+            // Parabola through x, w, v.
+            let r = (x - w) * (fx - fv);
+            let q = (x - v) * (fx - fw);
+            let mut p = (x - v) * q - (x - w) * r;
+            let mut q = 2.0 * (q - r);
+            if q > 0.0 {
+                p = -p;
+            }
+            q = q.abs();
+            if p.abs() < (0.5 * q * e).abs() && p > q * (a - x) && p < q * (b - x) {
+                e = d;
+                d = p / q;
+                let u = x + d;
+                if u - a < tol2 || b - u < tol2 {
+                    d = tol1.copysign(m - x);
+                }
+                golden = false;
+            }
+        }
+        if golden {
+            e = if x < m { b - x } else { a - x };
+            d = GOLD * e;
+        }
+        let u = if d.abs() >= tol1 {
+            x + d
+        } else {
+            x + tol1.copysign(d)
+        };
+        let fu = f(u);
+        evals += 1;
+        if fu <= fx {
+            if u < x {
+                b = x;
+            } else {
+                a = x;
+            }
+            (v, fv, w, fw, x, fx) = (w, fw, x, fx, u, fu);
+        } else {
+            if u < x {
+                a = u;
+            } else {
+                b = u;
+            }
+            if fu <= fw || w == x {
+                (v, fv, w, fw) = (w, fw, u, fu);
+            } else if fu <= fv || v == x || v == w {
+                (v, fv) = (u, fu);
+            }
+        }
+    }
+    (x, fx, evals)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn brent_finds_smooth_and_kinked_minima_and_the_interval_end() {
+        // (function, interval, minimiser): a parabola, a quartic, |x - 0.3| (no parabola
+        // fits its kink), a minimum beyond the interval (the end is returned), a nearly
+        // flat log-likelihood shape.
+        type Case = (fn(f64) -> f64, f64, f64, f64);
+        let cases: [Case; 5] = [
+            (|x| (x - 1.7).powi(2), -5.0, 5.0, 1.7),
+            (|x| (x + 0.4).powi(4) + 2.0, -3.0, 1.0, -0.4),
+            (|x| (x - 0.3).abs(), -1.0, 2.0, 0.3),
+            (|x| x, 2.0, 4.0, 2.0),
+            (|x| x.exp() - 2.0 * x, -10.0, 10.0, 2f64.ln()),
+        ];
+        for (f, a, b, want) in cases {
+            let (x, fx, evals) = brent_min(f, a, b, 1e-6);
+            assert!((x - want).abs() < 1e-4, "{x} against {want}");
+            assert!((fx - f(x)).abs() < 1e-15);
+            assert!(evals < 60, "{evals} evaluations");
+        }
+        // A parabola converges in a few steps.
+        let (_, _, evals) = brent_min(|x| 3.0 * (x - 0.25).powi(2), -4.0, 4.0, 1e-3);
+        assert!(evals <= 12, "{evals}");
+    }
 
     fn rosenbrock_res(x: &[f64], r: &mut Vec<f64>) -> bool {
         r.clear();

@@ -261,9 +261,11 @@ pub fn calibrate(o: &CalibrateOptions, input: &ReferenceArgs) -> Result<ExitCode
         crate::outln!("  {:<16} {:>14.4e} {:>14.4e}", u.keys.1, a.1, b.1);
         if u.criterion == calib::UncertaintyCriterion::Likelihood {
             crate::outln!(
-                "{} model fit: likelihood of {} reference observations (1 m averages) under a Kalman filter of the odometry's and the geometry's errors; innovations inside 1 and 3 sigma: horizontal {:.1} % / {:.1} %{}",
+                "{} model fit: likelihood of {} reference observations (1 m averages, one per {:.1} m of path: at most {} per run) under a Kalman filter of the odometry's and the geometry's errors; innovations inside 1 and 3 sigma: horizontal {:.1} % / {:.1} %{}",
                 cfg::model_name(u.model),
                 u.points,
+                ev.dist.last().unwrap_or(&0.0) / u.points.max(1) as f64,
+                calib::MAX_OBSERVATIONS,
                 100.0 * u.coverage1,
                 100.0 * u.coverage3,
                 u.heading_coverage.map_or(String::new(), |(h1, h3)| format!(
@@ -461,7 +463,7 @@ pub fn calibrate(o: &CalibrateOptions, input: &ReferenceArgs) -> Result<ExitCode
             if opts.criterion == calib::UncertaintyCriterion::Likelihood {
                 fit.push((
                     "kappa_criterion",
-                    FitValue::Text("maximum likelihood of the reference's observations (1 m averages) under an error-state Kalman filter of the odometry, the geometry's relative errors and the wheels' slip (white or Gauss-Markov; kappa = the long-range variance rate)".into()),
+                    FitValue::Text("maximum likelihood of the reference's observations (1 m averages, at most 1000 per run) under an error-state Kalman filter of the odometry, the geometry's relative errors and the wheels' slip (white or Gauss-Markov; kappa = the long-range variance rate)".into()),
                 ));
             }
             fit.push(("uncertainty_window", FitValue::Num(opts.delta_window)));
