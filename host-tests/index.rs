@@ -86,6 +86,31 @@ proptest! {
         let raw_of = |a: i64| (a as u64 & mask) as u32;
         prop_assert_eq!(extend_near(bits, raw_of(abs), abs, raw_of(abs + step)), abs + step);
     }
+
+    /// Any two latched counts, near or 2^63 and more apart (the wide path), any
+    /// ticks_per_rev and tolerance: the turns and error of the exact i128 arithmetic (turns
+    /// rounded to the nearest, a half turn down; saturated to i64).
+    #[test]
+    fn index_any_counts_match_i128(
+        a in prop_oneof![any::<i64>(), Just(i64::MIN), Just(i64::MAX), -4i64..4],
+        b in prop_oneof![any::<i64>(), Just(i64::MIN), Just(i64::MAX), -4i64..4],
+        tpr in prop_oneof![1u32..=8, 4u32..=1_048_576, Just(u32::MAX), any::<u32>()],
+        tolerance in prop_oneof![Just(index::DEFAULT_TOLERANCE), any::<u32>()],
+    ) {
+        let tpr = tpr.max(1);
+        let mut t = IndexTracker::new(tpr, tolerance);
+        prop_assert_eq!(t.on_index(a), IndexCheck::First);
+        let (diff, w) = (i128::from(b) - i128::from(a), i128::from(tpr));
+        let rem = diff.rem_euclid(w);
+        let error = if rem > w / 2 { rem - w } else { rem };
+        let turns = ((diff - error) / w).clamp(i64::MIN.into(), i64::MAX.into());
+        let expected = if error.unsigned_abs() <= u128::from(tolerance) {
+            IndexCheck::Whole { turns: turns as i64 }
+        } else {
+            IndexCheck::Mismatch { error: error as i64 }
+        };
+        prop_assert_eq!(t.on_index(b), expected, "{} -> {} at {}", a, b, tpr);
+    }
 }
 
 /// Issue 20 item 12: latched counts about 2^63 apart (unreachable on a board, but the core

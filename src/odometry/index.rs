@@ -105,17 +105,26 @@ impl IndexTracker {
     }
 }
 
-/// [`IndexTracker::on_index`]'s (turns, error) from `previous` to `count` in i128, turns
-/// saturated to i64 (more than 2^63 turns only at one increment per turn).
+/// [`IndexTracker::on_index`]'s (turns, error) from `previous` to `count` when their
+/// difference overflows i64, exactly, turns saturated to i64 (more than 2^63 turns only at one
+/// increment per turn). In i64 (an i128 division cost 1.8 KiB of flash): with
+/// `count = qc tpr + rc` and `previous = qp tpr + rp`, the difference is
+/// `(qc - qp) tpr + (rc - rp)`, and `rc - rp` is rounded to whole turns alone.
 #[cold]
 fn nearest_turns_wide(previous: i64, count: i64, tpr: i64) -> (i64, i64) {
-    let (diff, tpr) = (i128::from(count) - i128::from(previous), i128::from(tpr));
-    let rem = diff.rem_euclid(tpr);
+    let (qc, qp) = (count.div_euclid(tpr), previous.div_euclid(tpr));
+    // In -(tpr - 1)..=tpr - 1.
+    let d = count.rem_euclid(tpr) - previous.rem_euclid(tpr);
+    let rem = d.rem_euclid(tpr);
     let error = if rem > tpr / 2 { rem - tpr } else { rem };
-    let turns = (diff - error) / tpr;
-    let saturated = if turns < 0 { i64::MIN } else { i64::MAX };
-    // |error| <= tpr / 2 < 2^31.
-    (i64::try_from(turns).unwrap_or(saturated), error as i64)
+    // d - error is -tpr, 0 or tpr.
+    let adjust = (d - error) / tpr;
+    let saturated = if qc > qp { i64::MAX } else { i64::MIN };
+    let turns = qc
+        .checked_sub(qp)
+        .and_then(|t| t.checked_add(adjust))
+        .unwrap_or(saturated);
+    (turns, error)
 }
 
 /// The absolute count of a raw counter value read close in time to a reference reading:

@@ -1,7 +1,7 @@
 //! The sample timer's interrupt on the board: a free-running 32-bit counter whose output
 //! compare (CH2) fires at each sample's tick and whose input capture (CH1) latches the PPS.
 //! What the handler reads, in which order, and what it decides, over any timer that offers
-//! [`CompareTimer`] (TIM5 on the board, a simulated timer in `host-tests/timing.rs`).
+//! [`CompareTimer`] (TIM5 on the board, a simulated timer in `host-tests/compare.rs`).
 //!
 //! # The order of the reads
 //! The status flags are read **before** the counter. A compare that fires between the two

@@ -10,8 +10,8 @@
 //! - [`compare`]: the sample timer's interrupt: the order of its reads, the compare and
 //!   re-arm decision, the PPS capture on and off.
 //!
-//! All of it is pure and host-tested (`host-tests/timing.rs`); the firmware feeds it timer
-//! captures and bytes.
+//! All of it is pure and host-tested (`host-tests/timing_*.rs`, `host-tests/compare.rs`); the
+//! firmware feeds it timer captures and bytes.
 
 pub mod clock;
 pub mod compare;

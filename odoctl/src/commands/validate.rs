@@ -10,7 +10,7 @@ use odo_core::odometry::{ChassisParams, UncertaintyModel};
 use crate::calib::{self, Run};
 use crate::config::{self as cfg};
 use crate::csvio;
-use crate::reference::cli::{read_reference, reference_for_samples, ReferenceArgs};
+use crate::reference::cli::{read_matched_run, MatchedRun, ReferenceArgs, ReferenceSummary};
 use crate::stats::{coverage, summarize};
 
 use super::create;
@@ -37,15 +37,11 @@ pub fn validate(
     if let [one] = models {
         params.uncertainty_model = *one;
     }
-    let samples = csvio::read_samples(samples_path)?;
-    let reference = reference_for_samples(&read_reference(reference_path, input)?, &samples)?;
-    let matches = csvio::match_or_fail(
-        &samples,
-        &samples_path.display().to_string(),
-        &reference,
-        &reference_path.display().to_string(),
-        2,
-    )?;
+    let MatchedRun {
+        samples,
+        reference,
+        matches,
+    } = read_matched_run(samples_path, reference_path, input, ReferenceSummary::Print)?;
     let antenna = match config {
         Some(p) => calib::read_lever_arm(p)?,
         None => (0.0, 0.0),

@@ -1,7 +1,7 @@
 //! The command-line face of the reference input: the options `calibrate` and `validate` add
 //! to `--reference` ([`ReferenceArgs`]), those `simulate` adds to write receiver logs
-//! ([`ReceiverArgs`]), and the two calls the commands make ([`reference_for_samples`],
-//! [`ReceiverArgs::prepare`] / [`ReceiverArgs::write`]).
+//! ([`ReceiverArgs`]), and the calls the commands make ([`reference_for_samples`],
+//! [`read_matched_run`], [`ReceiverArgs::prepare`] / [`ReceiverArgs::write`]).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -14,7 +14,7 @@ use super::{
     antenna_position, gps_time, load, parse_antenna, Format, MinFix, OriginChoice, Reference,
     ReferenceOptions, TimeScale,
 };
-use crate::csvio::{RefPoint, Sample};
+use crate::csvio::{self, RefPoint, Sample};
 use crate::simulate::SimRun;
 
 /// How `--reference` is read (`calibrate`, `validate`).
@@ -63,11 +63,21 @@ pub fn read_reference(path: &Path, args: &ReferenceArgs) -> Result<Reference> {
 /// samples' time (refused when they do not overlap), with a summary of what was used on
 /// stdout.
 pub fn reference_for_samples(r: &Reference, samples: &[Sample]) -> Result<Vec<RefPoint>> {
-    let range = (
+    let points = r.ref_points(time_span(samples))?;
+    print_summary(r);
+    Ok(points)
+}
+
+/// The first and last sample's time (s), NaN when there is none.
+fn time_span(samples: &[Sample]) -> (f64, f64) {
+    (
         samples.first().map_or(f64::NAN, |s| s.t),
         samples.last().map_or(f64::NAN, |s| s.t),
-    );
-    let points = r.ref_points(range)?;
+    )
+}
+
+/// What of a receiver log was used, on stdout (nothing for a REFERENCE CSV).
+fn print_summary(r: &Reference) {
     if r.time == TimeScale::Gps {
         crate::outln!("reference {} ({}): {}", r.file, r.format, r.report);
         if let Some(o) = r.origin {
@@ -84,7 +94,55 @@ pub fn reference_for_samples(r: &Reference, samples: &[Sample]) -> Result<Vec<Re
             );
         }
     }
-    Ok(points)
+}
+
+/// One run read to judge its odometry against the reference (`validate`, `validate --mcap`).
+#[derive(Debug, Clone)]
+pub struct MatchedRun {
+    /// SAMPLES rows.
+    pub samples: Vec<Sample>,
+    /// REFERENCE rows over the samples' time span (a receiver log aligned to them).
+    pub reference: Vec<RefPoint>,
+    /// (sample index, reference index) at common times, at least two.
+    pub matches: Vec<(usize, usize)>,
+}
+
+/// Whether [`read_matched_run`] prints what of a receiver log it used.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ReferenceSummary {
+    /// On stdout, as [`reference_for_samples`] does.
+    Print,
+    /// Not at all (a second reading of the same files).
+    Quiet,
+}
+
+/// Reads a SAMPLES file and `--reference` of any format, the reference over the samples'
+/// time span, and matches their times; fails naming both files when fewer than two times
+/// are common.
+pub fn read_matched_run(
+    samples_path: &Path,
+    reference_path: &Path,
+    args: &ReferenceArgs,
+    summary: ReferenceSummary,
+) -> Result<MatchedRun> {
+    let samples = csvio::read_samples(samples_path)?;
+    let source = read_reference(reference_path, args)?;
+    let reference = match summary {
+        ReferenceSummary::Print => reference_for_samples(&source, &samples)?,
+        ReferenceSummary::Quiet => source.ref_points(time_span(&samples))?,
+    };
+    let matches = csvio::match_or_fail(
+        &samples,
+        &samples_path.display().to_string(),
+        &reference,
+        &reference_path.display().to_string(),
+        2,
+    )?;
+    Ok(MatchedRun {
+        samples,
+        reference,
+        matches,
+    })
 }
 
 /// Receiver logs of a simulated run (`simulate`).

@@ -9,8 +9,8 @@ use anyhow::Result;
 use super::recording::{self, RecordingSummary};
 use crate::calib::{self, Evaluation, Run};
 use crate::config as cfg;
-use crate::csvio::{self, RefPoint};
-use crate::reference::cli::{read_reference, ReferenceArgs};
+use crate::csvio::RefPoint;
+use crate::reference::cli::{read_matched_run, MatchedRun, ReferenceArgs, ReferenceSummary};
 use odo_core::odometry::Pose;
 
 /// Nanoseconds of a CSV time (s); the files' own time base (metadata `stamp_source` =
@@ -81,18 +81,16 @@ pub fn validate_hook(
     heading: Option<f64>,
 ) -> Result<()> {
     let params = cfg::load(config, sets)?;
-    let samples = csvio::read_samples(samples_path)?;
-    let range = (
-        samples.first().map_or(f64::NAN, |s| s.t),
-        samples.last().map_or(f64::NAN, |s| s.t),
-    );
-    let reference = read_reference(reference_path, reference_input)?.ref_points(range)?;
-    let matches = csvio::match_or_fail(
-        &samples,
-        &samples_path.display().to_string(),
-        &reference,
-        &reference_path.display().to_string(),
-        2,
+    // The command calling this hook (validate, calibrate) prints the reference's summary.
+    let MatchedRun {
+        samples,
+        reference,
+        matches,
+    } = read_matched_run(
+        samples_path,
+        reference_path,
+        reference_input,
+        ReferenceSummary::Quiet,
     )?;
     let antenna = config.map_or(Ok((0.0, 0.0)), calib::read_lever_arm)?;
     let run = Run::new(&samples, &reference, matches).with_antenna(antenna);

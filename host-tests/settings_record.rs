@@ -1,0 +1,321 @@
+//! The settings record (`odo_core::settings::record`): the codec against the layout
+//! docs/PROTOCOL.md documents, byte for byte, and the flash records of every format version
+//! (v1 and v2 records written by older firmware still load; damaged or mislabelled ones are
+//! refused).
+
+use odo_core::crc::crc32;
+use odo_core::settings::store::{
+    encode_record, Flash, SettingsStore, MAGIC, RECORD_LEN, SLOT_LEN, WORD,
+};
+use odo_core::settings::*;
+
+mod support;
+use support::settings::{load, variant, SimFlash};
+
+#[test]
+fn serialisation_round_trip_and_checksum() {
+    for i in 0..50 {
+        let s = variant(i);
+        let b = s.to_bytes();
+        assert_eq!(b.len(), Settings::SERIALIZED_LEN);
+        assert_eq!(Settings::from_bytes(&b).unwrap(), s);
+    }
+    assert_ne!(variant(1).checksum(), variant(2).checksum());
+    assert!(Settings::from_bytes(&[0u8; 10]).is_err());
+    let mut b = Settings::DEFAULT.to_bytes();
+    b[96] = 7; // bad uncertainty model code
+    assert!(Settings::from_bytes(&b).is_err());
+    // The new key is the last field.
+    let mut s = Settings::DEFAULT;
+    s.max_wheel_speed = 1.25;
+    let b = s.to_bytes();
+    assert_eq!(&b[112..116], &1.25f32.to_le_bytes());
+    assert_eq!(Settings::from_bytes(&b).unwrap(), s);
+    assert!(
+        Settings::from_bytes(&b[..116]).is_err(),
+        "version 3 needs 144 bytes"
+    );
+    assert!(Settings::from_bytes_version(4, &b).is_err());
+    assert!(Settings::from_bytes_version(0, &b).is_err());
+}
+
+/// A record exactly as the firmware of format version 1 wrote it: 112-byte payload (the
+/// version 2 payload without its last 4 bytes), CRC at 124, 128 bytes.
+fn v1_record(settings: &Settings, generation: u32) -> Vec<u8> {
+    let mut r = Vec::new();
+    r.extend_from_slice(&MAGIC.to_le_bytes());
+    r.extend_from_slice(&1u16.to_le_bytes());
+    r.extend_from_slice(&112u16.to_le_bytes());
+    r.extend_from_slice(&generation.to_le_bytes());
+    r.extend_from_slice(&settings.to_bytes()[..Settings::SERIALIZED_LEN_V1]);
+    let crc = crc32(&r);
+    r.extend_from_slice(&crc.to_le_bytes());
+    assert_eq!(r.len(), 128);
+    r
+}
+
+/// A record exactly as the firmware of format version 2 wrote it: 116-byte payload (the
+/// version 3 payload without the geometry's standard errors), CRC at 128, 132 bytes.
+fn v2_record(settings: &Settings, generation: u32) -> Vec<u8> {
+    let mut r = Vec::new();
+    r.extend_from_slice(&MAGIC.to_le_bytes());
+    r.extend_from_slice(&2u16.to_le_bytes());
+    r.extend_from_slice(&116u16.to_le_bytes());
+    r.extend_from_slice(&generation.to_le_bytes());
+    r.extend_from_slice(&settings.to_bytes()[..Settings::SERIALIZED_LEN_V2]);
+    let crc = crc32(&r);
+    r.extend_from_slice(&crc.to_le_bytes());
+    assert_eq!(r.len(), 132);
+    r
+}
+
+#[test]
+fn record_layout_of_format_version_3() {
+    let r = encode_record(&variant(4), 9);
+    assert_eq!(RECORD_LEN, 160);
+    assert_eq!(r.len(), RECORD_LEN);
+    assert_eq!(RECORD_LEN % WORD, 0);
+    assert_eq!(&r[4..8], &[3, 0, 144, 0]);
+    assert_eq!(&r[12..156], &variant(4).to_bytes());
+    assert_eq!(&r[156..160], &crc32(&r[..156]).to_le_bytes());
+    // The v1 record is the same bytes up to the payload's end, but its own header and CRC.
+    let old = v1_record(&variant(4), 9);
+    assert_eq!(&old[12..124], &r[12..124]);
+}
+
+#[test]
+fn format_version_1_record_loads_with_the_default_max_wheel_speed() {
+    let mut old = variant(3);
+    old.rate = 100;
+    // Whatever the in-memory value, a v1 record cannot carry it.
+    old.max_wheel_speed = 7.0;
+    let mut f = SimFlash::new(4 * SLOT_LEN);
+    f.program(0, 0, &v1_record(&old, 41)).unwrap();
+    let expect = Settings {
+        max_wheel_speed: Settings::DEFAULT_MAX_WHEEL_SPEED,
+        ..old
+    };
+    assert_eq!(load(&f), (expect, SettingsSource::Flash, 41));
+    assert_eq!(
+        Settings::from_bytes_version(1, &old.to_bytes()[..112]).unwrap(),
+        expect
+    );
+    // The next save writes version 2 after it, above its generation, and wins.
+    let mut store = SettingsStore::new(&mut f);
+    assert_eq!(store.save(&variant(5)).unwrap(), 42);
+    assert_eq!(load(&f), (variant(5), SettingsSource::Flash, 42));
+    assert_eq!(&f.mem[0][SLOT_LEN + 4..SLOT_LEN + 8], &[3, 0, 144, 0]);
+    assert_eq!(f.violations, 0);
+    // The v1 record is still the fallback if the new one is damaged.
+    f.mem[0][SLOT_LEN + 20] ^= 0x10;
+    assert_eq!(load(&f), (expect, SettingsSource::Flash, 41));
+}
+
+#[test]
+fn format_version_2_record_loads_with_an_exact_geometry() {
+    let mut old = variant(3);
+    old.chassis.geometry_uncertainty.track_width_se = 5e-4;
+    old.chassis.kappa_diff = 2e-5;
+    let mut f = SimFlash::new(4 * SLOT_LEN);
+    f.program(0, 0, &v2_record(&old, 7)).unwrap();
+    let expect = Settings {
+        chassis: odo_core::odometry::ChassisParams {
+            geometry_uncertainty: odo_core::odometry::GeometryUncertainty::EXACT,
+            kappa_diff: 0.0,
+            ..old.chassis
+        },
+        ..old
+    };
+    assert_eq!(load(&f), (expect, SettingsSource::Flash, 7));
+    // The next save writes version 3 and wins; the v2 record stays the fallback.
+    let mut store = SettingsStore::new(&mut f);
+    assert_eq!(store.save(&old).unwrap(), 8);
+    assert_eq!(load(&f), (old, SettingsSource::Flash, 8));
+    f.mem[0][SLOT_LEN + 20] ^= 0x10;
+    assert_eq!(load(&f), (expect, SettingsSource::Flash, 7));
+    assert_eq!(f.violations, 0);
+}
+
+/// Damaged or mislabelled v1 records are refused like any other, and saving over them
+/// keeps the generations increasing and never programs a used word.
+#[test]
+fn corrupt_or_mislabelled_old_records_are_rejected() {
+    let good = v1_record(&variant(2), 10);
+    let cases: Vec<(&str, Vec<u8>)> = vec![
+        ("payload bit", {
+            let mut r = good.clone();
+            r[40] ^= 1;
+            r
+        }),
+        ("crc bit", {
+            let mut r = good.clone();
+            r[125] ^= 0x80;
+            r
+        }),
+        ("v1 header with a v2 length", {
+            let mut r = good.clone();
+            r[6] = 116;
+            r
+        }),
+        ("v2 header on a v1 record", {
+            let mut r = good.clone();
+            r[4] = 2;
+            let crc = crc32(&r[..124]);
+            r[124..128].copy_from_slice(&crc.to_le_bytes());
+            r
+        }),
+        ("unknown version 3", {
+            let mut r = good.clone();
+            r[4] = 3;
+            let crc = crc32(&r[..124]);
+            r[124..128].copy_from_slice(&crc.to_le_bytes());
+            r
+        }),
+        ("v1 with settings the new rules refuse (rate 1 at 2 m/s)", {
+            let mut s = variant(2);
+            s.rate = 1;
+            v1_record(&s, 10)
+        }),
+    ];
+    for (what, rec) in cases {
+        let mut f = SimFlash::new(2 * SLOT_LEN);
+        f.program(0, 0, &rec).unwrap();
+        let before = f.mem.clone();
+        assert_eq!(
+            load(&f),
+            (Settings::DEFAULT, SettingsSource::Defaults, 0),
+            "{what}"
+        );
+        assert_eq!(f.mem, before, "{what}: loading changed the flash");
+        // A save goes after it (never over it), above any CRC-valid generation.
+        let mut store = SettingsStore::new(&mut f);
+        let g = store.save(&variant(7)).unwrap();
+        assert!(g >= 1, "{what}");
+        assert_eq!(load(&f).0, variant(7), "{what}");
+        assert_eq!(&f.mem[0][..128], &rec[..], "{what}: old slot untouched");
+        assert_eq!(f.violations, 0, "{what}");
+    }
+    // The CRC-valid but refused record still counts for the generation.
+    let mut s = variant(2);
+    s.rate = 1;
+    let mut f = SimFlash::new(2 * SLOT_LEN);
+    f.program(0, 0, &v1_record(&s, 10)).unwrap();
+    assert_eq!(SettingsStore::new(&mut f).save(&variant(7)).unwrap(), 11);
+}
+
+/// The version 3 layout written field by field as docs/PROTOCOL.md section 5 lists it (the
+/// encoder before the key table): the table's codec must give the same bytes.
+fn layout_v3_by_hand(s: &Settings) -> Vec<u8> {
+    let c = &s.chassis;
+    let mut b = Vec::new();
+    for v in [c.left_diameter, c.right_diameter, c.track_width] {
+        b.extend_from_slice(&v.to_le_bytes());
+    }
+    b.extend_from_slice(&c.ticks_per_rev.to_le_bytes());
+    for v in [
+        c.delta_left,
+        c.delta_right,
+        c.delta_diff,
+        c.kappa_left,
+        c.kappa_right,
+    ] {
+        b.extend_from_slice(&v.to_le_bytes());
+    }
+    for w in [&c.left_wheel, &c.right_wheel] {
+        for v in w.cos.iter().chain(w.sin.iter()) {
+            b.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    b.push(match c.uncertainty_model {
+        odo_core::odometry::UncertaintyModel::Paper => 0,
+        odo_core::odometry::UncertaintyModel::Covariance => 1,
+    });
+    b.push(match s.mode {
+        odo_core::timing::SyncMode::Pps => 0,
+        odo_core::timing::SyncMode::Free => 1,
+    });
+    b.push(match s.time_tag_pps {
+        odo_core::timing::TimeTagPps::Previous => 0,
+        odo_core::timing::TimeTagPps::Next => 1,
+    });
+    b.push(0);
+    for v in [s.rate, s.output_divider, s.baud] {
+        b.extend_from_slice(&v.to_le_bytes());
+    }
+    b.extend_from_slice(&s.max_wheel_speed.to_le_bytes());
+    let g = &c.geometry_uncertainty;
+    for v in [
+        g.left_diameter_se,
+        g.right_diameter_se,
+        g.track_width_se,
+        g.diameters_correlation,
+        g.left_track_correlation,
+        g.right_track_correlation,
+        c.kappa_diff,
+    ] {
+        b.extend_from_slice(&v.to_le_bytes());
+    }
+    b
+}
+
+#[test]
+fn table_codec_is_the_documented_layout_byte_for_byte() {
+    let mut s = variant(9);
+    s.chassis.uncertainty_model = odo_core::odometry::UncertaintyModel::Covariance;
+    s.chassis.right_wheel.sin[2] = -0.031;
+    s.time_tag_pps = odo_core::timing::TimeTagPps::Next;
+    s.mode = odo_core::timing::SyncMode::Pps;
+    s.max_wheel_speed = 3.25;
+    s.chassis.geometry_uncertainty = odo_core::odometry::GeometryUncertainty {
+        left_diameter_se: 2.5e-5,
+        right_diameter_se: 2.25e-5,
+        track_width_se: 4.0e-4,
+        diameters_correlation: 0.75,
+        left_track_correlation: 0.5,
+        right_track_correlation: 0.25,
+    };
+    s.chassis.kappa_diff = 3.5e-5;
+    for s in [Settings::DEFAULT, variant(1), s] {
+        assert_eq!(s.to_bytes().to_vec(), layout_v3_by_hand(&s));
+        // Version 1 is its first 112 bytes.
+        let without_se = Settings {
+            chassis: odo_core::odometry::ChassisParams {
+                geometry_uncertainty: odo_core::odometry::GeometryUncertainty::EXACT,
+                kappa_diff: 0.0,
+                ..s.chassis
+            },
+            ..s
+        };
+        let v1 = Settings::from_bytes_version(1, &layout_v3_by_hand(&s)[..112]).unwrap();
+        assert_eq!(
+            v1,
+            Settings {
+                max_wheel_speed: Settings::DEFAULT_MAX_WHEEL_SPEED,
+                ..without_se
+            }
+        );
+        // Version 2 is its first 116 bytes.
+        let v2 = Settings::from_bytes_version(2, &layout_v3_by_hand(&s)[..116]).unwrap();
+        assert_eq!(v2, without_se);
+    }
+    // The checksum of the defaults: over the 144 bytes of version 3 (firmware of version 2
+    // reported the CRC of the first 116).
+    assert_eq!(
+        Settings::DEFAULT.checksum(),
+        crc32(&layout_v3_by_hand(&Settings::DEFAULT))
+    );
+    // Every byte belongs to one key, but the reserved byte 99.
+    let mut owner = [0u32; Settings::SERIALIZED_LEN];
+    for k in Key::ALL {
+        let r = k.info().record;
+        for o in &mut owner[usize::from(r.offset)..][..k.info().kind.record_size()] {
+            *o += 1;
+        }
+    }
+    for (i, n) in owner.iter().enumerate() {
+        assert_eq!(*n, u32::from(i != 99), "byte {i}");
+    }
+    assert_eq!(serialized_len(1), Settings::SERIALIZED_LEN_V1);
+    assert_eq!(serialized_len(2), Settings::SERIALIZED_LEN_V2);
+    assert_eq!(serialized_len(3), Settings::SERIALIZED_LEN);
+}
