@@ -10,6 +10,7 @@ use odo_core::odometry::{ChassisParams, GeometryUncertainty, UncertaintyModel};
 use crate::config as cfg;
 use crate::csvio;
 
+use super::uncertainty::with_covariance_coefficients;
 use super::{
     evaluate, fit_delta_diff, fit_geometry, fit_kappa_filter, fit_restart_heading,
     fit_subtrajectories, fit_uncertainty_on, paper_cluster_errors, standard_errors,
@@ -281,68 +282,92 @@ pub fn calibrate(
                 models.push(m);
             }
         }
-        // The restarted sub-trajectories of the coverage criterion, made when first needed.
-        let mut restarts: Option<Restarts> = None;
-        for &m in &models {
-            let mut p = params;
-            p.uncertainty_model = m;
-            if m == UncertaintyModel::Covariance && o.criterion == UncertaintyCriterion::Likelihood
-            {
-                let innovations = Innovations::new(
-                    &run,
-                    &p,
-                    geometry.heading0,
-                    o.reference_sigma,
-                    o.reference_heading_sigma,
-                    OBSERVATION_BLOCK,
-                )?;
-                let u = fit_kappa_filter(&innovations, &p, initial, o.delta_mode).0;
-                timer.lap("uncertainty fit (filter)");
-                params = u.params;
-                uncertainty.push(u);
-                continue;
-            }
-            let restarts = match &mut restarts {
-                Some(r) => &*r,
-                None => {
-                    let r = Restarts::new(&run, &params, geometry.heading0, o.delta_window)?;
-                    timer.lap("restart headings");
-                    &*restarts.insert(r)
-                }
-            };
-            let pb = bar(o.quiet, &format!("{} model fit", cfg::model_name(m)));
-            let mut u = fit_uncertainty_on(
+        // The likelihood fit of the covariance model needs only the geometry: it runs on a
+        // thread of its own beside the paper model's fits.
+        let filter_fit = |p: ChassisParams| -> Result<UncertaintyFit> {
+            let innovations = Innovations::new(
                 &run,
-                restarts,
                 &p,
-                initial,
+                geometry.heading0,
                 o.reference_sigma,
-                o.delta_mode,
-                &pb,
+                o.reference_heading_sigma,
+                OBSERVATION_BLOCK,
             )?;
-            pb.finish_and_clear();
-            timer.lap("uncertainty fit");
-            if m == UncertaintyModel::Paper {
-                let pb = bar(o.quiet, "delta_diff fit");
-                u = fit_delta_diff(
+            Ok(fit_kappa_filter(&innovations, &p, initial, o.delta_mode).0)
+        };
+        let filter_wanted = models.contains(&UncertaintyModel::Covariance)
+            && o.criterion == UncertaintyCriterion::Likelihood;
+        std::thread::scope(|scope| -> Result<()> {
+            let mut filter = filter_wanted.then(|| {
+                let p = ChassisParams {
+                    uncertainty_model: UncertaintyModel::Covariance,
+                    ..params
+                };
+                scope.spawn(move || filter_fit(p))
+            });
+            // The restarted sub-trajectories of the coverage criterion, made when first needed.
+            let mut restarts: Option<Restarts> = None;
+            for &m in &models {
+                let mut p = params;
+                p.uncertainty_model = m;
+                if m == UncertaintyModel::Covariance
+                    && o.criterion == UncertaintyCriterion::Likelihood
+                {
+                    let mut u = match filter.take() {
+                        Some(f) => f
+                            .join()
+                            .map_err(|_| anyhow::anyhow!("the filter's fit failed"))??,
+                        None => filter_fit(p)?,
+                    };
+                    timer.lap("uncertainty fit (filter)");
+                    params = with_covariance_coefficients(&params, &u.params);
+                    u.params = with_covariance_coefficients(&p, &u.params);
+                    uncertainty.push(u);
+                    continue;
+                }
+                let restarts = match &mut restarts {
+                    Some(r) => &*r,
+                    None => {
+                        let r = Restarts::new(&run, &params, geometry.heading0, o.delta_window)?;
+                        timer.lap("restart headings");
+                        &*restarts.insert(r)
+                    }
+                };
+                let pb = bar(o.quiet, &format!("{} model fit", cfg::model_name(m)));
+                let mut u = fit_uncertainty_on(
                     &run,
                     restarts,
-                    u,
+                    &p,
                     initial,
-                    DiffOptions {
-                        fit: o.fit_delta_diff,
-                        ref_heading_sigma: o.reference_heading_sigma,
-                        ref_sigma: o.reference_sigma,
-                        mode: o.delta_mode,
-                    },
+                    o.reference_sigma,
+                    o.delta_mode,
                     &pb,
                 )?;
                 pb.finish_and_clear();
-                timer.lap("delta_diff fit");
+                timer.lap("uncertainty fit");
+                if m == UncertaintyModel::Paper {
+                    let pb = bar(o.quiet, "delta_diff fit");
+                    u = fit_delta_diff(
+                        &run,
+                        restarts,
+                        u,
+                        initial,
+                        DiffOptions {
+                            fit: o.fit_delta_diff,
+                            ref_heading_sigma: o.reference_heading_sigma,
+                            ref_sigma: o.reference_sigma,
+                            mode: o.delta_mode,
+                        },
+                        &pb,
+                    )?;
+                    pb.finish_and_clear();
+                    timer.lap("delta_diff fit");
+                }
+                params = u.params;
+                uncertainty.push(u);
             }
-            params = u.params;
-            uncertainty.push(u);
-        }
+            Ok(())
+        })?;
         params.uncertainty_model = if let Some(m) = o.select {
             m
         } else if models.contains(&initial.uncertainty_model) {

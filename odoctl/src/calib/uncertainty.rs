@@ -103,6 +103,20 @@ pub(super) fn set_coefficient(
     }
     p
 }
+
+/// `base` with the covariance model's coefficients of `fitted` (the slip and opposite-phase
+/// slip; the geometry and the paper model's coefficients stay `base`'s).
+pub(super) fn with_covariance_coefficients(
+    base: &ChassisParams,
+    fitted: &ChassisParams,
+) -> ChassisParams {
+    ChassisParams {
+        kappa_left: fitted.kappa_left,
+        kappa_right: fitted.kappa_right,
+        kappa_diff: fitted.kappa_diff,
+        ..*base
+    }
+}
 /// Coverage of the horizontal `k`-sigma band widened by the reference noise:
 /// the fraction of points with `e <= k sqrt(sigma_h^2 + ref_sigma^2)`.
 pub fn horizontal_coverage(ev: &Evaluation, ref_sigma: f64, k: f64) -> f64 {
