@@ -38,18 +38,18 @@ pub const POSE_FRAME_BITS: u32 = 1140;
 /// Derivation, from the instruction counts of the README's performance table (`bench/run`,
 /// release code under QEMU) and the firmware's own `process_max` in `status`:
 ///
-/// * a typical sample costs the processing task about 7,000 instructions (timing, flags,
+/// * a typical sample costs the processing task about 7,500 instructions (timing, flags,
 ///   index, odometry and uncertainty, the record's f64 fields, the 114-byte frame at
-///   2,540, queueing); the per-angle wheel model adds up to 2,113 - 808 = 1,305 in its
-///   worst case: about **8,300 instructions** per sample;
+///   2,871, queueing); the per-angle wheel model adds up to 2,101 - 797 = 1,304 in its
+///   worst case: about **8,800 instructions** per sample;
 /// * the worst sample (`process_max`: the first one, which builds the integrator, and the
 ///   ones that log a state change or send the once-a-second Status) costs about
-///   **24,000 instructions**;
+///   **27,100 instructions**;
 /// * at 84 MHz the flash needs 2 wait states; the ART accelerator hides most of them, but
 ///   counted at **2 cycles per instruction** (no cache hits at all) a typical sample takes
-///   16,600 cycles (198 us) and the worst 48,000 cycles (571 us).
+///   17,600 cycles (210 us) and the worst 54,200 cycles (645 us).
 ///
-/// At 1,000 Hz this is 999 x 16,600 + 48,000 = 16.6 million cycles per second, **20 % of the
+/// At 1,000 Hz this is 999 x 17,600 + 54,200 = 17.6 million cycles per second, **21 % of the
 /// CPU** (within the 25 % budget that leaves the rest to the sample interrupt, the UART
 /// interrupts and the command task), and even the worst sample ends well within one 1 ms
 /// sample period, so the sample queue never fills in steady state. 1,000 also divides

@@ -15,6 +15,24 @@ use crate::stats::{coverage, summarize};
 
 use super::create;
 
+/// The antenna lever arm `(forward, left)` (m) of a calibration result (`[fit]`), (0, 0)
+/// without one; printed when there is one. `validate` and its ensemble apply it to the runs.
+pub(super) fn lever_arm(config: Option<&Path>) -> Result<(f64, f64)> {
+    let antenna = match config {
+        Some(p) => calib::read_lever_arm(p)?,
+        None => (0.0, 0.0),
+    };
+    if antenna != (0.0, 0.0) {
+        crate::outln!(
+            "antenna lever arm from {}: {:.4} m forward, {:.4} m left of the axle centre",
+            config.map_or(String::new(), |p| p.display().to_string()),
+            antenna.0,
+            antenna.1
+        );
+    }
+    Ok(antenna)
+}
+
 /// `odoctl validate`.
 #[allow(clippy::too_many_arguments)]
 pub fn validate(
@@ -42,19 +60,7 @@ pub fn validate(
         reference,
         matches,
     } = read_matched_run(samples_path, reference_path, input, ReferenceSummary::Print)?;
-    let antenna = match config {
-        Some(p) => calib::read_lever_arm(p)?,
-        None => (0.0, 0.0),
-    };
-    let run = Run::new(&samples, &reference, matches).with_antenna(antenna);
-    if antenna != (0.0, 0.0) {
-        crate::outln!(
-            "antenna lever arm from {}: {:.4} m forward, {:.4} m left of the axle centre",
-            config.map_or(String::new(), |p| p.display().to_string()),
-            antenna.0,
-            antenna.1
-        );
-    }
+    let run = Run::new(&samples, &reference, matches).with_antenna(lever_arm(config)?);
     let last = run.len() - 1;
     let h0 = match heading {
         Some(h) => h,

@@ -9,8 +9,7 @@ use odo_core::odometry::{ChassisParams, UncertaintyModel};
 
 use crate::calib::{self, CheckpointSample, Ensemble, Run};
 use crate::config as cfg;
-use crate::csvio;
-use crate::reference::cli::{read_reference, reference_for_samples, ReferenceArgs};
+use crate::reference::cli::{read_matched_run, MatchedRun, ReferenceArgs, ReferenceSummary};
 
 /// What `validate` takes for an ensemble.
 #[derive(Debug, Clone)]
@@ -64,8 +63,9 @@ pub fn read_run_list(path: &Path) -> Result<Vec<(PathBuf, PathBuf)>> {
     Ok(runs)
 }
 
-/// `odoctl validate` with several runs: each is replayed from its start (the reference
-/// position, averaged over the opening standstill; the reference heading averaged there when
+/// `odoctl validate` with several runs: each is read as `validate` reads its run (the same
+/// matching, the calibration result's antenna lever arm applied) and replayed from its start
+/// (the reference position, averaged over the opening standstill; the reference heading averaged there when
 /// the reference has headings, else the heading minimising eq (16) on that run, which makes the
 /// horizontal figures optimistic), and compared with the reference at every checkpoint. The
 /// bands are widened by what the reference adds to the observed error: its noise at the point
@@ -91,17 +91,15 @@ pub fn validate_ensemble(o: &EnsembleOptions, input: &ReferenceArgs) -> Result<E
         .collect();
     let rh2 = o.reference_heading_sigma * o.reference_heading_sigma;
     let mut fitted_heading = 0usize;
+    // The calibration result's lever arm, applied to every run as `validate` applies it.
+    let antenna = super::validate::lever_arm(o.config)?;
     for (sp, rp) in &o.runs {
-        let samples = csvio::read_samples(sp)?;
-        let reference = reference_for_samples(&read_reference(rp, input)?, &samples)?;
-        let matches = csvio::match_or_fail(
-            &samples,
-            &sp.display().to_string(),
-            &reference,
-            &rp.display().to_string(),
-            2,
-        )?;
-        let run = Run::new(&samples, &reference, matches);
+        let MatchedRun {
+            samples,
+            reference,
+            matches,
+        } = read_matched_run(sp, rp, input, ReferenceSummary::Print)?;
+        let run = Run::new(&samples, &reference, matches).with_antenna(antenna);
         let last = run.len() - 1;
         // Start heading not fitted to the judged errors when the reference has headings.
         let mut changes = Vec::new();

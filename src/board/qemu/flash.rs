@@ -6,9 +6,13 @@ use odo_core::settings::store::Flash;
 /// Bytes per emulated sector.
 pub const SECTOR_SIZE: usize = 4096;
 
+/// The RAM of the two sectors, in `.bss`: held by reference, so the settings store and the
+/// command task's state that owns it stay small when start-up moves them.
+static mut SECTORS: [[u8; SECTOR_SIZE]; 2] = [[0; SECTOR_SIZE]; 2];
+
 /// Two flash sectors emulated in RAM (erased = 0xFF, programming clears bits).
 pub struct SettingsFlash {
-    mem: [[u8; SECTOR_SIZE]; 2],
+    mem: &'static mut [[u8; SECTOR_SIZE]; 2],
 }
 
 impl SettingsFlash {
@@ -19,9 +23,13 @@ impl SettingsFlash {
 
     /// Two erased sectors.
     pub fn new(_flash: stm32f4xx_hal::pac::FLASH) -> Self {
-        Self {
-            mem: [[0xFF; SECTOR_SIZE]; 2],
+        // Note(unsafe): FLASH is a singleton peripheral moved in here, so this runs once and
+        // this is the only reference to SECTORS.
+        let mem = unsafe { &mut *core::ptr::addr_of_mut!(SECTORS) };
+        for sector in mem.iter_mut() {
+            sector.fill(0xFF);
         }
+        Self { mem }
     }
 }
 
