@@ -199,10 +199,7 @@ fn error_messages_name_the_problem() {
         "{m}"
     );
     let m = msg(s.set_many([("kappa_diff_corr", "-1")]));
-    assert!(
-        m.contains("kappa_diff_corr: out of range, 0..=1000"),
-        "{m}"
-    );
+    assert!(m.contains("kappa_diff_corr: out of range, 0..=1000"), "{m}");
     assert!(msg(s.set_many([("baud", "1")])).contains("one of 9600"));
     let m = msg(s.set_many([("ticks_per_rev", "100")]));
     assert!(

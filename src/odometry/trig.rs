@@ -150,11 +150,12 @@ pub fn exp_neg(x: f32) -> f32 {
         return 1.0 - x * (1.0 - x * (0.5 - x * (1.0 / 6.0 - x * (1.0 / 24.0))));
     }
     // Also catches NaN and infinity.
-    if !(x < 87.0) {
+    if x.partial_cmp(&87.0) != Some(core::cmp::Ordering::Less) {
         return 0.0;
     }
-    // ln 2 split into a part exact in f32 with n < 128 and the rest (Cody-Waite).
-    const LN2_HI: f32 = 0.693_359_375;
+    // ln 2 split into a part whose product with n < 128 is exact in f32 (0.693359375, nine
+    // significant bits) and the rest (Cody-Waite).
+    const LN2_HI: f32 = 0.693_359_4;
     const LN2_LO: f32 = -2.121_944_4e-4;
     let n = (x * core::f32::consts::LOG2_E + 0.5) as i32;
     let r = (x - n as f32 * LN2_HI) - n as f32 * LN2_LO;

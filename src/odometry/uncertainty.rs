@@ -270,9 +270,12 @@ impl CovarianceUncertainty {
         } else {
             [0.0; 6]
         };
-        self.xx.add(2.0 * a * pxa + a * a * paa + q(j.dx, j.dx) + txx);
-        self.yy.add(2.0 * b * pya + b * b * paa + q(j.dy, j.dy) + tyy);
-        self.xy.add(a * pya + b * pxa + a * b * paa + q(j.dx, j.dy) + txy);
+        self.xx
+            .add(2.0 * a * pxa + a * a * paa + q(j.dx, j.dx) + txx);
+        self.yy
+            .add(2.0 * b * pya + b * b * paa + q(j.dy, j.dy) + tyy);
+        self.xy
+            .add(a * pya + b * pxa + a * b * paa + q(j.dx, j.dy) + txy);
         self.xa.add(a * paa + q(j.dx, j.dalpha) + txa);
         self.ya.add(b * paa + q(j.dy, j.dalpha) + tya);
         self.aa.add(q(j.dalpha, j.dalpha) + taa);
