@@ -377,7 +377,7 @@ fn covariance_model_covers_gauss_markov_opposite_phase_slip() {
     // (9 m) and of the path (12.2 m, after the pivot and 8 m straight).
     let checkpoints = [600, 900, 2000, steps.len()];
     let sigma_rate = (KAPPA_DIFF / (2.0 * CORR)).sqrt();
-    let mut rng = Rng::new(0x6A0_55_0003);
+    let mut rng = Rng::new(0x0006_A055_0003);
     // Per model, per checkpoint: errors and sigmas.
     let mut errors = vec![vec![vec![]; checkpoints.len()]; 2];
     let mut sigmas = vec![vec![vec![]; checkpoints.len()]; 2];
