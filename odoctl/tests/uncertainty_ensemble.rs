@@ -100,8 +100,10 @@ fn regimes() -> Vec<Regime> {
         // measures the slip rate's variance `kappa_diff / (2 kappa_diff_corr)` at 0.2-2.5
         // times the truth's 1e-4, below it in seven calibrations of ten: 54-67 % inside 1
         // sigma, 92.5 % at worst inside 3 (the white unit model: 55-81 % and 93 %; without
-        // `kappa_diff`: 21-63 % and 60-92 %). The band holds the measured figures, the upper
-        // bound with a 3-point margin.
+        // `kappa_diff`: 21-63 % and 60-92 %; with kappa and `kappa_diff` fitted once each
+        // instead of in turn: 41.5-61.5 % and 89.5 %). With the simulated slip's coefficients
+        // the target holds (`turning_slip_with_the_simulated_slips_coefficients_...`). The
+        // band holds the measured figures, the upper bound with a 3-point margin.
         regime(
             "q 0.0005, turning slip 0.02",
             0.0005,
