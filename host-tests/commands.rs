@@ -100,6 +100,17 @@ fn command_table() {
             false,
             "max_wheel_speed: out of range, 0.01..=20; nothing changed",
         ),
+        ("get kappa_diff_corr", true, "kappa_diff_corr = 0"),
+        (
+            "set kappa_diff 0.0004 kappa_diff_corr 2",
+            true,
+            "kappa_diff_corr = 2",
+        ),
+        (
+            "set kappa_diff_corr 1001",
+            false,
+            "kappa_diff_corr: out of range, 0..=1000; nothing changed",
+        ),
         ("set track_width nan", false, "NaN/inf"),
         ("set track_width -inf", false, "NaN/inf"),
         (

@@ -188,6 +188,37 @@ fn chord_series_matches_sinc_and_is_smooth_at_zero() {
 }
 
 #[test]
+fn exp_neg_is_accurate_from_zero_to_underflow() {
+    // Boundary table: zero, negative, NaN, infinity, the series' edge, the underflow edge.
+    assert_eq!(trig::exp_neg(0.0), 1.0);
+    assert_eq!(trig::exp_neg(-1.0), 1.0);
+    assert_eq!(trig::exp_neg(f32::NAN), 0.0);
+    assert_eq!(trig::exp_neg(f32::INFINITY), 0.0);
+    assert_eq!(trig::exp_neg(87.0), 0.0);
+    assert!(trig::exp_neg(86.9) > 0.0);
+    let mut worst = 0.0f64;
+    // Tiny arguments (a sample's wheel-distance difference over a correlation length) up to
+    // the underflow edge, both sides of the series' edge 1/16.
+    let mut x = 1e-12f32;
+    while x < 86.9 {
+        for v in [x, x.next_up(), 0.0625f32.next_down(), 0.0625] {
+            let got = f64::from(trig::exp_neg(v));
+            let want = (-f64::from(v)).exp();
+            worst = worst.max(((got - want) / want).abs());
+        }
+        x *= 1.01;
+    }
+    assert!(worst < 3e-7, "worst relative error {worst:e}");
+    // Monotone non-increasing over a fine grid of [0, 2].
+    let mut prev = 1.0f32;
+    for i in 0..=20_000 {
+        let v = trig::exp_neg(i as f32 * 1e-4);
+        assert!(v <= prev && (0.0..=1.0).contains(&v), "{i}: {v} > {prev}");
+        prev = v;
+    }
+}
+
+#[test]
 fn square_root_is_accurate_over_the_f32_range() {
     assert_eq!(trig::sqrt(0.0), 0.0);
     assert_eq!(trig::sqrt(-1.0), 0.0);

@@ -116,6 +116,15 @@ fn boundary_table() {
         ("kappa_left", "0.01", true),
         ("kappa_left", "0.0101", false),
         ("kappa_right", "nan", false),
+        ("kappa_diff_corr", "0", true),
+        ("kappa_diff_corr", "0.0005", true), // below 1 mm: white, its limit
+        ("kappa_diff_corr", "2", true),
+        ("kappa_diff_corr", "1000", true),
+        ("kappa_diff_corr", "1000.001", false),
+        ("kappa_diff_corr", "-1e-9", false),
+        ("kappa_diff_corr", "nan", false),
+        ("kappa_diff_corr", "inf", false),
+        ("kappa_diff_corr", "2 m", false),
         ("left_cos1", "0.05", true),
         ("left_cos1", "-0.05", true),
         ("left_cos1", "0.0501", false),
@@ -189,6 +198,8 @@ fn error_messages_name_the_problem() {
         m.contains("max_wheel_speed: out of range, 0.01..=20"),
         "{m}"
     );
+    let m = msg(s.set_many([("kappa_diff_corr", "-1")]));
+    assert!(m.contains("kappa_diff_corr: out of range, 0..=1000"), "{m}");
     assert!(msg(s.set_many([("baud", "1")])).contains("one of 9600"));
     let m = msg(s.set_many([("ticks_per_rev", "100")]));
     assert!(
@@ -378,8 +389,8 @@ fn errors_are_values_naming_the_key() {
         SettingError::CountsPerSample { counts: 48_971 }
     ));
     assert_eq!(
-        Settings::from_bytes_version(4, &Settings::DEFAULT.to_bytes()),
-        Err(SettingError::UnknownFormatVersion(4))
+        Settings::from_bytes_version(5, &Settings::DEFAULT.to_bytes()),
+        Err(SettingError::UnknownFormatVersion(5))
     );
     assert_eq!(
         relation(&[

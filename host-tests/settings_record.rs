@@ -1,6 +1,6 @@
 //! The settings record (`odo_core::settings::record`): the codec against the layout
 //! docs/PROTOCOL.md documents, byte for byte, and the flash records of every format version
-//! (v1 and v2 records written by older firmware still load; damaged or mislabelled ones are
+//! (v1, v2 and v3 records written by older firmware still load; damaged or mislabelled ones are
 //! refused).
 
 use odo_core::crc::crc32;
@@ -33,9 +33,13 @@ fn serialisation_round_trip_and_checksum() {
     assert_eq!(Settings::from_bytes(&b).unwrap(), s);
     assert!(
         Settings::from_bytes(&b[..116]).is_err(),
-        "version 3 needs 144 bytes"
+        "version 4 needs 148 bytes"
     );
-    assert!(Settings::from_bytes_version(4, &b).is_err());
+    assert!(
+        Settings::from_bytes(&b[..144]).is_err(),
+        "version 4 needs 148 bytes"
+    );
+    assert!(Settings::from_bytes_version(5, &b).is_err());
     assert!(Settings::from_bytes_version(0, &b).is_err());
 }
 
@@ -69,15 +73,30 @@ fn v2_record(settings: &Settings, generation: u32) -> Vec<u8> {
     r
 }
 
+/// A record exactly as the firmware of format version 3 wrote it: 144-byte payload (the
+/// version 4 payload without `kappa_diff_corr`), CRC at 156, 160 bytes.
+fn v3_record(settings: &Settings, generation: u32) -> Vec<u8> {
+    let mut r = Vec::new();
+    r.extend_from_slice(&MAGIC.to_le_bytes());
+    r.extend_from_slice(&3u16.to_le_bytes());
+    r.extend_from_slice(&144u16.to_le_bytes());
+    r.extend_from_slice(&generation.to_le_bytes());
+    r.extend_from_slice(&settings.to_bytes()[..Settings::SERIALIZED_LEN_V3]);
+    let crc = crc32(&r);
+    r.extend_from_slice(&crc.to_le_bytes());
+    assert_eq!(r.len(), 160);
+    r
+}
+
 #[test]
-fn record_layout_of_format_version_3() {
+fn record_layout_of_format_version_4() {
     let r = encode_record(&variant(4), 9);
-    assert_eq!(RECORD_LEN, 160);
+    assert_eq!(RECORD_LEN, 164);
     assert_eq!(r.len(), RECORD_LEN);
     assert_eq!(RECORD_LEN % WORD, 0);
-    assert_eq!(&r[4..8], &[3, 0, 144, 0]);
-    assert_eq!(&r[12..156], &variant(4).to_bytes());
-    assert_eq!(&r[156..160], &crc32(&r[..156]).to_le_bytes());
+    assert_eq!(&r[4..8], &[4, 0, 148, 0]);
+    assert_eq!(&r[12..160], &variant(4).to_bytes());
+    assert_eq!(&r[160..164], &crc32(&r[..160]).to_le_bytes());
     // The v1 record is the same bytes up to the payload's end, but its own header and CRC.
     let old = v1_record(&variant(4), 9);
     assert_eq!(&old[12..124], &r[12..124]);
@@ -100,11 +119,11 @@ fn format_version_1_record_loads_with_the_default_max_wheel_speed() {
         Settings::from_bytes_version(1, &old.to_bytes()[..112]).unwrap(),
         expect
     );
-    // The next save writes version 2 after it, above its generation, and wins.
+    // The next save writes version 4 after it, above its generation, and wins.
     let mut store = SettingsStore::new(&mut f);
     assert_eq!(store.save(&variant(5)).unwrap(), 42);
     assert_eq!(load(&f), (variant(5), SettingsSource::Flash, 42));
-    assert_eq!(&f.mem[0][SLOT_LEN + 4..SLOT_LEN + 8], &[3, 0, 144, 0]);
+    assert_eq!(&f.mem[0][SLOT_LEN + 4..SLOT_LEN + 8], &[4, 0, 148, 0]);
     assert_eq!(f.violations, 0);
     // The v1 record is still the fallback if the new one is damaged.
     f.mem[0][SLOT_LEN + 20] ^= 0x10;
@@ -116,23 +135,57 @@ fn format_version_2_record_loads_with_an_exact_geometry() {
     let mut old = variant(3);
     old.chassis.geometry_uncertainty.track_width_se = 5e-4;
     old.chassis.kappa_diff = 2e-5;
+    old.chassis.kappa_diff_corr = 2.0;
     let mut f = SimFlash::new(4 * SLOT_LEN);
     f.program(0, 0, &v2_record(&old, 7)).unwrap();
     let expect = Settings {
         chassis: odo_core::odometry::ChassisParams {
             geometry_uncertainty: odo_core::odometry::GeometryUncertainty::EXACT,
             kappa_diff: 0.0,
+            kappa_diff_corr: 0.0,
             ..old.chassis
         },
         ..old
     };
     assert_eq!(load(&f), (expect, SettingsSource::Flash, 7));
-    // The next save writes version 3 and wins; the v2 record stays the fallback.
+    // The next save writes version 4 and wins; the v2 record stays the fallback.
     let mut store = SettingsStore::new(&mut f);
     assert_eq!(store.save(&old).unwrap(), 8);
     assert_eq!(load(&f), (old, SettingsSource::Flash, 8));
     f.mem[0][SLOT_LEN + 20] ^= 0x10;
     assert_eq!(load(&f), (expect, SettingsSource::Flash, 7));
+    assert_eq!(f.violations, 0);
+}
+
+#[test]
+fn format_version_3_record_loads_with_white_turning_slip() {
+    let mut old = variant(3);
+    old.chassis.geometry_uncertainty.track_width_se = 5e-4;
+    old.chassis.kappa_diff = 2e-5;
+    // Whatever the in-memory value, a v3 record cannot carry it.
+    old.chassis.kappa_diff_corr = 1.5;
+    let mut f = SimFlash::new(4 * SLOT_LEN);
+    f.program(0, 0, &v3_record(&old, 12)).unwrap();
+    let expect = Settings {
+        chassis: odo_core::odometry::ChassisParams {
+            kappa_diff_corr: 0.0,
+            ..old.chassis
+        },
+        ..old
+    };
+    assert_eq!(load(&f), (expect, SettingsSource::Flash, 12));
+    assert_eq!(
+        Settings::from_bytes_version(3, &old.to_bytes()[..144]).unwrap(),
+        expect
+    );
+    assert!(Settings::from_bytes_version(3, &old.to_bytes()[..143]).is_err());
+    // The next save writes version 4 and wins; the v3 record stays the fallback.
+    let mut store = SettingsStore::new(&mut f);
+    assert_eq!(store.save(&old).unwrap(), 13);
+    assert_eq!(load(&f), (old, SettingsSource::Flash, 13));
+    assert_eq!(&f.mem[0][SLOT_LEN + 4..SLOT_LEN + 8], &[4, 0, 148, 0]);
+    f.mem[0][SLOT_LEN + 20] ^= 0x10;
+    assert_eq!(load(&f), (expect, SettingsSource::Flash, 12));
     assert_eq!(f.violations, 0);
 }
 
@@ -164,9 +217,16 @@ fn corrupt_or_mislabelled_old_records_are_rejected() {
             r[124..128].copy_from_slice(&crc.to_le_bytes());
             r
         }),
-        ("unknown version 3", {
+        ("v3 header on a v1 record", {
             let mut r = good.clone();
             r[4] = 3;
+            let crc = crc32(&r[..124]);
+            r[124..128].copy_from_slice(&crc.to_le_bytes());
+            r
+        }),
+        ("unknown version 5", {
+            let mut r = good.clone();
+            r[4] = 5;
             let crc = crc32(&r[..124]);
             r[124..128].copy_from_slice(&crc.to_le_bytes());
             r
@@ -203,9 +263,9 @@ fn corrupt_or_mislabelled_old_records_are_rejected() {
     assert_eq!(SettingsStore::new(&mut f).save(&variant(7)).unwrap(), 11);
 }
 
-/// The version 3 layout written field by field as docs/PROTOCOL.md section 5 lists it (the
+/// The version 4 layout written field by field as docs/PROTOCOL.md section 5 lists it (the
 /// encoder before the key table): the table's codec must give the same bytes.
-fn layout_v3_by_hand(s: &Settings) -> Vec<u8> {
+fn layout_v4_by_hand(s: &Settings) -> Vec<u8> {
     let c = &s.chassis;
     let mut b = Vec::new();
     for v in [c.left_diameter, c.right_diameter, c.track_width] {
@@ -252,6 +312,7 @@ fn layout_v3_by_hand(s: &Settings) -> Vec<u8> {
         g.left_track_correlation,
         g.right_track_correlation,
         c.kappa_diff,
+        c.kappa_diff_corr,
     ] {
         b.extend_from_slice(&v.to_le_bytes());
     }
@@ -275,18 +336,20 @@ fn table_codec_is_the_documented_layout_byte_for_byte() {
         right_track_correlation: 0.25,
     };
     s.chassis.kappa_diff = 3.5e-5;
+    s.chassis.kappa_diff_corr = 2.25;
     for s in [Settings::DEFAULT, variant(1), s] {
-        assert_eq!(s.to_bytes().to_vec(), layout_v3_by_hand(&s));
+        assert_eq!(s.to_bytes().to_vec(), layout_v4_by_hand(&s));
         // Version 1 is its first 112 bytes.
         let without_se = Settings {
             chassis: odo_core::odometry::ChassisParams {
                 geometry_uncertainty: odo_core::odometry::GeometryUncertainty::EXACT,
                 kappa_diff: 0.0,
+                kappa_diff_corr: 0.0,
                 ..s.chassis
             },
             ..s
         };
-        let v1 = Settings::from_bytes_version(1, &layout_v3_by_hand(&s)[..112]).unwrap();
+        let v1 = Settings::from_bytes_version(1, &layout_v4_by_hand(&s)[..112]).unwrap();
         assert_eq!(
             v1,
             Settings {
@@ -295,14 +358,26 @@ fn table_codec_is_the_documented_layout_byte_for_byte() {
             }
         );
         // Version 2 is its first 116 bytes.
-        let v2 = Settings::from_bytes_version(2, &layout_v3_by_hand(&s)[..116]).unwrap();
+        let v2 = Settings::from_bytes_version(2, &layout_v4_by_hand(&s)[..116]).unwrap();
         assert_eq!(v2, without_se);
+        // Version 3 is its first 144 bytes.
+        let v3 = Settings::from_bytes_version(3, &layout_v4_by_hand(&s)[..144]).unwrap();
+        assert_eq!(
+            v3,
+            Settings {
+                chassis: odo_core::odometry::ChassisParams {
+                    kappa_diff_corr: 0.0,
+                    ..s.chassis
+                },
+                ..s
+            }
+        );
     }
-    // The checksum of the defaults: over the 144 bytes of version 3 (firmware of version 2
-    // reported the CRC of the first 116).
+    // The checksum of the defaults: over the 148 bytes of version 4 (firmware of version 3
+    // reported the CRC of the first 144, of version 2 of the first 116).
     assert_eq!(
         Settings::DEFAULT.checksum(),
-        crc32(&layout_v3_by_hand(&Settings::DEFAULT))
+        crc32(&layout_v4_by_hand(&Settings::DEFAULT))
     );
     // Every byte belongs to one key, but the reserved byte 99.
     let mut owner = [0u32; Settings::SERIALIZED_LEN];
@@ -317,5 +392,6 @@ fn table_codec_is_the_documented_layout_byte_for_byte() {
     }
     assert_eq!(serialized_len(1), Settings::SERIALIZED_LEN_V1);
     assert_eq!(serialized_len(2), Settings::SERIALIZED_LEN_V2);
-    assert_eq!(serialized_len(3), Settings::SERIALIZED_LEN);
+    assert_eq!(serialized_len(3), Settings::SERIALIZED_LEN_V3);
+    assert_eq!(serialized_len(4), Settings::SERIALIZED_LEN);
 }

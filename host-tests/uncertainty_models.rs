@@ -344,3 +344,129 @@ fn covariance_model_covers_opposite_phase_slip() {
     let s = integ.sigma();
     assert_eq!([s.x, s.y, s.heading, s.xy], [0.0; 4]);
 }
+
+/// Gauss-Markov opposite-phase slip (`kappa_diff_corr`): each run's slip rate `eps` is a
+/// Gauss-Markov process over the wheel-distance difference, of correlation length `L` and
+/// stationary variance `kappa_diff / (2 L)`, and each sample's true wheel distances are
+/// `s_1 + e`, `s_2 - e` with `e = eps |s_1 - s_2|` (as `odoctl`'s simulator makes turning
+/// slip and its calibration filter fits it). The model with the matching `kappa_diff` and
+/// `kappa_diff_corr` must cover the errors at the nominal rates at every checkpoint, early in
+/// the first turn and after all of them; the white model of the same long-range rate
+/// (`kappa_diff_corr` 0) is far too wide early in a turn, which is why the state exists.
+#[test]
+fn covariance_model_covers_gauss_markov_opposite_phase_slip() {
+    const KAPPA_DIFF: f64 = 4.0e-4;
+    const CORR: f64 = 2.0;
+    let correlated = ChassisParams {
+        uncertainty_model: UncertaintyModel::Covariance,
+        kappa_left: 0.0,
+        kappa_right: 0.0,
+        kappa_diff: KAPPA_DIFF as f32,
+        kappa_diff_corr: CORR as f32,
+        ..ChassisParams::DESIGNED
+    };
+    let white = ChassisParams {
+        kappa_diff_corr: 0.0,
+        ..correlated
+    };
+    let c = PI * correlated.left_diameter / f64::from(correlated.ticks_per_rev);
+    let w = correlated.track_width;
+    let steps = path(c);
+    // Sample counts after which the errors are compared: 100 samples (0.8 m of wheel-distance
+    // difference, 0.4 L) into the first arc, its end (3.2 m), the end of the second arc
+    // (9 m) and of the path (12.2 m, after the pivot and 8 m straight).
+    let checkpoints = [600, 900, 2000, steps.len()];
+    let sigma_rate = (KAPPA_DIFF / (2.0 * CORR)).sqrt();
+    let mut rng = Rng::new(0x0006_A055_0003);
+    // Per model, per checkpoint: errors and sigmas.
+    let mut errors = vec![vec![vec![]; checkpoints.len()]; 2];
+    let mut sigmas = vec![vec![vec![]; checkpoints.len()]; 2];
+    for _ in 0..RUNS {
+        let mut integ = [&correlated, &white]
+            .map(|p| Integrator::new(p, WheelCounts::default(), Pose::default()).unwrap());
+        let (mut x, mut y, mut a) = (0.0f64, 0.0f64, 0.0f64);
+        let mut g = [0i64; 2];
+        // Stationary from the start.
+        let mut eps = sigma_rate * rng.normal();
+        let mut next = 0;
+        for (k, d) in steps.iter().enumerate() {
+            g = [g[0] + d[0], g[1] + d[1]];
+            for i in &mut integ {
+                i.step(
+                    WheelCounts {
+                        left: g[0],
+                        right: g[1],
+                    },
+                    IndexRefs::default(),
+                );
+            }
+            let s = [c * d[0] as f64, c * d[1] as f64];
+            let diff = (s[0] - s[1]).abs();
+            let rho = (-diff / CORR).exp();
+            eps = rho * eps + (1.0 - rho * rho).sqrt() * sigma_rate * rng.normal();
+            let e = eps * diff;
+            let [da, dx, dy] = increments([s[0] + e, s[1] - e], a, w);
+            (x, y, a) = (x + dx, y + dy, a + da);
+            if k + 1 == checkpoints[next] {
+                for (m, i) in integ.iter().enumerate() {
+                    let p = i.pose();
+                    errors[m][next].push([p.x - x, p.y - y, p.heading - a]);
+                    sigmas[m][next].push(i.sigma());
+                }
+                next = (next + 1).min(checkpoints.len() - 1);
+            }
+        }
+    }
+    for (n, &at) in checkpoints.iter().enumerate() {
+        let [c1, c3, w1, w3] = [(0, 1.0), (0, 3.0), (1, 1.0), (1, 3.0)]
+            .map(|(m, k)| coverage(&errors[m][n], &sigmas[m][n], k));
+        println!(
+            "Gauss-Markov turning slip after {at} samples: 1-sigma {c1:.3?}, 3-sigma {c3:.3?}; \
+             white model of the same kappa_diff: 1-sigma {w1:.3?}, 3-sigma {w3:.3?}"
+        );
+        for i in 0..3 {
+            assert!((0.63..=0.74).contains(&c1[i]), "{at}: 1-sigma {c1:?}");
+            assert!(c3[i] >= 0.99, "{at}: 3-sigma {c3:?}");
+        }
+        if at == checkpoints[0] {
+            // Early in a turn the white model's sigma is several times the error's.
+            for i in 0..3 {
+                assert!(w1[i] > 0.9, "{at}: white 1-sigma {w1:?}");
+            }
+        }
+    }
+}
+
+/// `kappa_diff_corr` 0 is the white model exactly, and so is a correlation length below
+/// `MIN_TURN_CORRELATION` (its limit); a Gauss-Markov one gives other sigmas on a turn and
+/// none on a straight line.
+#[test]
+fn turning_correlation_zero_or_tiny_is_the_white_model() {
+    use odo_core::odometry::uncertainty::MIN_TURN_CORRELATION;
+    let run = |corr: f32, right: i64| {
+        let p = ChassisParams {
+            uncertainty_model: UncertaintyModel::Covariance,
+            kappa_diff: 4.0e-4,
+            kappa_diff_corr: corr,
+            ..ChassisParams::DESIGNED
+        };
+        let mut integ = Integrator::new(&p, WheelCounts::default(), Pose::default()).unwrap();
+        for k in 1..=500 {
+            integ.step(
+                WheelCounts {
+                    left: 400 * k,
+                    right: right * k,
+                },
+                IndexRefs::default(),
+            );
+        }
+        (integ.sigma(), integ.heading_covariance())
+    };
+    let white = run(0.0, 200);
+    assert_eq!(run(MIN_TURN_CORRELATION * 0.5, 200), white);
+    let gm = run(2.0, 200);
+    assert!(gm.0.heading < white.0.heading, "{gm:?} vs {white:?}");
+    assert!(gm.0.heading > 0.0);
+    // Straight: the opposite-phase slip adds nothing in either form.
+    assert_eq!(run(2.0, 400), run(0.0, 400));
+}

@@ -141,6 +141,8 @@ fn main() -> ! {
         delta_diff: 0.0,
         kappa: [1e-7; 2],
         kappa_diff: 1e-6,
+        turn_decay: 0.0,
+        turn_rate_variance: 0.0,
         geometry: [1e-8, 1e-8, 1e-6, 5e-9, 1e-9, -1e-9],
     };
     let mut paper = PaperUncertainty::default();
@@ -180,6 +182,14 @@ fn main() -> ! {
     report("step + sigma(), paper model", &mut full);
     integrator_steps(&covariance, false, true, overhead, &mut full);
     report("step + sigma(), covariance model", &mut full);
+    // Opposite-phase slip as a Gauss-Markov state (`kappa_diff_corr`).
+    let turning = ChassisParams {
+        kappa_diff: 4.0e-4,
+        kappa_diff_corr: 2.0,
+        ..covariance
+    };
+    integrator_steps(&turning, false, true, overhead, &mut full);
+    report("step + sigma(), cov. + turn corr.", &mut full);
 
     let with_diff = ChassisParams {
         delta_diff: 2.0e-8,

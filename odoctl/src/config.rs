@@ -469,7 +469,9 @@ mod tests {
         let text = render_params(&p, "test", &[("initial_heading", FitValue::Num(0.5))]);
         let back = parse_params("x.toml", &text, ChassisParams::DESIGNED).unwrap();
         assert_eq!(back, p);
-        assert_eq!(chassis_value_text(&back, Key::RightSin3), "0.0023");
+        // The 24th chassis key (`kappa_diff_corr` is the 12th).
+        assert_eq!(chassis_value_text(&back, Key::RightSin3), "0.0024");
+        assert_eq!(chassis_value_text(&back, Key::KappaDiffCorr), "0.0012");
     }
 
     fn error_of(r: Result<ChassisParams>) -> ConfigError {

@@ -49,6 +49,7 @@ fn every_key_changed(rng: &mut Rng) -> Settings {
     c.kappa_left = rng.f32_bits_to(1e-2, false);
     c.kappa_right = rng.f32_bits_to(1e-2, false);
     c.kappa_diff = rng.f32_bits_to(1e-2, false).max(f32::from_bits(1));
+    c.kappa_diff_corr = rng.f32_bits_to(1e3, false).max(f32::from_bits(1));
     let g = &mut c.geometry_uncertainty;
     for v in [
         &mut g.left_diameter_se,
@@ -190,7 +191,7 @@ fn odoctl_and_the_unit_know_the_same_keys() {
     assert_eq!(sent_sorted, names_sorted);
     // Parameter files: exactly the chassis keys, the unit options refused by name.
     let chassis: Vec<Key> = config::chassis_keys().collect();
-    assert_eq!(chassis.len(), 29);
+    assert_eq!(chassis.len(), 30);
     for k in Key::ALL {
         let line = format!("{} = {}\n", k.name(), Settings::DEFAULT.get(k));
         let line = match k.info().kind {

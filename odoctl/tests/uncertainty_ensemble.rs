@@ -93,16 +93,23 @@ fn regimes() -> Vec<Regime> {
             0.0,
             band(0.60, 0.76, 0.97),
         ),
-        // Target missed: opposite-phase slip when turning, correlated over a metre of wheel
-        // distance difference, against the unit's white `kappa_diff`, which one 70 m run
-        // measures only to within a factor of 40 (4e-5 .. 1.5e-3, truth 4e-4): 55-80 %
-        // inside 1 sigma, 93-98.5 % inside 3 (without `kappa_diff`: 21-63 % and 60-92 %).
+        // Target missed: opposite-phase slip when turning, correlated over 2 m of wheel
+        // distance difference. The unit carries it as the calibration fits it (`kappa_diff`
+        // and `kappa_diff_corr`, a Gauss-Markov state), so the bands are no longer too wide
+        // over the first 10 m (63-67 %, against 80 % with the white model), but one 70 m run
+        // measures the slip rate's variance `kappa_diff / (2 kappa_diff_corr)` at 0.2-2.5
+        // times the truth's 1e-4, below it in seven calibrations of ten: 54-67 % inside 1
+        // sigma, 92.5 % at worst inside 3 (the white unit model: 55-81 % and 93 %; without
+        // `kappa_diff`: 21-63 % and 60-92 %; with kappa and `kappa_diff` fitted once each
+        // instead of in turn: 41.5-61.5 % and 89.5 %). With the simulated slip's coefficients
+        // the target holds (`turning_slip_with_the_simulated_slips_coefficients_...`). The
+        // band holds the measured figures, the upper bound with a 3-point margin.
         regime(
             "q 0.0005, turning slip 0.02",
             0.0005,
             0.1,
             0.02,
-            band(0.52, 0.84, 0.90),
+            band(0.52, 0.70, 0.90),
         ),
     ]
 }
@@ -199,13 +206,24 @@ fn ensemble(
     settings: SimSettings,
     criterion: UncertaintyCriterion,
 ) -> ([Ensemble; 2], ChassisParams) {
+    ensemble_with(name, settings, criterion, |p| p)
+}
+
+/// [`ensemble`] with each calibration's parameters passed through `adjust` before the
+/// replays.
+fn ensemble_with(
+    name: &str,
+    settings: SimSettings,
+    criterion: UncertaintyCriterion,
+    adjust: impl Fn(ChassisParams) -> ChassisParams,
+) -> ([Ensemble; 2], ChassisParams) {
     let t = default_truth();
     let mut out = [Ensemble::new(&CHECKPOINTS), Ensemble::new(&CHECKPOINTS)];
     let per = RUNS / CALIBRATIONS;
     let (mut first, mut err2, mut se2, mut within2) = (None, [0.0; 3], [0.0; 3], [0usize; 3]);
     let mut coefficients = Vec::new();
     for k in 0..CALIBRATIONS {
-        let p = calibrate(settings, criterion, 1 + k);
+        let p = adjust(calibrate(settings, criterion, 1 + k));
         let g = p.geometry_uncertainty;
         let e = [
             p.left_diameter - t.left_diameter,
@@ -219,7 +237,10 @@ fn ensemble(
             within2[i] += usize::from(e[i].abs() <= 2.0 * se[i]);
         }
         first.get_or_insert(p);
-        coefficients.push(format!("{:.2e}/{:.2e}", p.kappa_left, p.kappa_diff));
+        coefficients.push(format!(
+            "{:.2e}/{:.2e}/{:.2}",
+            p.kappa_left, p.kappa_diff, p.kappa_diff_corr
+        ));
         replay_runs(settings, &p, 1000 + k * per..1000 + (k + 1) * per, &mut out);
     }
     let rms = |v: f64| (v / CALIBRATIONS as f64).sqrt() * 1e3;
@@ -236,7 +257,7 @@ fn ensemble(
         within2
     );
     println!(
-        "{name}: kappa/kappa_diff per calibration {}",
+        "{name}: kappa/kappa_diff/kappa_diff_corr per calibration {}",
         coefficients.join(" ")
     );
     (out, first.expect("one calibration"))
@@ -256,8 +277,8 @@ fn print_table(
         )
     } else {
         format!(
-            "kappa {:.3e}, kappa_diff {:.3e}",
-            p.kappa_left, p.kappa_diff
+            "kappa {:.3e}, kappa_diff {:.3e}, kappa_diff_corr {:.2}",
+            p.kappa_left, p.kappa_diff, p.kappa_diff_corr
         )
     };
     println!("{regime} | {model} ({criterion}; {coefficient})");
@@ -361,6 +382,41 @@ fn calibrated_uncertainty_covers_the_true_errors_across_slip_regimes() {
         "below the measured floor:\n{}",
         failed.join("\n")
     );
+}
+
+/// The turning-slip regime's shortfall is the calibration's estimate of the slip, not the
+/// unit's model of it: with each calibration's `kappa_diff` and `kappa_diff_corr` replaced by
+/// the simulated slip's (everything else as calibrated), the covariance model meets the
+/// target. The simulator's rate of `slip_turn` over half the wheel-distance difference,
+/// correlated over `slip_turn_corr` of it, is the unit's rate `slip_turn / 2` per metre of
+/// the difference, correlated over `L = 2 slip_turn_corr`: `kappa_diff = 2 L (slip_turn /
+/// 2)^2`. Measured: 60-70.5 % inside 1 sigma, at least 99.5 % inside 3 (calibrated: 54-67 %,
+/// 92.5 %); held with a 3-point margin on the 1-sigma floor.
+#[test]
+fn turning_slip_with_the_simulated_slips_coefficients_meets_the_target() {
+    let r = regimes()
+        .into_iter()
+        .find(|r| r.settings.slip_turn > 0.0)
+        .expect("a turning-slip regime");
+    let (st, corr) = (r.settings.slip_turn, r.settings.slip_turn_corr);
+    let l = 2.0 * corr;
+    let kappa_diff = 2.0 * l * (0.5 * st).powi(2);
+    let ([_, covariance], p) =
+        ensemble_with(r.name, r.settings, UncertaintyCriterion::Likelihood, |p| {
+            ChassisParams {
+                kappa_diff: kappa_diff as f32,
+                kappa_diff_corr: l as f32,
+                ..p
+            }
+        });
+    let c = covariance.coverage();
+    print_table(r.name, "covariance", "simulated turning slip", &p, &c);
+    let floor = Floor {
+        one_sigma: 0.57,
+        ..TARGET
+    };
+    let failed = misses(r.name, &c, floor);
+    assert!(failed.is_empty(), "{}", failed.join("\n"));
 }
 
 #[test]

@@ -270,8 +270,11 @@ impl Integrator {
             delta_diff: p.delta_diff,
             kappa: [p.kappa_left, p.kappa_right],
             kappa_diff: p.kappa_diff,
+            turn_decay: 0.0,
+            turn_rate_variance: 0.0,
             geometry: p.geometry_uncertainty.relative_covariance(p),
-        };
+        }
+        .with_turning_correlation(p.kappa_diff_corr);
         self.periodic = [None; 2];
     }
 

@@ -130,6 +130,13 @@ pub struct ChassisParams {
     /// (`s_1 + e`, `s_2 - e`: slip when turning) per metre of wheel-distance difference
     /// `|ds_1 - ds_2|`, m^2/m (0: none).
     pub kappa_diff: f32,
+    /// `kappa_diff_corr`: for the covariance model, correlation length of the opposite-phase
+    /// slip, metres of wheel-distance difference `|ds_1 - ds_2|` (0, or below 1 mm: white, `e`
+    /// of variance `kappa_diff |ds_1 - ds_2|` per sample). Otherwise the slip rate `eps` (`e` grows by
+    /// `eps |ds_1 - ds_2|`) is a Gauss-Markov process of variance `kappa_diff / (2
+    /// kappa_diff_corr)`: the same long-range variance `kappa_diff D` over a difference
+    /// `D >> kappa_diff_corr`, less over shorter turns. What `odoctl calibrate` fits.
+    pub kappa_diff_corr: f32,
     /// Per-angle wheel function of wheel 1 (`left_cos1`.. `left_sin3`).
     pub left_wheel: WheelHarmonics,
     /// Per-angle wheel function of wheel 2 (`right_cos1`.. `right_sin3`).
@@ -154,6 +161,7 @@ impl ChassisParams {
         kappa_left: 1.0e-7,
         kappa_right: 1.0e-7,
         kappa_diff: 0.0,
+        kappa_diff_corr: 0.0,
         left_wheel: WheelHarmonics::ROUND,
         right_wheel: WheelHarmonics::ROUND,
         geometry_uncertainty: GeometryUncertainty::EXACT,
@@ -173,6 +181,8 @@ impl ChassisParams {
     pub const MAX_DELTA: f32 = 1.0e-3;
     /// Largest accepted covariance-model coefficient, m^2/m.
     pub const MAX_KAPPA: f32 = 1.0e-2;
+    /// Largest accepted `kappa_diff_corr`, metres of wheel-distance difference.
+    pub const MAX_KAPPA_DIFF_CORR: f32 = 1.0e3;
     /// Largest accepted magnitude of one wheel-function coefficient (relative radius).
     pub const MAX_HARMONIC: f32 = 0.05;
 
@@ -204,6 +214,8 @@ impl ChassisParams {
         check("kappa_left", self.kappa_left, kappa)?;
         check("kappa_right", self.kappa_right, kappa)?;
         check("kappa_diff", self.kappa_diff, kappa)?;
+        let corr = (0.0, Self::MAX_KAPPA_DIFF_CORR);
+        check("kappa_diff_corr", self.kappa_diff_corr, corr)?;
         let harmonic = (-Self::MAX_HARMONIC, Self::MAX_HARMONIC);
         for (wheel, [cos_keys, sin_keys]) in [
             (&self.left_wheel, HARMONIC_KEYS[0]),

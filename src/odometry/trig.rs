@@ -11,6 +11,9 @@
 //!   so the `dalpha -> 0` limit of eq (10) is reached smoothly with no branch.
 //! * [`sqrt`]: a square root accurate to a few f32 ulps without `libm` (whose `sqrtf` is a
 //!   software routine on this target).
+//! * [`exp_neg`]: `exp(-x)` for `x >= 0`, the decay of a Gauss-Markov state over one sample:
+//!   a short power series where `x` is small (every sample of a real drive), an exact
+//!   power-of-two reduction beyond.
 
 /// One full turn in binary-angle units is 2^64; this is pi/2^63, radians per unit.
 pub const RAD_PER_BINARY: f64 = core::f64::consts::PI / 9_223_372_036_854_775_808.0;
@@ -124,6 +127,45 @@ pub fn sqrt(x: f32) -> f32 {
     // One Newton step on the square root itself squares that error away.
     let r = x * y;
     r + 0.5 * y * (x - r * r)
+}
+
+/// `exp(-x)` for `x >= 0` (0 for larger than 87, NaN or infinite `x`; 1 for `x <= 0`),
+/// relative error below 3e-7.
+///
+/// The covariance model decays its opposite-phase slip state by `exp(-|ds_1 - ds_2| / L)`
+/// per sample, and a sample's wheel-distance difference is far below the correlation length
+/// (at 50 Hz, 4 cm of difference in a spin at 1 m/s, against `L` of 0.05..20 m in the
+/// calibration's grid): for `x < 1/16` the series to `x^4` is exact to f32 rounding (its
+/// remainder `x^5 / 120` is below 1e-8) and costs four multiply-adds. Larger `x` splits
+/// `x = n ln 2 + r`, `|r| <= ln 2 / 2`, and takes `2^-n exp(-r)` (the series to `r^7`,
+/// remainder below 1.3e-7), so that any setting gives a decay in `[0, 1]`.
+#[inline]
+pub fn exp_neg(x: f32) -> f32 {
+    const SMALL: f32 = 1.0 / 16.0;
+    if x < SMALL {
+        // Also x <= 0.
+        if x.partial_cmp(&0.0) != Some(core::cmp::Ordering::Greater) {
+            return 1.0;
+        }
+        return 1.0 - x * (1.0 - x * (0.5 - x * (1.0 / 6.0 - x * (1.0 / 24.0))));
+    }
+    // Also catches NaN and infinity.
+    if x.partial_cmp(&87.0) != Some(core::cmp::Ordering::Less) {
+        return 0.0;
+    }
+    // ln 2 split into a part whose product with n < 128 is exact in f32 (0.693359375, nine
+    // significant bits) and the rest (Cody-Waite).
+    const LN2_HI: f32 = 0.693_359_4;
+    const LN2_LO: f32 = -2.121_944_4e-4;
+    let n = (x * core::f32::consts::LOG2_E + 0.5) as i32;
+    let r = (x - n as f32 * LN2_HI) - n as f32 * LN2_LO;
+    let e = 1.0
+        - r * (1.0
+            - r * (0.5
+                - r * (1.0 / 6.0
+                    - r * (1.0 / 24.0 - r * (1.0 / 120.0 - r * (1.0 / 720.0 - r / 5040.0))))));
+    // 2^-n, n in 0..=126: a normal f32.
+    e * f32::from_bits(((127 - n) as u32) << 23)
 }
 
 /// `sqrt(a^2 + b^2)`, for the small magnitudes of per-sample uncertainties.

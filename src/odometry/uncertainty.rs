@@ -18,6 +18,18 @@
 //! state and `S = diag(kappa_1 |ds_1|, kappa_2 |ds_2|)` (variances proportional to distance
 //! rolled, so the result does not depend on the sampling rate).
 //!
+//! Opposite-phase slip when turning (`kappa_diff`: wheel 1's distance `+e`, wheel 2's `-e`)
+//! is either white, a third input of `S` of variance `kappa_diff |ds_1 - ds_2|`, or, with a
+//! correlation length `L` (`kappa_diff_corr`, metres of `|ds_1 - ds_2|`), a Gauss-Markov slip
+//! rate `eps` (`e` grows by `eps |ds_1 - ds_2|`) of stationary variance
+//! `sigma^2 = kappa_diff / (2 L)`, decaying by `rho = exp(-|ds_1 - ds_2| / L)` per sample: the
+//! state `odoctl`'s calibration filter fits (`Turning`). The unit never observes `eps`, so its
+//! variance stays `sigma^2` and only its covariance with the pose, `P_pe` (3 values), is
+//! carried. With `u = (J_1 - J_2) |ds_1 - ds_2|` the pose change per unit `eps`:
+//! `P' = F P F^T + F P_pe u^T + u P_pe^T F^T + u u^T sigma^2 + J S J^T` and
+//! `P_pe' = rho (F P_pe + u sigma^2)` (the step moves the pose with the rate before it
+//! decays, as the filter's transition does).
+//!
 //! All sums run in f32 with Kahan compensation ([`CompensatedSum`]), so a sigma that grows by
 //! tiny steps over hours keeps full f32 accuracy instead of stalling on rounding.
 
@@ -52,6 +64,13 @@ impl CompensatedSum {
     #[inline]
     pub const fn value(&self) -> f32 {
         self.sum
+    }
+
+    /// Multiplies the accumulated value (and its carry) by `factor`.
+    #[inline]
+    pub fn scale(&mut self, factor: f32) {
+        self.sum *= factor;
+        self.carry *= factor;
     }
 }
 
@@ -135,10 +154,39 @@ pub struct UncertaintyCoefficients {
     pub kappa: [f32; 2],
     /// `kappa_diff`: m^2 per metre of `|ds_1 - ds_2|` (covariance model).
     pub kappa_diff: f32,
+    /// `1 / kappa_diff_corr`, 1/m of `|ds_1 - ds_2|`: 0 for white opposite-phase slip, else
+    /// the decay rate of its Gauss-Markov state (covariance model).
+    pub turn_decay: f32,
+    /// `kappa_diff / (2 kappa_diff_corr)`: the stationary variance of the opposite-phase slip
+    /// rate (dimensionless^2; 0 when white).
+    pub turn_rate_variance: f32,
     /// Covariance of the geometry's relative calibration errors (left and right diameter,
     /// track width), upper triangle `[ll, rr, ww, lr, lw, rw]`
     /// (`GeometryUncertainty::relative_covariance`; covariance model).
     pub geometry: [f32; 6],
+}
+
+/// Shortest correlation length of opposite-phase slip that is carried as a Gauss-Markov
+/// state (m of `|ds_1 - ds_2|`): a shorter one is taken as white, its limit as the length
+/// goes to zero at the same `kappa_diff` (and far below a sample's difference at any rate).
+pub const MIN_TURN_CORRELATION: f32 = 1.0e-3;
+
+impl UncertaintyCoefficients {
+    /// These coefficients with opposite-phase slip of correlation length `corr`
+    /// (`kappa_diff_corr`, m of `|ds_1 - ds_2|`): Gauss-Markov from
+    /// [`MIN_TURN_CORRELATION`] on, white below (0 included).
+    pub fn with_turning_correlation(self, corr: f32) -> Self {
+        let (turn_decay, turn_rate_variance) = if corr >= MIN_TURN_CORRELATION {
+            (1.0 / corr, self.kappa_diff / (2.0 * corr))
+        } else {
+            (0.0, 0.0)
+        };
+        Self {
+            turn_decay,
+            turn_rate_variance,
+            ..self
+        }
+    }
 }
 
 /// The paper's accumulated sigmas, eqs (26)-(28).
@@ -179,8 +227,9 @@ impl PaperUncertainty {
 }
 
 /// The covariance of (x, y, alpha), carried from sample to sample: the wheels' slip
-/// (`kappa`) propagated as a covariance, plus the calibration's geometry errors carried as
-/// the pose's sensitivity to them and added as `S G S^T` when read.
+/// (`kappa`) and the opposite-phase slip (`kappa_diff`, white or Gauss-Markov) propagated as a
+/// covariance, plus the calibration's geometry errors carried as the pose's sensitivity to
+/// them and added as `S G S^T` when read.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct CovarianceUncertainty {
     xx: CompensatedSum,
@@ -189,6 +238,9 @@ pub struct CovarianceUncertainty {
     xy: CompensatedSum,
     xa: CompensatedSum,
     ya: CompensatedSum,
+    /// Covariance of (x, y, alpha) with the Gauss-Markov opposite-phase slip rate (m, m,
+    /// rad); stays zero while the slip is white.
+    turn: [CompensatedSum; 3],
     /// `d(x, y, alpha) / d(relative left diameter, relative right diameter, relative
     /// track width)`: rows x, y (m), alpha (rad).
     sensitivity: [[f32; 3]; 3],
@@ -198,25 +250,71 @@ pub struct CovarianceUncertainty {
 }
 
 impl CovarianceUncertainty {
-    /// Propagates one sample: `P' = F P F^T + J S J^T`.
+    /// Propagates one sample: `P' = F P F^T + J S J^T`, plus the Gauss-Markov opposite-phase
+    /// slip's terms when `kappa_diff_corr` is set (module documentation).
     pub fn step(&mut self, k: &UncertaintyCoefficients, g: &StepGeometry, j: &StepJacobian) {
         let v1 = k.kappa[0] * g.wheel_distance[0].abs();
         let v2 = k.kappa[1] * g.wheel_distance[1].abs();
-        // The opposite-phase error moves s_1 by +e and s_2 by -e.
-        let ve = k.kappa_diff * (g.wheel_distance[0] - g.wheel_distance[1]).abs();
+        let diff = (g.wheel_distance[0] - g.wheel_distance[1]).abs();
+        // The opposite-phase error moves s_1 by +e and s_2 by -e: white, an input of S;
+        // correlated, the slip state's terms.
+        let correlated = k.turn_decay > 0.0;
+        let ve = if correlated { 0.0 } else { k.kappa_diff * diff };
         let q = |u: [f32; 2], w: [f32; 2]| {
             u[0] * w[0] * v1 + u[1] * w[1] * v2 + (u[0] - u[1]) * (w[0] - w[1]) * ve
         };
         let (a, b) = (j.dx_dalpha, j.dy_dalpha);
         let (paa, pxa, pya) = (self.aa.value(), self.xa.value(), self.ya.value());
-        self.xx.add(2.0 * a * pxa + a * a * paa + q(j.dx, j.dx));
-        self.yy.add(2.0 * b * pya + b * b * paa + q(j.dy, j.dy));
-        self.xy.add(a * pya + b * pxa + a * b * paa + q(j.dx, j.dy));
-        self.xa.add(a * paa + q(j.dx, j.dalpha));
-        self.ya.add(b * paa + q(j.dy, j.dalpha));
-        self.aa.add(q(j.dalpha, j.dalpha));
+        let [txx, tyy, taa, txy, txa, tya] = if correlated {
+            self.step_turning_slip(k, diff, j)
+        } else {
+            [0.0; 6]
+        };
+        self.xx
+            .add(2.0 * a * pxa + a * a * paa + q(j.dx, j.dx) + txx);
+        self.yy
+            .add(2.0 * b * pya + b * b * paa + q(j.dy, j.dy) + tyy);
+        self.xy
+            .add(a * pya + b * pxa + a * b * paa + q(j.dx, j.dy) + txy);
+        self.xa.add(a * paa + q(j.dx, j.dalpha) + txa);
+        self.ya.add(b * paa + q(j.dy, j.dalpha) + tya);
+        self.aa.add(q(j.dalpha, j.dalpha) + taa);
         self.step_sensitivity(g, j);
         self.geometry = k.geometry;
+    }
+
+    /// The Gauss-Markov opposite-phase slip over one sample of wheel-distance difference
+    /// `diff` (m): moves its covariance with the pose to `rho (F P_pe + u sigma^2)` and
+    /// returns its terms of the pose covariance, `F P_pe u^T + u P_pe^T F^T + u u^T sigma^2`,
+    /// as `[xx, yy, aa, xy, xa, ya]`.
+    fn step_turning_slip(
+        &mut self,
+        k: &UncertaintyCoefficients,
+        diff: f32,
+        j: &StepJacobian,
+    ) -> [f32; 6] {
+        let s2 = k.turn_rate_variance;
+        // Pose change per unit slip rate.
+        let u = [
+            (j.dx[0] - j.dx[1]) * diff,
+            (j.dy[0] - j.dy[1]) * diff,
+            (j.dalpha[0] - j.dalpha[1]) * diff,
+        ];
+        // F P_pe: the heading's covariance with the rate carried into the position's.
+        let pa = self.turn[2].value();
+        let w = [
+            self.turn[0].value() + j.dx_dalpha * pa,
+            self.turn[1].value() + j.dy_dalpha * pa,
+            pa,
+        ];
+        let t = |r: usize, c: usize| w[r] * u[c] + u[r] * w[c] + u[r] * u[c] * s2;
+        let rho = trig::exp_neg(diff * k.turn_decay);
+        let incoming = [j.dx_dalpha * pa, j.dy_dalpha * pa, 0.0];
+        for (i, p) in self.turn.iter_mut().enumerate() {
+            p.add(incoming[i] + u[i] * s2);
+            p.scale(rho);
+        }
+        [t(0, 0), t(1, 1), t(2, 2), t(0, 1), t(0, 2), t(1, 2)]
     }
 
     /// Carries the pose's sensitivity to the geometry's relative errors through one sample:

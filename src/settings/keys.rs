@@ -241,6 +241,10 @@ const KAPPA: Kind = Kind::F32 {
     min: 0.0,
     max: ChassisParams::MAX_KAPPA,
 };
+const TURN_CORR: Kind = Kind::F32 {
+    min: 0.0,
+    max: ChassisParams::MAX_KAPPA_DIFF_CORR,
+};
 const HARM: Kind = Kind::F32 {
     min: -ChassisParams::MAX_HARMONIC,
     max: ChassisParams::MAX_HARMONIC,
@@ -421,6 +425,12 @@ key_table! {
     KappaDiff {
         name: "kappa_diff", unit: "m^2/m", kind: KAPPA, default: D.kappa_diff,
         field: [chassis.kappa_diff], record: 140 since 3, group: Chassis,
+    }
+    /// `kappa_diff_corr`: covariance model, correlation length of the opposite-phase slip,
+    /// metres of wheel-distance difference (0, or below 0.001: white).
+    KappaDiffCorr {
+        name: "kappa_diff_corr", unit: "m", kind: TURN_CORR, default: D.kappa_diff_corr,
+        field: [chassis.kappa_diff_corr], record: 144 since 4, group: Chassis,
     }
     /// `left_cos1`: wheel 1's radius function, first cosine harmonic (relative).
     LeftCos1 {

@@ -156,6 +156,7 @@ impl Settings {
             kappa_left: 0.0,
             kappa_right: 0.0,
             kappa_diff: 0.0,
+            kappa_diff_corr: 0.0,
             left_wheel: WheelHarmonics::ROUND,
             right_wheel: WheelHarmonics::ROUND,
             geometry_uncertainty: GeometryUncertainty::EXACT,

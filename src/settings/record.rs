@@ -7,9 +7,9 @@ use super::{Key, SettingError, Settings};
 
 /// Version of the serialised settings layout ([`Settings::to_bytes`]). Version 2 appended
 /// `max_wheel_speed` to version 1, version 3 the geometry's standard errors and correlations
-/// (`left_diameter_se`.. `right_track_correlation`) and `kappa_diff`; [`Settings::from_bytes_version`] reads
-/// all three.
-pub const SETTINGS_FORMAT_VERSION: u16 = 3;
+/// (`left_diameter_se`.. `right_track_correlation`) and `kappa_diff`, version 4
+/// `kappa_diff_corr`; [`Settings::from_bytes_version`] reads all four.
+pub const SETTINGS_FORMAT_VERSION: u16 = 4;
 
 /// Length of the payload of format `version`: the end of its last key, bytes.
 pub const fn serialized_len(version: u16) -> usize {
@@ -47,8 +47,8 @@ const fn no_overlap() -> bool {
 const _: () = assert!(no_overlap(), "two keys share bytes of the settings record");
 
 impl Settings {
-    /// Length of the serialised form of format version [`SETTINGS_FORMAT_VERSION`] (3),
-    /// bytes: 144 (from the key table).
+    /// Length of the serialised form of format version [`SETTINGS_FORMAT_VERSION`] (4),
+    /// bytes: 148 (from the key table).
     pub const SERIALIZED_LEN: usize = serialized_len(SETTINGS_FORMAT_VERSION);
 
     /// Length of the serialised form of format version 1, bytes: 112, the version 2 layout
@@ -58,6 +58,10 @@ impl Settings {
     /// Length of the serialised form of format version 2, bytes: 116, the version 3 layout
     /// without the geometry's standard errors and correlations and `kappa_diff`.
     pub const SERIALIZED_LEN_V2: usize = serialized_len(2);
+
+    /// Length of the serialised form of format version 3, bytes: 144, the version 4 layout
+    /// without `kappa_diff_corr`.
+    pub const SERIALIZED_LEN_V3: usize = serialized_len(3);
 
     /// Serialises into the fixed little-endian layout of format version
     /// [`SETTINGS_FORMAT_VERSION`] (documented in `docs/PROTOCOL.md`).
@@ -99,11 +103,13 @@ impl Settings {
         Self::from_bytes_version(SETTINGS_FORMAT_VERSION, bytes)
     }
 
-    /// Parses the serialised form of format `version` and validates it: version 3
-    /// ([`Self::SERIALIZED_LEN`] bytes), 2 ([`Self::SERIALIZED_LEN_V2`] bytes, before the
-    /// geometry's standard errors) or 1 ([`Self::SERIALIZED_LEN_V1`] bytes, before
-    /// `max_wheel_speed`); a key newer than the record takes its default. Too few bytes, a bad code, an unknown version or settings that do not
-    /// validate (including under rules added since the record was written) are errors.
+    /// Parses the serialised form of format `version` and validates it: version 4
+    /// ([`Self::SERIALIZED_LEN`] bytes), 3 ([`Self::SERIALIZED_LEN_V3`] bytes, before
+    /// `kappa_diff_corr`), 2 ([`Self::SERIALIZED_LEN_V2`] bytes, before the geometry's
+    /// standard errors) or 1 ([`Self::SERIALIZED_LEN_V1`] bytes, before `max_wheel_speed`); a
+    /// key newer than the record takes its default. Too few bytes, a bad code, an unknown
+    /// version or settings that do not validate (including under rules added since the
+    /// record was written) are errors.
     pub fn from_bytes_version(version: u16, bytes: &[u8]) -> Result<Self, SettingError> {
         if !(1..=SETTINGS_FORMAT_VERSION).contains(&version) {
             return Err(SettingError::UnknownFormatVersion(version));

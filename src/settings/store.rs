@@ -16,17 +16,19 @@
 //! | offset | size | field |
 //! |---|---|---|
 //! | 0 | 4 | magic `0x534F444F` (bytes `4F 44 4F 53`, "ODOS") |
-//! | 4 | 2 | settings format version ([`super::SETTINGS_FORMAT_VERSION`], 3) |
-//! | 6 | 2 | payload length `n` ([`Settings::SERIALIZED_LEN`], 144) |
+//! | 4 | 2 | settings format version ([`super::SETTINGS_FORMAT_VERSION`], 4) |
+//! | 6 | 2 | payload length `n` ([`Settings::SERIALIZED_LEN`], 148) |
 //! | 8 | 4 | generation, 1 for the first save |
 //! | 12 | n | payload ([`Settings::to_bytes`]) |
 //! | 12 + n | 4 | CRC-32/ISO-HDLC of bytes 0..12 + n |
 //!
-//! Saves write format version 3 ([`RECORD_LEN`] = 160 bytes). Loading also accepts the
-//! records of format version 2 (payload 116 bytes, 132 bytes in all), written before the
-//! geometry's standard errors existed, and of format version 1 (payload 112 bytes, 128 bytes),
-//! written before `max_wheel_speed` existed: keys newer than a record load at their defaults.
-//! The version and length must be one of these three pairs, else the record is skipped.
+//! Saves write format version 4 ([`RECORD_LEN`] = 164 bytes). Loading also accepts the
+//! records of format version 3 (payload 144 bytes, 160 bytes in all), written before
+//! `kappa_diff_corr` existed, of format version 2 (payload 116 bytes, 132 bytes), written
+//! before the geometry's standard errors existed, and of format version 1 (payload 112 bytes,
+//! 128 bytes), written before `max_wheel_speed` existed: keys newer than a record load at
+//! their defaults. The version and length must be one of these four pairs, else the record
+//! is skipped.
 
 use super::{Settings, SETTINGS_FORMAT_VERSION};
 use crate::bytes::Reader;
@@ -45,9 +47,10 @@ pub const WORD: usize = 4;
 const CRC_AT: usize = 12 + Settings::SERIALIZED_LEN;
 
 /// The (format version, payload length) pairs a record may carry, bytes.
-const FORMATS: [(u16, usize); 3] = [
+const FORMATS: [(u16, usize); 4] = [
     (1, Settings::SERIALIZED_LEN_V1),
     (2, Settings::SERIALIZED_LEN_V2),
+    (3, Settings::SERIALIZED_LEN_V3),
     (SETTINGS_FORMAT_VERSION, Settings::SERIALIZED_LEN),
 ];
 
@@ -305,7 +308,7 @@ fn record_format(r: &[u8]) -> Option<(u16, usize)> {
 }
 
 /// A record whose magic, version, length and CRC are right: its generation, and its
-/// settings (either format version) if they decode and validate.
+/// settings (any format version it accepts) if they decode and validate.
 fn parse_record(r: &[u8]) -> Option<(u32, Option<Settings>)> {
     let (version, len) = record_format(r)?;
     let generation = Reader::new(r.get(8..)?).u32().ok()?;

@@ -1,11 +1,12 @@
 //! The slip of the largest likelihood under the Kalman filter of [`Innovations`]: the
 //! covariance model's kappa (white wheel slip, then Gauss-Markov slip profiled over its
-//! correlation length), then opposite-phase slip when turning ([`Turning`], the unit's
-//! `kappa_diff`), kept only when the likelihood says it is there. The more likely of white and
-//! correlated slip is kept and its kappa, the long-range rate, is what the unit's white-slip
-//! model gets: correlated slip is smoother over a few centimetres than white slip of the same
-//! long-range rate, and a white-slip fit alone took it for less slip (a third of it at
-//! `L` = 2 m).
+//! correlation length), then opposite-phase slip when turning ([`Turning`]: the unit's
+//! `kappa_diff`, and its correlation length `kappa_diff_corr`, which the unit's covariance
+//! model carries as the same Gauss-Markov state), kept only when the likelihood says it is
+//! there. The more likely of white and correlated wheel slip is kept and its kappa, the
+//! long-range rate, is what the unit's white-slip model gets: correlated slip is smoother over
+//! a few centimetres than white slip of the same long-range rate, and a white-slip fit alone
+//! took it for less slip (a third of it at `L` = 2 m).
 //!
 //! Each score of a correlated slip needs its Gauss-Markov states composed over the blocks
 //! (`filter_blocks`), once per correlation length; for one length the likelihood is a
@@ -37,6 +38,9 @@ const LN_TOL: f64 = 1e-3;
 
 /// How far a correlated fit's kappa is looked for from the white fit's: `ln` below, above.
 const LN_REACH: (f64, f64) = (3.0, 8.0);
+
+/// Most rounds of the alternate fit of kappa and `kappa_diff` once opposite-phase slip is in.
+const JOINT_ROUNDS: usize = 4;
 
 /// The correlation lengths of the profile (m).
 fn corr_grid() -> impl Iterator<Item = f64> {
@@ -199,15 +203,27 @@ impl Innovations {
         if best.1 > without - OPPOSITE_PHASE_EVIDENCE * best.2 {
             return (kappa, corr, Turning::NONE);
         }
-        let turning = best.0;
+        let mut turning = best.0;
         let gt = (turning.corr > 0.0).then(|| self.turning_slip(turning.corr));
         let turn = gt.as_deref().map(|g| (turning.corr, g));
-        let (kappa, _) = search_near(
-            |k| self.nll(k, wheels, turning.kappa_diff, turn),
-            kappa,
-            lo,
-            hi,
-        );
+        // Kappa took some of the turning slip for wheel slip before `kappa_diff` was there:
+        // the two are fitted in turn until they settle.
+        let mut kappa = kappa;
+        for _ in 0..JOINT_ROUNDS {
+            let (k, _) = search_near(
+                |k| self.nll(k, wheels, turning.kappa_diff, turn),
+                kappa,
+                lo,
+                hi,
+            );
+            let (d, _) = search_near(|d| self.nll(k, wheels, d, turn), turning.kappa_diff, lo, hi);
+            let settled =
+                (k / kappa).ln().abs() < 0.01 && (d / turning.kappa_diff).ln().abs() < 0.01;
+            (kappa, turning.kappa_diff) = (k, d);
+            if settled {
+                break;
+            }
+        }
         (kappa, corr, turning)
     }
 }
@@ -235,6 +251,9 @@ pub fn fit_kappa_filter(
         kappa,
     );
     params.kappa_diff = turning.kappa_diff as f32;
+    // The unit carries the same Gauss-Markov state (`kappa_diff_corr`, metres of
+    // `|s_1 - s_2|` as `Turning::corr`); 0 when the white form won.
+    params.kappa_diff_corr = turning.corr as f32;
     let score = innovations.score_with(kappa, corr, turning);
     let warning = if kappa <= lo * 1.01 {
         Some(

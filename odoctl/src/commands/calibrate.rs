@@ -259,6 +259,21 @@ pub fn calibrate(o: &CalibrateOptions, input: &ReferenceArgs) -> Result<ExitCode
         };
         crate::outln!("  {:<16} {:>14.4e} {:>14.4e}", u.keys.0, a.0, b.0);
         crate::outln!("  {:<16} {:>14.4e} {:>14.4e}", u.keys.1, a.1, b.1);
+        if u.model == UncertaintyModel::Covariance {
+            let (i, p) = (&initial, &c.params);
+            crate::outln!(
+                "  {:<16} {:>14.4e} {:>14.4e}",
+                "kappa_diff",
+                i.kappa_diff,
+                p.kappa_diff
+            );
+            crate::outln!(
+                "  {:<16} {:>14.4e} {:>14.4e}",
+                "kappa_diff_corr",
+                i.kappa_diff_corr,
+                p.kappa_diff_corr
+            );
+        }
         if u.criterion == calib::UncertaintyCriterion::Likelihood {
             crate::outln!(
                 "{} model fit: likelihood of {} reference observations (1 m averages, one per {:.1} m of path: at most {} per run) under a Kalman filter of the odometry's and the geometry's errors; innovations inside 1 and 3 sigma: horizontal {:.1} % / {:.1} %{}",
