@@ -114,6 +114,7 @@ pub(super) fn with_covariance_coefficients(
         kappa_left: fitted.kappa_left,
         kappa_right: fitted.kappa_right,
         kappa_diff: fitted.kappa_diff,
+        kappa_diff_corr: fitted.kappa_diff_corr,
         ..*base
     }
 }
