@@ -1,0 +1,194 @@
+//! The geometry refined by the Kalman filter of the kappa likelihood (`--geometry-refine
+//! filter`, the default after the sub-trajectory fit).
+//!
+//! [`Innovations`] carries the geometry's relative errors `(c_1, c_2, b)` as states with a wide
+//! prior, so its state after the last observation is a generalised least-squares estimate of
+//! them that weights every observation by the slip's noise: the turns, where the heading
+//! drifts most, count for what they are worth, where the sub-trajectory fit weighs every
+//! residual alike. The refinement: the white-slip kappa of the largest likelihood (the slip's
+//! long-range rate; a white model weights the short 70 m run's turns as well as the fitted
+//! correlated one), the filter's estimate applied to the geometry, the filter linearised again
+//! at the result, until the step is a hundredth of a standard error (two or three passes).
+//!
+//! Its limit: the filter is linearised about the odometry integrated open-loop over the whole
+//! run, whose heading drifts from the truth by a random walk of variance
+//! `kappa (R_1 + R_2) / W^2` (`R_i` the distances the wheels rolled); the positions' second
+//! order in that drift shortens the path by about a quarter of it (relative), which the filter
+//! takes for a scale of all three lengths. That bound is added to the standard errors, and when
+//! it exceeds the diameters' own the refinement is not applied (logs of a few hundred metres
+//! on: the sub-trajectory estimate is then kept, which is better there). The filter observes
+//! the axle centre: a lever arm also keeps the sub-trajectory estimate.
+
+use anyhow::{anyhow, Result};
+use odo_core::odometry::ChassisParams;
+
+use super::{Innovations, Run, Turning, OBSERVATION_BLOCK};
+
+/// Whether `calibrate` refines the sub-trajectory geometry by the filter.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum GeometryRefine {
+    /// The filter's generalised least-squares estimate ([`refine_geometry`]) where its
+    /// linearisation holds (the default).
+    #[default]
+    Filter,
+    /// The sub-trajectory estimate as fitted.
+    None,
+}
+
+/// Largest number of linearisations.
+const MAX_PASSES: usize = 4;
+
+/// The refinement stops when its step is below this share of each standard error.
+const STEP_TOLERANCE: f64 = 0.01;
+
+/// Outcome of [`refine_geometry`].
+#[derive(Debug, Clone)]
+pub struct FilterRefinement {
+    /// The refined parameters (the input's when not applied).
+    pub params: ChassisParams,
+    /// Covariance of `left_diameter`, `right_diameter`, `track_width` (m^2), with the
+    /// linearisation bound added to the diagonal.
+    pub covariance: [[f64; 3]; 3],
+    /// The white slip of the largest likelihood the filter weighted with (m^2 per m rolled).
+    pub kappa: f64,
+    /// Linearisations run.
+    pub passes: usize,
+    /// Bound of the linearisation's error, relative (see the module documentation).
+    pub linearisation: f64,
+    /// Filter observations (one per metre of path).
+    pub observations: usize,
+    /// Why the refinement was not applied (`None`: applied).
+    pub skipped: Option<String>,
+}
+
+impl FilterRefinement {
+    /// The standard errors of `left_diameter`, `right_diameter`, `track_width` (m).
+    pub fn std_errors(&self) -> [f64; 3] {
+        std::array::from_fn(|i| self.covariance[i][i].sqrt())
+    }
+}
+
+/// The white-slip kappa in `[lo, hi]` of the largest likelihood: a grid in log scale, then
+/// golden sections.
+fn white_kappa(inn: &Innovations, lo: f64, hi: f64) -> f64 {
+    let f = |l: f64| inn.score_with(l.exp(), 0.0, Turning::NONE).nll;
+    let (a, b) = (lo.ln(), hi.ln());
+    let n = 24;
+    let step = (b - a) / n as f64;
+    let (mut best, mut best_f) = (a, f64::INFINITY);
+    for i in 0..=n {
+        let l = a + step * i as f64;
+        let v = f(l);
+        if v < best_f {
+            (best, best_f) = (l, v);
+        }
+    }
+    let (mut l, mut h) = ((best - step).max(a), (best + step).min(b));
+    let g = 0.5 * (5f64.sqrt() - 1.0);
+    let (mut c, mut d) = (h - g * (h - l), l + g * (h - l));
+    let (mut fc, mut fd) = (f(c), f(d));
+    while h - l > 1e-3 {
+        if fc < fd {
+            (h, d, fd) = (d, c, fc);
+            c = h - g * (h - l);
+            fc = f(c);
+        } else {
+            (l, c, fc) = (c, d, fd);
+            d = l + g * (h - l);
+            fd = f(d);
+        }
+    }
+    let m = 0.5 * (l + h);
+    if f(m) <= best_f {
+        m.exp()
+    } else {
+        best.exp()
+    }
+}
+
+/// The distances the two wheels rolled over the run (m).
+fn rolled(run: &Run, p: &ChassisParams) -> [f64; 2] {
+    let (a, b) = (run.matches[0].0, run.matches[run.len() - 1].0);
+    let per = |d: f64| std::f64::consts::PI * d / f64::from(p.ticks_per_rev);
+    let (mut l, mut r) = (0i64, 0i64);
+    for w in run.samples[a..=b].windows(2) {
+        l += (w[1].left - w[0].left).abs();
+        r += (w[1].right - w[0].right).abs();
+    }
+    [
+        l as f64 * per(p.left_diameter),
+        r as f64 * per(p.right_diameter),
+    ]
+}
+
+/// Refines `params` (a geometry estimate, e.g. the sub-trajectory fit's) by the filter's
+/// estimate (module documentation). `heading0` is the run's start heading (used without
+/// reference headings), the sigmas are the reference's (m, rad).
+pub fn refine_geometry(
+    run: &Run,
+    params: &ChassisParams,
+    heading0: f64,
+    ref_sigma: f64,
+    ref_heading_sigma: f64,
+) -> Result<FilterRefinement> {
+    let new = |p: &ChassisParams| {
+        Innovations::new(
+            run,
+            p,
+            heading0,
+            ref_sigma,
+            ref_heading_sigma,
+            OBSERVATION_BLOCK,
+        )
+    };
+    let mut inn = new(params)?;
+    let hi = f64::from(ChassisParams::MAX_KAPPA);
+    let kappa = white_kappa(&inn, hi * 1e-12, hi);
+    let mut p = *params;
+    let mut rel_cov = [[0.0; 3]; 3];
+    let mut passes = 0;
+    while passes < MAX_PASSES {
+        if passes > 0 {
+            inn = new(&p)?;
+        }
+        let s = inn.score_with(kappa, 0.0, Turning::NONE);
+        passes += 1;
+        if !s.nll.is_finite() || s.geometry.iter().any(|v| !v.is_finite()) {
+            return Err(anyhow!("the filter failed at kappa {kappa:e}"));
+        }
+        let g = s.geometry;
+        p.left_diameter *= 1.0 + g[0];
+        p.right_diameter *= 1.0 + g[1];
+        p.track_width *= 1.0 + g[2];
+        rel_cov = s.geometry_cov;
+        if (0..3).all(|i| g[i].abs() <= STEP_TOLERANCE * rel_cov[i][i].sqrt()) {
+            break;
+        }
+    }
+    let r = rolled(run, &p);
+    let linearisation = kappa * (r[0] + r[1]) / (4.0 * p.track_width * p.track_width);
+    let v = [p.left_diameter, p.right_diameter, p.track_width];
+    let mut covariance = [[0.0; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            covariance[i][j] = rel_cov[i][j] * v[i] * v[j];
+        }
+        covariance[i][i] += (linearisation * v[i]).powi(2);
+    }
+    let diameters_se = rel_cov[0][0].min(rel_cov[1][1]).sqrt();
+    let skipped = (linearisation > diameters_se).then(|| {
+        format!(
+            "the filter's linearisation error ({linearisation:.1e} of the lengths: white slip kappa {kappa:.2e} m^2/m over {:.0} m rolled) exceeds its diameters' standard error ({diameters_se:.1e})",
+            r[0] + r[1]
+        )
+    });
+    Ok(FilterRefinement {
+        params: if skipped.is_some() { *params } else { p },
+        covariance,
+        kappa,
+        passes,
+        linearisation,
+        observations: inn.observations,
+        skipped,
+    })
+}
