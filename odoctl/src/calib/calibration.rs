@@ -13,10 +13,10 @@ use crate::csvio;
 use super::{
     evaluate, fit_delta_diff, fit_geometry, fit_kappa_filter, fit_restart_heading,
     fit_subtrajectories, fit_uncertainty_on, paper_cluster_errors, refine_geometry,
-    standard_errors, track_width_warning, windows_study, Cuts, DeltaMode, DiffOptions,
-    Evaluation, FilterRefinement, GeomFit, GeomOptions, GeometryRefine, Innovations, LeverArm,
-    Restarts, Run, SubtrajectoryFit, SubtrajectoryOptions, UncertaintyFit, WindowEstimate,
-    WindowStart, OBSERVATION_BLOCK, SUBTRAJECTORY_LENGTH,
+    standard_errors, track_width_warning, windows_study, Cuts, DeltaMode, DiffOptions, Evaluation,
+    FilterRefinement, GeomFit, GeomOptions, GeometryRefine, Innovations, LeverArm, Restarts, Run,
+    SubtrajectoryFit, SubtrajectoryOptions, UncertaintyFit, WindowEstimate, WindowStart,
+    OBSERVATION_BLOCK, SUBTRAJECTORY_LENGTH,
 };
 
 /// How the diameters and the track width are estimated.
@@ -502,6 +502,7 @@ fn refine(
             params: s.params,
             covariance: [[f64::NAN; 3]; 3],
             kappa: f64::NAN,
+            kappa_diff: f64::NAN,
             passes: 0,
             linearisation: f64::NAN,
             observations: 0,
