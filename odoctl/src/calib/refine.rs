@@ -134,16 +134,62 @@ fn rolled(run: &Run, p: &ChassisParams) -> [f64; 2] {
     out
 }
 
+/// Reference path of the first look at the slip on a long log (m).
+const PREFIX: f64 = 100.0;
+
+/// A long log is not refined when the linearisation bound from its first [`PREFIX`] metres'
+/// slip exceeds this many of the sub-trajectory fit's diameter standard errors (which are
+/// about the filter's): the filter over the whole log would be run only to be refused.
+const PREFIX_MARGIN: f64 = 3.0;
+
 /// Refines `params` (a geometry estimate, e.g. the sub-trajectory fit's) by the filter's
 /// estimate (module documentation). `heading0` is the run's start heading (used without
-/// reference headings), the sigmas are the reference's (m, rad).
+/// reference headings), the sigmas are the reference's (m, rad); `diameters_se` the
+/// estimate's own smaller diameter standard error (m), by which a long log is first judged
+/// on the slip of its first 100 m.
 pub fn refine_geometry(
     run: &Run,
     params: &ChassisParams,
     heading0: f64,
     ref_sigma: f64,
     ref_heading_sigma: f64,
+    diameters_se: Option<f64>,
 ) -> Result<FilterRefinement> {
+    let hi = f64::from(ChassisParams::MAX_KAPPA);
+    let lo = hi * 1e-12;
+    let last = run.len() - 1;
+    if let Some(se) = diameters_se.filter(|_| run.dist[last] > 1.5 * PREFIX) {
+        let b = run.last_within(0, PREFIX);
+        let prefix = Run::new(run.samples, run.reference, run.matches[..=b].to_vec())
+            .with_antenna(run.antenna);
+        let inn = Innovations::new(
+            &prefix,
+            params,
+            heading0,
+            ref_sigma,
+            ref_heading_sigma,
+            OBSERVATION_BLOCK,
+        )?;
+        let kappa = least(|k| inn.score_with(k, 0.0, Turning::NONE).nll, lo, hi);
+        let r = rolled(run, params);
+        let linearisation = kappa * (r[0] + r[1]) / (8.0 * params.track_width.powi(2));
+        let relative = se / params.left_diameter.min(params.right_diameter);
+        if linearisation > PREFIX_MARGIN * relative {
+            return Ok(FilterRefinement {
+                params: *params,
+                covariance: [[f64::NAN; 3]; 3],
+                kappa,
+                kappa_diff: f64::NAN,
+                passes: 0,
+                linearisation,
+                observations: inn.observations,
+                skipped: Some(format!(
+                    "the filter's linearisation error ({linearisation:.1e} of the lengths: white slip kappa {kappa:.2e} m^2/m over the first {PREFIX} m, {:.0} m rolled) exceeds {PREFIX_MARGIN} of the diameters' standard errors ({relative:.1e})",
+                    r[0] + r[1]
+                )),
+            });
+        }
+    }
     let new = |p: &ChassisParams| {
         Innovations::new(
             run,
@@ -155,8 +201,6 @@ pub fn refine_geometry(
         )
     };
     let mut inn = new(params)?;
-    let hi = f64::from(ChassisParams::MAX_KAPPA);
-    let lo = hi * 1e-12;
     // White slip; then whether the likelihood asks for opposite-phase slip when turning.
     let nll = |k: f64, t: Turning| inn.score_with(k, 0.0, t).nll;
     let white = |kappa_diff: f64| Turning {
