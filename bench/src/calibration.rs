@@ -17,13 +17,16 @@
 //! Then the time of the `--wheel-harmonics` fit on a 300 m run with an eccentric wheel.
 //!
 //! `BENCH_REPS` (default 5) sets the repetitions of the 70 m figures; the 3 km figures use
-//! `BENCH_REPS_LONG` (default 3); `BENCH_SEEDS` (default 5) the seeds of the accuracy table.
+//! `BENCH_REPS_LONG` (default 3); `BENCH_SEEDS` (default 5) the seeds of the accuracy table,
+//! `BENCH_LOGS` its logs (default all: `70 m,300 m,1 km,3 km`).
 
 use std::time::Instant;
 
 use indicatif::ProgressBar;
 use odo_core::odometry::{ChassisParams, UncertaintyModel};
-use odoctl::calib::{self, CalibrationOptions, GeomOptions, Method, Run, WindowStart};
+use odoctl::calib::{
+    self, CalibrationOptions, Cuts, GeomOptions, GeometryRefine, Method, Run, WindowStart,
+};
 use odoctl::csvio::match_times;
 use odoctl::simulate::{self, default_truth, PathKind, SimRun, SimSettings};
 
@@ -214,7 +217,7 @@ fn case(name: &str, run: &SimRun, n: usize, before: &Before) {
 }
 
 /// One geometry estimate's errors to the truth (mm: left, right, track) and its reported
-/// standard errors (mm).
+/// standard errors (mm: the geometry fit's robust ones, the filter's when it refined them).
 fn geometry_errors(c: &calib::Calibration) -> ([f64; 3], [f64; 3]) {
     let t = default_truth();
     let p = &c.params;
@@ -229,19 +232,35 @@ fn geometry_errors(c: &calib::Calibration) -> ([f64; 3], [f64; 3]) {
     )
 }
 
-/// The accuracy table of issue 16: errors to the truth of both methods from 0.300/0.300/0.700
-/// on logs of 70 m (the estimation path), 300 m, 1 km and 3 km (random paths), all with the
-/// simulator's correlated slip (`odoctl simulate` defaults: 0.1 % over 0.1 m); seed 1 (what
-/// `odoctl simulate` writes) with its reported standard errors, and the RMS error over seeds
-/// 1-`BENCH_SEEDS` (default 5). Then the wall time of the whole default calibration on 3 km.
+/// The accuracy table of issue 16: errors to the truth of the geometry methods from
+/// 0.300/0.300/0.700 on logs of 70 m (the estimation path), 300 m, 1 km and 3 km (random
+/// paths), all with the simulator's correlated slip (`odoctl simulate` defaults: 0.1 % over
+/// 0.1 m): the default (sub-trajectories cut by distance, refined by the filter where its
+/// linearisation holds), the same without the refinement (`--geometry-refine none`), both with
+/// the cuts on straights, and the paper's eq (16); seed 1 (what `odoctl simulate` writes) with
+/// its reported standard errors, the RMS error and the RMS reported standard error over seeds
+/// 1-`BENCH_SEEDS` (default 5), the share of the estimates within 2 reported standard errors,
+/// and on how many seeds the filter
+/// refined the estimate (`BENCH_LOGS`, e.g. `70 m,300 m`, limits the logs). Then the wall time
+/// of the whole default calibration on 3 km.
 fn accuracy_table() {
     let seeds = reps("BENCH_SEEDS", 5) as u64;
+    let logs: Vec<String> = std::env::var("BENCH_LOGS")
+        .map(|v| v.split(',').map(|l| l.trim().to_string()).collect())
+        .unwrap_or_default();
     println!(
         "accuracy from 0.300/0.300/0.700, simulator defaults (slip 0.1 % over 0.1 m, RTK 8 mm); errors to the truth in mm (left / right / track), seed 1 with its reported standard errors, RMS over seeds 1-{seeds}:"
     );
     println!(
-        "  {:<6} {:<14} {:>28} {:>28} {:>28}",
-        "log", "method", "seed 1 error", "seed 1 std. error", "RMS error"
+        "  {:<6} {:<26} {:>28} {:>28} {:>28} {:>28} {:>9} {:>8}",
+        "log",
+        "method",
+        "seed 1 error",
+        "seed 1 std. error",
+        "RMS error",
+        "RMS std. error",
+        "in 2 SE",
+        "refined"
     );
     for (kind, length, label) in [
         (PathKind::Estimation, 70.0, "70 m"),
@@ -249,6 +268,9 @@ fn accuracy_table() {
         (PathKind::Random, 1000.0, "1 km"),
         (PathKind::Random, 3000.0, "3 km"),
     ] {
+        if !logs.is_empty() && !logs.iter().any(|l| l == label) {
+            continue;
+        }
         let runs: Vec<SimRun> = (1..=seeds)
             .map(|seed| {
                 simulate::simulate_path(
@@ -262,16 +284,42 @@ fn accuracy_table() {
                 )
             })
             .collect();
-        for (method, mname) in [
-            (Method::Subtrajectory, "subtrajectory"),
-            (Method::Paper, "paper"),
+        for (method, cuts, refine, mname) in [
+            (
+                Method::Subtrajectory,
+                Cuts::Distance,
+                GeometryRefine::Filter,
+                "subtrajectory+filter",
+            ),
+            (
+                Method::Subtrajectory,
+                Cuts::Distance,
+                GeometryRefine::None,
+                "subtrajectory",
+            ),
+            (
+                Method::Subtrajectory,
+                Cuts::Straights,
+                GeometryRefine::Filter,
+                "straights+filter",
+            ),
+            (
+                Method::Subtrajectory,
+                Cuts::Straights,
+                GeometryRefine::None,
+                "straights",
+            ),
+            (Method::Paper, Cuts::Distance, GeometryRefine::None, "paper"),
         ] {
             let o = CalibrationOptions {
                 method,
+                subtrajectory_cuts: cuts,
+                geometry_refine: refine,
                 fit_delta: false,
                 ..Default::default()
             };
-            let mut sq = [0.0; 3];
+            let (mut sq, mut sq_se) = ([0.0; 3], [0.0; 3]);
+            let (mut within2, mut refined) = (0usize, 0usize);
             let mut first = None;
             for r in &runs {
                 match calib::calibrate(&r.samples, &r.reference, ("s", "r"), &poor(), &o) {
@@ -279,7 +327,11 @@ fn accuracy_table() {
                         let (e, se) = geometry_errors(&c);
                         for i in 0..3 {
                             sq[i] += e[i] * e[i];
+                            sq_se[i] += se[i] * se[i];
+                            within2 += usize::from(e[i].abs() <= 2.0 * se[i]);
                         }
+                        refined +=
+                            usize::from(c.refinement.as_ref().is_some_and(|r| r.skipped.is_none()));
                         first.get_or_insert((e, se));
                     }
                     Err(e) => println!("  {label} {mname}: failed: {e}"),
@@ -287,6 +339,7 @@ fn accuracy_table() {
             }
             let Some((e, se)) = first else { continue };
             let rms = sq.map(|v| (v / seeds as f64).sqrt());
+            let rms_se = sq_se.map(|v| (v / seeds as f64).sqrt());
             let f = |v: [f64; 3], sign: bool| {
                 if sign {
                     format!("{:+.4} / {:+.4} / {:+.3}", v[0], v[1], v[2])
@@ -295,14 +348,18 @@ fn accuracy_table() {
                 }
             };
             println!(
-                "  {label:<6} {mname:<14} {:>28} {:>28} {:>28}",
+                "  {label:<6} {mname:<26} {:>28} {:>28} {:>28} {:>28} {:>8.1}% {:>8}",
                 f(e, true),
                 f(se, false),
-                f(rms, false)
+                f(rms, false),
+                f(rms_se, false),
+                100.0 * within2 as f64 / (3 * runs.len()) as f64,
+                format!("{refined}/{}", runs.len())
             );
         }
     }
-    // The whole default calibration (sub-trajectory fit, delta, delta_diff) on the 3 km log.
+    // The whole default calibration (sub-trajectory fit, filter refinement, delta, delta_diff)
+    // on the 3 km log.
     let s3k = sim(PathKind::Random, 3000.0);
     let n = reps("BENCH_REPS_LONG", 3);
     let mut times = Vec::new();

@@ -13,10 +13,11 @@ use crate::csvio;
 use super::uncertainty::with_covariance_coefficients;
 use super::{
     evaluate, fit_delta_diff, fit_geometry, fit_kappa_filter, fit_restart_heading,
-    fit_subtrajectories, fit_uncertainty_on, paper_cluster_errors, standard_errors,
-    track_width_warning, windows_study, Cuts, DeltaMode, DiffOptions, Evaluation, GeomFit,
-    GeomOptions, Innovations, LeverArm, Restarts, Run, SubtrajectoryFit, SubtrajectoryOptions,
-    UncertaintyFit, WindowEstimate, WindowStart, OBSERVATION_BLOCK, SUBTRAJECTORY_LENGTH,
+    fit_subtrajectories, fit_uncertainty_on, paper_cluster_errors, refine_geometry,
+    standard_errors, track_width_warning, windows_study, Cuts, DeltaMode, DiffOptions, Evaluation,
+    FilterRefinement, GeomFit, GeomOptions, GeometryRefine, Innovations, LeverArm, Restarts, Run,
+    SubtrajectoryFit, SubtrajectoryOptions, UncertaintyFit, WindowEstimate, WindowStart,
+    OBSERVATION_BLOCK, SUBTRAJECTORY_LENGTH,
 };
 
 /// How the diameters and the track width are estimated.
@@ -73,6 +74,9 @@ pub struct CalibrationOptions {
     pub subtrajectory_length: f64,
     /// Where [`Method::Subtrajectory`] cuts the run.
     pub subtrajectory_cuts: Cuts,
+    /// Whether [`Method::Subtrajectory`]'s estimate is refined by the filter
+    /// ([`refine_geometry`]).
+    pub geometry_refine: GeometryRefine,
     /// The antenna lever arm: measured (held) or fitted with the geometry.
     pub antenna: LeverArm,
     /// The model the result selects (`uncertainty_model`), added to `models` when missing;
@@ -96,7 +100,7 @@ pub struct CalibrationOptions {
 }
 
 impl Default for CalibrationOptions {
-    /// The sub-trajectory method on 10 m (cut by distance), no lever arm; 10 m sub-trajectories of the
+    /// The sub-trajectory method on 10 m (cut by distance) refined by the filter, no lever arm; 10 m sub-trajectories of the
     /// uncertainty fit, the BD982's 8 mm and 0.5 deg, equal coefficients, `delta` and
     /// `delta_diff` fitted for the initial estimate's model, no polish, no stability study
     /// (its windows started from the whole-run estimate), no wheel harmonics, no progress bars.
@@ -112,6 +116,7 @@ impl Default for CalibrationOptions {
             method: Method::Subtrajectory,
             subtrajectory_length: SUBTRAJECTORY_LENGTH,
             subtrajectory_cuts: Cuts::default(),
+            geometry_refine: GeometryRefine::default(),
             antenna: LeverArm::Fixed(0.0, 0.0),
             select: None,
             criterion: UncertaintyCriterion::Likelihood,
@@ -148,6 +153,9 @@ pub struct Calibration {
     pub geometry: GeomFit,
     /// The sub-trajectory fit, with [`Method::Subtrajectory`].
     pub subtrajectories: Option<SubtrajectoryFit>,
+    /// The filter's refinement of the sub-trajectory estimate, with
+    /// [`GeometryRefine::Filter`] (applied unless its `skipped` says why not).
+    pub refinement: Option<FilterRefinement>,
     /// The uncertainty fits, one per model fitted.
     pub uncertainty: Vec<UncertaintyFit>,
     /// Evaluation of the whole run with the final parameters.
@@ -159,23 +167,33 @@ pub struct Calibration {
 }
 
 /// The geometry's calibration uncertainty as the unit's keys (`left_diameter_se`..
-/// `right_track_correlation`): the sub-trajectory fit's cluster-robust covariance, or for the
-/// paper's method its robust standard errors without correlations. A held unknown has none;
+/// `right_track_correlation`): the filter refinement's covariance when it was applied, else
+/// the sub-trajectory fit's cluster-robust covariance, or for the paper's method its robust
+/// standard errors without correlations. A held unknown has none;
 /// standard errors beyond [`GeometryUncertainty::MAX_SE`] are capped there, and correlations
 /// that f32 rounding would make inconsistent are shrunk until they are not.
 pub fn geometry_uncertainty(
     geometry: &GeomFit,
     subtrajectories: Option<&SubtrajectoryFit>,
+    refinement: Option<&FilterRefinement>,
 ) -> GeometryUncertainty {
+    let refined = refinement.filter(|r| r.skipped.is_none());
+    let covariance_of = |i: usize, j: usize| -> Option<f64> {
+        match (refined, subtrajectories) {
+            (Some(r), _) => Some(r.covariance[i][j]),
+            (None, Some(s)) => s.covariance_of(i, j),
+            (None, None) => None,
+        }
+    };
     let se = |i: usize| -> f64 {
-        let v = match subtrajectories {
-            Some(s) => s.covariance_of(i, i).map(f64::sqrt),
-            None => geometry.robust_std_errors[i],
+        let v = match (refined, subtrajectories) {
+            (None, None) => geometry.robust_std_errors[i],
+            _ => covariance_of(i, i).map(f64::sqrt),
         };
         v.filter(|v| v.is_finite()).unwrap_or(0.0)
     };
     let corr = |i: usize, j: usize| -> f64 {
-        let c = subtrajectories.and_then(|s| s.covariance_of(i, j));
+        let c = covariance_of(i, j);
         match (c, se(i) * se(j)) {
             (Some(c), d) if d > 0.0 && c.is_finite() => (c / d).clamp(-1.0, 1.0),
             _ => 0.0,
@@ -214,7 +232,7 @@ pub fn calibrate(
     let mut run = Run::new(samples, reference, matches).with_antenna(o.antenna.value());
     let timer = PhaseTimer::new();
     let h0 = run.heading_guess(0);
-    let (geometry, subtrajectories) = match o.method {
+    let (geometry, subtrajectories, refinement) = match o.method {
         Method::Paper => {
             let pb = bar(o.quiet, "eq (16) fit");
             let g = fit_geometry(
@@ -233,7 +251,7 @@ pub fn calibrate(
             )?;
             pb.finish_and_clear();
             timer.lap("eq (16) fit");
-            (g, None)
+            (g, None, None)
         }
         Method::Subtrajectory => {
             let s = fit_subtrajectories(
@@ -248,14 +266,26 @@ pub fn calibrate(
             )?;
             timer.lap("sub-trajectory fit");
             run.antenna = s.antenna;
-            let g = whole_run_summary(&run, &s)?;
+            let g = whole_run_summary(&run, &s, None)?;
             timer.lap("whole-run heading");
-            (g, Some(s))
+            let refinement = match o.geometry_refine {
+                GeometryRefine::None => None,
+                GeometryRefine::Filter => Some(refine(&run, &s, &g, o)?),
+            };
+            let g = match &refinement {
+                Some(r) if r.skipped.is_none() => {
+                    timer.lap("filter refinement");
+                    whole_run_summary(&run, &s, Some(r))?
+                }
+                _ => g,
+            };
+            (g, Some(s), refinement)
         }
     };
     run.antenna = geometry.antenna;
     let mut params = geometry.params;
-    params.geometry_uncertainty = geometry_uncertainty(&geometry, subtrajectories.as_ref());
+    params.geometry_uncertainty =
+        geometry_uncertainty(&geometry, subtrajectories.as_ref(), refinement.as_ref());
     let harmonics = if o.wheel_harmonics > 0 {
         let h = super::fit_harmonics(
             &run,
@@ -393,6 +423,7 @@ pub fn calibrate(
         params,
         geometry,
         subtrajectories,
+        refinement,
         uncertainty,
         evaluation,
         windows,
@@ -404,24 +435,36 @@ pub fn calibrate(
 /// evaluation, the uncertainty fits' first headings, `validate`'s output): the heading at the
 /// run's start minimising eq (16) over the whole run at the estimate (from the first
 /// sub-trajectory's), eq (16) there, and the sub-trajectory fit's robust errors (the
-/// heading's own, with the geometry held, over stretches of the sub-trajectory length).
-fn whole_run_summary(run: &Run, s: &SubtrajectoryFit) -> Result<GeomFit> {
+/// heading's own, with the geometry held, over stretches of the sub-trajectory length). With
+/// an applied `refinement`, its geometry and standard errors.
+fn whole_run_summary(
+    run: &Run,
+    s: &SubtrajectoryFit,
+    refinement: Option<&FilterRefinement>,
+) -> Result<GeomFit> {
     let last = run.len() - 1;
     let guess = s.blocks.first().map_or(0.0, |b| b.heading);
+    let params = refinement.map_or(s.params, |r| r.params);
     // One integration (two when it turns by more than 0.01 rad), the path turned about its
     // start: the heading a re-integrating fit would find.
-    let heading0 = fit_restart_heading(run, &s.params, 0, last, guess)?;
+    let heading0 = fit_restart_heading(run, &params, 0, last, guess)?;
     let cost = run
-        .eq16(&s.params, 0, last, heading0)
+        .eq16(&params, 0, last, heading0)
         .ok_or_else(|| anyhow::anyhow!("the estimate is not admissible"))?;
-    let se = &s.std_errors;
+    let mut se = s.std_errors;
+    if let Some(r) = refinement {
+        let e = r.std_errors();
+        for i in 0..3 {
+            se[i] = se[i].map(|_| e[i]);
+        }
+    }
     // The heading's errors with the geometry held (it is fitted with the geometry held).
     let heading_free = [false, false, false, true];
     let formal =
-        standard_errors(run, &s.params, 0, last, heading0, heading_free).and_then(|(e, _)| e[3]);
+        standard_errors(run, &params, 0, last, heading0, heading_free).and_then(|(e, _)| e[3]);
     let clustered = paper_cluster_errors(
         run,
-        &s.params,
+        &params,
         run.antenna,
         0,
         last,
@@ -433,7 +476,7 @@ fn whole_run_summary(run: &Run, s: &SubtrajectoryFit) -> Result<GeomFit> {
     let robust = [se[0], se[1], se[2], clustered];
     let min_turning = SubtrajectoryOptions::default().min_turning;
     Ok(GeomFit {
-        params: s.params,
+        params,
         heading0,
         cost,
         points: last,
@@ -458,10 +501,51 @@ fn whole_run_summary(run: &Run, s: &SubtrajectoryFit) -> Result<GeomFit> {
             s.track_estimated,
             s.turning,
             min_turning,
-            &s.params,
+            &params,
             &robust,
         ),
     })
+}
+
+/// The filter's refinement of a sub-trajectory fit `s` (whole-run summary `g`): not run with
+/// a lever arm (the filter observes the axle centre) nor with the track width held.
+fn refine(
+    run: &Run,
+    s: &SubtrajectoryFit,
+    g: &GeomFit,
+    o: &CalibrationOptions,
+) -> Result<FilterRefinement> {
+    let reason = if s.antenna != (0.0, 0.0) || o.antenna.fitted() {
+        Some("the filter observes the axle centre, not a lever arm's antenna")
+    } else if !s.track_estimated {
+        Some("the track width is held")
+    } else {
+        None
+    };
+    if let Some(why) = reason {
+        return Ok(FilterRefinement {
+            params: s.params,
+            covariance: [[f64::NAN; 3]; 3],
+            kappa: f64::NAN,
+            kappa_diff: f64::NAN,
+            passes: 0,
+            linearisation: f64::NAN,
+            observations: 0,
+            skipped: Some(why.to_string()),
+        });
+    }
+    let diameters_se = match (s.std_errors[0], s.std_errors[1]) {
+        (Some(a), Some(b)) => Some(a.min(b)),
+        _ => None,
+    };
+    refine_geometry(
+        run,
+        &s.params,
+        g.heading0,
+        o.reference_sigma,
+        o.reference_heading_sigma,
+        diameters_se,
+    )
 }
 
 /// Wall time of each calibration phase, printed to stderr when `ODOCTL_DEBUG` is set.

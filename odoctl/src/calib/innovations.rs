@@ -247,8 +247,12 @@ impl Innovations {
         let (lo, hi) = run.standstill(0);
         let n0 = (hi - lo + 1) as f64;
         let pos_var0 = (lo..=hi).map(r2).sum::<f64>() / (n0 * n0);
-        let (h0, heading_var0) = match run.start_heading(0, |_| None) {
-            Some((h, n)) => (h, rh2 / n as f64),
+        let (h0, heading_var0) = match run
+            .opening_heading(geometry, heading0)
+            .map_err(|e| anyhow!("parameters: {e}"))?
+        {
+            // One epoch's variance: the epochs averaged are observed again in the first block.
+            Some((h, _)) => (h, rh2),
             None => (heading0, 1e-6),
         };
         let mut integ = run

@@ -47,7 +47,7 @@
 //! `run` (a run matched to its reference, the integrator along it), `sensitivity` (forward
 //! sensitivities), `pipeline` (their two-core pass), `geometry` (the eq 16 fit), `evaluation`
 //! (errors and predicted uncertainty), `restarts` (the restarted sub-trajectories),
-//! `uncertainty` (delta, kappa), `delta_diff`, `harmonics` (the per-angle wheel function), `stability` (the study on sub-trajectories) and
+//! `uncertainty` (delta, kappa), `delta_diff`, `harmonics` (the per-angle wheel function), `refine` (the filter's refinement of the sub-trajectory geometry), `stability` (the study on sub-trajectories) and
 //! `calibration` (all of it in memory: [`calibrate`]).
 
 mod antenna;
@@ -61,6 +61,7 @@ mod geometry;
 mod harmonics;
 mod innovations;
 mod pipeline;
+mod refine;
 mod restarts;
 mod run;
 mod sensitivity;
@@ -79,6 +80,7 @@ pub use geometry::*;
 pub use harmonics::*;
 pub use innovations::*;
 pub use pipeline::*;
+pub use refine::*;
 pub use restarts::*;
 pub use run::*;
 pub use sensitivity::*;

@@ -57,6 +57,12 @@ pub struct GeometryArgs {
     /// or spin is split: better on short runs' track width, see odoctl/README.md).
     #[arg(long, value_enum, default_value_t = calib::Cuts::Distance)]
     pub subtrajectory_cuts: calib::Cuts,
+    /// After the default method: `filter` (the default) refines the geometry by the Kalman
+    /// filter of the kappa likelihood, which weights the turns by the slip's heading noise,
+    /// where its linearisation holds (short logs; see odoctl/README.md); `none` keeps the
+    /// sub-trajectory estimate.
+    #[arg(long, value_enum, default_value_t = calib::GeometryRefine::Filter)]
+    pub geometry_refine: calib::GeometryRefine,
     /// Measured antenna position from the axle centre, `FORWARD,LEFT` (m, chassis frame):
     /// the reference is the antenna's path (held; the first guess with --fit-antenna).
     #[arg(long, value_name = "F,L", allow_hyphen_values = true)]
@@ -82,6 +88,7 @@ impl GeometryArgs {
         o.method = self.method;
         o.subtrajectory_length = self.subtrajectory_length;
         o.subtrajectory_cuts = self.subtrajectory_cuts;
+        o.geometry_refine = self.geometry_refine;
         o.antenna = if self.fit_antenna {
             LeverArm::Fitted(f, l)
         } else {
@@ -139,6 +146,7 @@ pub fn calibrate(o: &CalibrateOptions, input: &ReferenceArgs) -> Result<ExitCode
         "estimate",
         "std. error"
     );
+    let refined = c.refinement.as_ref().is_some_and(|r| r.skipped.is_none());
     let se = |i: usize| {
         g.robust_std_errors[i].map_or_else(|| "held".to_string(), |v| format!("{v:.2e}"))
     };
@@ -190,15 +198,46 @@ pub fn calibrate(o: &CalibrateOptions, input: &ReferenceArgs) -> Result<ExitCode
             s.evaluations,
             s.residual_sigma
         );
-        crate::outln!(
-            "  standard errors: cluster-robust over the {} sub-trajectories (with the residuals taken as independent: {})",
-            s.blocks.len(),
-            s.independent_std_errors[..3]
-                .iter()
-                .map(|v| v.map_or("held".to_string(), |v| format!("{v:.2e}")))
-                .collect::<Vec<_>>()
-                .join(", ")
-        );
+        match &c.refinement {
+            Some(r) if r.skipped.is_none() => {
+                let e = s.std_errors;
+                crate::outln!(
+                    "  refined by the filter (--geometry-refine filter): white slip kappa {:.3e} m^2/m, kappa_diff {:.3e}, {} observations, {} passes; the sub-trajectory estimate was {:.6} / {:.6} / {:.6} m (standard errors {})",
+                    r.kappa,
+                    r.kappa_diff,
+                    r.observations,
+                    r.passes,
+                    s.params.left_diameter,
+                    s.params.right_diameter,
+                    s.params.track_width,
+                    e[..3]
+                        .iter()
+                        .map(|v| v.map_or("held".to_string(), |v| format!("{v:.2e}")))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                );
+                crate::outln!(
+                    "  standard errors: the filter's, with its linearisation bound {:.1e} of each length added",
+                    r.linearisation
+                );
+            }
+            Some(r) => crate::outln!(
+                "  filter refinement not applied: {}",
+                r.skipped.as_deref().unwrap_or_default()
+            ),
+            None => {}
+        }
+        if !refined {
+            crate::outln!(
+                "  standard errors: cluster-robust over the {} sub-trajectories (with the residuals taken as independent: {})",
+                s.blocks.len(),
+                s.independent_std_errors[..3]
+                    .iter()
+                    .map(|v| v.map_or("held".to_string(), |v| format!("{v:.2e}")))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+        }
         crate::outln!(
             "  initial heading: the whole run's eq (16) heading at the estimate, the geometry held (for the evaluation below)"
         );
@@ -412,15 +451,43 @@ pub fn calibrate(o: &CalibrateOptions, input: &ReferenceArgs) -> Result<ExitCode
         }
         fit.push((
             "std_error_method",
-            FitValue::Text(format!(
-                "cluster-robust sandwich over {} {}",
-                g.clusters,
-                match opts.method {
-                    Method::Subtrajectory => "sub-trajectories",
-                    Method::Paper => "consecutive stretches",
-                }
-            )),
+            FitValue::Text(if refined {
+                "the filter's covariance with its linearisation bound".to_string()
+            } else {
+                format!(
+                    "cluster-robust sandwich over {} {}",
+                    g.clusters,
+                    match opts.method {
+                        Method::Subtrajectory => "sub-trajectories",
+                        Method::Paper => "consecutive stretches",
+                    }
+                )
+            }),
         ));
+        if let Some(r) = &c.refinement {
+            fit.push((
+                "geometry_refine",
+                FitValue::Text(match &r.skipped {
+                    None => "filter".to_string(),
+                    Some(why) => format!("filter, not applied: {why}"),
+                }),
+            ));
+            if r.skipped.is_none() {
+                fit.push(("geometry_refine_kappa", FitValue::Num(r.kappa)));
+                let s = c.subtrajectories.as_ref().map(|s| s.params);
+                if let Some(p) = s {
+                    fit.push((
+                        "subtrajectory_left_diameter",
+                        FitValue::Num(p.left_diameter),
+                    ));
+                    fit.push((
+                        "subtrajectory_right_diameter",
+                        FitValue::Num(p.right_diameter),
+                    ));
+                    fit.push(("subtrajectory_track_width", FitValue::Num(p.track_width)));
+                }
+            }
+        }
         for (name, se) in calib::GEOMETRY_UNKNOWNS.iter().zip(g.robust_std_errors) {
             if let Some(v) = se {
                 fit.push((se_keys(name), FitValue::Num(v)));
