@@ -102,7 +102,7 @@ fn largest_likelihood(nll: impl Fn(f64) -> f64, lo: f64, hi: f64) -> f64 {
 /// turns: within a factor of 10 on 70 m) is more often under- than overestimated by its most
 /// likely value, and the sigma it gives is then too narrow; the mean is what the errors' spread
 /// over the likelihood's uncertainty has. Under turning slip it took the ensemble test's
-/// coverage from 54-67 % inside 1 sigma (92.5 % inside 3) to 57.5-69 % (94.5 %).
+/// coverage from 54-67 % inside 1 sigma (92.5 % inside 3) to 57.5-68.5 % (94 %).
 fn posterior_mean(nll: impl Fn(f64) -> f64, x: f64, hi: f64) -> f64 {
     let (l, h) = (x.ln(), 0.3);
     let curvature = (nll(l + h) - 2.0 * nll(l) + nll(l - h)) / (h * h);
