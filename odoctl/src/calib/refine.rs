@@ -30,6 +30,7 @@
 use anyhow::{anyhow, Result};
 use odo_core::odometry::ChassisParams;
 
+use super::slip_fit::largest_likelihood;
 use super::{Innovations, Run, Turning, OBSERVATION_BLOCK};
 
 /// Whether `calibrate` refines the sub-trajectory geometry by the filter.
@@ -84,43 +85,6 @@ impl FilterRefinement {
 /// 95 % point of a likelihood-ratio test with one degree of freedom, as the kappa fit's).
 const TURNING_EVIDENCE: f64 = 1.92;
 
-/// The value in `[lo, hi]` of the least `nll`: a grid in log scale, then golden sections.
-fn least(nll: impl Fn(f64) -> f64, lo: f64, hi: f64) -> f64 {
-    let f = |l: f64| nll(l.exp());
-    let (a, b) = (lo.ln(), hi.ln());
-    let n = 24;
-    let step = (b - a) / n as f64;
-    let (mut best, mut best_f) = (a, f64::INFINITY);
-    for i in 0..=n {
-        let l = a + step * i as f64;
-        let v = f(l);
-        if v < best_f {
-            (best, best_f) = (l, v);
-        }
-    }
-    let (mut l, mut h) = ((best - step).max(a), (best + step).min(b));
-    let g = 0.5 * (5f64.sqrt() - 1.0);
-    let (mut c, mut d) = (h - g * (h - l), l + g * (h - l));
-    let (mut fc, mut fd) = (f(c), f(d));
-    while h - l > 1e-3 {
-        if fc < fd {
-            (h, d, fd) = (d, c, fc);
-            c = h - g * (h - l);
-            fc = f(c);
-        } else {
-            (l, c, fc) = (c, d, fd);
-            d = l + g * (h - l);
-            fd = f(d);
-        }
-    }
-    let m = 0.5 * (l + h);
-    if f(m) <= best_f {
-        m.exp()
-    } else {
-        best.exp()
-    }
-}
-
 /// The distances the two wheels rolled over the run (m).
 fn rolled(run: &Run, p: &ChassisParams) -> [f64; 2] {
     let (a, b) = (run.matches[0].0, run.matches[run.len() - 1].0);
@@ -170,7 +134,7 @@ pub fn refine_geometry(
             ref_heading_sigma,
             OBSERVATION_BLOCK,
         )?;
-        let kappa = least(|k| inn.score_with(k, 0.0, Turning::NONE).nll, lo, hi);
+        let kappa = largest_likelihood(|k| inn.score_with(k, 0.0, Turning::NONE).nll, lo, hi);
         let r = rolled(run, params);
         let linearisation = kappa * (r[0] + r[1]) / (8.0 * params.track_width.powi(2));
         let relative = se / params.left_diameter.min(params.right_diameter);
@@ -207,8 +171,8 @@ pub fn refine_geometry(
         kappa_diff,
         corr: 0.0,
     };
-    let kappa = least(|k| nll(k, Turning::NONE), lo, hi);
-    let kd = least(|d| nll(kappa, white(d)), lo, hi);
+    let kappa = largest_likelihood(|k| nll(k, Turning::NONE), lo, hi);
+    let kd = largest_likelihood(|d| nll(kappa, white(d)), lo, hi);
     let kappa_diff = if nll(kappa, white(kd)) + TURNING_EVIDENCE < nll(kappa, Turning::NONE) {
         kd
     } else {

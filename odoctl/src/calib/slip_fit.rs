@@ -73,7 +73,7 @@ impl Turning {
 
 /// The value in `[lo, hi]` where `nll` is least: a grid in log scale (a decade apart), then
 /// Brent's search between the best point's neighbours.
-fn largest_likelihood(nll: impl Fn(f64) -> f64, lo: f64, hi: f64) -> f64 {
+pub(super) fn largest_likelihood(nll: impl Fn(f64) -> f64, lo: f64, hi: f64) -> f64 {
     let f = |l: f64| nll(l.exp());
     let (a, b) = (lo.ln(), hi.ln());
     let n = ((b - a) / 10f64.ln()).ceil().max(1.0) as usize;
