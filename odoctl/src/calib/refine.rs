@@ -30,7 +30,7 @@
 use anyhow::{anyhow, Result};
 use odo_core::odometry::ChassisParams;
 
-use super::slip_fit::largest_likelihood;
+use super::slip_fit::{largest_likelihood, OPPOSITE_PHASE_EVIDENCE};
 use super::{Innovations, Run, Turning, OBSERVATION_BLOCK};
 
 /// Whether `calibrate` refines the sub-trajectory geometry by the filter.
@@ -81,10 +81,6 @@ impl FilterRefinement {
     }
 }
 
-/// Least decrease of the negative log-likelihood for which opposite-phase slip is kept (the
-/// 95 % point of a likelihood-ratio test with one degree of freedom, as the kappa fit's).
-const TURNING_EVIDENCE: f64 = 1.92;
-
 /// The distances the two wheels rolled over the run (m).
 fn rolled(run: &Run, p: &ChassisParams) -> [f64; 2] {
     let (a, b) = (run.matches[0].0, run.matches[run.len() - 1].0);
@@ -134,7 +130,7 @@ pub fn refine_geometry(
             ref_heading_sigma,
             OBSERVATION_BLOCK,
         )?;
-        let kappa = largest_likelihood(|k| inn.score_with(k, 0.0, Turning::NONE).nll, lo, hi);
+        let kappa = inn.fit(lo, hi);
         let r = rolled(run, params);
         let linearisation = kappa * (r[0] + r[1]) / (8.0 * params.track_width.powi(2));
         let relative = se / params.left_diameter.min(params.right_diameter);
@@ -171,9 +167,10 @@ pub fn refine_geometry(
         kappa_diff,
         corr: 0.0,
     };
-    let kappa = largest_likelihood(|k| nll(k, Turning::NONE), lo, hi);
+    let kappa = inn.fit(lo, hi);
     let kd = largest_likelihood(|d| nll(kappa, white(d)), lo, hi);
-    let kappa_diff = if nll(kappa, white(kd)) + TURNING_EVIDENCE < nll(kappa, Turning::NONE) {
+    let kappa_diff = if nll(kappa, white(kd)) + OPPOSITE_PHASE_EVIDENCE < nll(kappa, Turning::NONE)
+    {
         kd
     } else {
         0.0

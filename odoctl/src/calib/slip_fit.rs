@@ -24,7 +24,7 @@ use crate::optim::brent_min;
 
 /// Least decrease of the negative log-likelihood for which opposite-phase slip is kept:
 /// the 95 % point of a likelihood-ratio test with one degree of freedom (3.84 / 2).
-const OPPOSITE_PHASE_EVIDENCE: f64 = 1.92;
+pub(super) const OPPOSITE_PHASE_EVIDENCE: f64 = 1.92;
 
 /// Shortest and longest slip correlation length the fit considers (m of wheel travel).
 pub const SLIP_CORR_RANGE: (f64, f64) = (0.05, 20.0);
