@@ -1,6 +1,6 @@
 //! Issue 21: the calibrated uncertainty against the truth, over an ensemble of simulated runs.
 //!
-//! Per slip regime: ten 70 m estimation runs (seeds 1-10) are each calibrated as a user
+//! Per slip regime: twenty 70 m estimation runs (seeds 1-20) are each calibrated as a user
 //! would (`calib::calibrate`, both models, the default criterion: sub-trajectory geometry
 //! with its standard errors and correlations, which the covariance model carries), then
 //! twenty runs of other seeds per calibration, both path kinds in turn, are replayed through
@@ -30,11 +30,11 @@ use odoctl::replay::{counts, index_refs};
 use odoctl::simulate::{default_truth, simulate_path, PathKind, SimSettings};
 
 /// Runs per regime replayed against the truth.
-const RUNS: u64 = 200;
+const RUNS: u64 = 400;
 /// Calibrations per regime (estimation runs of seeds 1..): each serves `RUNS /
 /// CALIBRATIONS` of the replayed runs, so that the coverage also spans the calibration's own
 /// error, which every run replayed with one calibration shares.
-const CALIBRATIONS: u64 = 10;
+const CALIBRATIONS: u64 = 20;
 
 /// What a regime is held to. The issue's target is 1-sigma coverage in 60-76 % and 3-sigma
 /// at least 97 % at every checkpoint; where the default model does not meet it, the measured
@@ -79,43 +79,28 @@ fn regimes() -> Vec<Regime> {
         one_sigma_max,
         three_sigma,
     };
-    // Measured with 10 calibrations x 20 runs each: the target (60-76 % / 97 %) holds under
-    // random-walk and Gauss-Markov slip; where it is missed, the band holds the measured
-    // figures with a margin of about 3 points, so they cannot get worse unnoticed.
+    // Measured with 20 calibrations x 20 runs each (10 x 20 before: too few calibrations,
+    // whose geometry errors every run replayed with one of them shares, to tell 72 % from
+    // 78 %). Where the target is missed, the band holds the measured figures with a margin,
+    // so they cannot get worse unnoticed.
     vec![
-        regime("q 0.0002", 0.0002, 0.1, 0.0, band(0.60, 0.76, 0.97)),
-        regime("q 0.001", 0.001, 0.1, 0.0, band(0.60, 0.76, 0.97)),
-        // At the target's upper edge: the heading covers 71-76.5 % (76.5 % at 30 m, one run
-        // in 200 over 76 %, since the filter's start heading averages the opening second
-        // rather than the standstill's epochs: 76.0 % before).
-        regime("q 0.003", 0.003, 0.1, 0.0, band(0.60, 0.77, 0.97)),
-        regime(
-            "q 0.001, Gauss-Markov 2 m",
-            0.001,
-            2.0,
-            0.0,
-            band(0.60, 0.76, 0.97),
-        ),
-        // Target missed: opposite-phase slip when turning, correlated over 2 m of wheel
-        // distance difference. The unit carries it as the calibration fits it (`kappa_diff`
-        // and `kappa_diff_corr`, a Gauss-Markov state), so the bands are no longer too wide
-        // over the first 10 m (67-69 %, against 80 % with the white model), but one 70 m run
-        // measures the slip rate's variance `kappa_diff / (2 kappa_diff_corr)` at 0.2-2.5
-        // times the truth's 1e-4, below it in seven calibrations of ten. With `kappa_diff`
-        // taken as its mean over the likelihood (`posterior_mean`): 57.5-68.5 % inside 1 sigma,
-        // 94 % at worst inside 3 (its most likely value: 54-67 % and 92.5 %; the white unit
-        // model: 55-81 % and 93 %; without `kappa_diff`: 21-63 % and 60-92 %; with kappa and
-        // `kappa_diff` fitted once each instead of in turn: 41.5-61.5 % and 89.5 %). With the
-        // simulated slip's coefficients the target holds
-        // (`turning_slip_with_the_simulated_slips_coefficients_...`). The band holds the
-        // measured figures with a margin of about 2.5 points.
-        regime(
-            "q 0.0005, turning slip 0.02",
-            0.0005,
-            0.1,
-            0.02,
-            band(0.55, 0.72, 0.92),
-        ),
+        regime("q 0.0002", 0.0002, 0.1, 0.0, TARGET),
+        regime("q 0.001", 0.001, 0.1, 0.0, TARGET),
+        // Just over the target's upper edge: 69-77 % inside 1 sigma. Kappa is right here (its
+        // median over the 20 calibrations 9.3e-6 against q^2 = 9e-6) and with the true kappa
+        // it is the same (69-77 %); with the true geometry as well, 64-72 %: what is too wide
+        // is the geometry's part, the sub-trajectory fit's standard errors of the wheels'
+        // difference (its errors 0.77 of them in RMS over the 20 calibrations).
+        regime("q 0.003", 0.003, 0.1, 0.0, band(0.60, 0.78, 0.97)),
+        regime("q 0.001, Gauss-Markov 2 m", 0.001, 2.0, 0.0, TARGET),
+        // Opposite-phase slip when turning, correlated over 2 m of wheel-distance difference:
+        // the unit carries it as the calibration fits it (`kappa_diff` and `kappa_diff_corr`, a
+        // Gauss-Markov state, `kappa_diff` taken as its mean over the likelihood). The target
+        // holds: 63-74 % inside 1 sigma, at least 97.2 % inside 3. One 70 m run measures the
+        // slip rate's variance within a factor of about 5 either way; before the filter was
+        // linearised about its own estimate, kappa took part of it and the 3-sigma coverage
+        // was 95.8 % at worst.
+        regime("q 0.0005, turning slip 0.02", 0.0005, 0.1, 0.02, TARGET),
     ]
 }
 
@@ -424,17 +409,23 @@ fn turning_slip_with_the_simulated_slips_coefficients_meets_the_target() {
     assert!(failed.is_empty(), "{}", failed.join("\n"));
 }
 
+/// Without the geometry fit's own error: kappa of 70 m runs (seeds 1-20) against q^2. The
+/// fit is unbiased within its standard error of the mean and about as spread as one run's
+/// information allows. Measured (mean / standard deviation of `ln(kappa / q^2)`): q 0.001
+/// -0.02 / 0.23, q 0.003 0.05 / 0.26; q 0.001 with L = 2 m -0.13 / 0.61. Before the filter
+/// was linearised about its own estimate and kept correlated slip only on a likelihood-ratio
+/// test: 0.14 / 0.23 and 0.36 / 0.37 (the white-slip fit alone read 0.3-0.4 of the truth at
+/// L = 2 m).
 #[test]
 fn the_filter_likelihood_recovers_kappa_with_the_true_geometry() {
-    // Without the geometry fit's own error: kappa of one 70 m run against q^2, three seeds
-    // per regime. Its standard error on such a run is about 0.19 (q 0.001) and 0.11 (q 0.003)
-    // in ln kappa; the white-slip fit alone read 0.3-0.4 of the truth at L = 2 m. Measured
-    // (ln kappa / q^2): q 0.001 -0.09, 0.16, 0.07; q 0.003 0.03, 0.41, 0.09; q 0.001 with
-    // L = 2 m -0.58, -0.21, 0.49.
     use odoctl::calib::{Innovations, Run};
-    for (q, corr) in [(0.001, 0.1), (0.003, 0.1), (0.001, 2.0)] {
+    for (q, corr, mean_limit, sd_limit) in [
+        (0.001, 0.1, 0.15, 0.4),
+        (0.003, 0.1, 0.15, 0.4),
+        (0.001, 2.0, 0.3, 0.7),
+    ] {
         let mut logs = Vec::new();
-        for seed in [1u64, 2, 3] {
+        for seed in 1u64..=20 {
             let truth = default_truth();
             let run = simulate_path(
                 PathKind::Estimation,
@@ -455,12 +446,13 @@ fn the_filter_likelihood_recovers_kappa_with_the_true_geometry() {
             let (kappa, _) = inn.fit_correlated(1e-14, 1e-2);
             logs.push((kappa / (q * q)).ln());
         }
-        let mean = logs.iter().sum::<f64>() / 3.0;
-        println!("q {q}, L {corr}: ln(kappa / q^2) {logs:.2?}");
-        let limit = if corr > 1.0 { 0.75 } else { 0.5 };
+        let n = logs.len() as f64;
+        let mean = logs.iter().sum::<f64>() / n;
+        let sd = (logs.iter().map(|l| (l - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+        println!("q {q}, L {corr}: ln(kappa / q^2) mean {mean:.3}, sd {sd:.3}: {logs:.2?}");
         assert!(
-            logs.iter().all(|l| l.abs() < limit) && mean.abs() < 0.3,
-            "q {q}, L {corr}: {logs:?}"
+            mean.abs() < mean_limit && sd < sd_limit,
+            "q {q}, L {corr}: mean {mean}, sd {sd}: {logs:?}"
         );
     }
 }

@@ -30,7 +30,7 @@
 use anyhow::{anyhow, Result};
 use odo_core::odometry::ChassisParams;
 
-use super::slip_fit::{largest_likelihood, OPPOSITE_PHASE_EVIDENCE};
+use super::slip_fit::{largest_likelihood, EVIDENCE_PER_PARAMETER};
 use super::{Innovations, Run, Turning, OBSERVATION_BLOCK};
 
 /// Whether `calibrate` refines the sub-trajectory geometry by the filter.
@@ -169,8 +169,7 @@ pub fn refine_geometry(
     };
     let kappa = inn.fit(lo, hi);
     let kd = largest_likelihood(|d| nll(kappa, white(d)), lo, hi);
-    let kappa_diff = if nll(kappa, white(kd)) + OPPOSITE_PHASE_EVIDENCE < nll(kappa, Turning::NONE)
-    {
+    let kappa_diff = if nll(kappa, white(kd)) + EVIDENCE_PER_PARAMETER < nll(kappa, Turning::NONE) {
         kd
     } else {
         0.0
@@ -203,9 +202,9 @@ pub fn refine_geometry(
     let mut covariance = [[0.0; 3]; 3];
     for i in 0..3 {
         for j in 0..3 {
-            covariance[i][j] = rel_cov[i][j] * v[i] * v[j];
+            // The linearisation's error is one scale of all three lengths.
+            covariance[i][j] = (rel_cov[i][j] + linearisation * linearisation) * v[i] * v[j];
         }
-        covariance[i][i] += (linearisation * v[i]).powi(2);
     }
     let diameters_se = rel_cov[0][0].min(rel_cov[1][1]).sqrt();
     let skipped = if kappa_diff > 0.0 {
