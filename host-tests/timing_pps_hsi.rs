@@ -91,11 +91,7 @@ fn hsi_glitches_are_rejected_while_locked() {
         check_consecutive_labels(&r);
         assert_eq!(disc.stats().glitches, 6, "ppm {ppm}");
         assert_eq!(disc.stats().locks, 1);
-        assert!(r
-            .samples
-            .iter()
-            .skip(200)
-            .all(|s| s.state == SyncState::Locked));
+        assert!(all_locked_after(&r, 200));
         assert!(locked_error(&r, sc.crystal) < 35.0 / f64::from(HZ));
     }
 }
@@ -126,15 +122,7 @@ fn hsi_holdover_reacquisition_and_relock() {
         let mut disc = hsi_disc();
         let r = run(&mut disc, &sc.edges(), sc.crystal, sc.seconds);
         check_structure(&r);
-        let reacquired: Vec<u32> = r
-            .events
-            .iter()
-            .filter_map(|(_, e)| match e {
-                PpsEvent::Reacquired { missed, .. } => Some(*missed),
-                _ => None,
-            })
-            .collect();
-        assert_eq!(reacquired, vec![6], "ppm {ppm}");
+        assert_eq!(reacquisitions(&r), vec![6], "ppm {ppm}");
         let mut transitions: Vec<SyncState> = r.samples.iter().map(|s| s.state).collect();
         transitions.dedup();
         use SyncState::*;
@@ -287,26 +275,10 @@ proptest! {
     /// HSI offsets up to +-4.5 % with the HSI tolerance: random jitter, losses and spurious
     /// edges; structure, no spurious edge accepted, locked samples on the true grid.
     #[test]
-    fn hsi_discipline_invariants(
-        ppm in -45_000.0f64..45_000.0,
-        jitter in 0i64..40,
-        lost in proptest::collection::vec(2u32..60, 0..12),
-        spurious in proptest::collection::vec(0.5f64..59.0, 0..6),
-        seed in 1u64..u64::MAX,
-    ) {
-        let mut sc = Scenario::new(ppm, jitter, 60);
-        sc.lost = lost;
-        sc.seed = seed;
-        sc.spurious = spurious
-            .into_iter()
-            .filter(|t| (t - t.round()).abs() > 1e-4)
-            .collect();
-        let mut disc = hsi_disc();
-        let r = run(&mut disc, &sc.edges(), sc.crystal, sc.seconds);
-        check_structure(&r);
+    fn hsi_discipline_invariants(sc in scenario(-45_000.0..45_000.0, 1e-4)) {
+        let (r, err) = run_checked(&mut hsi_disc(), &sc);
         check_consecutive_labels(&r);
-        let err = locked_error(&r, sc.crystal);
-        prop_assert!(err < grid_bound(sc.crystal, jitter, 50), "error {}", err);
+        prop_assert!(err < grid_bound(sc.crystal, sc.jitter, 50), "error {}", err);
         // Without losses near the start it locks by the third edge.
         if !sc.lost.iter().any(|s| *s <= 3) && sc.spurious.iter().all(|t| *t > 3.5) {
             prop_assert_eq!(lock_seconds(&r).first().copied(), Some(3));

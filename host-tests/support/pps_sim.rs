@@ -1,11 +1,14 @@
 //! The PPS simulation of the timing tests: a crystal (or HSI) `ppm` off nominal, PPS edges
-//! with jitter, lost and spurious pulses ([`Scenario`]), the board's sample loop around a
-//! [`Discipline`] ([`run`]), and the checks of a run (structure, labels, error against the
-//! true GNSS grid).
+//! with jitter, lost and spurious pulses ([`Scenario`]; random ones for the property tests:
+//! [`scenario`]), the board's sample loop around a [`Discipline`] ([`run`]), and the checks
+//! of a run (structure, labels, error against the true GNSS grid).
 
 use std::collections::VecDeque;
+use std::ops::Range;
 
 use odo_core::timing::*;
+use proptest::collection::vec;
+use proptest::prelude::*;
 
 /// The sample timer's clock, Hz.
 pub const HZ: u32 = 84_000_000;
@@ -30,7 +33,7 @@ impl Rng {
 }
 
 /// An MCU crystal `ppm` off nominal: true seconds to timer ticks.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, Debug)]
 pub struct Crystal {
     pub ppm: f64,
     pub origin: u64,
@@ -51,6 +54,7 @@ pub struct Edge {
     pub second: Option<u32>,
 }
 
+#[derive(Debug)]
 pub struct Scenario {
     pub crystal: Crystal,
     pub jitter: i64,
@@ -90,6 +94,30 @@ impl Scenario {
     }
 }
 
+/// The property tests' scenarios: 60 s of a clock off nominal by a `ppm` drawn from `ppm`,
+/// jitter up to 40 ticks, up to 12 lost pulses (seconds 2-59) and 6 spurious edges, any
+/// seed. Spurious edges within `glitch` seconds of a true second are left out: the
+/// discipline cannot tell them from the real edge (the glitch window, or the acquisition
+/// window before the lock).
+pub fn scenario(ppm: Range<f64>, glitch: f64) -> impl Strategy<Value = Scenario> {
+    (
+        ppm,
+        0i64..40,
+        vec(2u32..60, 0..12),
+        vec(0.5f64..59.0, 0..6),
+        1u64..u64::MAX,
+    )
+        .prop_map(move |(ppm, jitter, lost, spurious, seed)| Scenario {
+            lost,
+            spurious: spurious
+                .into_iter()
+                .filter(|t| (t - t.round()).abs() > glitch)
+                .collect(),
+            seed,
+            ..Scenario::new(ppm, jitter, 60)
+        })
+}
+
 /// What a run produced: the samples in order, with the events delivered before each.
 pub struct Run {
     pub samples: Vec<Sample>,
@@ -121,6 +149,34 @@ pub fn run(disc: &mut Discipline, edges: &[Edge], crystal: Crystal, seconds: u32
         ahead.push_back(disc.next_sample(now));
     }
     out
+}
+
+/// Runs `sc` on `disc` (as [`run`]) and checks the run's structure ([`check_structure`]);
+/// returns the run and its [`locked_error`] (s).
+pub fn run_checked(disc: &mut Discipline, sc: &Scenario) -> (Run, f64) {
+    let r = run(disc, &sc.edges(), sc.crystal, sc.seconds);
+    check_structure(&r);
+    let err = locked_error(&r, sc.crystal);
+    (r, err)
+}
+
+/// The pulses missed before each reacquisition of a run, in order.
+pub fn reacquisitions(run: &Run) -> Vec<u32> {
+    run.events
+        .iter()
+        .filter_map(|(_, e)| match e {
+            PpsEvent::Reacquired { missed, .. } => Some(*missed),
+            _ => None,
+        })
+        .collect()
+}
+
+/// Whether every sample of a run after the first `n` is locked.
+pub fn all_locked_after(run: &Run, n: usize) -> bool {
+    run.samples
+        .iter()
+        .skip(n)
+        .all(|s| s.state == SyncState::Locked)
 }
 
 pub fn pps_disc() -> Discipline {

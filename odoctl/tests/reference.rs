@@ -501,6 +501,54 @@ fn calibrate_cli(
     )
 }
 
+/// `calibrate_cli` of the run `dir/s.csv` from each receiver log of `dir` (`r.nmea`,
+/// `r.pos`) with the options `extra`, against the same run's estimates and standard errors
+/// from its CSV reference (`csv`): each summary has `stdout_has`; the log's standard errors
+/// are between `se_ratio.0` and `se_ratio.1` times the CSV's; and its estimate is no further
+/// from `truth` than the CSV's plus 10 of its standard errors (the run's slip, not the
+/// reference noise, dominates the error to the truth; the standard errors, which take the
+/// residuals as independent, do not show it). Prints the errors, labelled `label`.
+fn check_logs_against_csv(
+    dir: &std::path::Path,
+    extra: &[&str],
+    (csv, csv_se): ([f64; 3], [f64; 3]),
+    truth: [f64; 3],
+    se_ratio: (f64, f64),
+    stdout_has: &str,
+    label: &str,
+) {
+    for file in ["r.nmea", "r.pos"] {
+        let (est, se, stdout) = calibrate_cli(&dir.join("s.csv"), &dir.join(file), extra);
+        assert!(stdout.contains(stdout_has), "{label}: {stdout}");
+        for k in 0..3 {
+            assert!(
+                se[k] > se_ratio.0 * csv_se[k] && se[k] < se_ratio.1 * csv_se[k],
+                "{file} {k} ({label}): {se:?} {csv_se:?}"
+            );
+            let (e, e_csv) = ((est[k] - truth[k]).abs(), (csv[k] - truth[k]).abs());
+            assert!(
+                e < e_csv + 10.0 * se[k],
+                "{file} {k} ({label}): {est:?} (CSV {csv:?}, se {se:?})"
+            );
+        }
+        eprintln!(
+            "{file}, {label}: errors {:.1} {:.1} {:.1} um, standard errors {:.1} {:.1} {:.1} um (CSV {:.1} {:.1} {:.1} um, {:.1} {:.1} {:.1} um)",
+            (est[0] - truth[0]) * 1e6,
+            (est[1] - truth[1]) * 1e6,
+            (est[2] - truth[2]) * 1e6,
+            se[0] * 1e6,
+            se[1] * 1e6,
+            se[2] * 1e6,
+            (csv[0] - truth[0]) * 1e6,
+            (csv[1] - truth[1]) * 1e6,
+            (csv[2] - truth[2]) * 1e6,
+            csv_se[0] * 1e6,
+            csv_se[1] * 1e6,
+            csv_se[2] * 1e6
+        );
+    }
+}
+
 #[test]
 fn cli_simulate_logs_then_calibrate_from_each_format() {
     let d = common::scratch("reference_cli");
@@ -537,77 +585,32 @@ fn cli_simulate_logs_then_calibrate_from_each_format() {
     );
     let truth = [0.2608, 0.2607, 0.5656];
     // The sub-trajectory estimate, whose errors are set by the points it has (the default's
-    // filter refinement is limited by the slip instead: below).
+    // filter refinement is limited by the slip instead: below). A fifth of the CSV's points
+    // (10 Hz against 50 Hz, float epochs left out): standard errors about sqrt(5) larger.
     let plain = ["--geometry-refine", "none"];
     let (csv, csv_se, _) = calibrate_cli(&p("s.csv"), &p("r.csv"), &plain);
-    for file in ["r.nmea", "r.pos"] {
-        let (est, se, stdout) = calibrate_cli(&p("s.csv"), &p(file), &plain);
-        assert!(
-            stdout.contains("left out for their fix quality (--min-fix):"),
-            "{stdout}"
-        );
-        for k in 0..3 {
-            // A fifth of the CSV's points (10 Hz against 50 Hz, float epochs left out):
-            // standard errors about sqrt(5) larger.
-            assert!(
-                se[k] < 3.0 * csv_se[k] && se[k] > csv_se[k],
-                "{file} {k}: {se:?} {csv_se:?}"
-            );
-            // The accuracy reached from the CSV: the run's slip, not the reference noise,
-            // dominates the error to the truth (the standard errors, which take the residuals
-            // as independent, do not show it); the log's estimate is no further from the truth
-            // than the CSV's plus 10 of its standard errors.
-            let (e, e_csv) = ((est[k] - truth[k]).abs(), (csv[k] - truth[k]).abs());
-            assert!(
-                e < e_csv + 10.0 * se[k],
-                "{file} {k}: {est:?} (CSV {csv:?}, se {se:?})"
-            );
-        }
-        eprintln!(
-            "{file}: errors {:.1} {:.1} {:.1} um (CSV {:.1} {:.1} {:.1} um)",
-            (est[0] - truth[0]) * 1e6,
-            (est[1] - truth[1]) * 1e6,
-            (est[2] - truth[2]) * 1e6,
-            (csv[0] - truth[0]) * 1e6,
-            (csv[1] - truth[1]) * 1e6,
-            (csv[2] - truth[2]) * 1e6
-        );
-    }
+    check_logs_against_csv(
+        &d,
+        &plain,
+        (csv, csv_se),
+        truth,
+        (1.0, 3.0),
+        "left out for their fix quality (--min-fix):",
+        "sub-trajectory",
+    );
     // The default, refined by the filter: its errors are the slip's during the turns, which a
-    // fifth of the points hardly changes; the log's estimate as close to the truth as the
-    // CSV's within 10 of its standard errors.
+    // fifth of the points hardly changes.
     let (csv, csv_se, stdout) = calibrate_cli(&p("s.csv"), &p("r.csv"), &[]);
     assert!(stdout.contains("refined by the filter"), "{stdout}");
-    for file in ["r.nmea", "r.pos"] {
-        let (est, se, stdout) = calibrate_cli(&p("s.csv"), &p(file), &[]);
-        assert!(stdout.contains("refined by the filter"), "{stdout}");
-        for k in 0..3 {
-            assert!(
-                se[k] > 0.7 * csv_se[k] && se[k] < 3.0 * csv_se[k],
-                "{file} {k}: {se:?} {csv_se:?}"
-            );
-            let (e, e_csv) = ((est[k] - truth[k]).abs(), (csv[k] - truth[k]).abs());
-            assert!(
-                e < e_csv + 10.0 * se[k],
-                "{file} {k}: {est:?} (CSV {csv:?}, se {se:?})"
-            );
-        }
-        eprintln!(
-            "{file}, refined: errors {:.1} {:.1} {:.1} um, standard errors {:.1} {:.1} {:.1} um (CSV {:.1} {:.1} {:.1} um, {:.1} {:.1} {:.1} um)",
-            (est[0] - truth[0]) * 1e6,
-            (est[1] - truth[1]) * 1e6,
-            (est[2] - truth[2]) * 1e6,
-            se[0] * 1e6,
-            se[1] * 1e6,
-            se[2] * 1e6,
-            (csv[0] - truth[0]) * 1e6,
-            (csv[1] - truth[1]) * 1e6,
-            (csv[2] - truth[2]) * 1e6,
-            csv_se[0] * 1e6,
-            csv_se[1] * 1e6,
-            csv_se[2] * 1e6
-        );
-    }
+    check_logs_against_csv(
+        &d,
+        &[],
+        (csv, csv_se),
+        truth,
+        (0.7, 3.0),
+        "refined by the filter",
+        "refined",
+    );
     // The same log, forced and with float epochs: used counts in the summary.
     let (_, _, stdout) = calibrate_cli(
         &p("s.csv"),
