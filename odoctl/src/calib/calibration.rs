@@ -528,23 +528,17 @@ fn refine(
             covariance: [[f64::NAN; 3]; 3],
             kappa: f64::NAN,
             kappa_diff: f64::NAN,
-            passes: 0,
             linearisation: f64::NAN,
             observations: 0,
             skipped: Some(why.to_string()),
         });
     }
-    let diameters_se = match (s.std_errors[0], s.std_errors[1]) {
-        (Some(a), Some(b)) => Some(a.min(b)),
-        _ => None,
-    };
     refine_geometry(
         run,
         &s.params,
         g.heading0,
         o.reference_sigma,
         o.reference_heading_sigma,
-        diameters_se,
     )
 }
 

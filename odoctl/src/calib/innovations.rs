@@ -163,8 +163,21 @@ pub struct Innovations {
     /// Per observed block, how its heading error moves the position from its observation's
     /// step to its end (m per rad, x and y).
     levers: Vec<[f64; 2]>,
+    /// What it was built with.
+    settings: Settings,
     /// Observations (positions) used.
     pub observations: usize,
+}
+
+/// How [`Innovations`] takes a run's observations.
+#[derive(Debug, Clone, Copy)]
+struct Settings {
+    /// The run's start heading without reference headings (rad).
+    heading0: f64,
+    /// The reference's position (horizontal RMS, m) and heading (rad) noise.
+    sigmas: (f64, f64),
+    /// [`OBSERVATION_BLOCK`] or another (m).
+    block_length: f64,
 }
 
 /// What the filter gives at one `kappa`.
@@ -183,6 +196,9 @@ pub struct FilterScore {
     pub geometry: [f64; 3],
     /// Covariance of [`FilterScore::geometry`].
     pub geometry_cov: [[f64; 3]; 3],
+    /// Mean over the observations of the heading error's variance after each (rad^2): how far
+    /// the odometry re-anchored to the estimate turns from the truth.
+    pub heading_var: f64,
 }
 
 impl Step {
@@ -239,7 +255,8 @@ pub(super) struct SlipModel<'a> {
 
 impl Innovations {
     /// Integrates the odometry with `geometry` over the whole run and takes the observations,
-    /// then linearises again about the filter's estimate ([`Innovations::relinearised`]).
+    /// then linearises again about the filter's estimate at the white slip of the largest
+    /// likelihood ([`Innovations::reanchored`]).
     pub fn new(
         run: &Run,
         geometry: &ChassisParams,
@@ -251,35 +268,38 @@ impl Innovations {
         let open_loop = Self::anchored(
             run,
             geometry,
-            heading0,
-            (ref_sigma, ref_heading_sigma),
-            block_length,
+            Settings {
+                heading0,
+                sigmas: (ref_sigma, ref_heading_sigma),
+                block_length,
+            },
             None,
         )?;
-        open_loop.relinearised(|anchors| {
-            Self::anchored(
-                run,
-                geometry,
-                heading0,
-                (ref_sigma, ref_heading_sigma),
-                block_length,
-                Some(anchors),
-            )
-        })
+        let hi = f64::from(ChassisParams::MAX_KAPPA);
+        let kappa = open_loop.fit(hi * 1e-12, hi);
+        open_loop.reanchored(run, geometry, kappa)
     }
 
-    /// The filter linearised about its own estimate rather than the odometry integrated
-    /// open-loop, whose heading drifts from the truth by the slip's random walk (at q 0.003
-    /// over 70 m about 3 degrees): the positions' second order in that drift is a systematic
-    /// error the linear filter cannot carry, and the likelihood took it for slip (correlated
-    /// slip of a long correlation length, kappa 27 % high on 70 m runs with the true
-    /// geometry). The white-slip kappa of the largest likelihood is fitted on `self`, the
+    /// The filter for `geometry` linearised about this one's estimate at white slip `kappa`
+    /// rather than about the odometry integrated open-loop, whose heading drifts from the
+    /// truth by the slip's random walk (at q 0.003 over 70 m about 3 degrees): the positions'
+    /// second order in that drift is a systematic error the linear filter cannot carry, and
+    /// the likelihood took it for slip (correlated slip of a long correlation length, kappa
+    /// 27 % high on 70 m runs with the true geometry), the geometry's estimate for a scale. The
     /// filter's estimate after each observation becomes the pose the odometry is re-anchored
-    /// to at the end of that block, and `build` integrates the run so (any anchor is exact: the
-    /// filter shifts its state by the re-anchoring; only the linearisation changes).
-    fn relinearised(self, build: impl Fn(&[Pose]) -> Result<Self>) -> Result<Self> {
-        let hi = f64::from(ChassisParams::MAX_KAPPA);
-        let kappa = self.fit(hi * 1e-12, hi);
+    /// to at the end of that block (any anchor is exact: the filter shifts its state by the
+    /// re-anchoring; only the point of linearisation changes). Falls back to `self`'s own
+    /// linearisation when the filter fails at `kappa`.
+    pub fn reanchored(&self, run: &Run, geometry: &ChassisParams, kappa: f64) -> Result<Self> {
+        match self.anchors(kappa) {
+            Some(anchors) => Self::anchored(run, geometry, self.settings, Some(&anchors)),
+            None => Self::anchored(run, geometry, self.settings, None),
+        }
+    }
+
+    /// The filter's estimate of the pose at the end of each observed block, at white slip
+    /// `kappa`; `None` when it fails.
+    fn anchors(&self, kappa: f64) -> Option<Vec<Pose>> {
         let mut track = Vec::with_capacity(self.obs.len());
         self.filter_tracked(
             SlipModel {
@@ -294,34 +314,35 @@ impl Innovations {
             || self.levers.len() != track.len()
             || track.iter().flatten().any(|v| !v.is_finite())
         {
-            return Ok(self);
+            return None;
         }
-        let anchors: Vec<Pose> = self
-            .closes
-            .iter()
-            .zip(&track)
-            .zip(&self.levers)
-            .map(|((c, e), m)| Pose {
-                x: c.x + e[0] + m[0] * e[2],
-                y: c.y + e[1] + m[1] * e[2],
-                heading: c.heading + e[2],
-            })
-            .collect();
-        build(&anchors)
+        Some(
+            self.closes
+                .iter()
+                .zip(&track)
+                .zip(&self.levers)
+                .map(|((c, e), m)| Pose {
+                    x: c.x + e[0] + m[0] * e[2],
+                    y: c.y + e[1] + m[1] * e[2],
+                    heading: c.heading + e[2],
+                })
+                .collect(),
+        )
     }
 
     /// [`Innovations::new`]'s run, the odometry integrated open-loop (`anchors` `None`) or
-    /// moved to `anchors[b]` at the end of observed block `b`; `sigmas`: the reference's
-    /// position (horizontal RMS, m) and heading (rad) noise.
+    /// moved to `anchors[b]` at the end of observed block `b`.
     fn anchored(
         run: &Run,
         geometry: &ChassisParams,
-        heading0: f64,
-        sigmas: (f64, f64),
-        block_length: f64,
+        settings: Settings,
         anchors: Option<&[Pose]>,
     ) -> Result<Self> {
-        let (ref_sigma, ref_heading_sigma) = sigmas;
+        let Settings {
+            heading0,
+            sigmas: (ref_sigma, ref_heading_sigma),
+            block_length,
+        } = settings;
         let rh2 = ref_heading_sigma * ref_heading_sigma;
         // Every `stride`-th block's observation is used.
         let path = run.dist[run.len() - 1] - run.dist[0];
@@ -472,6 +493,7 @@ impl Innovations {
             shifts,
             closes,
             levers,
+            settings,
             observations,
         })
     }
@@ -539,6 +561,7 @@ impl Innovations {
         }
         let mut x = [0.0f64; N];
         let mut nll = 0.0;
+        let mut heading_var = 0.0;
         let (mut hn, mut h1, mut h3, mut an, mut a1, mut a3) = (0usize, 0, 0, 0usize, 0, 0);
         for (b, (base, o)) in self.composed.blocks.iter().zip(&self.obs).enumerate() {
             // The block's transition: rows 0-2 (the pose) full, the others diagonal.
@@ -678,6 +701,7 @@ impl Innovations {
             if let Some(t) = track.as_deref_mut() {
                 t.push([x[0], x[1], x[2]]);
             }
+            heading_var += p[2][2];
             // Keep P symmetric against rounding.
             for r in 0..N {
                 for c in r + 1..N {
@@ -700,6 +724,7 @@ impl Innovations {
             heading: (share(a1, an), share(a3, an)),
             geometry: [x[3], x[4], x[5]],
             geometry_cov: [0, 1, 2].map(|r| [0, 1, 2].map(|c| p[3 + r][3 + c])),
+            heading_var: heading_var / self.obs.len().max(1) as f64,
         }
     }
 }
@@ -750,9 +775,13 @@ mod tests {
         );
         let m = crate::csvio::match_or_fail(&sim.samples, "s", &sim.reference, "r", 10).unwrap();
         let run = Run::new(&sim.samples, &sim.reference, m);
-        let sigmas = (0.008, 0.5f64.to_radians());
+        let settings = Settings {
+            heading0: 0.0,
+            sigmas: (0.008, 0.5f64.to_radians()),
+            block_length: OBSERVATION_BLOCK,
+        };
         let build = |anchors: Option<&[Pose]>| {
-            Innovations::anchored(&run, &truth, 0.0, sigmas, OBSERVATION_BLOCK, anchors).unwrap()
+            Innovations::anchored(&run, &truth, settings, anchors).unwrap()
         };
         let open = build(None);
         assert!(open.observations > 30);

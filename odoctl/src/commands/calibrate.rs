@@ -202,11 +202,10 @@ pub fn calibrate(o: &CalibrateOptions, input: &ReferenceArgs) -> Result<ExitCode
             Some(r) if r.skipped.is_none() => {
                 let e = s.std_errors;
                 crate::outln!(
-                    "  refined by the filter (--geometry-refine filter): white slip kappa {:.3e} m^2/m, kappa_diff {:.3e}, {} observations, {} passes; the sub-trajectory estimate was {:.6} / {:.6} / {:.6} m (standard errors {})",
+                    "  refined by the filter (--geometry-refine filter): white slip kappa {:.3e} m^2/m, kappa_diff {:.3e}, {} observations; the sub-trajectory estimate was {:.6} / {:.6} / {:.6} m (standard errors {})",
                     r.kappa,
                     r.kappa_diff,
                     r.observations,
-                    r.passes,
                     s.params.left_diameter,
                     s.params.right_diameter,
                     s.params.track_width,
