@@ -244,6 +244,10 @@ fn filter_refinement_holds_on_a_long_log() {
     let r = c.refinement.as_ref().unwrap();
     assert!(r.skipped.is_none(), "{:?}", r.skipped);
     let se = r.std_errors();
+    println!(
+        "1 km: linearisation bound {:.2e} of the lengths, diameters' standard errors {:.2e} / {:.2e} m",
+        r.linearisation, se[0], se[1]
+    );
     assert!(
         r.linearisation > 0.0 && r.linearisation * truth.left_diameter < 0.1 * se[0],
         "{} against {se:?}",

@@ -266,19 +266,17 @@ pub fn calibrate(
             )?;
             timer.lap("sub-trajectory fit");
             run.antenna = s.antenna;
-            let g = whole_run_summary(&run, &s, None)?;
-            timer.lap("whole-run heading");
             let refinement = match o.geometry_refine {
                 GeometryRefine::None => None,
-                GeometryRefine::Filter => Some(refine(&run, &s, &g, o)?),
-            };
-            let g = match &refinement {
-                Some(r) if r.skipped.is_none() => {
+                GeometryRefine::Filter => {
+                    let r = refine(&run, &s, o)?;
                     timer.lap("filter refinement");
-                    whole_run_summary(&run, &s, Some(r))?
+                    Some(r)
                 }
-                _ => g,
             };
+            let applied = refinement.as_ref().filter(|r| r.skipped.is_none());
+            let g = whole_run_summary(&run, &s, applied)?;
+            timer.lap("whole-run heading");
             (g, Some(s), refinement)
         }
     };
@@ -507,14 +505,9 @@ fn whole_run_summary(
     })
 }
 
-/// The filter's refinement of a sub-trajectory fit `s` (whole-run summary `g`): not run with
+/// The filter's refinement of a sub-trajectory fit `s`: not run with
 /// a lever arm (the filter observes the axle centre) nor with the track width held.
-fn refine(
-    run: &Run,
-    s: &SubtrajectoryFit,
-    g: &GeomFit,
-    o: &CalibrationOptions,
-) -> Result<FilterRefinement> {
+fn refine(run: &Run, s: &SubtrajectoryFit, o: &CalibrationOptions) -> Result<FilterRefinement> {
     let reason = if s.antenna != (0.0, 0.0) || o.antenna.fitted() {
         Some("the filter observes the axle centre, not a lever arm's antenna")
     } else if !s.track_estimated {
@@ -533,10 +526,13 @@ fn refine(
             skipped: Some(why.to_string()),
         });
     }
+    // The start heading (the filter's without reference headings): the first
+    // sub-trajectory's fitted one.
+    let heading0 = s.blocks.first().map_or(0.0, |b| b.heading);
     refine_geometry(
         run,
         &s.params,
-        g.heading0,
+        heading0,
         o.reference_sigma,
         o.reference_heading_sigma,
     )
