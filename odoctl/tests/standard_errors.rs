@@ -38,12 +38,8 @@ fn slippy(length: f64, seed: u64) -> simulate::SimRun {
 }
 
 fn errors_in_se(fit: &calib::SubtrajectoryFit, truth: &ChassisParams) -> [f64; 3] {
-    let t = [truth.left_diameter, truth.right_diameter, truth.track_width];
-    let p = [
-        fit.params.left_diameter,
-        fit.params.right_diameter,
-        fit.params.track_width,
-    ];
+    let t = common::lengths(&truth);
+    let p = common::lengths(&fit.params);
     std::array::from_fn(|i| (p[i] - t[i]).abs() / fit.std_errors[i].unwrap())
 }
 
@@ -67,12 +63,8 @@ fn subtrajectory_standard_errors_cover_the_truth_over_many_seeds() {
             n += 1;
             within2 += usize::from(z <= 2.0);
             within3 += usize::from(z <= 3.0);
-            let t = [truth.left_diameter, truth.right_diameter, truth.track_width][i];
-            let e = [
-                fit.params.left_diameter,
-                fit.params.right_diameter,
-                fit.params.track_width,
-            ][i] - t;
+            let t = common::lengths(&truth)[i];
+            let e = common::lengths(&fit.params)[i] - t;
             formal_within2 += usize::from(e.abs() <= 2.0 * fit.independent_std_errors[i].unwrap());
         }
     }
@@ -115,12 +107,8 @@ fn paper_method_cluster_errors_against_the_formal_ones() {
             &indicatif::ProgressBar::hidden(),
         )
         .unwrap();
-        let t = [truth.left_diameter, truth.right_diameter, truth.track_width];
-        let p = [
-            fit.params.left_diameter,
-            fit.params.right_diameter,
-            fit.params.track_width,
-        ];
+        let t = common::lengths(&truth);
+        let p = common::lengths(&fit.params);
         for i in 0..3 {
             let e = (p[i] - t[i]).abs();
             n += 1;
@@ -153,7 +141,7 @@ fn filter_refinement_on_the_70_m_path_beats_the_subtrajectory_track_and_its_erro
         track_width: 0.700,
         ..ChassisParams::DESIGNED
     };
-    let t = [truth.left_diameter, truth.right_diameter, truth.track_width];
+    let t = common::lengths(&truth);
     let seeds = 30;
     let (mut sq_refined, mut sq_plain) = ([0.0f64; 3], [0.0f64; 3]);
     let (mut within2, mut within3, mut n) = (0, 0, 0);
@@ -180,13 +168,7 @@ fn filter_refinement_on_the_70_m_path_beats_the_subtrajectory_track_and_its_erro
         assert!(plain.refinement.is_none());
         let g = refined.params.geometry_uncertainty;
         let se = [g.left_diameter_se, g.right_diameter_se, g.track_width_se].map(f64::from);
-        let values = |c: &calib::Calibration| {
-            [
-                c.params.left_diameter,
-                c.params.right_diameter,
-                c.params.track_width,
-            ]
-        };
+        let values = |c: &calib::Calibration| common::lengths(&c.params);
         let (vr, vp) = (values(&refined), values(&plain));
         for i in 0..3 {
             let e = vr[i] - t[i];
@@ -253,12 +235,8 @@ fn filter_refinement_holds_on_a_long_log() {
         "{} against {se:?}",
         r.linearisation
     );
-    let t = [truth.left_diameter, truth.right_diameter, truth.track_width];
-    let v = [
-        c.params.left_diameter,
-        c.params.right_diameter,
-        c.params.track_width,
-    ];
+    let t = common::lengths(&truth);
+    let v = common::lengths(&c.params);
     for i in 0..3 {
         assert!(
             (v[i] - t[i]).abs() < 3.0 * se[i],

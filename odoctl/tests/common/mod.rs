@@ -19,6 +19,11 @@ use odo_core::settings::Settings;
 use odoctl::csvio::Sample;
 use odoctl::simulate::{self, PathKind, SimRun, SimSettings};
 
+/// `left_diameter`, `right_diameter`, `track_width` of `p` (m).
+pub fn lengths(p: &ChassisParams) -> [f64; 3] {
+    [p.left_diameter, p.right_diameter, p.track_width]
+}
+
 /// The odoctl binary.
 pub fn bin() -> &'static str {
     env!("CARGO_BIN_EXE_odoctl")
