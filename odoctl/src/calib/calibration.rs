@@ -312,15 +312,19 @@ pub fn calibrate(
         }
         // The likelihood fit of the covariance model needs only the geometry: it runs on a
         // thread of its own beside the paper model's fits.
+        let refined = refinement.as_ref().and_then(|r| r.innovations.clone());
         let filter_fit = |p: ChassisParams| -> Result<UncertaintyFit> {
-            let innovations = Innovations::new(
-                &run,
-                &p,
-                geometry.heading0,
-                o.reference_sigma,
-                o.reference_heading_sigma,
-                OBSERVATION_BLOCK,
-            )?;
+            let innovations = match &refined {
+                Some(i) => i.clone(),
+                None => std::sync::Arc::new(Innovations::new(
+                    &run,
+                    &p,
+                    geometry.heading0,
+                    o.reference_sigma,
+                    o.reference_heading_sigma,
+                    OBSERVATION_BLOCK,
+                )?),
+            };
             Ok(fit_kappa_filter(&innovations, &p, initial, o.delta_mode).0)
         };
         let filter_wanted = models.contains(&UncertaintyModel::Covariance)
@@ -524,6 +528,7 @@ fn refine(run: &Run, s: &SubtrajectoryFit, o: &CalibrationOptions) -> Result<Fil
             linearisation: f64::NAN,
             observations: 0,
             skipped: Some(why.to_string()),
+            innovations: None,
         });
     }
     // The start heading (the filter's without reference headings): the first

@@ -147,6 +147,7 @@ impl Block {
 }
 
 /// The run's motion and observations, ready for the likelihood of any kappa.
+#[derive(Debug, Clone)]
 pub struct Innovations {
     /// The steps between observations, composed.
     composed: Composed,

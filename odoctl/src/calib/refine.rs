@@ -64,6 +64,10 @@ pub struct FilterRefinement {
     pub observations: usize,
     /// Why the refinement was not applied (`None`: applied).
     pub skipped: Option<String>,
+    /// The filter it ran, linearised about its estimate: the covariance model's kappa fit
+    /// takes it rather than building its own (its geometry states absorb the refinement's
+    /// step).
+    pub innovations: Option<std::sync::Arc<Innovations>>,
 }
 
 impl FilterRefinement {
@@ -144,6 +148,7 @@ pub fn refine_geometry(
         kappa_diff,
         linearisation,
         observations: inn.observations,
+        innovations: skipped.is_none().then(|| std::sync::Arc::new(inn)),
         skipped,
     })
 }
