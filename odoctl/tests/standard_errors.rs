@@ -38,7 +38,7 @@ fn slippy(length: f64, seed: u64) -> simulate::SimRun {
 }
 
 fn errors_in_se(fit: &calib::SubtrajectoryFit, truth: &ChassisParams) -> [f64; 3] {
-    let t = common::lengths(&truth);
+    let t = common::lengths(truth);
     let p = common::lengths(&fit.params);
     std::array::from_fn(|i| (p[i] - t[i]).abs() / fit.std_errors[i].unwrap())
 }
