@@ -276,8 +276,8 @@ impl Innovations {
             },
             None,
         )?;
-        let hi = f64::from(ChassisParams::MAX_KAPPA);
-        let kappa = open_loop.fit(hi * 1e-12, hi);
+        let (lo, hi) = super::slip_fit::slip_rate_range();
+        let kappa = open_loop.fit(lo, hi);
         open_loop.reanchored(run, geometry, kappa)
     }
 

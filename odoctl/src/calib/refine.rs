@@ -30,7 +30,7 @@
 use anyhow::{anyhow, Result};
 use odo_core::odometry::ChassisParams;
 
-use super::slip_fit::{largest_likelihood, EVIDENCE_PER_PARAMETER};
+use super::slip_fit::{largest_likelihood, slip_rate_range, EVIDENCE_PER_PARAMETER};
 use super::{Innovations, Run, Turning, OBSERVATION_BLOCK};
 
 /// Whether `calibrate` refines the sub-trajectory geometry by the filter.
@@ -87,8 +87,7 @@ pub fn refine_geometry(
     ref_sigma: f64,
     ref_heading_sigma: f64,
 ) -> Result<FilterRefinement> {
-    let hi = f64::from(ChassisParams::MAX_KAPPA);
-    let lo = hi * 1e-12;
+    let (lo, hi) = slip_rate_range();
     let inn = Innovations::new(
         run,
         params,

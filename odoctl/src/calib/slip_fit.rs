@@ -39,6 +39,13 @@ const LN_TOL: f64 = 1e-3;
 /// How far a correlated fit's kappa is looked for from the white fit's: `ln` below, above.
 const LN_REACH: (f64, f64) = (3.0, 8.0);
 
+/// The range the likelihood fits search for a slip rate (m^2 per m): twelve decades up to the
+/// unit's largest admissible kappa.
+pub(super) fn slip_rate_range() -> (f64, f64) {
+    let hi = f64::from(ChassisParams::MAX_KAPPA);
+    (hi * 1e-12, hi)
+}
+
 /// Most rounds of the alternate fit of kappa and `kappa_diff` once opposite-phase slip is in.
 const JOINT_ROUNDS: usize = 4;
 
@@ -264,8 +271,7 @@ pub fn fit_kappa_filter(
     initial: &ChassisParams,
     mode: DeltaMode,
 ) -> (UncertaintyFit, f64) {
-    let hi = f64::from(ChassisParams::MAX_KAPPA);
-    let lo = hi * 1e-12;
+    let (lo, hi) = slip_rate_range();
     let (kappa, corr, turning) = innovations.fit_with_turning(lo, hi);
     let mut params = set_coefficient(
         &ChassisParams {
