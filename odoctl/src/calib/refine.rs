@@ -15,7 +15,7 @@
 //! their standard errors half the error.
 //!
 //! The filter is linearised about its own estimate ([`Innovations::reanchored`]), so one
-//! pass is enough (a second moved the estimates by less than 0.1 um on the 70 m to 3 km
+//! pass is enough (a second moved the RMS errors by 1 um at most on the 70 m to 3 km
 //! logs). What remains of the linearisation: the odometry re-anchored to the estimate turns
 //! from the truth by the estimate's heading error, whose second order shortens the path by
 //! half its variance (relative), of which the filter takes about half for a scale of all
