@@ -43,49 +43,46 @@ fn serialisation_round_trip_and_checksum() {
     assert!(Settings::from_bytes_version(0, &b).is_err());
 }
 
-/// A record exactly as the firmware of format version 1 wrote it: 112-byte payload (the
-/// version 2 payload without its last 4 bytes), CRC at 124, 128 bytes.
+/// A record exactly as the firmware of format `version` wrote it: magic, version, payload
+/// length, generation, the first `payload` bytes of today's payload, CRC; `len` bytes.
+fn old_record(
+    settings: &Settings,
+    generation: u32,
+    version: u16,
+    payload: usize,
+    len: usize,
+) -> Vec<u8> {
+    let mut r = Vec::new();
+    r.extend_from_slice(&MAGIC.to_le_bytes());
+    r.extend_from_slice(&version.to_le_bytes());
+    r.extend_from_slice(&(payload as u16).to_le_bytes());
+    r.extend_from_slice(&generation.to_le_bytes());
+    r.extend_from_slice(&settings.to_bytes()[..payload]);
+    let crc = crc32(&r);
+    r.extend_from_slice(&crc.to_le_bytes());
+    assert_eq!(r.len(), len);
+    r
+}
+
+/// Format version 1: 112-byte payload (the version 2 payload without its last 4 bytes), CRC
+/// at 124, 128 bytes.
 fn v1_record(settings: &Settings, generation: u32) -> Vec<u8> {
-    let mut r = Vec::new();
-    r.extend_from_slice(&MAGIC.to_le_bytes());
-    r.extend_from_slice(&1u16.to_le_bytes());
-    r.extend_from_slice(&112u16.to_le_bytes());
-    r.extend_from_slice(&generation.to_le_bytes());
-    r.extend_from_slice(&settings.to_bytes()[..Settings::SERIALIZED_LEN_V1]);
-    let crc = crc32(&r);
-    r.extend_from_slice(&crc.to_le_bytes());
-    assert_eq!(r.len(), 128);
-    r
+    assert_eq!(Settings::SERIALIZED_LEN_V1, 112);
+    old_record(settings, generation, 1, Settings::SERIALIZED_LEN_V1, 128)
 }
 
-/// A record exactly as the firmware of format version 2 wrote it: 116-byte payload (the
-/// version 3 payload without the geometry's standard errors), CRC at 128, 132 bytes.
+/// Format version 2: 116-byte payload (the version 3 payload without the geometry's standard
+/// errors), CRC at 128, 132 bytes.
 fn v2_record(settings: &Settings, generation: u32) -> Vec<u8> {
-    let mut r = Vec::new();
-    r.extend_from_slice(&MAGIC.to_le_bytes());
-    r.extend_from_slice(&2u16.to_le_bytes());
-    r.extend_from_slice(&116u16.to_le_bytes());
-    r.extend_from_slice(&generation.to_le_bytes());
-    r.extend_from_slice(&settings.to_bytes()[..Settings::SERIALIZED_LEN_V2]);
-    let crc = crc32(&r);
-    r.extend_from_slice(&crc.to_le_bytes());
-    assert_eq!(r.len(), 132);
-    r
+    assert_eq!(Settings::SERIALIZED_LEN_V2, 116);
+    old_record(settings, generation, 2, Settings::SERIALIZED_LEN_V2, 132)
 }
 
-/// A record exactly as the firmware of format version 3 wrote it: 144-byte payload (the
-/// version 4 payload without `kappa_diff_corr`), CRC at 156, 160 bytes.
+/// Format version 3: 144-byte payload (the version 4 payload without `kappa_diff_corr`), CRC
+/// at 156, 160 bytes.
 fn v3_record(settings: &Settings, generation: u32) -> Vec<u8> {
-    let mut r = Vec::new();
-    r.extend_from_slice(&MAGIC.to_le_bytes());
-    r.extend_from_slice(&3u16.to_le_bytes());
-    r.extend_from_slice(&144u16.to_le_bytes());
-    r.extend_from_slice(&generation.to_le_bytes());
-    r.extend_from_slice(&settings.to_bytes()[..Settings::SERIALIZED_LEN_V3]);
-    let crc = crc32(&r);
-    r.extend_from_slice(&crc.to_le_bytes());
-    assert_eq!(r.len(), 160);
-    r
+    assert_eq!(Settings::SERIALIZED_LEN_V3, 144);
+    old_record(settings, generation, 3, Settings::SERIALIZED_LEN_V3, 160)
 }
 
 #[test]
