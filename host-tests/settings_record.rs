@@ -99,6 +99,20 @@ fn record_layout_of_format_version_4() {
     assert_eq!(&old[12..124], &r[12..124]);
 }
 
+/// An old record at the start of `f`, of generation `generation`, loads as `expect`; the next
+/// save of `new` writes version 4 after it (payload 148) with the next generation and wins;
+/// with that record damaged the old one is the fallback again; no used word is programmed.
+fn assert_upgrades(f: &mut SimFlash, generation: u32, expect: Settings, new: &Settings) {
+    assert_eq!(load(f), (expect, SettingsSource::Flash, generation));
+    let mut store = SettingsStore::new(&mut *f);
+    assert_eq!(store.save(new).unwrap(), generation + 1);
+    assert_eq!(load(f), (*new, SettingsSource::Flash, generation + 1));
+    assert_eq!(&f.mem[0][SLOT_LEN + 4..SLOT_LEN + 8], &[4, 0, 148, 0]);
+    f.mem[0][SLOT_LEN + 20] ^= 0x10;
+    assert_eq!(load(f), (expect, SettingsSource::Flash, generation));
+    assert_eq!(f.violations, 0);
+}
+
 #[test]
 fn format_version_1_record_loads_with_the_default_max_wheel_speed() {
     let mut old = variant(3);
@@ -111,20 +125,11 @@ fn format_version_1_record_loads_with_the_default_max_wheel_speed() {
         max_wheel_speed: Settings::DEFAULT_MAX_WHEEL_SPEED,
         ..old
     };
-    assert_eq!(load(&f), (expect, SettingsSource::Flash, 41));
     assert_eq!(
         Settings::from_bytes_version(1, &old.to_bytes()[..112]).unwrap(),
         expect
     );
-    // The next save writes version 4 after it, above its generation, and wins.
-    let mut store = SettingsStore::new(&mut f);
-    assert_eq!(store.save(&variant(5)).unwrap(), 42);
-    assert_eq!(load(&f), (variant(5), SettingsSource::Flash, 42));
-    assert_eq!(&f.mem[0][SLOT_LEN + 4..SLOT_LEN + 8], &[4, 0, 148, 0]);
-    assert_eq!(f.violations, 0);
-    // The v1 record is still the fallback if the new one is damaged.
-    f.mem[0][SLOT_LEN + 20] ^= 0x10;
-    assert_eq!(load(&f), (expect, SettingsSource::Flash, 41));
+    assert_upgrades(&mut f, 41, expect, &variant(5));
 }
 
 #[test]
@@ -144,14 +149,7 @@ fn format_version_2_record_loads_with_an_exact_geometry() {
         },
         ..old
     };
-    assert_eq!(load(&f), (expect, SettingsSource::Flash, 7));
-    // The next save writes version 4 and wins; the v2 record stays the fallback.
-    let mut store = SettingsStore::new(&mut f);
-    assert_eq!(store.save(&old).unwrap(), 8);
-    assert_eq!(load(&f), (old, SettingsSource::Flash, 8));
-    f.mem[0][SLOT_LEN + 20] ^= 0x10;
-    assert_eq!(load(&f), (expect, SettingsSource::Flash, 7));
-    assert_eq!(f.violations, 0);
+    assert_upgrades(&mut f, 7, expect, &old);
 }
 
 #[test]
@@ -170,20 +168,12 @@ fn format_version_3_record_loads_with_white_turning_slip() {
         },
         ..old
     };
-    assert_eq!(load(&f), (expect, SettingsSource::Flash, 12));
     assert_eq!(
         Settings::from_bytes_version(3, &old.to_bytes()[..144]).unwrap(),
         expect
     );
     assert!(Settings::from_bytes_version(3, &old.to_bytes()[..143]).is_err());
-    // The next save writes version 4 and wins; the v3 record stays the fallback.
-    let mut store = SettingsStore::new(&mut f);
-    assert_eq!(store.save(&old).unwrap(), 13);
-    assert_eq!(load(&f), (old, SettingsSource::Flash, 13));
-    assert_eq!(&f.mem[0][SLOT_LEN + 4..SLOT_LEN + 8], &[4, 0, 148, 0]);
-    f.mem[0][SLOT_LEN + 20] ^= 0x10;
-    assert_eq!(load(&f), (expect, SettingsSource::Flash, 12));
-    assert_eq!(f.violations, 0);
+    assert_upgrades(&mut f, 12, expect, &old);
 }
 
 /// Damaged or mislabelled v1 records are refused like any other, and saving over them
