@@ -266,19 +266,16 @@ impl Innovations {
         ref_heading_sigma: f64,
         block_length: f64,
     ) -> Result<Self> {
-        let open_loop = Self::anchored(
-            run,
-            geometry,
-            Settings {
-                heading0,
-                sigmas: (ref_sigma, ref_heading_sigma),
-                block_length,
-            },
-            None,
-        )?;
+        let settings = Settings {
+            heading0,
+            sigmas: (ref_sigma, ref_heading_sigma),
+            block_length,
+        };
+        let path = OpenLoop::new(run, geometry, settings)?;
+        let open_loop = Self::anchored(run, geometry, settings, &path, None)?;
         let (lo, hi) = super::slip_fit::slip_rate_range();
         let kappa = open_loop.fit(lo, hi);
-        open_loop.reanchored(run, geometry, kappa)
+        open_loop.reanchored(run, geometry, &path, kappa)
     }
 
     /// The filter for `geometry` linearised about this one's estimate at white slip `kappa`
@@ -291,11 +288,15 @@ impl Innovations {
     /// to at the end of that block (any anchor is exact: the filter shifts its state by the
     /// re-anchoring; only the point of linearisation changes). Falls back to `self`'s own
     /// linearisation when the filter fails at `kappa`.
-    pub fn reanchored(&self, run: &Run, geometry: &ChassisParams, kappa: f64) -> Result<Self> {
-        match self.anchors(kappa) {
-            Some(anchors) => Self::anchored(run, geometry, self.settings, Some(&anchors)),
-            None => Self::anchored(run, geometry, self.settings, None),
-        }
+    fn reanchored(
+        &self,
+        run: &Run,
+        geometry: &ChassisParams,
+        path: &OpenLoop,
+        kappa: f64,
+    ) -> Result<Self> {
+        let anchors = self.anchors(kappa);
+        Self::anchored(run, geometry, self.settings, path, anchors.as_deref())
     }
 
     /// The filter's estimate of the pose at the end of each observed block, at white slip
@@ -331,52 +332,37 @@ impl Innovations {
         )
     }
 
-    /// [`Innovations::new`]'s run, the odometry integrated open-loop (`anchors` `None`) or
-    /// moved to `anchors[b]` at the end of observed block `b`.
+    /// [`Innovations::new`]'s run: the odometry `path` as integrated (`anchors` `None`) or
+    /// moved to `anchors[b]` at the end of observed block `b` (the path after it turned and
+    /// shifted with the anchor, as an integration restarted there would run).
     fn anchored(
         run: &Run,
         geometry: &ChassisParams,
         settings: Settings,
+        path: &OpenLoop,
         anchors: Option<&[Pose]>,
     ) -> Result<Self> {
         let Settings {
-            heading0,
             sigmas: (ref_sigma, ref_heading_sigma),
             block_length,
+            ..
         } = settings;
         let rh2 = ref_heading_sigma * ref_heading_sigma;
         // Every `stride`-th block's observation is used.
-        let path = run.dist[run.len() - 1] - run.dist[0];
-        let stride = (path / (MAX_OBSERVATIONS * block_length)).ceil().max(1.0) as usize;
+        let distance = run.dist[run.len() - 1] - run.dist[0];
+        let stride = (distance / (MAX_OBSERVATIONS * block_length))
+            .ceil()
+            .max(1.0) as usize;
         let mut blocks = 0usize;
-        let r2 = |k: usize| {
-            let s = run.reference_at(k).sigma_h.unwrap_or(ref_sigma);
-            s * s / 2.0
-        };
-        // Start heading: the reference's over the opening standstill when it has headings.
-        let (lo, hi) = run.standstill(0);
-        let n0 = (hi - lo + 1) as f64;
-        let pos_var0 = (lo..=hi).map(r2).sum::<f64>() / (n0 * n0);
-        let (h0, heading_var0) = match run
-            .opening_heading(geometry, heading0)
-            .map_err(|e| anyhow!("parameters: {e}"))?
-        {
-            // One epoch's variance: the epochs averaged are observed again in the first block.
-            Some((h, _)) => (h, rh2),
-            None => (heading0, 1e-6),
-        };
-        let mut integ = run
-            .start(geometry, 0, h0)
-            .map_err(|e| anyhow!("parameters: {e}"))?;
         let w = geometry.track_width;
-        let first = run.matches[0].0;
-        let last = run.matches[run.len() - 1].0;
-        let mut steps = Vec::with_capacity(last - first);
+        let (first, last) = (path.first, path.first + path.poses.len() - 1);
         let mut k = 1;
-        let mut prev = integ.pose();
+        // This pass's pose of each of the path's (the latest re-anchoring).
+        let mut moved = Reanchoring::NONE;
         // The step being merged: its start pose and what it rolled so far.
-        let mut start = prev;
+        let mut start = path.poses[0];
         let (mut rolled, mut rolled_diff) = ([0.0f64; 2], 0.0f64);
+        let mut steps = Vec::with_capacity(last - first);
         // Observations of one block, averaged: (ref - odo) x, y, noise var, heading, count.
         let mut block = Block::default();
         let mut block_start = 0usize;
@@ -387,14 +373,12 @@ impl Innovations {
         let mut close_steps = Vec::new();
         let mut resets: Vec<(usize, [f64; 3])> = Vec::new();
         for i in first + 1..=last {
-            let s = &run.samples[i];
-            let _ = integ.step_pose(counts(s), index_refs(s));
-            let p = integ.pose();
-            let ws = wheel_distances(prev, p, w);
-            rolled[0] += ws[0].abs();
-            rolled[1] += ws[1].abs();
-            rolled_diff += (ws[0] - ws[1]).abs();
-            prev = p;
+            let open = path.poses[i - first];
+            let p = moved.apply(open);
+            let [d1, d2, dd] = path.rolled[i - first];
+            rolled[0] += d1;
+            rolled[1] += d2;
+            rolled_diff += dd;
             // A reference epoch joins its block; the block's averaged observation goes on the
             // step holding its middle epoch, which is closed when the block ends.
             let mut block_done = false;
@@ -406,7 +390,7 @@ impl Innovations {
                 block.add(Epoch {
                     dx: r.x - p.x,
                     dy: r.y - p.y,
-                    r: r2(k),
+                    r: position_variance(run, k, ref_sigma),
                     dh: r.heading.map(|h| wrap_angle(h - p.heading)),
                     step: steps.len(),
                 });
@@ -444,8 +428,8 @@ impl Innovations {
                             steps.len(),
                             [a.x - p.x, a.y - p.y, wrap_angle(a.heading - p.heading)],
                         ));
-                        integ.reset_pose(*a);
-                        (prev, start) = (*a, *a);
+                        moved = Reanchoring::new(open, *a);
+                        start = *a;
                     }
                     observations += 1;
                 }
@@ -490,7 +474,7 @@ impl Innovations {
         Ok(Self {
             composed: Composed::new(&terms[..used], &ends),
             obs,
-            p0: (pos_var0, heading_var0),
+            p0: path.start_variances,
             shifts,
             closes,
             levers,
@@ -541,12 +525,26 @@ impl Innovations {
 
     /// [`Innovations::filter`], pushing the pose error's estimate after each observation to
     /// `track` when given.
-    fn filter_tracked(
+    fn filter_tracked(&self, slip: SlipModel, track: Option<&mut Vec<[f64; 3]>>) -> FilterScore {
+        // Only the states the slip model has: the arithmetic is dense in them.
+        match (slip.wheels.is_some(), slip.turning.is_some()) {
+            (false, false) => self.filter_with::<6>(slip, track),
+            (false, true) => self.filter_with::<7>(slip, track),
+            (true, false) => self.filter_with::<8>(slip, track),
+            (true, true) => self.filter_with::<9>(slip, track),
+        }
+    }
+
+    /// [`Innovations::filter_tracked`] over `N` states: the pose error and the geometry's
+    /// (6), the two wheels' Gauss-Markov slip (6 and 7) when the model has them, the
+    /// opposite-phase one (the last) when it has it.
+    fn filter_with<const N: usize>(
         &self,
         slip: SlipModel,
         mut track: Option<&mut Vec<[f64; 3]>>,
     ) -> FilterScore {
-        let mut p: M = [[0.0; N]; N];
+        let turning_state = N - 1;
+        let mut p = [[0.0; N]; N];
         p[0][0] = self.p0.0;
         p[1][1] = self.p0.0;
         p[2][2] = self.p0.1;
@@ -558,7 +556,7 @@ impl Innovations {
             p[7][7] = p[6][6];
         }
         if let Some((corr, _)) = slip.turning {
-            p[8][8] = slip.kappa_diff / (2.0 * corr);
+            p[turning_state][turning_state] = slip.kappa_diff / (2.0 * corr);
         }
         let mut x = [0.0f64; N];
         let mut nll = 0.0;
@@ -582,7 +580,7 @@ impl Innovations {
                 gm[1] = Some((7, &w[1][b], slip.kappa));
             }
             if let Some((_, t)) = slip.turning {
-                gm[2] = Some((8, &t[b], slip.kappa_diff));
+                gm[2] = Some((turning_state, &t[b], slip.kappa_diff));
             }
             for &(i, g, _) in gm.iter().flatten() {
                 for r in 0..3 {
@@ -688,7 +686,7 @@ impl Innovations {
                 an += 1;
                 a1 += usize::from(v.abs() <= s.sqrt());
                 a3 += usize::from(v.abs() <= 3.0 * s.sqrt());
-                let k: Vec<f64> = (0..N).map(|r| p[r][2] / s).collect();
+                let k: [f64; N] = std::array::from_fn(|r| p[r][2] / s);
                 for r in 0..N {
                     x[r] += k[r] * v;
                 }
@@ -730,6 +728,124 @@ impl Innovations {
     }
 }
 
+/// A reference epoch's noise variance per axis (m^2): its own horizontal sigma, else
+/// `ref_sigma`, split over the two axes.
+fn position_variance(run: &Run, k: usize, ref_sigma: f64) -> f64 {
+    let s = run.reference_at(k).sigma_h.unwrap_or(ref_sigma);
+    s * s / 2.0
+}
+
+/// The odometry integrated once from the run's start, which every linearisation of
+/// [`Innovations`] moves rather than integrates again.
+struct OpenLoop {
+    /// Sample index of the first match.
+    first: usize,
+    /// The pose at each sample from the first match's to the last's.
+    poses: Vec<Pose>,
+    /// Per sample (the first's zero): wheel 1's and wheel 2's distance and `|s_1 - s_2|` (m),
+    /// absolute.
+    rolled: Vec<[f64; 3]>,
+    /// Initial variances of the position (per axis, m^2) and heading (rad^2).
+    start_variances: (f64, f64),
+}
+
+impl OpenLoop {
+    /// Integrates `geometry` from the reference position over the opening standstill and
+    /// the reference's heading there (`settings.heading0` without reference headings).
+    fn new(run: &Run, geometry: &ChassisParams, settings: Settings) -> Result<Self> {
+        let (ref_sigma, ref_heading_sigma) = settings.sigmas;
+        let (lo, hi) = run.standstill(0);
+        let n0 = (hi - lo + 1) as f64;
+        let pos_var0 = (lo..=hi)
+            .map(|k| position_variance(run, k, ref_sigma))
+            .sum::<f64>()
+            / (n0 * n0);
+        let (h0, heading_var0) = match run
+            .opening_heading(geometry, settings.heading0)
+            .map_err(|e| anyhow!("parameters: {e}"))?
+        {
+            // One epoch's variance: the epochs averaged are observed again in the first block.
+            Some((h, _)) => (h, ref_heading_sigma * ref_heading_sigma),
+            None => (settings.heading0, 1e-6),
+        };
+        let mut integ = run
+            .start(geometry, 0, h0)
+            .map_err(|e| anyhow!("parameters: {e}"))?;
+        let w = geometry.track_width;
+        let first = run.matches[0].0;
+        let last = run.matches[run.len() - 1].0;
+        let mut poses = Vec::with_capacity(last - first + 1);
+        let mut rolled = Vec::with_capacity(last - first + 1);
+        let mut prev = integ.pose();
+        poses.push(prev);
+        rolled.push([0.0; 3]);
+        for s in &run.samples[first + 1..=last] {
+            let _ = integ.step_pose(counts(s), index_refs(s));
+            let p = integ.pose();
+            let [s1, s2] = wheel_distances(prev, p, w);
+            poses.push(p);
+            rolled.push([s1.abs(), s2.abs(), (s1 - s2).abs()]);
+            prev = p;
+        }
+        Ok(Self {
+            first,
+            poses,
+            rolled,
+            start_variances: (pos_var0, heading_var0),
+        })
+    }
+}
+
+/// Where a path restarted from `to` at its pose `at` goes: its later poses turned about `at`
+/// by `to`'s heading minus `at`'s (clockwise) and moved by `to - at`.
+#[derive(Debug, Clone, Copy)]
+struct Reanchoring {
+    at: Pose,
+    to: Pose,
+    /// Sine and cosine minus one of the turn (the latter without cancellation).
+    sin: f64,
+    cos_m1: f64,
+}
+
+impl Reanchoring {
+    /// No move.
+    const NONE: Self = Self {
+        at: Pose {
+            x: 0.0,
+            y: 0.0,
+            heading: 0.0,
+        },
+        to: Pose {
+            x: 0.0,
+            y: 0.0,
+            heading: 0.0,
+        },
+        sin: 0.0,
+        cos_m1: 0.0,
+    };
+
+    fn new(at: Pose, to: Pose) -> Self {
+        let turn = to.heading - at.heading;
+        let half = (0.5 * turn).sin();
+        Self {
+            at,
+            to,
+            sin: turn.sin(),
+            cos_m1: -2.0 * half * half,
+        }
+    }
+
+    /// The pose `q` of the path moved (exactly `q` when `to` is `at`).
+    fn apply(&self, q: Pose) -> Pose {
+        let (dx, dy) = (q.x - self.at.x, q.y - self.at.y);
+        Pose {
+            x: q.x + (self.to.x - self.at.x) + (self.cos_m1 * dx + self.sin * dy),
+            y: q.y + (self.to.y - self.at.y) + (self.cos_m1 * dy - self.sin * dx),
+            heading: q.heading + (self.to.heading - self.at.heading),
+        }
+    }
+}
+
 /// The wheel distances (m) of the arc from `a` to `b` on a track `w`: its centre distance
 /// (the chord over `sinc(dalpha / 2)`) plus and minus `w dalpha / 2`.
 fn wheel_distances(a: Pose, b: Pose, w: f64) -> [f64; 2] {
@@ -746,11 +862,6 @@ fn wheel_distances(a: Pose, b: Pose, w: f64) -> [f64; 2] {
     };
     [ds + 0.5 * w * dalpha, ds - 0.5 * w * dalpha]
 }
-
-/// Filter state: position and heading errors, the geometry's relative errors (wheel 1 and 2
-/// scale, track width), the two wheels' correlated slip, the correlated opposite-phase slip.
-const N: usize = 9;
-type M = [[f64; N]; N];
 
 #[cfg(test)]
 mod tests {
@@ -781,8 +892,9 @@ mod tests {
             sigmas: (0.008, 0.5f64.to_radians()),
             block_length: OBSERVATION_BLOCK,
         };
+        let path = OpenLoop::new(&run, &truth, settings).unwrap();
         let build = |anchors: Option<&[Pose]>| {
-            Innovations::anchored(&run, &truth, settings, anchors).unwrap()
+            Innovations::anchored(&run, &truth, settings, &path, anchors).unwrap()
         };
         let open = build(None);
         assert!(open.observations > 30);
