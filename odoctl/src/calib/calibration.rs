@@ -450,9 +450,6 @@ fn whole_run_summary(
     // One integration (two when it turns by more than 0.01 rad), the path turned about its
     // start: the heading a re-integrating fit would find.
     let heading0 = fit_restart_heading(run, &params, 0, last, guess)?;
-    let cost = run
-        .eq16(&params, 0, last, heading0)
-        .ok_or_else(|| anyhow::anyhow!("the estimate is not admissible"))?;
     let mut se = s.std_errors;
     if let Some(r) = refinement {
         let e = r.std_errors();
@@ -460,21 +457,34 @@ fn whole_run_summary(
             se[i] = se[i].map(|_| e[i]);
         }
     }
-    // The heading's errors with the geometry held (it is fitted with the geometry held).
+    // The heading's errors with the geometry held (it is fitted with the geometry held); the
+    // three integrations of the whole run are independent: on three threads.
     let heading_free = [false, false, false, true];
-    let formal =
-        standard_errors(run, &params, 0, last, heading0, heading_free).and_then(|(e, _)| e[3]);
-    let clustered = paper_cluster_errors(
-        run,
-        &params,
-        run.antenna,
-        0,
-        last,
-        heading0,
-        &heading_free,
-        SUBTRAJECTORY_LENGTH,
-    )
-    .and_then(|(e, _)| e[3]);
+    let (cost, formal, clustered) = std::thread::scope(|scope| {
+        let formal = scope.spawn(|| {
+            standard_errors(run, &params, 0, last, heading0, heading_free)
+                .and_then(|(e, _)| e[3])
+        });
+        let clustered = scope.spawn(|| {
+            paper_cluster_errors(
+                run,
+                &params,
+                run.antenna,
+                0,
+                last,
+                heading0,
+                &heading_free,
+                SUBTRAJECTORY_LENGTH,
+            )
+            .and_then(|(e, _)| e[3])
+        });
+        let cost = run.eq16(&params, 0, last, heading0);
+        let joined = |h: std::thread::ScopedJoinHandle<'_, Option<f64>>| {
+            h.join().expect("a standard error's integration panicked")
+        };
+        (cost, joined(formal), joined(clustered))
+    });
+    let cost = cost.ok_or_else(|| anyhow::anyhow!("the estimate is not admissible"))?;
     let robust = [se[0], se[1], se[2], clustered];
     let min_turning = SubtrajectoryOptions::default().min_turning;
     Ok(GeomFit {
