@@ -193,63 +193,93 @@ pub struct RefPoint {
     pub sigma_h: Option<f64>,
 }
 
-/// A parsed CSV table: header and rows with their 1-based line numbers.
+/// A CSV table: its header, and its data rows read one after the other
+/// ([`Table::each_row`]) without holding them.
 struct Table<'a> {
     file: &'a str,
     header_line: usize,
     columns: Vec<String>,
-    /// 1-based line number of each data row.
-    lines: Vec<usize>,
-    /// The data rows' fields, row after row (`columns.len()` per row: one allocation for
-    /// the whole file).
-    fields: Vec<&'a str>,
+    /// The text after the header row.
+    body: &'a str,
+}
+
+/// A line that is not a row: blank, or a `#` comment.
+fn skipped(line: &str) -> bool {
+    let t = line.trim_start();
+    t.is_empty() || t.starts_with('#')
 }
 
 impl<'a> Table<'a> {
+    /// Reads the header (the first line that is not skipped).
     fn parse(file: &'a str, text: &'a str) -> Result<Self> {
-        let mut header: Option<(usize, Vec<String>)> = None;
-        let mut lines = Vec::new();
-        let mut all = Vec::new();
-        for (i, line) in text.lines().enumerate() {
-            let lineno = i + 1;
-            let line = line.trim_end_matches('\r');
-            if line.trim().is_empty() || line.trim_start().starts_with('#') {
-                continue;
-            }
-            match &header {
-                None => {
-                    let cols: Vec<String> = line
+        let mut offset = 0;
+        for (i, raw) in text.split('\n').enumerate() {
+            let next = (offset + raw.len() + 1).min(text.len());
+            let line = raw.trim_end_matches('\r');
+            if !skipped(line) {
+                return Ok(Self {
+                    file,
+                    header_line: i + 1,
+                    columns: line
                         .split(',')
                         .map(|f| f.trim().trim_matches('"').to_string())
-                        .collect();
-                    header = Some((lineno, cols));
-                }
-                Some((_, cols)) => {
-                    let before = all.len();
-                    all.extend(line.split(',').map(str::trim));
-                    let n = all.len() - before;
-                    if n != cols.len() {
-                        bail!(
-                            "{file}:{lineno}: {n} fields, but the header has {} columns",
-                            cols.len()
-                        );
-                    }
-                    lines.push(lineno);
+                        .collect(),
+                    body: &text[next..],
+                });
+            }
+            offset = next;
+        }
+        bail!("{file}: empty file (no header row)")
+    }
+
+    /// A capacity for the rows: the body's lines.
+    fn rows_hint(&self) -> usize {
+        self.body.bytes().filter(|&b| b == b'\n').count() + 1
+    }
+
+    /// Calls `f` with each data row, in file order; a row with another number of fields than
+    /// the header's, or none at all, is an error.
+    fn each_row(&self, mut f: impl FnMut(Row<'_>) -> Result<()>) -> Result<()> {
+        let mut fields: Vec<&str> = Vec::with_capacity(self.columns.len());
+        let mut rows = 0usize;
+        for (i, raw) in self.body.split('\n').enumerate() {
+            let line = raw.trim_end_matches('\r');
+            if skipped(line) {
+                continue;
+            }
+            let lineno = self.header_line + 1 + i;
+            fields.clear();
+            let mut start = 0;
+            for (j, b) in line.bytes().enumerate() {
+                if b == b',' {
+                    fields.push(line[start..j].trim());
+                    start = j + 1;
                 }
             }
+            fields.push(line[start..].trim());
+            if fields.len() != self.columns.len() {
+                bail!(
+                    "{}:{lineno}: {} fields, but the header has {} columns",
+                    self.file,
+                    fields.len(),
+                    self.columns.len()
+                );
+            }
+            f(Row {
+                file: self.file,
+                line: lineno,
+                fields: &fields,
+            })?;
+            rows += 1;
         }
-        let (header_line, columns) =
-            header.ok_or_else(|| anyhow!("{file}: empty file (no header row)"))?;
-        if lines.is_empty() {
-            bail!("{file}:{header_line}: no data rows after the header");
+        if rows == 0 {
+            bail!(
+                "{}:{}: no data rows after the header",
+                self.file,
+                self.header_line
+            );
         }
-        Ok(Self {
-            file,
-            header_line,
-            columns,
-            lines,
-            fields: all,
-        })
+        Ok(())
     }
 
     fn column<'n>(&self, name: &'n str) -> Option<Col<'n>> {
@@ -266,18 +296,6 @@ impl<'a> Table<'a> {
                 self.columns.join(",")
             )
         })
-    }
-
-    /// The data rows, in file order.
-    fn rows(&self) -> impl Iterator<Item = Row<'_>> {
-        self.lines
-            .iter()
-            .zip(self.fields.chunks(self.columns.len().max(1)))
-            .map(|(line, fields)| Row {
-                file: self.file,
-                line: *line,
-                fields,
-            })
     }
 }
 
@@ -398,9 +416,9 @@ pub fn parse_samples(file: &str, text: &str) -> Result<Vec<Sample>> {
     let cxy = table.column(sigma_xy);
     let [mcu_time_us, gps_week, gps_tow_ms, _, _] = RECORD_COLUMNS;
     let time_cols = [mcu_time_us, gps_week, gps_tow_ms].map(|c| table.column(c));
-    let mut out = Vec::with_capacity(table.lines.len());
+    let mut out = Vec::with_capacity(table.rows_hint());
     let mut prev = None;
-    for row in table.rows() {
+    table.each_row(|row| {
         let t = row.time(ct, &mut prev)?;
         let mut s = Sample {
             t,
@@ -446,7 +464,8 @@ pub fn parse_samples(file: &str, text: &str) -> Result<Vec<Sample>> {
             }
         }
         out.push(s);
-    }
+        Ok(())
+    })?;
     Ok(out)
 }
 
@@ -463,9 +482,9 @@ pub fn parse_reference(file: &str, text: &str) -> Result<Vec<RefPoint>> {
     let cy = table.required("y")?;
     let ch = table.column("heading");
     let cs = table.column("sigma_h");
-    let mut out = Vec::with_capacity(table.lines.len());
+    let mut out = Vec::with_capacity(table.rows_hint());
     let mut prev = None;
-    for row in table.rows() {
+    table.each_row(|row| {
         out.push(RefPoint {
             t: row.time(ct, &mut prev)?,
             x: row.get(cx, position)?,
@@ -475,7 +494,8 @@ pub fn parse_reference(file: &str, text: &str) -> Result<Vec<RefPoint>> {
                 .optional(cs, real)?
                 .filter(|s: &f64| s.is_finite() && *s > 0.0),
         });
-    }
+        Ok(())
+    })?;
     Ok(out)
 }
 

@@ -462,8 +462,7 @@ fn whole_run_summary(
     let heading_free = [false, false, false, true];
     let (cost, formal, clustered) = std::thread::scope(|scope| {
         let formal = scope.spawn(|| {
-            standard_errors(run, &params, 0, last, heading0, heading_free)
-                .and_then(|(e, _)| e[3])
+            standard_errors(run, &params, 0, last, heading0, heading_free).and_then(|(e, _)| e[3])
         });
         let clustered = scope.spawn(|| {
             paper_cluster_errors(

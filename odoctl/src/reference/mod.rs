@@ -392,8 +392,11 @@ pub fn load(path: &Path, o: &ReferenceOptions) -> Result<Reference> {
 /// Parses a reference file's content; `file` names it in messages.
 pub fn parse(file: &str, bytes: &[u8], o: &ReferenceOptions) -> Result<Reference> {
     // NMEA logs may carry binary messages between the sentences: those lines are counted
-    // as corrupt, the rest is read.
-    let text = String::from_utf8_lossy(bytes);
+    // as corrupt, the rest is read (the strict check first: it is the faster one).
+    let text = match std::str::from_utf8(bytes) {
+        Ok(t) => std::borrow::Cow::Borrowed(t),
+        Err(_) => String::from_utf8_lossy(bytes),
+    };
     let format = o.format.unwrap_or_else(|| detect(&text));
     match format {
         Format::Csv => {
