@@ -149,7 +149,7 @@ impl Evaluation {
         let start = run
             .start_heading(a, |k| rows.get(k - a - 1).map(|r| r.2 - heading0))
             .map(|(h, n)| (heading0, h, n));
-        self.reserve(rows.len() + 1);
+        self.reserve(rows.len() + usize::from(include_start));
         if include_start {
             self.push(run, a, run.anchor(a), heading0, 0.0, 0.0, start);
         }

@@ -362,7 +362,12 @@ impl Innovations {
         // The step being merged: its start pose and what it rolled so far.
         let mut start = path.poses[0];
         let (mut rolled, mut rolled_diff) = ([0.0f64; 2], 0.0f64);
-        let mut steps = Vec::with_capacity(last - first);
+        // A step closes when it rolled MERGED_STEP or its block ends; consecutive blocks
+        // start more than a block length or BLOCK_TIME apart.
+        let rolled_mean: f64 = path.rolled.iter().map(|r| 0.5 * (r[0] + r[1])).sum();
+        let duration = run.reference_at(run.len() - 1).t - run.reference_at(0).t;
+        let blocks_most = distance / block_length + duration / BLOCK_TIME + 1.0;
+        let mut steps = Vec::with_capacity((rolled_mean / MERGED_STEP + blocks_most) as usize + 1);
         // Observations of one block, averaged: (ref - odo) x, y, noise var, heading, count.
         let mut block = Block::default();
         let mut block_start = 0usize;

@@ -154,7 +154,7 @@ impl Restarts {
             .zip(self.headings.chunks(chunk))
             .collect();
         let (first, rest) = jobs.split_first().expect("at least one sub-trajectory");
-        let evaluate = |ev: &mut Evaluation, (wins, heads): (&[(usize, usize)], &[f64])| {
+        let reserve = |ev: &mut Evaluation, wins: &[(usize, usize)]| {
             let n = wins.iter().map(|(a, b)| b - a).sum();
             if full {
                 ev.reserve(n);
@@ -162,6 +162,11 @@ impl Restarts {
                 ev.horizontal.reserve(n);
                 ev.sigma_h.reserve(n);
             }
+        };
+        // Room for every part's rows, which are appended to `ev`'s own.
+        reserve(ev, &self.windows);
+        let evaluate = |ev: &mut Evaluation, (wins, heads): (&[(usize, usize)], &[f64])| {
+            reserve(ev, wins);
             for (&(a, b), &h) in wins.iter().zip(heads) {
                 if full {
                     ev.extend(run, p, a, b, h, false)?;
