@@ -507,7 +507,7 @@ pub fn read_reference(path: &Path) -> Result<Vec<RefPoint>> {
 /// Pairs of (sample index, reference index) with equal times (within [`MATCH_TOLERANCE`]),
 /// in increasing order; each sample is paired with its nearest reference point.
 pub fn match_times(samples: &[Sample], reference: &[RefPoint]) -> Vec<(usize, usize)> {
-    let mut out = Vec::new();
+    let mut out = Vec::with_capacity(samples.len());
     let mut j = 0;
     for (i, s) in samples.iter().enumerate() {
         while j + 1 < reference.len() && reference[j + 1].t <= s.t {
