@@ -693,7 +693,7 @@ pub(super) fn fit_restart_heading(
     let (x0, y0) = run.anchor(a);
     let mut path = Vec::with_capacity(b - a);
     let mut heading = guess;
-    for _ in 0..RESTART_PASSES {
+    for pass in 0..RESTART_PASSES {
         path.clear();
         run.integrate_pose(params, a, b, heading, |k, integ| {
             // The antenna turns with the path about the start, as the centre does.
@@ -703,6 +703,17 @@ pub(super) fn fit_restart_heading(
         })
         .map_err(|e| anyhow!("parameters: {e}"))?;
         let at = heading;
+        // The first pass starts from the turn of the least squares (where `sum r . R(phi) d`
+        // is largest: one pass over the path), which is near the norms' least; a second
+        // from the heading the first found.
+        let (dot, cross) = path.iter().fold((0.0, 0.0), |(a, b), &[dx, dy, rx, ry]| {
+            (a + rx * dx + ry * dy, b + rx * dy - ry * dx)
+        });
+        let start = if pass == 0 && (dot != 0.0 || cross != 0.0) {
+            at + cross.atan2(dot)
+        } else {
+            at
+        };
         let f = |x: &[f64], acc: &mut NormalAccumulator| {
             let (sin, cos) = (x[0] - at).sin_cos();
             for &[dx, dy, rx, ry] in &path {
@@ -713,7 +724,7 @@ pub(super) fn fit_restart_heading(
         };
         let res = optim::levenberg_marquardt_streamed(
             f,
-            &[at],
+            &[start],
             &[1.0],
             Objective::SumOfNorms,
             LmOptions {
