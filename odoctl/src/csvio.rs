@@ -654,6 +654,36 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("s.csv:2"), "{e}");
+
+        // Rows are read in file order: the first bad line is the one named, whatever is wrong
+        // with a later one.
+        let e = parse_samples("s.csv", "t,left,right\n0,0,0\n0.02,x,0\n0.04,1\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("s.csv:3") && e.contains("`left`"), "{e}");
+        let e = parse_samples("s.csv", "t,left,right\n0,0,0\n0.02,1\n0.04,x,0\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("s.csv:3") && e.contains("2 fields"), "{e}");
+    }
+
+    /// Comments and blank lines before the header, CRLF line ends, spaces around fields, no
+    /// final line end: the same rows, and errors still name the file's own line.
+    #[test]
+    fn samples_layout_boundaries() {
+        let text =
+            "# recorded 2026-11-24\r\n\r\n t , left ,right\r\n0, 1 ,2\r\n  # pause\r\n0.02,3,4";
+        let s = parse_samples("s.csv", text).unwrap();
+        assert_eq!(s.len(), 2);
+        assert_eq!((s[0].left, s[0].right, s[1].t, s[1].right), (1, 2, 0.02, 4));
+        let e = parse_samples("s.csv", "# c\n\nt,left,right\n0,0,0\n\n0.02,0,y\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("s.csv:6") && e.contains("`right`"), "{e}");
+        let e = parse_samples("s.csv", "# only a comment\n\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("empty file"), "{e}");
     }
 
     #[test]

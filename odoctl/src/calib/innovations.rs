@@ -872,6 +872,63 @@ fn wheel_distances(a: Pose, b: Pose, w: f64) -> [f64; 2] {
 mod tests {
     use super::*;
     use crate::simulate::{default_truth, simulate_path, PathKind, SimSettings};
+    use odo_core::odometry::Integrator;
+
+    /// The path moved to an anchor is the odometry integrated again from that anchor (the
+    /// core's arithmetic: to its rounding), and moved onto its own pose it is the path itself.
+    #[test]
+    fn a_moved_path_is_the_path_integrated_from_the_anchor() {
+        let truth = default_truth();
+        let sim = simulate_path(
+            PathKind::Estimation,
+            40.0,
+            truth,
+            SimSettings {
+                slip: 0.002,
+                seed: 5,
+                ..SimSettings::default()
+            },
+        );
+        let m = crate::csvio::match_or_fail(&sim.samples, "s", &sim.reference, "r", 10).unwrap();
+        let run = Run::new(&sim.samples, &sim.reference, m);
+        let settings = Settings {
+            heading0: 0.3,
+            sigmas: (0.008, 0.5f64.to_radians()),
+            block_length: OBSERVATION_BLOCK,
+        };
+        let path = OpenLoop::new(&run, &truth, settings).unwrap();
+        let n = path.poses.len();
+        for (at, dx, dy, turn) in [
+            (n / 4, 0.0, 0.0, 0.0),
+            (n / 3, 0.02, -0.01, 0.003),
+            (n / 2, -0.5, 0.3, -0.2),
+            (n - 2, 1.0, 1.0, 3.0),
+        ] {
+            let open = path.poses[at];
+            let anchor = Pose {
+                x: open.x + dx,
+                y: open.y + dy,
+                heading: open.heading + turn,
+            };
+            let moved = Reanchoring::new(open, anchor);
+            // Integrated from the anchor at sample `first + at`.
+            let mut again =
+                Integrator::new(&truth, counts(&run.samples[path.first + at]), anchor).unwrap();
+            for j in at + 1..n {
+                let s = &run.samples[path.first + j];
+                let _ = again.step_pose(counts(s), index_refs(s));
+                let (a, b) = (moved.apply(path.poses[j]), again.pose());
+                assert!(
+                    (a.x - b.x).abs() < 1e-6 && (a.y - b.y).abs() < 1e-6,
+                    "anchor at {at}, sample {j}: {a:?} {b:?}"
+                );
+                assert!((a.heading - b.heading).abs() < 1e-9, "{a:?} {b:?}");
+                if turn == 0.0 && dx == 0.0 {
+                    assert_eq!(a, path.poses[j]);
+                }
+            }
+        }
+    }
 
     /// A re-anchoring moves the point of linearisation only: anchored at the odometry's own
     /// poses the filter is the open-loop one; anchored 1 cm off them, the same to rounding;
