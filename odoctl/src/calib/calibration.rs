@@ -235,209 +235,205 @@ pub fn calibrate(
     let filter_wanted = o.fit_delta
         && models.contains(&UncertaintyModel::Covariance)
         && o.criterion == UncertaintyCriterion::Likelihood;
-    std::thread::scope(|outer| {
-        let h0 = run.heading_guess(0);
-        let (geometry, subtrajectories, refinement, early_filter) = match o.method {
-            Method::Paper => {
-                let pb = bar(o.quiet, "eq (16) fit");
-                let g = fit_geometry(
+    let h0 = run.heading_guess(0);
+    let (geometry, subtrajectories, refinement, mut early_filter) = match o.method {
+        Method::Paper => {
+            let pb = bar(o.quiet, "eq (16) fit");
+            let g = fit_geometry(
+                &run,
+                initial,
+                h0,
+                0,
+                run.len() - 1,
+                GeomOptions {
+                    polish: o.polish,
+                    antenna: o.antenna,
+                    cluster_length: o.subtrajectory_length,
+                    ..Default::default()
+                },
+                &pb,
+            )?;
+            pb.finish_and_clear();
+            timer.lap("eq (16) fit");
+            (g, None, None, None)
+        }
+        Method::Subtrajectory => {
+            let s = fit_subtrajectories(
+                &run,
+                initial,
+                SubtrajectoryOptions {
+                    length: o.subtrajectory_length,
+                    antenna: o.antenna,
+                    cuts: o.subtrajectory_cuts,
+                    ..Default::default()
+                },
+            )?;
+            timer.lap("sub-trajectory fit");
+            run.antenna = s.antenna;
+            let refinement = match o.geometry_refine {
+                GeometryRefine::None => None,
+                GeometryRefine::Filter => {
+                    let r = refine(&run, &s, o)?;
+                    timer.lap("filter refinement");
+                    Some(r)
+                }
+            };
+            let applied = refinement.as_ref().filter(|r| r.skipped.is_none());
+            // The covariance model's kappa needs only the refinement's filter (the geometry
+            // it returns is taken from the parameters it is merged into): fitted on a thread
+            // of its own from here, beside the rest; the thread owns what it reads (joined
+            // where the kappa is taken; on an error before that it ends by itself).
+            let early_filter = applied
+                .and_then(|r| Some((r.params, r.innovations.clone()?)))
+                .filter(|_| filter_wanted)
+                .map(|(g, innovations)| {
+                    let p = ChassisParams {
+                        uncertainty_model: UncertaintyModel::Covariance,
+                        ..g
+                    };
+                    let (initial, mode) = (*initial, o.delta_mode);
+                    std::thread::spawn(move || fit_kappa_filter(&innovations, &p, &initial, mode).0)
+                });
+            let g = whole_run_summary(&run, &s, applied)?;
+            timer.lap("whole-run heading");
+            (g, Some(s), refinement, early_filter)
+        }
+    };
+    run.antenna = geometry.antenna;
+    let mut params = geometry.params;
+    params.geometry_uncertainty =
+        geometry_uncertainty(&geometry, subtrajectories.as_ref(), refinement.as_ref());
+    let harmonics = if o.wheel_harmonics > 0 {
+        let h = super::fit_harmonics(
+            &run,
+            &params,
+            geometry.heading0,
+            o.wheel_harmonics,
+            o.harmonics_window,
+        )?;
+        params = h.params;
+        timer.lap("wheel harmonics fit");
+        Some(h)
+    } else {
+        None
+    };
+    let mut uncertainty = Vec::new();
+    if o.fit_delta {
+        // The likelihood fit of the covariance model needs only the geometry: without the
+        // refinement's filter it is built here, on a thread of its own beside the paper
+        // model's fits.
+        let filter_fit = |p: ChassisParams| -> Result<UncertaintyFit> {
+            let innovations = Innovations::new(
+                &run,
+                &p,
+                geometry.heading0,
+                o.reference_sigma,
+                o.reference_heading_sigma,
+                OBSERVATION_BLOCK,
+            )?;
+            Ok(fit_kappa_filter(&innovations, &p, initial, o.delta_mode).0)
+        };
+        std::thread::scope(|scope| -> Result<()> {
+            let mut filter = (filter_wanted && early_filter.is_none()).then(|| {
+                let p = ChassisParams {
+                    uncertainty_model: UncertaintyModel::Covariance,
+                    ..params
+                };
+                scope.spawn(move || filter_fit(p))
+            });
+            // The restarted sub-trajectories of the coverage criterion, made when first needed.
+            let mut restarts: Option<Restarts> = None;
+            for &m in &models {
+                let mut p = params;
+                p.uncertainty_model = m;
+                if m == UncertaintyModel::Covariance
+                    && o.criterion == UncertaintyCriterion::Likelihood
+                {
+                    let failed = |_| anyhow::anyhow!("the filter's fit failed");
+                    let mut u = match (early_filter.take(), filter.take()) {
+                        (Some(early), _) => early.join().map_err(failed)?,
+                        (None, Some(f)) => f.join().map_err(failed)??,
+                        (None, None) => filter_fit(p)?,
+                    };
+                    timer.lap("uncertainty fit (filter)");
+                    params = with_covariance_coefficients(&params, &u.params);
+                    u.params = with_covariance_coefficients(&p, &u.params);
+                    uncertainty.push(u);
+                    continue;
+                }
+                let restarts = match &mut restarts {
+                    Some(r) => &*r,
+                    None => {
+                        let r = Restarts::new(&run, &params, geometry.heading0, o.delta_window)?;
+                        timer.lap("restart headings");
+                        &*restarts.insert(r)
+                    }
+                };
+                let pb = bar(o.quiet, &format!("{} model fit", cfg::model_name(m)));
+                let mut u = fit_uncertainty_on(
                     &run,
+                    restarts,
+                    &p,
                     initial,
-                    h0,
-                    0,
-                    run.len() - 1,
-                    GeomOptions {
-                        polish: o.polish,
-                        antenna: o.antenna,
-                        cluster_length: o.subtrajectory_length,
-                        ..Default::default()
-                    },
+                    o.reference_sigma,
+                    o.delta_mode,
                     &pb,
                 )?;
                 pb.finish_and_clear();
-                timer.lap("eq (16) fit");
-                (g, None, None, None)
-            }
-            Method::Subtrajectory => {
-                let s = fit_subtrajectories(
-                    &run,
-                    initial,
-                    SubtrajectoryOptions {
-                        length: o.subtrajectory_length,
-                        antenna: o.antenna,
-                        cuts: o.subtrajectory_cuts,
-                        ..Default::default()
-                    },
-                )?;
-                timer.lap("sub-trajectory fit");
-                run.antenna = s.antenna;
-                let refinement = match o.geometry_refine {
-                    GeometryRefine::None => None,
-                    GeometryRefine::Filter => {
-                        let r = refine(&run, &s, o)?;
-                        timer.lap("filter refinement");
-                        Some(r)
-                    }
-                };
-                let applied = refinement.as_ref().filter(|r| r.skipped.is_none());
-                // The covariance model's kappa needs only the refinement's filter (the geometry
-                // it returns is taken from the parameters it is merged into): fitted on a thread
-                // of its own from here, beside the rest.
-                let early_filter = applied
-                    .and_then(|r| Some((r.params, r.innovations.clone()?)))
-                    .filter(|_| filter_wanted)
-                    .map(|(g, innovations)| {
-                        let p = ChassisParams {
-                            uncertainty_model: UncertaintyModel::Covariance,
-                            ..g
-                        };
-                        let mode = o.delta_mode;
-                        outer.spawn(move || Ok(fit_kappa_filter(&innovations, &p, initial, mode).0))
-                    });
-                let g = whole_run_summary(&run, &s, applied)?;
-                timer.lap("whole-run heading");
-                (g, Some(s), refinement, early_filter)
-            }
-        };
-        run.antenna = geometry.antenna;
-        let mut params = geometry.params;
-        params.geometry_uncertainty =
-            geometry_uncertainty(&geometry, subtrajectories.as_ref(), refinement.as_ref());
-        let harmonics = if o.wheel_harmonics > 0 {
-            let h = super::fit_harmonics(
-                &run,
-                &params,
-                geometry.heading0,
-                o.wheel_harmonics,
-                o.harmonics_window,
-            )?;
-            params = h.params;
-            timer.lap("wheel harmonics fit");
-            Some(h)
-        } else {
-            None
-        };
-        let mut uncertainty = Vec::new();
-        if o.fit_delta {
-            // The likelihood fit of the covariance model needs only the geometry: without the
-            // refinement's filter it is built here, on a thread of its own beside the paper
-            // model's fits.
-            let filter_fit = |p: ChassisParams| -> Result<UncertaintyFit> {
-                let innovations = Innovations::new(
-                    &run,
-                    &p,
-                    geometry.heading0,
-                    o.reference_sigma,
-                    o.reference_heading_sigma,
-                    OBSERVATION_BLOCK,
-                )?;
-                Ok(fit_kappa_filter(&innovations, &p, initial, o.delta_mode).0)
-            };
-            std::thread::scope(|scope| -> Result<()> {
-                let mut filter = early_filter.or_else(|| {
-                    filter_wanted.then(|| {
-                        let p = ChassisParams {
-                            uncertainty_model: UncertaintyModel::Covariance,
-                            ..params
-                        };
-                        scope.spawn(move || filter_fit(p))
-                    })
-                });
-                // The restarted sub-trajectories of the coverage criterion, made when first needed.
-                let mut restarts: Option<Restarts> = None;
-                for &m in &models {
-                    let mut p = params;
-                    p.uncertainty_model = m;
-                    if m == UncertaintyModel::Covariance
-                        && o.criterion == UncertaintyCriterion::Likelihood
-                    {
-                        let mut u = match filter.take() {
-                            Some(f) => f
-                                .join()
-                                .map_err(|_| anyhow::anyhow!("the filter's fit failed"))??,
-                            None => filter_fit(p)?,
-                        };
-                        timer.lap("uncertainty fit (filter)");
-                        params = with_covariance_coefficients(&params, &u.params);
-                        u.params = with_covariance_coefficients(&p, &u.params);
-                        uncertainty.push(u);
-                        continue;
-                    }
-                    let restarts = match &mut restarts {
-                        Some(r) => &*r,
-                        None => {
-                            let r =
-                                Restarts::new(&run, &params, geometry.heading0, o.delta_window)?;
-                            timer.lap("restart headings");
-                            &*restarts.insert(r)
-                        }
-                    };
-                    let pb = bar(o.quiet, &format!("{} model fit", cfg::model_name(m)));
-                    let mut u = fit_uncertainty_on(
+                timer.lap("uncertainty fit");
+                if m == UncertaintyModel::Paper {
+                    let pb = bar(o.quiet, "delta_diff fit");
+                    u = fit_delta_diff(
                         &run,
                         restarts,
-                        &p,
+                        u,
                         initial,
-                        o.reference_sigma,
-                        o.delta_mode,
+                        DiffOptions {
+                            fit: o.fit_delta_diff,
+                            ref_heading_sigma: o.reference_heading_sigma,
+                            ref_sigma: o.reference_sigma,
+                            mode: o.delta_mode,
+                        },
                         &pb,
                     )?;
                     pb.finish_and_clear();
-                    timer.lap("uncertainty fit");
-                    if m == UncertaintyModel::Paper {
-                        let pb = bar(o.quiet, "delta_diff fit");
-                        u = fit_delta_diff(
-                            &run,
-                            restarts,
-                            u,
-                            initial,
-                            DiffOptions {
-                                fit: o.fit_delta_diff,
-                                ref_heading_sigma: o.reference_heading_sigma,
-                                ref_sigma: o.reference_sigma,
-                                mode: o.delta_mode,
-                            },
-                            &pb,
-                        )?;
-                        pb.finish_and_clear();
-                        timer.lap("delta_diff fit");
-                    }
-                    params = u.params;
-                    uncertainty.push(u);
+                    timer.lap("delta_diff fit");
                 }
-                Ok(())
-            })?;
-            params.uncertainty_model = if let Some(m) = o.select {
-                m
-            } else if models.contains(&initial.uncertainty_model) {
-                initial.uncertainty_model
-            } else {
-                *models.last().expect("one model")
-            };
-        }
-        let evaluation = evaluate(&run, &params, geometry.heading0)?;
-        timer.lap("final evaluation");
-        let windows = if o.windows.is_empty() {
-            Vec::new()
-        } else {
-            if o.windows.iter().any(|l| l.is_nan() || *l <= 0.0) {
-                bail!("--windows: lengths must be positive metres");
+                params = u.params;
+                uncertainty.push(u);
             }
-            let pb = bar(o.quiet, "sub-trajectories");
-            let w = windows_study(&run, &geometry, initial, &o.windows, o.window_start, &pb)?;
-            pb.finish_and_clear();
-            w
+            Ok(())
+        })?;
+        params.uncertainty_model = if let Some(m) = o.select {
+            m
+        } else if models.contains(&initial.uncertainty_model) {
+            initial.uncertainty_model
+        } else {
+            *models.last().expect("one model")
         };
-        Ok(Calibration {
-            params,
-            geometry,
-            subtrajectories,
-            refinement,
-            uncertainty,
-            evaluation,
-            windows,
-            harmonics,
-        })
+    }
+    let evaluation = evaluate(&run, &params, geometry.heading0)?;
+    timer.lap("final evaluation");
+    let windows = if o.windows.is_empty() {
+        Vec::new()
+    } else {
+        if o.windows.iter().any(|l| l.is_nan() || *l <= 0.0) {
+            bail!("--windows: lengths must be positive metres");
+        }
+        let pb = bar(o.quiet, "sub-trajectories");
+        let w = windows_study(&run, &geometry, initial, &o.windows, o.window_start, &pb)?;
+        pb.finish_and_clear();
+        w
+    };
+    Ok(Calibration {
+        params,
+        geometry,
+        subtrajectories,
+        refinement,
+        uncertainty,
+        evaluation,
+        windows,
+        harmonics,
     })
 }
 
