@@ -625,6 +625,11 @@ impl Flush for String {
 mod tests {
     use super::*;
 
+    /// The error of parsing `text` as `s.csv`.
+    fn samples_error(text: &str) -> String {
+        parse_samples("s.csv", text).unwrap_err().to_string()
+    }
+
     #[test]
     fn samples_parse_and_errors() {
         let ok = "t,left,right,left_index\n0.0,0,0,\n0.02,10,-3,5\n";
@@ -634,36 +639,22 @@ mod tests {
         assert_eq!(s[1].left_index, Some(5));
         assert_eq!(s[0].left_index, None);
 
-        let e = parse_samples("s.csv", "t,left\n0,0\n")
-            .unwrap_err()
-            .to_string();
+        let e = samples_error("t,left\n0,0\n");
         assert!(e.contains("s.csv:1") && e.contains("`right`"), "{e}");
-        let e = parse_samples("s.csv", "t,left,right\n0,0,0\n0.02,x,0\n")
-            .unwrap_err()
-            .to_string();
+        let e = samples_error("t,left,right\n0,0,0\n0.02,x,0\n");
         assert!(e.contains("s.csv:3") && e.contains("`left`"), "{e}");
-        let e = parse_samples("s.csv", "t,left,right\n0,0,0\n# c\n\n0,1,1\n")
-            .unwrap_err()
-            .to_string();
+        let e = samples_error("t,left,right\n0,0,0\n# c\n\n0,1,1\n");
         assert!(e.contains("s.csv:5") && e.contains("increase"), "{e}");
-        let e = parse_samples("s.csv", "t,left,right\n")
-            .unwrap_err()
-            .to_string();
+        let e = samples_error("t,left,right\n");
         assert!(e.contains("no data rows"), "{e}");
-        let e = parse_samples("s.csv", "t,left,right\n0,1\n")
-            .unwrap_err()
-            .to_string();
+        let e = samples_error("t,left,right\n0,1\n");
         assert!(e.contains("s.csv:2"), "{e}");
 
         // Rows are read in file order: the first bad line is the one named, whatever is wrong
         // with a later one.
-        let e = parse_samples("s.csv", "t,left,right\n0,0,0\n0.02,x,0\n0.04,1\n")
-            .unwrap_err()
-            .to_string();
+        let e = samples_error("t,left,right\n0,0,0\n0.02,x,0\n0.04,1\n");
         assert!(e.contains("s.csv:3") && e.contains("`left`"), "{e}");
-        let e = parse_samples("s.csv", "t,left,right\n0,0,0\n0.02,1\n0.04,x,0\n")
-            .unwrap_err()
-            .to_string();
+        let e = samples_error("t,left,right\n0,0,0\n0.02,1\n0.04,x,0\n");
         assert!(e.contains("s.csv:3") && e.contains("2 fields"), "{e}");
     }
 
@@ -676,13 +667,9 @@ mod tests {
         let s = parse_samples("s.csv", text).unwrap();
         assert_eq!(s.len(), 2);
         assert_eq!((s[0].left, s[0].right, s[1].t, s[1].right), (1, 2, 0.02, 4));
-        let e = parse_samples("s.csv", "# c\n\nt,left,right\n0,0,0\n\n0.02,0,y\n")
-            .unwrap_err()
-            .to_string();
+        let e = samples_error("# c\n\nt,left,right\n0,0,0\n\n0.02,0,y\n");
         assert!(e.contains("s.csv:6") && e.contains("`right`"), "{e}");
-        let e = parse_samples("s.csv", "# only a comment\n\n")
-            .unwrap_err()
-            .to_string();
+        let e = samples_error("# only a comment\n\n");
         assert!(e.contains("empty file"), "{e}");
     }
 

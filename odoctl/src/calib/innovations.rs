@@ -874,28 +874,38 @@ mod tests {
     use crate::simulate::{default_truth, simulate_path, PathKind, SimSettings};
     use odo_core::odometry::Integrator;
 
+    /// 40 m of the estimation path with the truth's geometry and 0.2 % slip.
+    fn slipping_run(seed: u64) -> crate::simulate::SimRun {
+        simulate_path(
+            PathKind::Estimation,
+            40.0,
+            default_truth(),
+            SimSettings {
+                slip: 0.002,
+                seed,
+                ..SimSettings::default()
+            },
+        )
+    }
+
+    /// The BD982's sigmas, 1 m blocks, start heading `heading0` (rad).
+    fn settings(heading0: f64) -> Settings {
+        Settings {
+            heading0,
+            sigmas: (0.008, 0.5f64.to_radians()),
+            block_length: OBSERVATION_BLOCK,
+        }
+    }
+
     /// The path moved to an anchor is the odometry integrated again from that anchor (the
     /// core's arithmetic: to its rounding), and moved onto its own pose it is the path itself.
     #[test]
     fn a_moved_path_is_the_path_integrated_from_the_anchor() {
         let truth = default_truth();
-        let sim = simulate_path(
-            PathKind::Estimation,
-            40.0,
-            truth,
-            SimSettings {
-                slip: 0.002,
-                seed: 5,
-                ..SimSettings::default()
-            },
-        );
+        let sim = slipping_run(5);
         let m = crate::csvio::match_or_fail(&sim.samples, "s", &sim.reference, "r", 10).unwrap();
         let run = Run::new(&sim.samples, &sim.reference, m);
-        let settings = Settings {
-            heading0: 0.3,
-            sigmas: (0.008, 0.5f64.to_radians()),
-            block_length: OBSERVATION_BLOCK,
-        };
+        let settings = settings(0.3);
         let path = OpenLoop::new(&run, &truth, settings).unwrap();
         let n = path.poses.len();
         for (at, dx, dy, turn) in [
@@ -937,23 +947,10 @@ mod tests {
     #[test]
     fn re_anchoring_keeps_the_likelihood() {
         let truth = default_truth();
-        let sim = simulate_path(
-            PathKind::Estimation,
-            40.0,
-            truth,
-            SimSettings {
-                slip: 0.002,
-                seed: 3,
-                ..SimSettings::default()
-            },
-        );
+        let sim = slipping_run(3);
         let m = crate::csvio::match_or_fail(&sim.samples, "s", &sim.reference, "r", 10).unwrap();
         let run = Run::new(&sim.samples, &sim.reference, m);
-        let settings = Settings {
-            heading0: 0.0,
-            sigmas: (0.008, 0.5f64.to_radians()),
-            block_length: OBSERVATION_BLOCK,
-        };
+        let settings = settings(0.0);
         let path = OpenLoop::new(&run, &truth, settings).unwrap();
         let build = |anchors: Option<&[Pose]>| {
             Innovations::anchored(&run, &truth, settings, &path, anchors).unwrap()
