@@ -358,7 +358,7 @@ impl Innovations {
         let (first, last) = (path.first, path.first + path.poses.len() - 1);
         let mut k = 1;
         // This pass's pose of each of the path's (the latest re-anchoring).
-        let mut moved = Reanchoring::NONE;
+        let mut moved = Reanchoring::default();
         // The step being merged: its start pose and what it rolled so far.
         let mut start = path.poses[0];
         let (mut rolled, mut rolled_diff) = ([0.0f64; 2], 0.0f64);
@@ -802,8 +802,8 @@ impl OpenLoop {
 }
 
 /// Where a path restarted from `to` at its pose `at` goes: its later poses turned about `at`
-/// by `to`'s heading minus `at`'s (clockwise) and moved by `to - at`.
-#[derive(Debug, Clone, Copy)]
+/// by `to`'s heading minus `at`'s (clockwise) and moved by `to - at`. The default is no move.
+#[derive(Debug, Clone, Copy, Default)]
 struct Reanchoring {
     at: Pose,
     to: Pose,
@@ -813,22 +813,6 @@ struct Reanchoring {
 }
 
 impl Reanchoring {
-    /// No move.
-    const NONE: Self = Self {
-        at: Pose {
-            x: 0.0,
-            y: 0.0,
-            heading: 0.0,
-        },
-        to: Pose {
-            x: 0.0,
-            y: 0.0,
-            heading: 0.0,
-        },
-        sin: 0.0,
-        cos_m1: 0.0,
-    };
-
     fn new(at: Pose, to: Pose) -> Self {
         let turn = to.heading - at.heading;
         let half = (0.5 * turn).sin();
