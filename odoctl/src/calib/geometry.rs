@@ -706,11 +706,15 @@ pub(super) fn fit_restart_heading(
         // The first pass starts from the turn of the least squares (where `sum r . R(phi) d`
         // is largest: one pass over the path), which is near the norms' least; a second
         // from the heading the first found.
-        let (dot, cross) = path.iter().fold((0.0, 0.0), |(a, b), &[dx, dy, rx, ry]| {
-            (a + rx * dx + ry * dy, b + rx * dy - ry * dx)
-        });
-        let start = if pass == 0 && (dot != 0.0 || cross != 0.0) {
-            at + cross.atan2(dot)
+        let start = if pass == 0 {
+            let (dot, cross) = path.iter().fold((0.0, 0.0), |(a, b), &[dx, dy, rx, ry]| {
+                (a + rx * dx + ry * dy, b + rx * dy - ry * dx)
+            });
+            if dot != 0.0 || cross != 0.0 {
+                at + cross.atan2(dot)
+            } else {
+                at
+            }
         } else {
             at
         };
