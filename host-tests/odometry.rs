@@ -869,7 +869,7 @@ proptest! {
             let jump = if event == 0 { 1i64 << 19 } else { 0 };
             g = [g[0].wrapping_add(a + jump), g[1].wrapping_add(b)];
             if event == 1 {
-                index = IndexRefs { left: Some(g[0] - 17), right: Some(g[1] + 5) };
+                index = IndexRefs { left: Some(g[0].wrapping_sub(17)), right: Some(g[1].wrapping_add(5)) };
             }
             let (fixed0, heading0) = (pose_only.position_fixed(), pose_only.heading_binary());
             let status = full.step(counts(g), index);
