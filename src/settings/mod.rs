@@ -35,8 +35,8 @@ pub const POSE_FRAME_BITS: u32 = 1140;
 
 /// Highest accepted `rate`, Hz: what the processing task sustains with a wide margin.
 ///
-/// Derivation, from the instruction counts of the README's performance table (`bench/run`,
-/// release code under QEMU) and the firmware's own `process_max` in `status`:
+/// Derivation, from the instruction counts in docs/RESULTS.md (`bench/run`, Instructions on the
+/// Cortex-M4F: release code under QEMU) and the firmware's own `process_max` in `status`:
 ///
 /// * a typical sample costs the processing task about 7,500 instructions (timing, flags,
 ///   index, odometry and uncertainty, the record's f64 fields, the 114-byte frame at
