@@ -496,7 +496,7 @@ impl<W: Write> RecordWriter<W> {
                 sigma_x: r.sigma_x,
                 sigma_y: r.sigma_y,
                 sigma_heading: r.sigma_heading,
-                sigma_xy: r.sigma_xy,
+                cov_xy: r.cov_xy,
                 time: None,
             }),
         };

@@ -163,7 +163,7 @@ pub struct PoseRecord {
     /// Standard uncertainty of heading, radians.
     pub sigma_heading: f32,
     /// Covariance of x and y, m^2 (0 unless the covariance model filled the record).
-    pub sigma_xy: f32,
+    pub cov_xy: f32,
     /// Absolute count of encoder 1 (left), Gamma_1, increments (x4 decoded, 64-bit).
     pub gamma_left: i64,
     /// Absolute count of encoder 2 (right), Gamma_2, increments.
@@ -199,7 +199,7 @@ impl PoseRecord {
             w.f32(self.sigma_x)?;
             w.f32(self.sigma_y)?;
             w.f32(self.sigma_heading)?;
-            w.f32(self.sigma_xy)?;
+            w.f32(self.cov_xy)?;
             w.i64(self.gamma_left)?;
             w.i64(self.gamma_right)?;
             w.i64(self.index_left)?;
@@ -232,7 +232,7 @@ impl PoseRecord {
                 sigma_x: r.f32()?,
                 sigma_y: r.f32()?,
                 sigma_heading: r.f32()?,
-                sigma_xy: r.f32()?,
+                cov_xy: r.f32()?,
                 gamma_left: r.i64()?,
                 gamma_right: r.i64()?,
                 index_left: r.i64()?,

@@ -458,7 +458,7 @@ impl Processor {
             sigma_x: sigma.x,
             sigma_y: sigma.y,
             sigma_heading: sigma.heading,
-            sigma_xy: sigma.xy,
+            cov_xy: sigma.cov_xy,
             gamma_left: counts.left,
             gamma_right: counts.right,
             index_left: refs.left.unwrap_or(0),
