@@ -327,7 +327,10 @@ fn heartbeat_is_due_once_a_second_and_reports_the_counters() {
     assert_eq!(s.samples, rate + 1);
     assert_eq!(s.rate_hz, rate);
     assert_eq!((s.pps_edges, s.pps_rejected), (9, 2));
-    assert_eq!((s.rx_errors, s.gnss_rx_lost, s.samples_lost), (11, 12, 4));
+    assert_eq!(
+        (s.host_rx_lost, s.gnss_rx_lost, s.samples_lost),
+        (11, 12, 4)
+    );
     assert_eq!(
         (s.settings_source, s.settings_dirty),
         (SettingsSource::Flash, true)

@@ -311,7 +311,7 @@ fn describe(f: &Frame) -> Option<String> {
             s.pps_edges,
             s.pps_rejected,
             s.index_lost,
-            s.rx_errors,
+            s.host_rx_lost,
             s.host_rx_overruns,
             s.host_rx_line_errors,
             s.gnss_rx_lost,

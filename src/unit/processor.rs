@@ -510,7 +510,7 @@ impl Processor {
             dropped_total: self.dropped_total,
             pps_edges: raw.stats.accepted,
             pps_rejected: raw.stats.glitches,
-            rx_errors: inputs.host.lost,
+            host_rx_lost: inputs.host.lost,
             settings_source: inputs.store.source,
             settings_dirty: inputs.store.dirty,
             samples_lost: raw.queue_lost,
