@@ -23,7 +23,8 @@ use anyhow::{anyhow, bail, Context, Result};
 /// Samples and reference points are matched when their times differ by at most this (s).
 pub const MATCH_TOLERANCE: f64 = 1.0e-3;
 
-/// The SAMPLES columns every file has: time, the two absolute counts, the index latches.
+/// The SAMPLES columns every writer writes: time, the two absolute counts, the index latches
+/// (the reader needs the first three).
 pub const SAMPLE_COLUMNS: [&str; 5] = ["t", "left", "right", "left_index", "right_index"];
 
 /// The SAMPLES columns of the unit's own pose record ([`UnitPose`] and the status flags).
