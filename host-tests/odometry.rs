@@ -648,7 +648,7 @@ fn paper_uncertainty_matches_f64_reference_and_table_3_scale() {
             "{got} vs {want}"
         );
     }
-    assert_eq!(sigma.xy, 0.0);
+    assert_eq!(sigma.cov_xy, 0.0);
     // Straight north only, 100 m at delta = 3.9e-8 m/increment: closed forms of the paper's
     // sums. Per step sigma_dy = sqrt(2)/2 * delta * n; sigma_dalpha = sqrt(2) * delta * n / w;
     // sigma_dx = sqrt(2) * dd/(2w) * delta * n + dd * sigma_alpha(before), which is where

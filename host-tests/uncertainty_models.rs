@@ -70,7 +70,7 @@ fn ellipse_coverage(errors: &[[f64; 3]], sigmas: &[PoseSigma], k: f64) -> f64 {
         let (sxx, syy, sxy) = (
             f64::from(s.x).powi(2),
             f64::from(s.y).powi(2),
-            f64::from(s.xy),
+            f64::from(s.cov_xy),
         );
         let det = sxx * syy - sxy * sxy;
         let d2 = (syy * e[0] * e[0] - 2.0 * sxy * e[0] * e[1] + sxx * e[1] * e[1]) / det;
@@ -302,7 +302,7 @@ fn covariance_model_covers_the_calibrations_geometry_error() {
         IndexRefs::default(),
     );
     let s = integ.sigma();
-    assert_eq!([s.x, s.y, s.heading, s.xy], [0.0; 4]);
+    assert_eq!([s.x, s.y, s.heading, s.cov_xy], [0.0; 4]);
 }
 
 /// Opposite-phase slip in the covariance model (`kappa_diff`): each sample's true wheel
@@ -342,7 +342,7 @@ fn covariance_model_covers_opposite_phase_slip() {
         IndexRefs::default(),
     );
     let s = integ.sigma();
-    assert_eq!([s.x, s.y, s.heading, s.xy], [0.0; 4]);
+    assert_eq!([s.x, s.y, s.heading, s.cov_xy], [0.0; 4]);
 }
 
 /// Gauss-Markov opposite-phase slip (`kappa_diff_corr`): each run's slip rate `eps` is a

@@ -54,7 +54,7 @@ mod app {
     use odo_core::timing::{DisciplineConfig, SyncState};
     use odo_core::unit::{
         self, Commands, Effect, HeartbeatInputs, IndexCapture, Live, PpsLatch, Processor,
-        RawSample, Requests, StoreState,
+        RawSample, Requests, SampleOutcome, StoreState,
     };
     use stm32f4xx_hal::pac::Interrupt;
     use stm32f4xx_hal::watchdog::IndependentWatchdog;
@@ -320,8 +320,11 @@ mod app {
             }
             let requests = cx.shared.requests.lock(core::mem::take);
             p.apply(requests, log);
-            let Some(record) = p.on_sample(&raw, log) else {
-                continue;
+            let outcome = p.on_sample(&raw, log);
+            let record = match &outcome {
+                SampleOutcome::Record(record) => Some(record),
+                SampleOutcome::Skipped => None,
+                SampleOutcome::NoIntegrator => continue,
             };
             cx.local.watchdog.feed();
             cx.local.led.set(raw.state == SyncState::Locked);
@@ -338,7 +341,7 @@ mod app {
                 p.status_sent(send(&mut cx.shared.link, &status, RECORD_RESERVE));
             }
             if let Some(record) = record {
-                let sent = send(&mut cx.shared.link, &Message::Pose(record), RECORD_RESERVE);
+                let sent = send(&mut cx.shared.link, &Message::Pose(*record), RECORD_RESERVE);
                 p.sent(sent);
             }
             let spent = board::cycles().wrapping_sub(start);

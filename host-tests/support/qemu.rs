@@ -239,11 +239,11 @@ pub fn assert_replay_bit_exact(
         distance += (pose.x - before.x).hypot(pose.y - before.y);
         let got = (
             [r.x, r.y, r.heading],
-            [r.sigma_x, r.sigma_y, r.sigma_heading, r.sigma_xy],
+            [r.sigma_x, r.sigma_y, r.sigma_heading, r.cov_xy],
         );
         let want = (
             [pose.x, pose.y, pose.heading],
-            [sigma.x, sigma.y, sigma.heading, sigma.xy],
+            [sigma.x, sigma.y, sigma.heading, sigma.cov_xy],
         );
         let same = got
             .0

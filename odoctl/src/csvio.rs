@@ -3,9 +3,9 @@
 //! * SAMPLES: header row; columns `t` (s), `left`, `right` (absolute increment counts of wheel
 //!   1 and 2, integers); optional `left_index`, `right_index` (counts latched at each wheel's
 //!   last index pulse, empty when unknown) and the unit's own record (`seq`, `x`, `y`,
-//!   `heading`, `sigma_x`, `sigma_y`, `sigma_heading`, `sigma_xy`, `flags`); other columns are
+//!   `heading`, `sigma_x`, `sigma_y`, `sigma_heading`, `cov_xy`, `flags`); other columns are
 //!   ignored. The first row is the starting point; each later row integrates the counts since
-//!   the previous row.
+//!   the previous row. The reader also takes [`COV_XY_ALIAS`] for `cov_xy`.
 //! * REFERENCE: header row; `t`, `x`, `y` (m, x east, y north), optional `heading` (rad,
 //!   clockwise from +y) and `sigma_h` (the row's horizontal RMS noise, m, as a receiver's GST
 //!   or `.pos` sigmas give it; the uncertainty fit uses it instead of `--reference-sigma`). Rows are matched to samples by equal `t` within [`MATCH_TOLERANCE`].
@@ -23,7 +23,8 @@ use anyhow::{anyhow, bail, Context, Result};
 /// Samples and reference points are matched when their times differ by at most this (s).
 pub const MATCH_TOLERANCE: f64 = 1.0e-3;
 
-/// The SAMPLES columns every file has: time, the two absolute counts, the index latches.
+/// The SAMPLES columns every writer writes: time, the two absolute counts, the index latches
+/// (the reader needs the first three).
 pub const SAMPLE_COLUMNS: [&str; 5] = ["t", "left", "right", "left_index", "right_index"];
 
 /// The SAMPLES columns of the unit's own pose record ([`UnitPose`] and the status flags).
@@ -35,9 +36,13 @@ pub const POSE_COLUMNS: [&str; 9] = [
     "sigma_x",
     "sigma_y",
     "sigma_heading",
-    "sigma_xy",
+    "cov_xy",
     "flags",
 ];
+
+/// Another header name of the `cov_xy` column, read as it: the name earlier versions of
+/// `record` and `decode` write.
+pub const COV_XY_ALIAS: &str = "sigma_xy";
 
 /// The SAMPLES columns of the record's clocks and link counters, as `record` and `decode`
 /// write them (the first three are read into [`UnitPose::time`], the ROS exports' stamps).
@@ -103,7 +108,7 @@ impl SamplesLayout {
                         fmt_real(u.sigma_x),
                         fmt_real(u.sigma_y),
                         fmt_real(u.sigma_heading),
-                        fmt_real(u.sigma_xy),
+                        fmt_real(u.cov_xy),
                         s.flags.map(|v| v.to_string()).unwrap_or_default()
                     );
                 }
@@ -141,8 +146,8 @@ pub struct UnitPose {
     pub sigma_y: f32,
     /// sigma of the heading (rad).
     pub sigma_heading: f32,
-    /// Signed x-y covariance term as the unit sends it (m), 0 when absent.
-    pub sigma_xy: f32,
+    /// Covariance of x and y as the unit sends it (m^2), 0 when absent.
+    pub cov_xy: f32,
     /// The record's time tag (`mcu_time_us`, `gps_week`, `gps_tow_ms`), when the file has it.
     pub time: Option<RecordTime>,
 }
@@ -403,7 +408,7 @@ fn read_text(path: &Path) -> Result<String> {
 pub fn parse_samples(file: &str, text: &str) -> Result<Vec<Sample>> {
     let table = Table::parse(file, text)?;
     let [t, left, right, left_index, right_index] = SAMPLE_COLUMNS;
-    let [seq, x, y, heading, sigma_x, sigma_y, sigma_heading, sigma_xy, flags] = POSE_COLUMNS;
+    let [seq, x, y, heading, sigma_x, sigma_y, sigma_heading, cov_xy, flags] = POSE_COLUMNS;
     let ct = table.required(t)?;
     let cl = table.required(left)?;
     let cr = table.required(right)?;
@@ -413,7 +418,7 @@ pub fn parse_samples(file: &str, text: &str) -> Result<Vec<Sample>> {
     let cseq = table.column(seq);
     let pose_cols = [x, y, heading, sigma_x, sigma_y, sigma_heading].map(|c| table.column(c));
     let has_pose = pose_cols.iter().all(Option::is_some);
-    let cxy = table.column(sigma_xy);
+    let cxy = table.column(cov_xy).or_else(|| table.column(COV_XY_ALIAS));
     let [mcu_time_us, gps_week, gps_tow_ms, _, _] = RECORD_COLUMNS;
     let time_cols = [mcu_time_us, gps_week, gps_tow_ms].map(|c| table.column(c));
     let mut out = Vec::with_capacity(table.rows_hint());
@@ -440,7 +445,7 @@ pub fn parse_samples(file: &str, text: &str) -> Result<Vec<Sample>> {
                     sigma_x: row.get(g(3), real)?,
                     sigma_y: row.get(g(4), real)?,
                     sigma_heading: row.get(g(5), real)?,
-                    sigma_xy: row.optional(cxy, real)?.unwrap_or(0.0),
+                    cov_xy: row.optional(cxy, real)?.unwrap_or(0.0),
                     time: match [0, 1, 2].map(|i| row.optional(time_cols[i], unsigned)) {
                         [Ok(Some(m)), Ok(Some(w)), Ok(Some(t))] => Some(RecordTime {
                             mcu_time_us: m,
@@ -714,6 +719,7 @@ mod tests {
                     y: -1.0 / 3.0,
                     heading: 1e-300,
                     sigma_x: 1.5e-7,
+                    cov_xy: -2.5e-9,
                     ..Default::default()
                 }),
                 ..Default::default()
@@ -724,5 +730,23 @@ mod tests {
         let back = parse_samples("x", std::str::from_utf8(&out).unwrap()).unwrap();
         assert_eq!(back[1], s[1]);
         assert_eq!(back[0].unit, None);
+    }
+
+    /// A file with the older header name of the covariance column reads as one with
+    /// `cov_xy`; a file with neither reads the covariance as 0.
+    #[test]
+    fn cov_xy_alias() {
+        let row = "0,1,2,3,0.5,-0.25,0.125,0.001,0.002,0.0003";
+        let text = |cov: &str| {
+            format!("t,left,right,seq,x,y,heading,sigma_x,sigma_y,sigma_heading{cov}\n{row}")
+        };
+        let new = parse_samples("new.csv", &(text(",cov_xy") + ",-1.5e-5\n")).unwrap();
+        let old = parse_samples("old.csv", &(text(",sigma_xy") + ",-1.5e-5\n")).unwrap();
+        assert_eq!(new[0].unit.unwrap().cov_xy, -1.5e-5);
+        assert_eq!(old, new);
+        let none = parse_samples("none.csv", &(text("") + "\n")).unwrap();
+        assert_eq!(none[0].unit.unwrap().cov_xy, 0.0);
+        let e = samples_error(&(text(",sigma_xy") + ",x\n"));
+        assert!(e.contains("s.csv:2") && e.contains("`sigma_xy`"), "{e}");
     }
 }

@@ -311,7 +311,7 @@ fn describe(f: &Frame) -> Option<String> {
             s.pps_edges,
             s.pps_rejected,
             s.index_lost,
-            s.rx_errors,
+            s.host_rx_lost,
             s.host_rx_overruns,
             s.host_rx_line_errors,
             s.gnss_rx_lost,
@@ -496,7 +496,7 @@ impl<W: Write> RecordWriter<W> {
                 sigma_x: r.sigma_x,
                 sigma_y: r.sigma_y,
                 sigma_heading: r.sigma_heading,
-                sigma_xy: r.sigma_xy,
+                cov_xy: r.cov_xy,
                 time: None,
             }),
         };

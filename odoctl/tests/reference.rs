@@ -188,7 +188,7 @@ fn property_enu_through_nmea_and_pos_within_a_millimetre_anywhere() {
                 gps_time: t0 + k as f64 * 0.2,
                 position: frame.to_geodetic(*p),
                 heading: None,
-                sigma: None,
+                sigma_north_east_up: None,
                 fix: FixQuality::RtkFixed,
                 line: 0,
             })
@@ -249,7 +249,7 @@ fn hemisphere_sign_table() {
                 gps_time: 2350.0 * WEEK + 1000.0 + k as f64,
                 position: frame.to_geodetic([*e, *n, 0.0]),
                 heading: None,
-                sigma: None,
+                sigma_north_east_up: None,
                 fix: FixQuality::RtkFixed,
                 line: 0,
             })
@@ -284,7 +284,7 @@ fn still_epochs(gps_start: f64, n: usize) -> Vec<reference::Epoch> {
             gps_time: gps_start + k as f64 * 0.1,
             position: origin,
             heading: None,
-            sigma: Some([0.005, 0.005, 0.01]),
+            sigma_north_east_up: Some([0.005, 0.005, 0.01]),
             fix: FixQuality::RtkFixed,
             line: 0,
         })

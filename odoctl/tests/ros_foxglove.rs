@@ -41,12 +41,12 @@ fn client_ready() -> bool {
 }
 
 fn expect_csv(dir: &Path, records: &[PoseRecord]) -> PathBuf {
-    let mut e = String::from("t_us,x,y,heading,sigma_x,sigma_y,sigma_heading,sigma_xy\n");
+    let mut e = String::from("t_us,x,y,heading,sigma_x,sigma_y,sigma_heading,cov_xy\n");
     for r in records {
         let _ = writeln!(
             e,
             "{},{:?},{:?},{:?},{:?},{:?},{:?},{:?}",
-            r.mcu_time_us, r.x, r.y, r.heading, r.sigma_x, r.sigma_y, r.sigma_heading, r.sigma_xy
+            r.mcu_time_us, r.x, r.y, r.heading, r.sigma_x, r.sigma_y, r.sigma_heading, r.cov_xy
         );
     }
     let p = dir.join("expect.csv");

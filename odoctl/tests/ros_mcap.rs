@@ -58,17 +58,24 @@ fn params_toml(p: &ChassisParams) -> String {
 }
 
 /// The covariance terms the replay CSV does not carry, straight from the core integrator:
-/// `t,sigma_xy,cov_x_heading,cov_y_heading` per row.
+/// `t,cov_xy,cov_x_heading,cov_y_heading` per row.
 fn expectations(p: &ChassisParams, samples: &Path) -> String {
     let s = odoctl::csvio::read_samples(samples).unwrap();
     let mut integ = Integrator::new(p, counts(&s[0]), Pose::default()).unwrap();
-    let mut out = String::from("t,sigma_xy,cov_x_heading,cov_y_heading\n");
+    let mut out = String::from("t,cov_xy,cov_x_heading,cov_y_heading\n");
     for (i, row) in s.iter().enumerate() {
         if i > 0 {
             integ.step(counts(row), index_refs(row));
         }
         let (xa, ya) = integ.heading_covariance();
-        let _ = writeln!(out, "{},{:?},{:?},{:?}", row.t, integ.sigma().xy, xa, ya);
+        let _ = writeln!(
+            out,
+            "{},{:?},{:?},{:?}",
+            row.t,
+            integ.sigma().cov_xy,
+            xa,
+            ya
+        );
     }
     out
 }
@@ -253,9 +260,9 @@ fn record_mcap_from_a_unit_on_tcp_read_back_independently() {
     // position-heading terms (not on the wire).
     std::fs::copy(f("_samples.csv"), f("_replay.csv")).unwrap();
     let rows = odoctl::csvio::read_samples(&f("_samples.csv")).unwrap();
-    let mut e = String::from("t,sigma_xy,cov_x_heading,cov_y_heading\n");
+    let mut e = String::from("t,cov_xy,cov_x_heading,cov_y_heading\n");
     for r in &rows {
-        let _ = writeln!(e, "{},{:?},0,0", r.t, r.unit.unwrap().sigma_xy);
+        let _ = writeln!(e, "{},{:?},0,0", r.t, r.unit.unwrap().cov_xy);
     }
     std::fs::write(f("_expect.csv"), e).unwrap();
     if python_ready() {

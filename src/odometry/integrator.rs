@@ -132,7 +132,7 @@ pub struct PoseSigma {
     /// sigma of heading, radians.
     pub heading: f32,
     /// Covariance of x and y, m^2 (covariance model only).
-    pub xy: f32,
+    pub cov_xy: f32,
 }
 
 impl PoseSigma {
@@ -344,12 +344,17 @@ impl Integrator {
                     x,
                     y,
                     heading,
-                    xy: 0.0,
+                    cov_xy: 0.0,
                 }
             }
             UncertaintyModel::Covariance => {
-                let (x, y, heading, xy) = self.covariance.sigmas();
-                PoseSigma { x, y, heading, xy }
+                let (x, y, heading, cov_xy) = self.covariance.sigmas();
+                PoseSigma {
+                    x,
+                    y,
+                    heading,
+                    cov_xy,
+                }
             }
         }
     }

@@ -163,7 +163,7 @@ pub struct PoseRecord {
     /// Standard uncertainty of heading, radians.
     pub sigma_heading: f32,
     /// Covariance of x and y, m^2 (0 unless the covariance model filled the record).
-    pub sigma_xy: f32,
+    pub cov_xy: f32,
     /// Absolute count of encoder 1 (left), Gamma_1, increments (x4 decoded, 64-bit).
     pub gamma_left: i64,
     /// Absolute count of encoder 2 (right), Gamma_2, increments.
@@ -199,7 +199,7 @@ impl PoseRecord {
             w.f32(self.sigma_x)?;
             w.f32(self.sigma_y)?;
             w.f32(self.sigma_heading)?;
-            w.f32(self.sigma_xy)?;
+            w.f32(self.cov_xy)?;
             w.i64(self.gamma_left)?;
             w.i64(self.gamma_right)?;
             w.i64(self.index_left)?;
@@ -232,7 +232,7 @@ impl PoseRecord {
                 sigma_x: r.f32()?,
                 sigma_y: r.f32()?,
                 sigma_heading: r.f32()?,
-                sigma_xy: r.f32()?,
+                cov_xy: r.f32()?,
                 gamma_left: r.i64()?,
                 gamma_right: r.i64()?,
                 index_left: r.i64()?,
@@ -275,14 +275,14 @@ pub struct Status {
     pub rate_hz: u32,
     /// Samples computed since start (wrapping).
     pub samples: u32,
-    /// Records dropped since start (queue full), wrapping.
+    /// Records dropped since start (queue full), saturating.
     pub dropped_total: u32,
     /// PPS edges accepted since start.
     pub pps_edges: u32,
     /// PPS edges rejected as glitches since start.
     pub pps_rejected: u32,
     /// Host-link receive bytes lost (UART overrun or a full receive queue) since start.
-    pub rx_errors: u32,
+    pub host_rx_lost: u32,
     /// Where the settings in use came from.
     pub settings_source: SettingsSource,
     /// The settings in use differ from the ones stored (a `save` is pending).
@@ -335,7 +335,7 @@ impl Status {
             w.u32(self.dropped_total)?;
             w.u32(self.pps_edges)?;
             w.u32(self.pps_rejected)?;
-            w.u32(self.rx_errors)?;
+            w.u32(self.host_rx_lost)?;
             w.u8(settings_source_code(self.settings_source))?;
             w.u8(self.settings_dirty as u8)?;
             w.u8(self.reset_cause.code())?;
@@ -370,7 +370,7 @@ impl Status {
         let dropped_total = r.u32().map_err(short)?;
         let pps_edges = r.u32().map_err(short)?;
         let pps_rejected = r.u32().map_err(short)?;
-        let rx_errors = r.u32().map_err(short)?;
+        let host_rx_lost = r.u32().map_err(short)?;
         let settings_source = settings_source_from_code(r.u8().map_err(short)?)?;
         let settings_dirty = match r.u8().map_err(short)? {
             0 => false,
@@ -396,7 +396,7 @@ impl Status {
             dropped_total,
             pps_edges,
             pps_rejected,
-            rx_errors,
+            host_rx_lost,
             settings_source,
             settings_dirty,
             samples_lost,

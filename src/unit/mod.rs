@@ -22,7 +22,7 @@ pub mod status;
 
 pub use commands::{Commands, Effect, StallingFlash};
 pub use event::{Event, Log};
-pub use processor::{HeartbeatInputs, Live, Processor, Requests, StoreState};
+pub use processor::{HeartbeatInputs, Live, Processor, Requests, SampleOutcome, StoreState};
 pub use rx_errors::{RxByte, RxErrors};
 pub use sample::{IndexCapture, PpsLatch, RawCounts, RawSample};
 pub use start::{start, Start};

@@ -108,6 +108,19 @@ pub struct Live {
     pub late_samples: u32,
 }
 
+/// What one sample gave ([`Processor::on_sample`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum SampleOutcome {
+    /// Integrated, and its record is due (every `output_divider`-th sample).
+    Record(PoseRecord),
+    /// Integrated; its record is skipped (`output_divider`).
+    Skipped,
+    /// A record is due but there is no integrator to fill it: neither the settings' nor the
+    /// designed chassis parameters were accepted ([`Event::IntegratorRejected`]). The
+    /// designed ones always are, so this does not occur.
+    NoIntegrator,
+}
+
 /// State of the processing task: counts to records.
 pub struct Processor {
     timer_hz: u32,
@@ -377,9 +390,8 @@ impl Processor {
         self.last_tick = raw.sample.tick;
     }
 
-    /// Integrates one sample. `None` when nothing was integrated (never, today);
-    /// `Some(None)` when the record is not sent (`output_divider`).
-    pub fn on_sample(&mut self, raw: &RawSample, log: &mut impl Log) -> Option<Option<PoseRecord>> {
+    /// Integrates one sample: its record, or why there is none.
+    pub fn on_sample(&mut self, raw: &RawSample, log: &mut impl Log) -> SampleOutcome {
         if raw.merged > 0 {
             self.merged_samples = self.merged_samples.wrapping_add(raw.merged);
             log.event(Event::SampleLate {
@@ -438,12 +450,14 @@ impl Processor {
         let phase = self.since_switch;
         self.since_switch = self.since_switch.wrapping_add(1);
         if phase % self.divider != 0 {
-            return Some(None);
+            return SampleOutcome::Skipped;
         }
-        let integrator = self.integrator.as_ref()?;
+        let Some(integrator) = self.integrator.as_ref() else {
+            return SampleOutcome::NoIntegrator;
+        };
         let pose = integrator.pose();
         let sigma = integrator.sigma();
-        Some(Some(PoseRecord {
+        SampleOutcome::Record(PoseRecord {
             sequence,
             flags: self.flags,
             mcu_time_us: self.mcu_time_us,
@@ -458,13 +472,13 @@ impl Processor {
             sigma_x: sigma.x,
             sigma_y: sigma.y,
             sigma_heading: sigma.heading,
-            sigma_xy: sigma.xy,
+            cov_xy: sigma.cov_xy,
             gamma_left: counts.left,
             gamma_right: counts.right,
             index_left: refs.left.unwrap_or(0),
             index_right: refs.right.unwrap_or(0),
             dropped: self.dropped_since,
-        }))
+        })
     }
 
     /// The rate and `output_divider` in use follow the samples: at the first sample of a
@@ -510,7 +524,7 @@ impl Processor {
             dropped_total: self.dropped_total,
             pps_edges: raw.stats.accepted,
             pps_rejected: raw.stats.glitches,
-            rx_errors: inputs.host.lost,
+            host_rx_lost: inputs.host.lost,
             settings_source: inputs.store.source,
             settings_dirty: inputs.store.dirty,
             samples_lost: raw.queue_lost,

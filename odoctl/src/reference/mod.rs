@@ -150,7 +150,7 @@ pub struct Epoch {
     /// True heading (rad, clockwise from north), when the log has one (NMEA HDT).
     pub heading: Option<f64>,
     /// Standard deviations north, east, up (m), when the log has them (GST; `.pos` sdn/sde/sdu).
-    pub sigma: Option<[f64; 3]>,
+    pub sigma_north_east_up: Option<[f64; 3]>,
     /// Solution quality.
     pub fix: FixQuality,
     /// 1-based line of the position in the file.
@@ -320,7 +320,7 @@ pub struct LocalEpoch {
     /// Heading (rad, clockwise from +y (north)), when the reference has one.
     pub heading: Option<f64>,
     /// Standard deviations east, north (m), when the reference has them.
-    pub sigma_xy: Option<[f64; 2]>,
+    pub sigma_east_north: Option<[f64; 2]>,
     /// Solution quality (CSV rows: taken as RTK fixed).
     pub fix: FixQuality,
     /// 1-based line in the file.
@@ -425,7 +425,7 @@ impl Reference {
                 y: r.y,
                 up: None,
                 heading: r.heading,
-                sigma_xy: r.sigma_h.map(|s| [s / 2f64.sqrt(); 2]),
+                sigma_east_north: r.sigma_h.map(|s| [s / 2f64.sqrt(); 2]),
                 fix: FixQuality::RtkFixed,
                 line: 0,
             })
@@ -489,7 +489,7 @@ impl Reference {
                     y,
                     up: Some(up),
                     heading: e.heading,
-                    sigma_xy: e.sigma.map(|s| [s[1], s[0]]),
+                    sigma_east_north: e.sigma_north_east_up.map(|s| [s[1], s[0]]),
                     fix: e.fix,
                     line: e.line,
                 }
@@ -507,14 +507,14 @@ impl Reference {
         })
     }
 
-    /// The median over the used epochs of the horizontal RMS sigma `hypot(sigma_x, sigma_y)`
+    /// The median over the used epochs of the horizontal RMS sigma `hypot(sigma_east, sigma_north)`
     /// (m) the log reports (GST, `.pos` sdn/sde), when it reports any: what
     /// `--reference-sigma` means.
     pub fn median_horizontal_sigma(&self) -> Option<f64> {
         let mut v: Vec<f64> = self
             .epochs
             .iter()
-            .filter_map(|e| e.sigma_xy.map(|s| s[0].hypot(s[1])))
+            .filter_map(|e| e.sigma_east_north.map(|s| s[0].hypot(s[1])))
             .filter(|s| s.is_finite())
             .collect();
         if v.is_empty() {
@@ -579,7 +579,7 @@ impl Reference {
                 y: e.y,
                 heading: e.heading,
                 sigma_h: e
-                    .sigma_xy
+                    .sigma_east_north
                     .map(|s| s[0].hypot(s[1]))
                     .filter(|s| s.is_finite() && *s > 0.0),
             })
@@ -715,7 +715,7 @@ mod tests {
                 height: 300.0,
             },
             heading: None,
-            sigma: Some([0.01, 0.02, 0.03]),
+            sigma_north_east_up: Some([0.01, 0.02, 0.03]),
             fix,
             line: 1 + t as usize,
         }
@@ -747,7 +747,7 @@ mod tests {
         let ys: Vec<f64> = r.epochs.iter().map(|e| e.y).collect();
         assert!(ys[..3].iter().sum::<f64>().abs() < 1e-6, "{ys:?}");
         assert!((ys[3] - 2.0).abs() < 0.01, "{ys:?}");
-        assert_eq!(r.epochs[0].sigma_xy, Some([0.02, 0.01]));
+        assert_eq!(r.epochs[0].sigma_east_north, Some([0.02, 0.01]));
         assert_eq!(r.median_horizontal_sigma(), Some(0.02f64.hypot(0.01)));
         let text = r.report.to_string();
         assert!(

@@ -40,7 +40,8 @@ struct Undated {
     position: Geodetic,
     fix: FixQuality,
     heading: Option<f64>,
-    sigma: Option<[f64; 3]>,
+    /// Standard deviations north, east, up (m), from the GST of the same time.
+    sigma_north_east_up: Option<[f64; 3]>,
     line: usize,
     /// The last date sentence before it (index into the dates).
     date: Option<usize>,
@@ -234,7 +235,7 @@ pub fn parse(file: &str, text: &str, leap_seconds: i32) -> Result<GeodeticLog> {
                     position,
                     fix: fix_quality(g.fix_type),
                     heading,
-                    sigma,
+                    sigma_north_east_up: sigma,
                     line,
                     date: dates.len().checked_sub(1),
                 });
@@ -279,9 +280,9 @@ pub fn parse(file: &str, text: &str, leap_seconds: i32) -> Result<GeodeticLog> {
                 match undated[recent..]
                     .iter_mut()
                     .rev()
-                    .find(|u| ms(u.sod) == key && u.sigma.is_none())
+                    .find(|u| ms(u.sod) == key && u.sigma_north_east_up.is_none())
                 {
-                    Some(u) => u.sigma = Some(sigma),
+                    Some(u) => u.sigma_north_east_up = Some(sigma),
                     None => {
                         if pending_gst.len() >= 20 {
                             pending_gst.remove(0);
@@ -361,7 +362,7 @@ fn date_epochs(
             gps_time,
             position: u.position,
             heading: u.heading,
-            sigma: u.sigma,
+            sigma_north_east_up: u.sigma_north_east_up,
             fix: u.fix,
             line: u.line,
         });
@@ -420,7 +421,7 @@ mod tests {
         assert!((e.position.lon_deg + (122.0 + 2.269_578_64 / 60.0)).abs() < 1e-12);
         assert!((e.position.height - (18.893 - 25.669)).abs() < 1e-4);
         assert_eq!(e.fix, FixQuality::Dgps);
-        let s = e.sigma.unwrap();
+        let s = e.sigma_north_east_up.unwrap();
         assert!(
             (s[0] - 0.023).abs() < 1e-6
                 && (s[1] - 0.020).abs() < 1e-6
@@ -614,14 +615,14 @@ mod tests {
         let l = parse("g.nmea", &log, 18).unwrap();
         let e = &l.epochs;
         assert_eq!(
-            e[0].sigma.map(|s| [s[0], s[1]]),
+            e[0].sigma_north_east_up.map(|s| [s[0], s[1]]),
             Some([0.011f32 as f64, 0.012f32 as f64])
         );
         assert_eq!(
-            e[1].sigma.map(|s| [s[0], s[1]]),
+            e[1].sigma_north_east_up.map(|s| [s[0], s[1]]),
             Some([0.021f32 as f64, 0.022f32 as f64])
         );
-        assert_eq!(e[2].sigma, None);
+        assert_eq!(e[2].sigma_north_east_up, None);
         assert!(
             (e[0].heading.unwrap() + 0.5f64.to_radians()).abs() < 1e-6,
             "{:?}",

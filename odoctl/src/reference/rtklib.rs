@@ -155,7 +155,7 @@ fn row(tokens: &[&str], layout: Layout, leap_seconds: i32) -> Result<Epoch, Stri
         gps_time,
         position,
         heading: None,
-        sigma,
+        sigma_north_east_up: sigma,
         fix: fix_quality(q),
         line: 0,
     })
@@ -230,7 +230,10 @@ mod tests {
             assert!((l.epochs[1].gps_time - 2300.0 * gps_time::WEEK - 0.1).abs() < 1e-6);
             assert_eq!(l.epochs[0].fix, FixQuality::RtkFixed);
             assert_eq!(l.epochs[1].fix, FixQuality::RtkFloat);
-            assert_eq!(l.epochs[0].sigma, Some([0.0057, 0.0058, 0.0113]));
+            assert_eq!(
+                l.epochs[0].sigma_north_east_up,
+                Some([0.0057, 0.0058, 0.0113])
+            );
             assert_eq!(l.epochs[1].position.lat_deg, -49.2);
             assert_eq!(l.epochs[1].position.lon_deg, -16.6);
             assert_eq!(l.epochs[0].line, 4);
@@ -271,7 +274,7 @@ mod tests {
         );
         let l = parse("b.pos", &t, 18).unwrap();
         assert_eq!(l.epochs.len(), 2);
-        assert_eq!(l.epochs[1].sigma, None);
+        assert_eq!(l.epochs[1].sigma_north_east_up, None);
         assert_eq!(l.epochs[1].fix, FixQuality::Dgps);
         assert_eq!(
             (l.report.corrupt, l.report.unusable),

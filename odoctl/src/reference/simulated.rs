@@ -106,7 +106,7 @@ pub fn receiver_epochs(times: &[f64], truth: &[(f64, f64, f64)], sim: &ReceiverS
             gps_time: sim.gps_start + t,
             position,
             heading,
-            sigma: Some([s / SQRT_2, s / SQRT_2, s]),
+            sigma_north_east_up: Some([s / SQRT_2, s / SQRT_2, s]),
             fix,
             line: 0,
         });
@@ -161,7 +161,7 @@ pub fn write_nmea(w: &mut dyn Write, epochs: &[Epoch], leap_seconds: i32) -> Res
             Some(format!(
                 "GNGGA,{time},{lat},{ns},{lon},{ew},{q},12,0.6,{alt:.4},M,{GEOID_SEPARATION:.3},M,1.0,0000"
             )),
-            e.sigma.map(|s| {
+            e.sigma_north_east_up.map(|s| {
                 let h = s[0].hypot(s[1]);
                 format!(
                     "GNGST,{time},{:.4},{h:.4},{h:.4},0.0,{:.4},{:.4},{:.4}",
@@ -241,7 +241,7 @@ pub fn write_pos(w: &mut dyn Write, epochs: &[Epoch], time: PosTime) -> Result<(
             FixQuality::Ppp => 6,
             FixQuality::Invalid => 0,
         };
-        let s = e.sigma.unwrap_or([0.0; 3]);
+        let s = e.sigma_north_east_up.unwrap_or([0.0; 3]);
         out.push_str(&format!(
             "{t} {:14.9} {:14.9} {:10.4} {q:3} {:3} {:8.4} {:8.4} {:8.4} {:8.4} {:8.4} {:8.4} {:6.2} {:6.1}\n",
             e.position.lat_deg, e.position.lon_deg, e.position.height, 12, s[0], s[1], s[2], 0.0, 0.0, 0.0, 1.0, 999.9

@@ -421,7 +421,7 @@ fn serve(
                 r.sigma_x,
                 r.sigma_y,
                 r.sigma_heading,
-                r.sigma_xy,
+                r.cov_xy,
                 (0.0, 0.0),
             ),
             twist,

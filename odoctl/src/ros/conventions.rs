@@ -61,15 +61,15 @@ pub struct PoseCovariance {
 }
 
 impl PoseCovariance {
-    /// From the sigmas the unit reports (`sigma_x`, `sigma_y`, `sigma_heading`, the x-y
-    /// covariance) and the position-heading covariances (zero for the paper's model).
-    pub fn from_sigmas(sx: f32, sy: f32, sh: f32, xy: f32, heading_terms: (f32, f32)) -> Self {
+    /// From the sigmas the unit reports (`sigma_x`, `sigma_y`, `sigma_heading`) and its x-y
+    /// covariance (`cov_xy`), and the position-heading covariances (zero for the paper's model).
+    pub fn from_sigmas(sx: f32, sy: f32, sh: f32, cov_xy: f32, heading_terms: (f32, f32)) -> Self {
         let sq = |s: f32| f64::from(s) * f64::from(s);
         Self {
             xx: sq(sx),
             yy: sq(sy),
             aa: sq(sh),
-            xy: f64::from(xy),
+            xy: f64::from(cov_xy),
             xa: f64::from(heading_terms.0),
             ya: f64::from(heading_terms.1),
         }

@@ -29,7 +29,7 @@ pub fn odom_samples(
         let s = integ.sigma();
         (
             integ.pose(),
-            PoseCovariance::from_sigmas(s.x, s.y, s.heading, s.xy, integ.heading_covariance()),
+            PoseCovariance::from_sigmas(s.x, s.y, s.heading, s.cov_xy, integ.heading_covariance()),
         )
     };
     let mut out = Vec::with_capacity(samples.len());
@@ -99,7 +99,7 @@ pub fn unit_samples(
                 u.sigma_x,
                 u.sigma_y,
                 u.sigma_heading,
-                u.sigma_xy,
+                u.cov_xy,
                 (0.0, 0.0),
             ),
             twist,

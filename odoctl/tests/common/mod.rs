@@ -124,7 +124,7 @@ fn record(seq: u32, s: &Sample, integ: &Integrator) -> PoseRecord {
         sigma_x: sg.x,
         sigma_y: sg.y,
         sigma_heading: sg.heading,
-        sigma_xy: sg.xy,
+        cov_xy: sg.cov_xy,
         gamma_left: s.left,
         gamma_right: s.right,
         index_left: s.left_index.unwrap_or(0),

@@ -6,7 +6,7 @@ definitions, on the ROS 2 domain of ROS_DOMAIN_ID (default 0) ("rt/odom", "rt/tf
 
 Prints "ready" once its readers exist, then collects for --timeout seconds (or until
 --count /odom messages) and checks each /odom message against --expect (the unit's records:
-x,y,heading,sigma_x,sigma_y,sigma_heading,sigma_xy; matched by position): frames, position,
+x,y,heading,sigma_x,sigma_y,sigma_heading,cov_xy; matched by position): frames, position,
 quaternion (yaw = pi/2 - heading), pose covariance layout, /tf equal to /odom, stamps
 increasing. --expect-error TEXT instead requires an ERROR status containing TEXT on
 /diagnostics (a lost link) and no /odom message.
@@ -206,7 +206,7 @@ def main():
         c = m.pose.covariance
         sx, sy, sh = f32(r["sigma_x"]), f32(r["sigma_y"]), f32(r["sigma_heading"])
         check((c[0], c[7], c[35]) == (sx * sx, sy * sy, sh * sh), f"{where}: variances")
-        check(c[1] == c[6] == f32(r["sigma_xy"]), f"{where}: cov xy")
+        check(c[1] == c[6] == f32(r["cov_xy"]), f"{where}: cov xy")
         check(c[14] == c[21] == c[28] == 1e6, f"{where}: unobserved variances")
         t = m.twist.covariance
         check(t[14] == t[21] == t[28] == 1e6 and t[0] > 0 and t[35] > 0, f"{where}: twist covariance")

@@ -3,7 +3,7 @@
 v1): connects with subprotocol foxglove.websocket.v1, reads serverInfo and advertise,
 subscribes to every channel, decodes binary messageData (opcode 0x01: uint32 subscription id,
 uint64 log time ns, payload) and checks what `odoctl bridge --foxglove` sends against the
-unit's records (--expect CSV: t_us,x,y,heading,sigma_x,sigma_y,sigma_heading,sigma_xy).
+unit's records (--expect CSV: t_us,x,y,heading,sigma_x,sigma_y,sigma_heading,cov_xy).
 
 CDR payloads are decoded by mcap-ros2-support's decoder from the advertised ros2msg schema
 text; JSON payloads by json. Prints `foxglove_client: ok ...` and exits 0 when every check
@@ -186,9 +186,9 @@ async def main():
         if abs(wrap(yaw - (math.pi / 2 - r["heading"]))) > 1e-6:
             fail(f"yaw {yaw} for heading {r['heading']}")
         c = o.pose.covariance
-        sx, sy, sxy = r["sigma_x"], r["sigma_y"], r["sigma_xy"]
-        if c[0] != sx * sx or c[7] != sy * sy or c[1] != sxy or c[6] != sxy:
-            fail(f"covariance {c[0]}, {c[7]}, {c[1]} for sigmas {sx}, {sy}, {sxy}")
+        sx, sy, cxy = r["sigma_x"], r["sigma_y"], r["cov_xy"]
+        if c[0] != sx * sx or c[7] != sy * sy or c[1] != cxy or c[6] != cxy:
+            fail(f"covariance {c[0]}, {c[7]}, {c[1]} for sigmas {sx}, {sy} and cov_xy {cxy}")
     gaps = sum(1 for i0, i1 in zip(idx, idx[1:]) if i1 != i0 + 1)
 
     # /tf: the /odom pose.
@@ -243,7 +243,7 @@ async def main():
         r = next((r for r in recs if r["x"] == pos["x"] and r["y"] == pos["y"]), None)
         if r is None:
             fail("ellipse centre is none of the records")
-        sxx, syy, sxy = r["sigma_x"] ** 2, r["sigma_y"] ** 2, r["sigma_xy"]
+        sxx, syy, sxy = r["sigma_x"] ** 2, r["sigma_y"] ** 2, r["cov_xy"]
         det = sxx * syy - sxy * sxy
         if det <= 1e-30:
             continue

@@ -7,7 +7,7 @@ here from the inputs by the rules of docs/ROS.md:
 
   --samples   the SAMPLES CSV that was replayed (counts, time columns, flags)
   --replay    the replay CSV of the same run (`odoctl replay --out`): t,x,y,heading,sigmas
-  --expect    t,sigma_xy,cov_x_heading,cov_y_heading per row (the integrator's covariance
+  --expect    t,cov_xy,cov_x_heading,cov_y_heading per row (the integrator's covariance
               terms the replay CSV does not carry; written by the Rust test)
   --params    the parameter TOML of the replay (all keys explicit)
   --stamps    samples_t | utc | mcu_time: which stamps the file must carry
@@ -169,7 +169,7 @@ def main():
         check(all(close(a, b, 0, 1e-12) for a, b in zip((qo.x, qo.y, qo.z, qo.w), qe)), f"{where}: quaternion {qo} != {qe}")
         c = m.pose.covariance
         sx, sy, sh = f32(r["sigma_x"]), f32(r["sigma_y"]), f32(r["sigma_heading"])
-        xy, xa, ya = f32(e["sigma_xy"]), f32(e["cov_x_heading"]), f32(e["cov_y_heading"])
+        xy, xa, ya = f32(e["cov_xy"]), f32(e["cov_x_heading"]), f32(e["cov_y_heading"])
         cexp = [0.0] * 36
         cexp[0], cexp[7], cexp[35] = sx * sx, sy * sy, sh * sh
         cexp[1] = cexp[6] = xy
