@@ -1,141 +1,21 @@
-//! The eq (16) fit of the diameters and the track width: residuals and their Jacobian,
-//! continuation, damped Newton, the optional polish, standard errors and the restart heading.
+//! The paper's estimator (`--method paper`): eq (16) over the whole run for the diameters,
+//! the track width and the initial heading, by continuation, damped Newton and an optional
+//! polish; its formal and cluster-robust standard errors.
 
 use anyhow::{anyhow, bail, Result};
 use indicatif::ProgressBar;
 use odo_core::odometry::ChassisParams;
 
+use crate::calib::antenna::{
+    observed_with_rows, LeverArm, ANTENNA_FORWARD, ANTENNA_LEFT, MODEL_UNKNOWNS,
+};
+use crate::calib::run::Run;
+use crate::calib::sensitivity::with_geometry;
 use crate::optim::{self, LmOptions, NmOptions, NormalAccumulator, Objective};
 
-use super::*;
-
-impl Run<'_> {
-    /// [`Run::residuals`] and, with `jac`, their derivatives with respect to the geometry
-    /// unknowns `cols` (indices into [`GEOMETRY_UNKNOWNS`]; row-major: one row per residual,
-    /// one column per entry of `cols`), in the same pass.
-    #[allow(clippy::too_many_arguments)]
-    pub fn residuals_with_jacobian(
-        &self,
-        params: &ChassisParams,
-        a: usize,
-        b: usize,
-        heading0: f64,
-        out: &mut Vec<f64>,
-        jac: Option<&mut Vec<f64>>,
-        cols: &[usize],
-    ) -> bool {
-        let Some(jac) = jac else {
-            return self.residuals(params, a, b, heading0, out);
-        };
-        if cols.iter().any(|&c| c >= GEOMETRY_UNKNOWNS.len()) {
-            return false;
-        }
-        out.clear();
-        jac.clear();
-        // Room for every row at once: no regrowth (and copy) of the large Jacobian.
-        out.reserve(2 * (b - a));
-        jac.reserve(2 * (b - a) * cols.len());
-        let n = cols.len();
-        let (mut jx, mut jy) = ([0.0; MODEL_UNKNOWNS], [0.0; MODEL_UNKNOWNS]);
-        self.integrate_with_sensitivity(params, a, b, heading0, |k, p, d| {
-            let r = self.reference_at(k);
-            let (ox, oy) = observed_with_rows(p, d, self.antenna, heading0, cols, &mut jx, &mut jy);
-            out.push(ox - r.x);
-            out.push(oy - r.y);
-            jac.extend_from_slice(&jx[..n]);
-            jac.extend_from_slice(&jy[..n]);
-        })
-        .is_ok()
-            && out.iter().chain(jac.iter()).all(|v| v.is_finite())
-    }
-
-    /// [`Run::residuals_with_jacobian`] fed straight into `acc` (pair by pair, in match order:
-    /// the same sums as of the stored vectors) instead of stored: the objective and normal
-    /// equations of the eq (16) fits without a pass over tens of megabytes of Jacobian.
-    /// False when the parameters are not admissible or a residual is not finite.
-    pub fn accumulate_normal(
-        &self,
-        params: &ChassisParams,
-        a: usize,
-        b: usize,
-        heading0: f64,
-        cols: &[usize],
-        acc: &mut NormalAccumulator,
-    ) -> bool {
-        if cols.iter().any(|&c| c >= GEOMETRY_UNKNOWNS.len()) {
-            return false;
-        }
-        self.accumulate_normal_with(params, self.antenna, a, b, heading0, cols, acc)
-    }
-
-    /// [`Run::accumulate_normal`] with the lever arm `antenna` instead of the run's own (for
-    /// fits that estimate it; its columns are [`ANTENNA_FORWARD`], [`ANTENNA_LEFT`]).
-    #[allow(clippy::too_many_arguments)]
-    pub fn accumulate_normal_with(
-        &self,
-        params: &ChassisParams,
-        antenna: (f64, f64),
-        a: usize,
-        b: usize,
-        heading0: f64,
-        cols: &[usize],
-        acc: &mut NormalAccumulator,
-    ) -> bool {
-        if cols.iter().any(|&c| c >= MODEL_UNKNOWNS) || cols.len() > MODEL_UNKNOWNS {
-            return false;
-        }
-        let mut finite = true;
-        let (mut jx, mut jy) = ([0.0; MODEL_UNKNOWNS], [0.0; MODEL_UNKNOWNS]);
-        let ok = self
-            .integrate_with_sensitivity(params, a, b, heading0, |k, p, d| {
-                let r = self.reference_at(k);
-                let (ox, oy) = observed_with_rows(p, d, antenna, heading0, cols, &mut jx, &mut jy);
-                let (rx, ry) = (ox - r.x, oy - r.y);
-                finite &= rx.is_finite() && ry.is_finite();
-                acc.add_pair(rx, ry, &jx, &jy);
-            })
-            .is_ok();
-        ok && finite && acc.cost().is_finite()
-    }
-
-    /// The x and y differences odometry - reference at matches `a+1..=b`, into `out`;
-    /// false when the parameters are not admissible.
-    pub fn residuals(
-        &self,
-        params: &ChassisParams,
-        a: usize,
-        b: usize,
-        heading0: f64,
-        out: &mut Vec<f64>,
-    ) -> bool {
-        out.clear();
-        out.reserve(2 * (b - a));
-        self.integrate_pose(params, a, b, heading0, |k, integ| {
-            let (px, py) = self.observed(&integ.pose(), heading0);
-            let r = self.reference_at(k);
-            out.push(px - r.x);
-            out.push(py - r.y);
-        })
-        .is_ok()
-            && out.iter().all(|v| v.is_finite())
-    }
-
-    /// Eq (16) over matches `a..=b`.
-    pub fn eq16(&self, params: &ChassisParams, a: usize, b: usize, heading0: f64) -> Option<f64> {
-        let mut r = Vec::new();
-        self.residuals(params, a, b, heading0, &mut r)
-            .then(|| optim::objective(Objective::SumOfNorms, &r))
-    }
-}
-
-/// Which parameters the geometry fit estimates.
-pub(super) fn with_geometry(base: &ChassisParams, x: &[f64]) -> ChassisParams {
-    let mut p = *base;
-    p.left_diameter = x[0];
-    p.right_diameter = x[1];
-    p.track_width = x[2];
-    p
-}
+use super::covariance::{cluster_jackknife, diagonal_std_errors};
+use super::subtrajectory::SUBTRAJECTORY_LENGTH;
+use super::turning::{track_width_warning, turning};
 
 /// Result of the eq (16) fit.
 #[derive(Debug, Clone)]
@@ -163,12 +43,12 @@ pub struct GeomFit {
     /// first common time, or the mean over the standstill there ([`Run::anchor`]). A replay
     /// from it with `heading0` and `params` reproduces `cost`.
     pub start: (f64, f64),
-    /// Standard errors of [`GEOMETRY_UNKNOWNS`] (m, m, m, rad; `None` for an unknown that was
+    /// Standard errors of [`GEOMETRY_UNKNOWNS`](crate::calib::sensitivity::GEOMETRY_UNKNOWNS) (m, m, m, rad; `None` for an unknown that was
     /// held) for independent residuals; see [`standard_errors`]. Far too small when slip
     /// makes the residuals correlated: see `robust_std_errors`.
     pub std_errors: [Option<f64>; 4],
-    /// Cluster-robust standard errors of [`GEOMETRY_UNKNOWNS`] (see [`paper_cluster_errors`];
-    /// for the sub-trajectory method, [`SubtrajectoryFit::std_errors`], the heading `None`):
+    /// Cluster-robust standard errors of [`GEOMETRY_UNKNOWNS`](crate::calib::sensitivity::GEOMETRY_UNKNOWNS) (see [`paper_cluster_errors`];
+    /// for the sub-trajectory method, [`SubtrajectoryFit::std_errors`](super::subtrajectory::SubtrajectoryFit::std_errors), the heading `None`):
     /// what `calibrate` reports.
     pub robust_std_errors: [Option<f64>; 4],
     /// Clusters of the robust errors (stretches, or sub-trajectories).
@@ -216,21 +96,6 @@ impl Default for GeomOptions {
             cluster_length: SUBTRAJECTORY_LENGTH,
         }
     }
-}
-
-/// Total absolute heading change of the odometry over matches `a..=b` (rad), summed over
-/// steps of at least 0.25 m of path so that count noise does not add up.
-pub fn turning(run: &Run, params: &ChassisParams, a: usize, b: usize, heading0: f64) -> f64 {
-    let mut total = 0.0;
-    let mut last = (heading0, run.dist[a]);
-    let _ = run.integrate_pose(params, a, b, heading0, |k, integ| {
-        let h = integ.pose().heading;
-        if run.dist[k] - last.1 >= 0.25 || k == b {
-            total += (h - last.0).abs();
-            last = (h, run.dist[k]);
-        }
-    });
-    total
 }
 
 /// Stop a continuation stage's fit when the predicted relative reduction of its cost falls
@@ -542,48 +407,7 @@ pub fn paper_cluster_errors(
     Some((out, clusters.len()))
 }
 
-/// Relative standard error of `track_width` above which the fit warns that the trajectory
-/// turned too little to determine it (see [`track_width_warning`]).
-pub const TRACK_WIDTH_MAX_RELATIVE_SE: f64 = 1e-3;
-
-/// Total absolute turning below which the fit warns that the track width is poorly
-/// determined, whatever its standard error says (rad; 90 degrees).
-pub const TRACK_WIDTH_WARN_TURNING: f64 = core::f64::consts::FRAC_PI_2;
-
-/// The warning of a geometry fit whose trajectory turned too little to determine the track
-/// width: it was held (total absolute turning below `min_turning`), or the turning is below
-/// [`TRACK_WIDTH_WARN_TURNING`] (90 deg), or the relative standard error of `track_width`
-/// exceeds [`TRACK_WIDTH_MAX_RELATIVE_SE`] (0.1 %, 0.6 mm on a 0.56 m track). Eq (8): only
-/// turning reveals the track width, and the formal standard error assumes independent
-/// residuals, which odometry drift is not, so both the turning and the error are checked.
-pub fn track_width_warning(
-    estimated: bool,
-    turning: f64,
-    min_turning: f64,
-    params: &ChassisParams,
-    std_errors: &[Option<f64>; 4],
-) -> Option<String> {
-    let deg = turning.to_degrees();
-    if !estimated {
-        return Some(format!(
-            "the trajectory turned {deg:.0} deg in all (less than {:.0}): track_width not estimated, kept at {}",
-            min_turning.to_degrees(),
-            params.track_width
-        ));
-    }
-    let rel = std_errors[2].map_or(f64::INFINITY, |se| se / params.track_width);
-    if turning < TRACK_WIDTH_WARN_TURNING || rel.is_nan() || rel > TRACK_WIDTH_MAX_RELATIVE_SE {
-        return Some(format!(
-            "the trajectory turned {deg:.0} deg in all: track_width poorly determined (standard error {:.2} % of it; a fit wants at least {:.0} deg and at most {:.1} %)",
-            100.0 * rel,
-            TRACK_WIDTH_WARN_TURNING.to_degrees(),
-            100.0 * TRACK_WIDTH_MAX_RELATIVE_SE
-        ));
-    }
-    None
-}
-
-/// Standard errors of the geometry unknowns ([`GEOMETRY_UNKNOWNS`]) at an eq (16) estimate
+/// Standard errors of the geometry unknowns ([`GEOMETRY_UNKNOWNS`](crate::calib::sensitivity::GEOMETRY_UNKNOWNS)) at an eq (16) estimate
 /// over matches `a..=b`, with the held ones (`free[i]` false) `None`, and the residual
 /// standard deviation `s` (m). From the analytic Jacobian `J` of the x and y residuals (the
 /// unknowns that were free): `cov = (J^T J)^-1 s^2`, `s^2 = sum r^2 / (m - p)` with `m` residual
@@ -638,114 +462,66 @@ pub fn standard_errors_with(
     Some((se, s2.sqrt()))
 }
 
-/// The heading at match `a` minimising eq (16) over `a..=b` with the geometry fixed.
-pub fn fit_heading(
-    run: &Run,
-    params: &ChassisParams,
-    a: usize,
-    b: usize,
-    guess: f64,
-) -> Result<f64> {
-    let f = |x: &[f64], acc: &mut NormalAccumulator| {
-        run.accumulate_normal(params, a, b, x[0], &[3], acc)
-    };
-    let res = optim::levenberg_marquardt_streamed(
-        f,
-        &[guess],
-        &[1.0],
-        Objective::SumOfNorms,
-        LmOptions::default(),
-    )
-    .ok_or_else(|| anyhow!("parameters: not admissible"))?;
-    Ok(res.x[0])
-}
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calib::testing::sim;
+    use crate::csvio::match_times;
+    use crate::simulate::{default_truth, PathKind};
 
-/// Stop a restart heading fit when the predicted relative reduction of eq (16) falls below
-/// this (the heading is then the minimum within about 1e-10 rad).
-const RESTART_PRED_TOL: f64 = 1e-14;
-
-/// A path turned by up to this (rad) is the re-integrated path to within the integrator's
-/// own arithmetic noise; a restart heading found further from the heading the path was
-/// integrated at is refined from a path integrated at it (the turned path's error grows
-/// with the angle: about 1e-7 m at 0.5 rad over 10 m, 1e-7 rad on the heading found).
-const RESTART_TURN_EXACT: f64 = 0.01;
-
-/// Integrations of one restart heading fit at most (the second from the first's heading).
-const RESTART_PASSES: usize = 2;
-
-/// [`fit_heading`] for the restarts of the uncertainty fits, integrating once (twice when the
-/// heading found is more than [`RESTART_TURN_EXACT`] from `guess`). A change of
-/// the start heading by `phi` turns the whole path about its start by `phi` (clockwise):
-/// the odometry is integrated once at `guess`, and eq (16) is minimised over the rotation of
-/// those positions, `x - x0 = dx cos(phi) + dy sin(phi)`, `y - y0 = -dx sin(phi) + dy cos(phi)`
-/// (`dx`, `dy` the positions at `guess` relative to the start), with the derivative
-/// `d x / d heading0 = y - y0`, `d y / d heading0 = -(x - x0)` (what the forward sensitivity
-/// of [`Run::residuals_with_jacobian`] sums). The core integrator turns the same path by
-/// the same angle up to its rounding (the sine/cosine kernel, 2e-9 of the distance), so the
-/// heading is the one a fit re-integrating at every step would find.
-pub(super) fn fit_restart_heading(
-    run: &Run,
-    params: &ChassisParams,
-    a: usize,
-    b: usize,
-    guess: f64,
-) -> Result<f64> {
-    let (x0, y0) = run.anchor(a);
-    let mut path = Vec::with_capacity(b - a);
-    let mut heading = guess;
-    for pass in 0..RESTART_PASSES {
-        path.clear();
-        run.integrate_pose(params, a, b, heading, |k, integ| {
-            // The antenna turns with the path about the start, as the centre does.
-            let (px, py) = run.observed(&integ.pose(), heading);
-            let r = run.reference_at(k);
-            path.push([px - x0, py - y0, r.x - x0, r.y - y0]);
-        })
-        .map_err(|e| anyhow!("parameters: {e}"))?;
-        let at = heading;
-        // The first pass starts from the turn of the least squares (where `sum r . R(phi) d`
-        // is largest: one pass over the path), which is near the norms' least; a second
-        // from the heading the first found.
-        let start = if pass == 0 {
-            let (dot, cross) = path.iter().fold((0.0, 0.0), |(a, b), &[dx, dy, rx, ry]| {
-                (a + rx * dx + ry * dy, b + rx * dy - ry * dx)
-            });
-            if dot != 0.0 || cross != 0.0 {
-                at + cross.atan2(dot)
-            } else {
-                at
-            }
-        } else {
-            at
-        };
-        let f = |x: &[f64], acc: &mut NormalAccumulator| {
-            let (sin, cos) = (x[0] - at).sin_cos();
-            for &[dx, dy, rx, ry] in &path {
-                let (px, py) = (dx * cos + dy * sin, dy * cos - dx * sin);
-                acc.add_pair(px - rx, py - ry, &[py], &[-px]);
-            }
-            acc.cost().is_finite()
-        };
-        let res = optim::levenberg_marquardt_streamed(
-            f,
-            &[start],
-            &[1.0],
-            Objective::SumOfNorms,
-            LmOptions {
-                // The Newton model of the norms converges quadratically: the heading is the
-                // minimum of the turned path's eq (16) to 1e-10 rad, not where the IRLS
-                // majoriser's linear convergence happens to stop (iterations cost no
-                // integration here).
-                newton: true,
-                pred_tol: RESTART_PRED_TOL,
-                ..LmOptions::default()
-            },
+    #[test]
+    fn standard_errors_and_the_track_width_warning() {
+        let s = sim(PathKind::Estimation, 30.0, 6);
+        let run = Run::new(
+            &s.samples,
+            &s.reference,
+            match_times(&s.samples, &s.reference),
+        );
+        let last = run.len() - 1;
+        let fit = fit_geometry(
+            &run,
+            &default_truth(),
+            0.3,
+            0,
+            last,
+            GeomOptions::default(),
+            &ProgressBar::hidden(),
         )
-        .ok_or_else(|| anyhow!("parameters: not admissible"))?;
-        heading = res.x[0];
-        if (heading - at).abs() <= RESTART_TURN_EXACT {
-            break;
+        .unwrap();
+        assert!(
+            fit.track_estimated && fit.track_warning.is_none(),
+            "{fit:?}"
+        );
+        for se in fit.std_errors {
+            let se = se.unwrap();
+            assert!(se > 0.0 && se < 1e-3, "{se}");
         }
+        // The errors scale with the residual sigma: the same fit with all four free again.
+        let (se, s) = standard_errors(&run, &fit.params, 0, last, fit.heading0, [true; 4]).unwrap();
+        assert_eq!(se, fit.std_errors);
+        assert!(
+            (s - fit.residual_sigma).abs() < 1e-15 && s > 0.004 && s < 0.02,
+            "{s}"
+        );
+        // Held unknowns have no error; too little turning warns.
+        let (se, _) = standard_errors(
+            &run,
+            &fit.params,
+            0,
+            last,
+            fit.heading0,
+            [true, true, false, true],
+        )
+        .unwrap();
+        assert!(se[2].is_none() && se[0].is_some());
+        let p = fit.params;
+        let held = track_width_warning(false, 0.2, 0.5, &p, &fit.std_errors).unwrap();
+        assert!(held.contains("not estimated"), "{held}");
+        let little = track_width_warning(true, 1.0, 0.5, &p, &fit.std_errors).unwrap();
+        assert!(little.contains("poorly determined"), "{little}");
+        let mut loose = fit.std_errors;
+        loose[2] = Some(2e-3 * p.track_width);
+        assert!(track_width_warning(true, 10.0, 0.5, &p, &loose).is_some());
+        assert!(track_width_warning(true, 10.0, 0.5, &p, &fit.std_errors).is_none());
     }
-    Ok(heading)
 }

@@ -29,8 +29,8 @@
 //!
 //! Standard errors: cluster-robust over the sub-trajectories, the linearised
 //! delete-one-sub-trajectory jackknife ([`cluster_jackknife`]) from the reduced `S_j` and
-//! `g_j` (the plain sandwich [`cluster_sandwich`] covers the truth less often with a few dozen
-//! sub-trajectories); the formal `H^-1 s^2`, which takes every residual as independent, is
+//! `g_j` (the plain sandwich [`cluster_sandwich`] covers the truth less often with a few
+//! dozen sub-trajectories); the formal `H^-1 s^2`, which takes every residual as independent, is
 //! kept beside it for comparison.
 //!
 //! The trade of the length: shorter sub-trajectories follow less drift but each spends three
@@ -38,53 +38,29 @@
 //! fit. 10 m (20 s at 0.5 m/s) loses about a twentieth of the information to the nuisance
 //! parameters at a slip of 0.1 % and keeps the drift at millimetres. On a short run the
 //! track width is set by the slip during the turns (odoctl/README.md has the measured table).
+//!
+//! [`observed_point`]: crate::calib::antenna::observed_point
+//! [`cluster_sandwich`]: super::covariance::cluster_sandwich
 
 use anyhow::{anyhow, bail, Result};
 use odo_core::odometry::ChassisParams;
 
+use crate::calib::antenna::{
+    observed_with_rows, LeverArm, ANTENNA_FORWARD, ANTENNA_LEFT, MODEL_UNKNOWNS,
+};
+use crate::calib::heading_fit::RESTART_TURN_EXACT;
+use crate::calib::pipeline::cores;
+use crate::calib::run::{windows, Run};
 use crate::optim::{self, NormalAccumulator, Objective};
 
-use super::*;
+use super::covariance::{cluster_jackknife, diagonal_std_errors, independent, inverse};
+use super::turning::turning;
 
 /// Default sub-trajectory length (m of reference path).
 pub const SUBTRAJECTORY_LENGTH: f64 = 10.0;
 
 /// Common times a sub-trajectory needs after its start to be used.
 const MIN_POINTS: usize = 10;
-
-/// A path turned by up to this (rad) is taken as the re-integrated path; a larger change of
-/// a start heading is integrated anew (see [`fit_restart_heading`]'s constant).
-const RESTART_TURN_EXACT: f64 = 0.01;
-
-/// The antenna lever arm of a fit: `(forward, left)` metres from the axle centre.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum LeverArm {
-    /// Measured, held.
-    Fixed(f64, f64),
-    /// Estimated with the geometry, from this first guess.
-    Fitted(f64, f64),
-}
-
-impl Default for LeverArm {
-    /// No lever arm: the reference is the axle centre.
-    fn default() -> Self {
-        Self::Fixed(0.0, 0.0)
-    }
-}
-
-impl LeverArm {
-    /// The (first) value.
-    pub fn value(self) -> (f64, f64) {
-        match self {
-            Self::Fixed(f, l) | Self::Fitted(f, l) => (f, l),
-        }
-    }
-
-    /// True when estimated.
-    pub fn fitted(self) -> bool {
-        matches!(self, Self::Fitted(..))
-    }
-}
 
 /// Options of [`fit_subtrajectories`].
 #[derive(Debug, Clone, Copy)]

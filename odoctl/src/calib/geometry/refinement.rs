@@ -30,8 +30,12 @@
 use anyhow::{anyhow, Result};
 use odo_core::odometry::ChassisParams;
 
-use super::slip_fit::{largest_likelihood, slip_rate_range, EVIDENCE_PER_PARAMETER};
-use super::{Innovations, Run, Turning, OBSERVATION_BLOCK};
+use crate::calib::antenna::LeverArm;
+use crate::calib::filter::innovations::{Innovations, Turning, OBSERVATION_BLOCK};
+use crate::calib::filter::search::{largest_likelihood, slip_rate_range, EVIDENCE_PER_PARAMETER};
+use crate::calib::run::Run;
+
+use super::subtrajectory::SubtrajectoryFit;
 
 /// Whether `calibrate` refines the sub-trajectory geometry by the filter.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
@@ -150,4 +154,39 @@ pub fn refine_geometry(
         innovations: skipped.is_none().then(|| std::sync::Arc::new(inn)),
         skipped,
     })
+}
+
+/// The filter's refinement of a sub-trajectory fit `s` ([`refine_geometry`]) with the
+/// reference's sigmas (m, rad): not run with a lever arm (`antenna`: the filter observes the
+/// axle centre) nor with the track width held; then `skipped` says why.
+pub fn refine_subtrajectory_fit(
+    run: &Run,
+    s: &SubtrajectoryFit,
+    antenna: LeverArm,
+    ref_sigma: f64,
+    ref_heading_sigma: f64,
+) -> Result<FilterRefinement> {
+    let reason = if s.antenna != (0.0, 0.0) || antenna.fitted() {
+        Some("the filter observes the axle centre, not a lever arm's antenna")
+    } else if !s.track_estimated {
+        Some("the track width is held")
+    } else {
+        None
+    };
+    if let Some(why) = reason {
+        return Ok(FilterRefinement {
+            params: s.params,
+            covariance: [[f64::NAN; 3]; 3],
+            kappa: f64::NAN,
+            kappa_diff: f64::NAN,
+            linearisation: f64::NAN,
+            observations: 0,
+            skipped: Some(why.to_string()),
+            innovations: None,
+        });
+    }
+    // The start heading (the filter's without reference headings): the first
+    // sub-trajectory's fitted one.
+    let heading0 = s.blocks.first().map_or(0.0, |b| b.heading);
+    refine_geometry(run, &s.params, heading0, ref_sigma, ref_heading_sigma)
 }
