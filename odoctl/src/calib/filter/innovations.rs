@@ -208,6 +208,24 @@ struct Settings {
 }
 
 impl Step {
+    /// The step from `start` to `p` on a track `w` (m), the wheels having rolled `rolled` and
+    /// `rolled_diff` (m), without observation.
+    fn between(start: Pose, p: Pose, w: f64, rolled: [f64; 2], rolled_diff: f64) -> Self {
+        let dalpha = p.heading - start.heading;
+        let mid = start.heading + 0.5 * dalpha;
+        let (ddx, ddy) = (p.x - start.x, p.y - start.y);
+        let along = ddx * mid.sin() + ddy * mid.cos();
+        Self {
+            chord: ddx.hypot(ddy).copysign(along),
+            dalpha,
+            mid,
+            s: wheel_distances(start, p, w),
+            rolled,
+            rolled_diff,
+            obs: None,
+        }
+    }
+
     /// The step's linearised motion on a track `w` (m).
     fn terms(&self, w: f64) -> StepTerms {
         let (sn, cs) = self.mid.sin_cos();
@@ -334,104 +352,21 @@ impl Innovations {
         path: &OpenLoop,
         anchors: Option<&[Pose]>,
     ) -> Result<Self> {
-        let Settings {
-            sigmas: (ref_sigma, ref_heading_sigma),
-            block_length,
-            ..
-        } = settings;
-        let rh2 = ref_heading_sigma * ref_heading_sigma;
-        // Every `stride`-th block's observation is used.
-        let distance = run.dist[run.len() - 1] - run.dist[0];
-        let stride = (distance / (MAX_OBSERVATIONS * block_length))
-            .ceil()
-            .max(1.0) as usize;
-        let mut blocks = 0usize;
         let w = geometry.track_width;
-        let (first, last) = (path.first, path.first + path.poses.len() - 1);
-        let mut k = 1;
-        // This pass's pose of each of the path's (the latest re-anchoring).
-        let mut moved = Reanchoring::default();
-        // The step being merged: its start pose and what it rolled so far.
-        let mut start = path.poses[0];
-        let (mut rolled, mut rolled_diff) = ([0.0f64; 2], 0.0f64);
-        // A step closes when it rolled MERGED_STEP or its block ends; consecutive blocks
-        // start more than a block length or BLOCK_TIME apart.
-        let rolled_mean: f64 = path.rolled.iter().map(|r| 0.5 * (r[0] + r[1])).sum();
-        let duration = run.reference_at(run.len() - 1).t - run.reference_at(0).t;
-        let blocks_most = distance / block_length + duration / BLOCK_TIME + 1.0;
-        let mut steps = Vec::with_capacity((rolled_mean / MERGED_STEP + blocks_most) as usize + 1);
-        // Observations of one block, averaged: (ref - odo) x, y, noise var, heading, count.
-        let mut block = Block::default();
-        let mut block_start = 0usize;
-        let mut observations = 0;
-        // The odometry's pose at each observed block's end; the re-anchorings: (first step
-        // after, anchor minus odometry).
-        let mut closes = Vec::new();
-        let mut close_steps = Vec::new();
-        let mut resets: Vec<(usize, [f64; 3])> = Vec::new();
-        for i in first + 1..=last {
-            let open = path.poses[i - first];
-            let p = moved.apply(open);
-            let [d1, d2, dd] = path.rolled[i - first];
-            rolled[0] += d1;
-            rolled[1] += d2;
-            rolled_diff += dd;
-            // A reference epoch joins its block; the block's averaged observation goes on the
-            // step holding its middle epoch, which is closed when the block ends.
-            let mut block_done = false;
-            if k < run.len() && run.matches[k].0 == i {
-                let r = run.reference_at(k);
-                if block.is_empty() {
-                    block_start = k;
-                }
-                block.add(Epoch {
-                    dx: r.x - p.x,
-                    dy: r.y - p.y,
-                    r: position_variance(run, k, ref_sigma),
-                    dh: r.heading.map(|h| wrap_angle(h - p.heading)),
-                    step: steps.len(),
-                });
-                block_done = k + 1 >= run.len()
-                    || run.dist[k + 1] - run.dist[block_start] > block_length
-                    || run.reference_at(k + 1).t - run.reference_at(block_start).t > BLOCK_TIME;
-                k += 1;
-            }
-            if block_done || 0.5 * (rolled[0] + rolled[1]) >= MERGED_STEP || i == last {
-                let dalpha = p.heading - start.heading;
-                let mid = start.heading + 0.5 * dalpha;
-                let (ddx, ddy) = (p.x - start.x, p.y - start.y);
-                let along = ddx * mid.sin() + ddy * mid.cos();
-                steps.push(Step {
-                    chord: ddx.hypot(ddy).copysign(along),
-                    dalpha,
-                    mid,
-                    s: wheel_distances(start, p, w),
-                    rolled,
-                    rolled_diff,
-                    obs: None,
-                });
-                start = p;
-                (rolled, rolled_diff) = ([0.0; 2], 0.0);
-            }
-            if block_done {
-                let (at, o) = block.take(rh2);
-                blocks += 1;
-                if blocks.is_multiple_of(stride) || k >= run.len() {
-                    steps[at].obs = Some(o);
-                    closes.push(p);
-                    close_steps.push(steps.len());
-                    if let Some(a) = anchors.and_then(|a| a.get(observations)) {
-                        resets.push((
-                            steps.len(),
-                            [a.x - p.x, a.y - p.y, wrap_angle(a.heading - p.heading)],
-                        ));
-                        moved = Reanchoring::new(open, *a);
-                        start = *a;
-                    }
-                    observations += 1;
-                }
-            }
-        }
+        let taken = StepsTaken::along(run, w, settings, path, anchors);
+        Ok(Self::from_steps(taken, w, settings, path))
+    }
+
+    /// The filter of the steps `taken` on a track `w` (m): their terms composed between the
+    /// observations, the re-anchorings' shifts of the pose error and the blocks' levers.
+    fn from_steps(taken: StepsTaken, w: f64, settings: Settings, path: &OpenLoop) -> Self {
+        let StepsTaken {
+            steps,
+            closes,
+            close_steps,
+            resets,
+            observations,
+        } = taken;
         // The steps after the last observation are not observed.
         let mut ends = Vec::with_capacity(observations);
         let mut obs = Vec::with_capacity(observations);
@@ -468,7 +403,7 @@ impl Innovations {
             .zip(&close_steps)
             .map(|(&e, &c)| sum_m(&terms[e.min(c)..c]))
             .collect();
-        Ok(Self {
+        Self {
             composed: Composed::new(&terms[..used], &ends),
             obs,
             p0: path.start_variances,
@@ -477,7 +412,7 @@ impl Innovations {
             levers,
             settings,
             observations,
-        })
+        }
     }
 
     /// Runs the filter with the wheel-distance variance `kappa` (m^2 per m rolled).
@@ -630,6 +565,134 @@ impl Innovations {
             hi,
         );
         (kappa, corr, turning)
+    }
+}
+
+/// The run's motion merged into steps with the reference's blocks averaged into
+/// observations on them ([`StepsTaken::along`]).
+struct StepsTaken {
+    /// The steps, the observed ones with their observation.
+    steps: Vec<Step>,
+    /// The odometry's pose at each observed block's end.
+    closes: Vec<Pose>,
+    /// The number of steps at each observed block's end.
+    close_steps: Vec<usize>,
+    /// The re-anchorings: the first step after, anchor minus odometry `(x, y, heading)`.
+    resets: Vec<(usize, [f64; 3])>,
+    /// Observations (positions) taken.
+    observations: usize,
+}
+
+impl StepsTaken {
+    /// The odometry `path` on a track `w` (m), moved to `anchors[b]` at the end of observed
+    /// block `b` when given, merged into steps of [`MERGED_STEP`] (never across an
+    /// observation); the reference's epochs averaged over blocks of `settings.block_length`
+    /// (at most [`BLOCK_TIME`]), every `stride`-th block observed (at most
+    /// [`MAX_OBSERVATIONS`]).
+    fn along(
+        run: &Run,
+        w: f64,
+        settings: Settings,
+        path: &OpenLoop,
+        anchors: Option<&[Pose]>,
+    ) -> Self {
+        let Settings {
+            sigmas: (ref_sigma, ref_heading_sigma),
+            block_length,
+            ..
+        } = settings;
+        let rh2 = ref_heading_sigma * ref_heading_sigma;
+        // Every `stride`-th block's observation is used.
+        let distance = run.dist[run.len() - 1] - run.dist[0];
+        let stride = (distance / (MAX_OBSERVATIONS * block_length))
+            .ceil()
+            .max(1.0) as usize;
+        let mut blocks = 0usize;
+        let (first, last) = (path.first, path.first + path.poses.len() - 1);
+        let mut k = 1;
+        // This pass's pose of each of the path's (the latest re-anchoring).
+        let mut moved = Reanchoring::default();
+        // The step being merged: its start pose and what it rolled so far.
+        let mut start = path.poses[0];
+        let (mut rolled, mut rolled_diff) = ([0.0f64; 2], 0.0f64);
+        // A step closes when it rolled MERGED_STEP or its block ends; consecutive blocks
+        // start more than a block length or BLOCK_TIME apart.
+        let rolled_mean: f64 = path.rolled.iter().map(|r| 0.5 * (r[0] + r[1])).sum();
+        let duration = run.reference_at(run.len() - 1).t - run.reference_at(0).t;
+        let blocks_most = distance / block_length + duration / BLOCK_TIME + 1.0;
+        let mut taken = Self {
+            steps: Vec::with_capacity((rolled_mean / MERGED_STEP + blocks_most) as usize + 1),
+            closes: Vec::new(),
+            close_steps: Vec::new(),
+            resets: Vec::new(),
+            observations: 0,
+        };
+        // Observations of one block, averaged: (ref - odo) x, y, noise var, heading, count.
+        let mut block = Block::default();
+        let mut block_start = 0usize;
+        for i in first + 1..=last {
+            let open = path.poses[i - first];
+            let p = moved.apply(open);
+            let [d1, d2, dd] = path.rolled[i - first];
+            rolled[0] += d1;
+            rolled[1] += d2;
+            rolled_diff += dd;
+            // A reference epoch joins its block; the block's averaged observation goes on the
+            // step holding its middle epoch, which is closed when the block ends.
+            let mut block_done = false;
+            if k < run.len() && run.matches[k].0 == i {
+                let r = run.reference_at(k);
+                if block.is_empty() {
+                    block_start = k;
+                }
+                block.add(Epoch {
+                    dx: r.x - p.x,
+                    dy: r.y - p.y,
+                    r: position_variance(run, k, ref_sigma),
+                    dh: r.heading.map(|h| wrap_angle(h - p.heading)),
+                    step: taken.steps.len(),
+                });
+                block_done = k + 1 >= run.len()
+                    || run.dist[k + 1] - run.dist[block_start] > block_length
+                    || run.reference_at(k + 1).t - run.reference_at(block_start).t > BLOCK_TIME;
+                k += 1;
+            }
+            if block_done || 0.5 * (rolled[0] + rolled[1]) >= MERGED_STEP || i == last {
+                taken
+                    .steps
+                    .push(Step::between(start, p, w, rolled, rolled_diff));
+                start = p;
+                (rolled, rolled_diff) = ([0.0; 2], 0.0);
+            }
+            if block_done {
+                let (at, o) = block.take(rh2);
+                blocks += 1;
+                if blocks.is_multiple_of(stride) || k >= run.len() {
+                    if let Some(a) = taken.observe(at, o, p, anchors) {
+                        moved = Reanchoring::new(open, a);
+                        start = a;
+                    }
+                }
+            }
+        }
+        taken
+    }
+
+    /// Puts observation `o` on step `at`, the odometry at `p` at its block's end; returns the
+    /// anchor the path moves to there, if any.
+    fn observe(&mut self, at: usize, o: Obs, p: Pose, anchors: Option<&[Pose]>) -> Option<Pose> {
+        self.steps[at].obs = Some(o);
+        self.closes.push(p);
+        self.close_steps.push(self.steps.len());
+        let anchor = anchors.and_then(|a| a.get(self.observations)).copied();
+        if let Some(a) = anchor {
+            self.resets.push((
+                self.steps.len(),
+                [a.x - p.x, a.y - p.y, wrap_angle(a.heading - p.heading)],
+            ));
+        }
+        self.observations += 1;
+        anchor
     }
 }
 

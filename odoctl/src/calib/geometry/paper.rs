@@ -162,24 +162,23 @@ pub fn fit_geometry(
     start
         .validate()
         .map_err(|e| anyhow!("initial parameters: {e}"))?;
-    let mut scale = vec![
-        start.left_diameter,
-        start.right_diameter,
-        start.track_width,
-        1.0,
-    ];
-    let mut x = vec![
-        start.left_diameter,
-        start.right_diameter,
-        start.track_width,
-        heading0,
-    ];
-    // A fitted lever arm: unknowns 4 and 5 ([`ANTENNA_FORWARD`], [`ANTENNA_LEFT`]), free with
-    // the track width (only turning reveals it too).
-    if let LeverArm::Fitted(f, l) = opts.antenna {
-        x.extend([f, l]);
-        scale.extend([1.0, 1.0]);
+    let mut search = Eq16Search::new(run, start, heading0, a, opts.antenna);
+    let ends = continuation_ends(run, a, b, &opts);
+    progress.set_length((ends.len() + 1 + usize::from(opts.polish)) as u64);
+    search.continuation(&ends, opts.min_turning, progress)?;
+    let mut cost = search.newton(b, progress)?;
+    // (The polish varies the geometry alone: not with a fitted lever arm.)
+    if opts.polish && search.x.len() == 4 {
+        cost = search.polish(b, cost);
+        progress.inc(1);
     }
+    search.result(b, cost, ends.len(), &opts)
+}
+
+/// The last match of each continuation stage of [`fit_geometry`] on `a..=b`: the prefixes of
+/// `opts.first_stage` metres of reference path, then `opts.stage_growth` times longer each,
+/// of at least 4 common times; the last is `b`.
+fn continuation_ends(run: &Run, a: usize, b: usize, opts: &GeomOptions) -> Vec<usize> {
     let total = run.dist[b] - run.dist[a];
     let mut ends = Vec::new();
     let mut len = opts.first_stage;
@@ -193,71 +192,163 @@ pub fn fit_geometry(
     if ends.last() != Some(&b) {
         ends.push(b);
     }
-    let debug = std::env::var_os("ODOCTL_DEBUG").is_some();
-    let (mut iterations, mut evaluations) = (0, 0);
-    let lm = LmOptions {
+    ends
+}
+
+/// Options of the continuation stages' Levenberg-Marquardt fits.
+fn stage_lm() -> LmOptions {
+    LmOptions {
         max_iter: 60,
         pred_tol: STAGE_PRED_TOL,
         // Light damping from the start: the trust region (max_step) bounds the first steps
         // from a poor estimate, and each stage starts near its minimum.
         lambda0: 1e-9,
         ..LmOptions::default()
-    };
-    progress.set_length((ends.len() + 1 + usize::from(opts.polish)) as u64);
-    let mut free = vec![true, true, false, true];
-    free.resize(x.len(), false);
-    for &e in &ends {
-        // The track width joins once the stretch has turned enough (it stays free after).
-        if !free[2] && turning(run, &with_geometry(start, &x), a, e, x[3]) >= opts.min_turning {
-            free[2..].iter_mut().for_each(|f| *f = true);
+    }
+}
+
+/// The eq (16) search of [`fit_geometry`] from match `a`: the estimate `x` (the
+/// [`GEOMETRY_UNKNOWNS`](crate::calib::sensitivity::GEOMETRY_UNKNOWNS), then a fitted lever
+/// arm), which unknowns are free, and the optimisers' counts so far.
+struct Eq16Search<'a> {
+    run: &'a Run<'a>,
+    start: &'a ChassisParams,
+    a: usize,
+    x: Vec<f64>,
+    scale: Vec<f64>,
+    free: Vec<bool>,
+    iterations: usize,
+    evaluations: usize,
+    debug: bool,
+}
+
+impl<'a> Eq16Search<'a> {
+    /// At `start`'s geometry and `heading0`, the track width (and a fitted lever arm) held.
+    fn new(
+        run: &'a Run<'a>,
+        start: &'a ChassisParams,
+        heading0: f64,
+        a: usize,
+        antenna: LeverArm,
+    ) -> Self {
+        let mut scale = vec![
+            start.left_diameter,
+            start.right_diameter,
+            start.track_width,
+            1.0,
+        ];
+        let mut x = vec![
+            start.left_diameter,
+            start.right_diameter,
+            start.track_width,
+            heading0,
+        ];
+        // A fitted lever arm: unknowns 4 and 5 ([`ANTENNA_FORWARD`], [`ANTENNA_LEFT`]), free with
+        // the track width (only turning reveals it too).
+        if let LeverArm::Fitted(f, l) = antenna {
+            x.extend([f, l]);
+            scale.extend([1.0, 1.0]);
         }
-        let res = lm_subset(run, start, a, e, &x, &scale, &free, Objective::Squares, lm)
+        let mut free = vec![true, true, false, true];
+        free.resize(x.len(), false);
+        Self {
+            run,
+            start,
+            a,
+            x,
+            scale,
+            free,
+            iterations: 0,
+            evaluations: 0,
+            debug: std::env::var_os("ODOCTL_DEBUG").is_some(),
+        }
+    }
+
+    /// Levenberg-Marquardt on the squared distances over each stage `a..=e` of `ends`, each
+    /// from the one before; the track width (and a fitted lever arm) joins once the stretch
+    /// has turned `min_turning` (rad).
+    fn continuation(
+        &mut self,
+        ends: &[usize],
+        min_turning: f64,
+        progress: &ProgressBar,
+    ) -> Result<()> {
+        let (run, start, a) = (self.run, self.start, self.a);
+        for &e in ends {
+            let x = &self.x;
+            // The track width joins once the stretch has turned enough (it stays free after).
+            if !self.free[2] && turning(run, &with_geometry(start, x), a, e, x[3]) >= min_turning {
+                self.free[2..].iter_mut().for_each(|f| *f = true);
+            }
+            let res = lm_subset(
+                run,
+                start,
+                a,
+                e,
+                x,
+                &self.scale,
+                &self.free,
+                Objective::Squares,
+                stage_lm(),
+            )
             .ok_or_else(|| anyhow!("the starting parameters are not admissible"))?;
-        x = res.x;
-        iterations += res.iterations;
-        evaluations += res.evaluations;
-        if debug {
+            self.x = res.x;
+            self.iterations += res.iterations;
+            self.evaluations += res.evaluations;
+            if self.debug {
+                eprintln!(
+                    "stage to {e} ({:.1} m): {:?} cost {} iterations {} runs {} free {:?}",
+                    run.dist[e] - run.dist[a],
+                    self.x,
+                    res.cost,
+                    res.iterations,
+                    res.evaluations,
+                    self.free
+                );
+            }
+            progress.inc(1);
+        }
+        Ok(())
+    }
+
+    /// Damped Newton on eq (16) itself over `a..=b`; returns eq (16) at the estimate (m).
+    fn newton(&mut self, b: usize, progress: &ProgressBar) -> Result<f64> {
+        let res = lm_subset(
+            self.run,
+            self.start,
+            self.a,
+            b,
+            &self.x,
+            &self.scale,
+            &self.free,
+            Objective::SumOfNorms,
+            LmOptions {
+                max_iter: 200,
+                pred_tol: FINAL_PRED_TOL,
+                newton: true,
+                ..stage_lm()
+            },
+        )
+        .ok_or_else(|| anyhow!("the fit left the admissible parameter range"))?;
+        self.x = res.x;
+        self.iterations += res.iterations;
+        self.evaluations += res.evaluations;
+        if self.debug {
             eprintln!(
-                "stage to {e} ({:.1} m): {x:?} cost {} iterations {} runs {} free {free:?}",
-                run.dist[e] - run.dist[a],
-                res.cost,
-                res.iterations,
-                res.evaluations
+                "final fit: {:?} cost {} iterations {} runs {}",
+                self.x, res.cost, res.iterations, res.evaluations
             );
         }
         progress.inc(1);
+        Ok(res.cost)
     }
-    let res = lm_subset(
-        run,
-        start,
-        a,
-        b,
-        &x,
-        &scale,
-        &free,
-        Objective::SumOfNorms,
-        LmOptions {
-            max_iter: 200,
-            pred_tol: FINAL_PRED_TOL,
-            newton: true,
-            ..lm
-        },
-    )
-    .ok_or_else(|| anyhow!("the fit left the admissible parameter range"))?;
-    x = res.x;
-    let mut cost = res.cost;
-    iterations += res.iterations;
-    evaluations += res.evaluations;
-    if debug {
-        eprintln!(
-            "final fit: {x:?} cost {} iterations {} runs {}",
-            res.cost, res.iterations, res.evaluations
-        );
-    }
-    progress.inc(1);
-    // (The polish varies the geometry alone: not with a fitted lever arm.)
-    if opts.polish && x.len() == 4 {
-        let idx: Vec<usize> = (0..4).filter(|&i| free[i]).collect();
+
+    /// Nelder-Mead on eq (16) over `a..=b` from the estimate of eq (16) `cost`, kept when
+    /// lower; returns eq (16) at the estimate (m).
+    fn polish(&mut self, b: usize, cost: f64) -> f64 {
+        let (run, start, a) = (self.run, self.start, self.a);
+        let x = &self.x;
+        let idx: Vec<usize> = (0..4).filter(|&i| self.free[i]).collect();
         let full = |sub: &[f64]| {
             let mut v = x.clone();
             for (j, &i) in idx.iter().enumerate() {
@@ -266,7 +357,7 @@ pub fn fit_geometry(
             v
         };
         let sub0: Vec<f64> = idx.iter().map(|&i| x[i]).collect();
-        let step: Vec<f64> = idx.iter().map(|&i| scale[i] * 1e-4).collect();
+        let step: Vec<f64> = idx.iter().map(|&i| self.scale[i] * 1e-4).collect();
         let nm = optim::nelder_mead(
             |s| {
                 let v = full(s);
@@ -279,67 +370,65 @@ pub fn fit_geometry(
                 ..NmOptions::default()
             },
         );
-        evaluations += nm.evaluations;
-        iterations += nm.iterations;
+        self.evaluations += nm.evaluations;
+        self.iterations += nm.iterations;
         if nm.cost < cost {
-            x = full(&nm.x);
-            cost = nm.cost;
+            self.x = full(&nm.x);
+            nm.cost
+        } else {
+            cost
         }
-        progress.inc(1);
     }
-    let params = with_geometry(start, &x);
-    let antenna = lever_arm_of(run, &x);
-    if opts.antenna.fitted() && !free[4] {
-        bail!(
-            "the stretch turned too little to estimate the antenna lever arm (--fit-antenna needs {:.0} deg)",
-            opts.min_turning.to_degrees()
-        );
+
+    /// The fit at the estimate over `a..=b` (eq (16) `cost`, `stages` continuation stages):
+    /// its parameters, turning, standard errors and warnings.
+    fn result(self, b: usize, cost: f64, stages: usize, opts: &GeomOptions) -> Result<GeomFit> {
+        let (run, a, x, free) = (self.run, self.a, &self.x, &self.free);
+        let params = with_geometry(self.start, x);
+        let antenna = lever_arm_of(run, x);
+        if opts.antenna.fitted() && !free[4] {
+            bail!(
+                "the stretch turned too little to estimate the antenna lever arm (--fit-antenna needs {:.0} deg)",
+                opts.min_turning.to_degrees()
+            );
+        }
+        let turned = turning(run, &params, a, b, x[3]);
+        let held = [free[0], free[1], free[2], free[3]];
+        let (std_errors, residual_sigma) = if x.len() == 4 {
+            standard_errors(run, &params, a, b, x[3], held)
+        } else {
+            standard_errors_with(run, &params, antenna, a, b, x[3], free)
+                .map(|(se, s)| ([se[0], se[1], se[2], se[3]], s))
+        }
+        .ok_or_else(|| anyhow!("the fit left the admissible parameter range"))?;
+        let robust =
+            paper_cluster_errors(run, &params, antenna, a, b, x[3], free, opts.cluster_length);
+        let track_warning =
+            track_width_warning(free[2], turned, opts.min_turning, &params, &std_errors);
+        Ok(GeomFit {
+            params,
+            heading0: x[3],
+            start: run.anchor(a),
+            cost,
+            points: b - a,
+            iterations: self.iterations,
+            evaluations: self.evaluations + 3,
+            stages,
+            track_estimated: free[2],
+            turning: turned,
+            std_errors,
+            robust_std_errors: robust
+                .as_ref()
+                .map_or([None; 4], |(se, _)| [se[0], se[1], se[2], se[3]]),
+            clusters: robust.as_ref().map_or(0, |(_, g)| *g),
+            antenna,
+            antenna_std_errors: robust
+                .as_ref()
+                .and_then(|(se, _)| Some([se.get(4).copied()??, se.get(5).copied()??])),
+            residual_sigma,
+            track_warning,
+        })
     }
-    let turned = turning(run, &params, a, b, x[3]);
-    let held = [free[0], free[1], free[2], free[3]];
-    let (std_errors, residual_sigma) = if x.len() == 4 {
-        standard_errors(run, &params, a, b, x[3], held)
-    } else {
-        standard_errors_with(run, &params, antenna, a, b, x[3], &free)
-            .map(|(se, s)| ([se[0], se[1], se[2], se[3]], s))
-    }
-    .ok_or_else(|| anyhow!("the fit left the admissible parameter range"))?;
-    let robust = paper_cluster_errors(
-        run,
-        &params,
-        antenna,
-        a,
-        b,
-        x[3],
-        &free,
-        opts.cluster_length,
-    );
-    evaluations += 3;
-    let track_warning =
-        track_width_warning(free[2], turned, opts.min_turning, &params, &std_errors);
-    Ok(GeomFit {
-        params,
-        heading0: x[3],
-        start: run.anchor(a),
-        cost,
-        points: b - a,
-        iterations,
-        evaluations,
-        stages: ends.len(),
-        track_estimated: free[2],
-        turning: turned,
-        std_errors,
-        robust_std_errors: robust
-            .as_ref()
-            .map_or([None; 4], |(se, _)| [se[0], se[1], se[2], se[3]]),
-        clusters: robust.as_ref().map_or(0, |(_, g)| *g),
-        antenna,
-        antenna_std_errors: robust
-            .as_ref()
-            .and_then(|(se, _)| Some([se.get(4).copied()??, se.get(5).copied()??])),
-        residual_sigma,
-        track_warning,
-    })
 }
 
 /// The lever arm of a geometry-fit vector: its entries 4 and 5 when it has them (fitted),
