@@ -1,54 +1,55 @@
 //! Calibration against a reference trajectory (RTK GNSS): the wheel diameters and the track
-//! width, the uncertainty coefficients of the unit's covariance model (or the paper's model),
-//! the stability study on sub-trajectories (the paper's Figs. 7-9), and the error evaluation
-//! that `validate` uses.
+//! width with their uncertainty, the uncertainty coefficients of the unit's covariance model
+//! and of the paper's model, the stability study on sub-trajectories (the paper's Figs. 7-9),
+//! and the error evaluation that `validate` uses.
 //!
 //! All odometry goes through the core integrator, so a calibrated run is bit-consistent with
 //! what the unit computes.
 //!
 //! # The pipeline ([`calibrate`])
-//! 1. **Geometry** ([`geometry`]). By default the run is cut into sub-trajectories of 10 m of
-//!    reference path; each restarts the odometry, its start position and heading fitted as
-//!    nuisance parameters, while the diameters and the track width are shared
+//! 1. **Geometry** ([`geometry`]). The run is cut into sub-trajectories of 10 m of reference
+//!    path; each restarts the odometry, its start position and heading fitted as nuisance
+//!    parameters, while the diameters and the track width are shared
 //!    ([`fit_subtrajectories`]): slip drift never accumulates beyond one sub-trajectory. The
-//!    Kalman filter of the likelihood then refines that estimate, weighting every observation
-//!    by the slip's noise ([`geometry::refinement`]). The standard errors are cluster-robust
-//!    over the sub-trajectories. The documented alternative is the paper's eq (16) over the
-//!    whole run (`--method paper`, [`fit_geometry`]); with `--wheel-harmonics`, the per-angle
-//!    wheel function follows as a second stage.
-//! 2. **Uncertainty** ([`uncertainty`]). By default the covariance model's kappa is the slip of
-//!    the largest likelihood of the reference's observations under an error-state Kalman
-//!    filter along the whole run ([`filter`]): each innovation is scored on a prediction from
-//!    the observations before it only. The paper's model, and either model with
-//!    `--uncertainty-criterion coverage`, take the paper's coverage criterion: the smallest
+//!    likelihood's Kalman filter then refines that estimate by generalised least squares,
+//!    every observation weighted by the slip's noise, where its linearisation holds
+//!    ([`geometry::refinement`]); its covariance is the geometry's uncertainty the unit
+//!    carries (else the sub-trajectories' cluster-robust one). The documented alternative is
+//!    the paper's eq (16) over the whole run (`--method paper`, [`fit_geometry`]). With
+//!    `--wheel-harmonics`, the per-angle wheel function follows as a second stage.
+//! 2. **Uncertainty** ([`uncertainty`]). The covariance model's kappa is the slip of the
+//!    largest likelihood of the reference's observations under an error-state Kalman filter
+//!    along the whole run ([`filter`]), each innovation scored on a prediction from the
+//!    observations before it only. The paper's model (and the covariance model with
+//!    `--uncertainty-criterion coverage`) takes the paper's coverage criterion: the smallest
 //!    coefficient whose 1-sigma band, widened by the reference noise, covers 68.27 % of the
 //!    horizontal errors of restarted sub-trajectories; `delta_diff` by the heading-change
-//!    coverage.
-//! 3. **Evaluation and studies**: the whole run evaluated with the result ([`evaluate`]); on
-//!    request the stability study on sub-trajectories ([`studies`]).
+//!    coverage. `odoctl calibrate` fits both models and selects the covariance model.
+//! 3. **Evaluation** of the whole run with the result ([`evaluate`]), and on request the
+//!    stability study ([`studies`]).
 //!
 //! # Files
-//! The matched run, beneath every layer:
-//! - `run.rs`: [`Run`], a run matched to its reference: path length, anchors and start
-//!   headings of a stretch, the core integrator along it (pose, uncertainty, sensitivities),
-//!   the residuals against the reference and their normal equations; the stretches of a run.
+//! The matched run, which every layer uses:
+//! - `run.rs`: [`Run`], a run matched to its reference: path length, a stretch's anchor and
+//!   start heading, the core integrator along it (pose, uncertainty, sensitivities), the
+//!   residuals against the reference and their normal equations; the stretches of a run.
 //! - `sensitivity.rs`: the pose's forward sensitivities to the geometry unknowns;
-//!   `pipeline.rs`: their pass spread over two cores.
-//! - `antenna.rs`: the reference antenna's lever arm, the observed point and its derivatives.
-//! - `heading_fit.rs`: the start heading of a stretch minimising eq (16) with the geometry
-//!   held.
+//!   `pipeline.rs`: their pass on two cores.
+//! - `antenna.rs`: the reference antenna's lever arm: the observed point and its derivatives.
+//! - `heading_fit.rs`: the start heading of a stretch minimising eq (16), the geometry held.
 //! - `evaluation.rs`: errors and predicted uncertainty along a run.
 //!
-//! The layers, in the order of the pipeline: [`geometry`] (`subtrajectory.rs`,
-//! `refinement.rs`, `paper.rs`, `covariance.rs`, `turning.rs`, `wheel_harmonics.rs`),
-//! [`filter`] (the likelihood's Kalman filter, which the refinement and the kappa fit share:
-//! `innovations.rs`, `blocks.rs`, `kalman.rs`, `search.rs`), [`uncertainty`]
-//! (`coefficients.rs`, `likelihood.rs`, `coverage.rs`, `restarts.rs`, `delta_diff.rs`),
-//! [`studies`] (`stability.rs`, `ensemble.rs`); and `calibration.rs`, all of it in memory
-//! ([`calibrate`]).
+//! The layers, each using only the matched run and the layers before it:
+//! - [`filter`]: the likelihood's Kalman filter, which the geometry's refinement and the
+//!   kappa fit share (`innovations.rs`, `blocks.rs`, `kalman.rs`, `search.rs`);
+//! - [`geometry`]: `subtrajectory.rs`, `refinement.rs`, `paper.rs`, `covariance.rs`,
+//!   `turning.rs`, `wheel_harmonics.rs`;
+//! - [`uncertainty`]: `coefficients.rs`, `likelihood.rs`, `coverage.rs`, `restarts.rs`,
+//!   `delta_diff.rs`;
+//! - [`studies`]: `stability.rs`, `ensemble.rs`;
+//! - `calibration.rs`: all of it in memory ([`calibrate`]).
 //!
-//! A layer uses the matched run and the layers listed before it in this dependency order:
-//! run, [`filter`], [`geometry`], [`uncertainty`], [`studies`], `calibration.rs`.
+//! The items the rest of `odoctl`, the benchmarks and the tests use are re-exported here.
 
 pub mod antenna;
 pub mod calibration;

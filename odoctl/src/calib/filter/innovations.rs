@@ -17,8 +17,8 @@
 //! `(dx, dy)` (noise: the epochs' own sigmas, else `--reference-sigma`, over their number) and,
 //! where they have headings, the middle epoch's `dalpha` (`--reference-heading-sigma-deg`):
 //! the heading error is a random walk, whose block means are smoother than its values (their
-//! steps have 2/3 of the variance), so a filter that took the means for values at the middle
-//! read the slip 13 % (q 0.001) to 26 % (q 0.003) low on 70 m runs with the true geometry;
+//! steps have 2/3 of the variance), so a filter that takes the means for values at the middle
+//! reads the slip 13 % (q 0.001) to 26 % (q 0.003) low on 70 m runs with the true geometry;
 //! the position error, an integral of it, is smooth over a metre. The
 //! log-likelihood is `-1/2 sum (ln det S_k + v_k^T S_k^-1 v_k)` over the innovations `v_k`:
 //! each is scored on a prediction from the observations before it only, so nothing a point is

@@ -1,5 +1,5 @@
 //! The geometry refined by the Kalman filter of the kappa likelihood (`--geometry-refine
-//! filter`, the default after the sub-trajectory fit).
+//! filter`, the default after the sub-trajectory fit; [`refine_subtrajectory_fit`]).
 //!
 //! [`Innovations`] carries the geometry's relative errors `(c_1, c_2, b)` as states with a wide
 //! prior, so its state after the last observation is a generalised least-squares estimate of
@@ -21,11 +21,10 @@
 //! half its variance (relative), of which the filter takes about half for a scale of all
 //! three lengths; that error, a quarter of the heading error's mean variance, is added to the
 //! covariance as one scale of the three lengths, and when it exceeds the diameters' standard
-//! error the refinement is not applied. Before the re-anchoring, the filter was linearised
-//! about the odometry integrated open-loop, whose drift left an error of
-//! `kappa (R_1 + R_2) / (8 W^2)` (`R_i` the distances the wheels rolled): it refused every log
-//! longer than a few hundred metres, and added 0.04 mm to the 1 km log's diameters' standard
-//! errors. The filter observes the axle centre: a lever arm keeps the sub-trajectory estimate.
+//! error the refinement is not applied. (Linearised about the odometry integrated open-loop
+//! instead, the filter would keep the drift's error of `kappa (R_1 + R_2) / (8 W^2)`, `R_i` the
+//! distances the wheels rolled: it would refuse every log longer than a few hundred metres.)
+//! The filter observes the axle centre: a lever arm keeps the sub-trajectory estimate.
 
 use anyhow::{anyhow, Result};
 use odo_core::odometry::ChassisParams;
