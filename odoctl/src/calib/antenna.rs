@@ -6,16 +6,50 @@
 
 use odo_core::odometry::Pose;
 
-use super::*;
+use super::sensitivity::PoseSensitivity;
 
 /// Column of `antenna_forward` in the unknowns of the residual Jacobians (after the four
 /// [`GEOMETRY_UNKNOWNS`]).
+///
+/// [`GEOMETRY_UNKNOWNS`]: super::sensitivity::GEOMETRY_UNKNOWNS
 pub const ANTENNA_FORWARD: usize = 4;
 /// Column of `antenna_left`.
 pub const ANTENNA_LEFT: usize = 5;
 /// Number of model unknowns a Jacobian column index may name: [`GEOMETRY_UNKNOWNS`], then
 /// `antenna_forward`, `antenna_left`.
+///
+/// [`GEOMETRY_UNKNOWNS`]: super::sensitivity::GEOMETRY_UNKNOWNS
 pub const MODEL_UNKNOWNS: usize = 6;
+
+/// The antenna lever arm of a fit: `(forward, left)` metres from the axle centre.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum LeverArm {
+    /// Measured, held.
+    Fixed(f64, f64),
+    /// Estimated with the geometry, from this first guess.
+    Fitted(f64, f64),
+}
+
+impl Default for LeverArm {
+    /// No lever arm: the reference is the axle centre.
+    fn default() -> Self {
+        Self::Fixed(0.0, 0.0)
+    }
+}
+
+impl LeverArm {
+    /// The (first) value.
+    pub fn value(self) -> (f64, f64) {
+        match self {
+            Self::Fixed(f, l) | Self::Fitted(f, l) => (f, l),
+        }
+    }
+
+    /// True when estimated.
+    pub fn fitted(self) -> bool {
+        matches!(self, Self::Fitted(..))
+    }
+}
 
 /// The offset of the antenna from the axle centre at `heading` (east, north; m).
 #[inline(always)]

@@ -1,6 +1,7 @@
 //! The whole calibration in memory: the eq (16) fit, the uncertainty and `delta_diff` fits,
 //! the final evaluation and the stability study, returning values (no printing).
 
+use std::thread::JoinHandle;
 use std::time::Instant;
 
 use anyhow::{bail, Result};
@@ -10,15 +11,28 @@ use odo_core::odometry::{ChassisParams, GeometryUncertainty, UncertaintyModel};
 use crate::config as cfg;
 use crate::csvio;
 
-use super::uncertainty::with_covariance_coefficients;
-use super::{
-    evaluate, fit_delta_diff, fit_geometry, fit_kappa_filter, fit_restart_heading,
-    fit_subtrajectories, fit_uncertainty_on, paper_cluster_errors, refine_geometry,
-    standard_errors, track_width_warning, windows_study, Cuts, DeltaMode, DiffOptions, Evaluation,
-    FilterRefinement, GeomFit, GeomOptions, GeometryRefine, Innovations, LeverArm, Restarts, Run,
-    SubtrajectoryFit, SubtrajectoryOptions, UncertaintyFit, WindowEstimate, WindowStart,
-    OBSERVATION_BLOCK, SUBTRAJECTORY_LENGTH,
+use super::antenna::LeverArm;
+use super::evaluation::{evaluate, Evaluation};
+use super::filter::innovations::{Innovations, OBSERVATION_BLOCK};
+use super::geometry::paper::{
+    fit_geometry, paper_cluster_errors, standard_errors, GeomFit, GeomOptions,
 };
+use super::geometry::refinement::{refine_subtrajectory_fit, FilterRefinement, GeometryRefine};
+use super::geometry::subtrajectory::{
+    fit_subtrajectories, Cuts, SubtrajectoryFit, SubtrajectoryOptions, SUBTRAJECTORY_LENGTH,
+};
+use super::geometry::turning::track_width_warning;
+use super::geometry::wheel_harmonics::{fit_harmonics, HarmonicsFit, HARMONICS_SEGMENT};
+use super::heading_fit::fit_restart_heading;
+use super::run::Run;
+use super::studies::stability::{windows_study, WindowEstimate, WindowStart};
+use super::uncertainty::coefficients::{
+    with_covariance_coefficients, DeltaMode, UncertaintyCriterion, UncertaintyFit,
+};
+use super::uncertainty::coverage::fit_uncertainty_on;
+use super::uncertainty::delta_diff::{fit_delta_diff, DiffOptions};
+use super::uncertainty::likelihood::fit_kappa_filter;
+use super::uncertainty::restarts::Restarts;
 
 /// How the diameters and the track width are estimated.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
@@ -29,21 +43,6 @@ pub enum Method {
     Subtrajectory,
     /// The paper's eq (16) over the whole run ([`fit_geometry`]).
     Paper,
-}
-
-/// How `calibrate` fits the uncertainty coefficients.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
-pub enum UncertaintyCriterion {
-    /// The covariance model's kappa by the likelihood of the reference's observations under
-    /// an error-state Kalman filter (`innovations.rs`: nothing a point is judged on is fitted
-    /// to it); the paper's model by the coverage criterion (the default).
-    #[default]
-    Likelihood,
-    /// The paper's statistical fitting for both models: the smallest coefficient whose
-    /// 1-sigma band (widened by the reference noise) covers 68.27 % of the pooled horizontal
-    /// errors of restarted sub-trajectories, restart headings fitted by eq (16) on each;
-    /// `delta_diff` by the heading-change coverage.
-    Coverage,
 }
 
 /// Options of the calibration (`odoctl calibrate`'s fitting options; the defaults are the
@@ -75,7 +74,7 @@ pub struct CalibrationOptions {
     /// Where [`Method::Subtrajectory`] cuts the run.
     pub subtrajectory_cuts: Cuts,
     /// Whether [`Method::Subtrajectory`]'s estimate is refined by the filter
-    /// ([`refine_geometry`]).
+    /// ([`refine_geometry`](super::geometry::refinement::refine_geometry)).
     pub geometry_refine: GeometryRefine,
     /// The antenna lever arm: measured (held) or fitted with the geometry.
     pub antenna: LeverArm,
@@ -124,7 +123,7 @@ impl Default for CalibrationOptions {
             windows: Vec::new(),
             window_start: WindowStart::Full,
             wheel_harmonics: 0,
-            harmonics_window: super::HARMONICS_SEGMENT,
+            harmonics_window: HARMONICS_SEGMENT,
             quiet: true,
         }
     }
@@ -163,7 +162,7 @@ pub struct Calibration {
     /// The stability study.
     pub windows: Vec<WindowEstimate>,
     /// The wheel-function fit (`wheel_harmonics` > 0).
-    pub harmonics: Option<super::HarmonicsFit>,
+    pub harmonics: Option<HarmonicsFit>,
 }
 
 /// The geometry's calibration uncertainty as the unit's keys (`left_diameter_se`..
@@ -235,12 +234,84 @@ pub fn calibrate(
     let filter_wanted = o.fit_delta
         && models.contains(&UncertaintyModel::Covariance)
         && o.criterion == UncertaintyCriterion::Likelihood;
+    let GeometryPhase {
+        geometry,
+        subtrajectories,
+        refinement,
+        early_filter,
+    } = fit_geometry_phase(&mut run, initial, o, filter_wanted, &timer)?;
+    run.antenna = geometry.antenna;
+    let mut params = geometry.params;
+    params.geometry_uncertainty =
+        geometry_uncertainty(&geometry, subtrajectories.as_ref(), refinement.as_ref());
+    let harmonics = if o.wheel_harmonics > 0 {
+        let h = fit_harmonics(
+            &run,
+            &params,
+            geometry.heading0,
+            o.wheel_harmonics,
+            o.harmonics_window,
+        )?;
+        params = h.params;
+        timer.lap("wheel harmonics fit");
+        Some(h)
+    } else {
+        None
+    };
+    let uncertainty = if o.fit_delta {
+        let phase = UncertaintyPhase {
+            run: &run,
+            heading0: geometry.heading0,
+            initial,
+            o,
+            timer: &timer,
+        };
+        phase.fit_models(&mut params, &models, filter_wanted, early_filter)?
+    } else {
+        Vec::new()
+    };
+    let evaluation = evaluate(&run, &params, geometry.heading0)?;
+    timer.lap("final evaluation");
+    let windows = stability_study(&run, &geometry, initial, o)?;
+    Ok(Calibration {
+        params,
+        geometry,
+        subtrajectories,
+        refinement,
+        uncertainty,
+        evaluation,
+        windows,
+        harmonics,
+    })
+}
+
+/// What the geometry phase of [`calibrate`] hands on.
+struct GeometryPhase {
+    /// The geometry fit, whichever the method.
+    geometry: GeomFit,
+    /// The sub-trajectory fit, with [`Method::Subtrajectory`].
+    subtrajectories: Option<SubtrajectoryFit>,
+    /// The filter's refinement, with [`GeometryRefine::Filter`].
+    refinement: Option<FilterRefinement>,
+    /// The covariance model's kappa, fitted on a thread of its own from the applied
+    /// refinement's filter when the likelihood criterion wants it.
+    early_filter: Option<JoinHandle<UncertaintyFit>>,
+}
+
+/// The geometry of [`calibrate`] by `o.method`; the run's lever arm becomes the fit's.
+fn fit_geometry_phase(
+    run: &mut Run,
+    initial: &ChassisParams,
+    o: &CalibrationOptions,
+    filter_wanted: bool,
+    timer: &PhaseTimer,
+) -> Result<GeometryPhase> {
     let h0 = run.heading_guess(0);
-    let (geometry, subtrajectories, refinement, mut early_filter) = match o.method {
+    match o.method {
         Method::Paper => {
             let pb = bar(o.quiet, "eq (16) fit");
             let g = fit_geometry(
-                &run,
+                run,
                 initial,
                 h0,
                 0,
@@ -255,96 +326,119 @@ pub fn calibrate(
             )?;
             pb.finish_and_clear();
             timer.lap("eq (16) fit");
-            (g, None, None, None)
+            Ok(GeometryPhase {
+                geometry: g,
+                subtrajectories: None,
+                refinement: None,
+                early_filter: None,
+            })
         }
-        Method::Subtrajectory => {
-            let s = fit_subtrajectories(
-                &run,
-                initial,
-                SubtrajectoryOptions {
-                    length: o.subtrajectory_length,
-                    antenna: o.antenna,
-                    cuts: o.subtrajectory_cuts,
-                    ..Default::default()
-                },
+        Method::Subtrajectory => fit_subtrajectory_phase(run, initial, o, filter_wanted, timer),
+    }
+}
+
+/// [`fit_geometry_phase`] of [`Method::Subtrajectory`]: the sub-trajectory fit, the filter's
+/// refinement, the covariance model's kappa started beside the rest from the refinement's
+/// filter, and the whole-run summary.
+fn fit_subtrajectory_phase(
+    run: &mut Run,
+    initial: &ChassisParams,
+    o: &CalibrationOptions,
+    filter_wanted: bool,
+    timer: &PhaseTimer,
+) -> Result<GeometryPhase> {
+    let s = fit_subtrajectories(
+        run,
+        initial,
+        SubtrajectoryOptions {
+            length: o.subtrajectory_length,
+            antenna: o.antenna,
+            cuts: o.subtrajectory_cuts,
+            ..Default::default()
+        },
+    )?;
+    timer.lap("sub-trajectory fit");
+    run.antenna = s.antenna;
+    let refinement = match o.geometry_refine {
+        GeometryRefine::None => None,
+        GeometryRefine::Filter => {
+            let r = refine_subtrajectory_fit(
+                run,
+                &s,
+                o.antenna,
+                o.reference_sigma,
+                o.reference_heading_sigma,
             )?;
-            timer.lap("sub-trajectory fit");
-            run.antenna = s.antenna;
-            let refinement = match o.geometry_refine {
-                GeometryRefine::None => None,
-                GeometryRefine::Filter => {
-                    let r = refine(&run, &s, o)?;
-                    timer.lap("filter refinement");
-                    Some(r)
-                }
-            };
-            let applied = refinement.as_ref().filter(|r| r.skipped.is_none());
-            // The covariance model's kappa needs only the refinement's filter (the geometry
-            // it returns is taken from the parameters it is merged into): fitted on a thread
-            // of its own from here, beside the rest; the thread owns what it reads (joined
-            // where the kappa is taken; on an error before that it ends by itself).
-            let early_filter = applied
-                .and_then(|r| Some((r.params, r.innovations.clone()?)))
-                .filter(|_| filter_wanted)
-                .map(|(g, innovations)| {
-                    let p = ChassisParams {
-                        uncertainty_model: UncertaintyModel::Covariance,
-                        ..g
-                    };
-                    let (initial, mode) = (*initial, o.delta_mode);
-                    std::thread::spawn(move || fit_kappa_filter(&innovations, &p, &initial, mode).0)
-                });
-            let g = whole_run_summary(&run, &s, applied)?;
-            timer.lap("whole-run heading");
-            (g, Some(s), refinement, early_filter)
+            timer.lap("filter refinement");
+            Some(r)
         }
     };
-    run.antenna = geometry.antenna;
-    let mut params = geometry.params;
-    params.geometry_uncertainty =
-        geometry_uncertainty(&geometry, subtrajectories.as_ref(), refinement.as_ref());
-    let harmonics = if o.wheel_harmonics > 0 {
-        let h = super::fit_harmonics(
-            &run,
-            &params,
-            geometry.heading0,
-            o.wheel_harmonics,
-            o.harmonics_window,
-        )?;
-        params = h.params;
-        timer.lap("wheel harmonics fit");
-        Some(h)
-    } else {
-        None
-    };
-    let mut uncertainty = Vec::new();
-    if o.fit_delta {
+    let applied = refinement.as_ref().filter(|r| r.skipped.is_none());
+    // The covariance model's kappa needs only the refinement's filter (the geometry
+    // it returns is taken from the parameters it is merged into): fitted on a thread
+    // of its own from here, beside the rest; the thread owns what it reads (joined
+    // where the kappa is taken; on an error before that it ends by itself).
+    let early_filter = applied
+        .and_then(|r| Some((r.params, r.innovations.clone()?)))
+        .filter(|_| filter_wanted)
+        .map(|(g, innovations)| {
+            let p = ChassisParams {
+                uncertainty_model: UncertaintyModel::Covariance,
+                ..g
+            };
+            let (initial, mode) = (*initial, o.delta_mode);
+            std::thread::spawn(move || fit_kappa_filter(&innovations, &p, &initial, mode).0)
+        });
+    let g = whole_run_summary(run, &s, applied)?;
+    timer.lap("whole-run heading");
+    Ok(GeometryPhase {
+        geometry: g,
+        subtrajectories: Some(s),
+        refinement,
+        early_filter,
+    })
+}
+
+/// What the uncertainty phase of [`calibrate`] works on: the run with its fitted lever arm,
+/// the whole-run start heading (rad), the initial estimate and the options.
+struct UncertaintyPhase<'a> {
+    run: &'a Run<'a>,
+    heading0: f64,
+    initial: &'a ChassisParams,
+    o: &'a CalibrationOptions,
+    timer: &'a PhaseTimer,
+}
+
+impl UncertaintyPhase<'_> {
+    /// Fits the coefficients of every model of `models` into `params`, one fit each, and
+    /// selects the result's model. The covariance model's likelihood fit runs on a thread of
+    /// its own beside the paper model's fits (`early_filter` when the geometry phase started
+    /// it, else from here).
+    fn fit_models(
+        &self,
+        params: &mut ChassisParams,
+        models: &[UncertaintyModel],
+        filter_wanted: bool,
+        mut early_filter: Option<JoinHandle<UncertaintyFit>>,
+    ) -> Result<Vec<UncertaintyFit>> {
+        let (run, heading0, initial, o) = (self.run, self.heading0, self.initial, self.o);
+        let mut uncertainty = Vec::new();
         // The likelihood fit of the covariance model needs only the geometry: without the
         // refinement's filter it is built here, on a thread of its own beside the paper
         // model's fits.
-        let filter_fit = |p: ChassisParams| -> Result<UncertaintyFit> {
-            let innovations = Innovations::new(
-                &run,
-                &p,
-                geometry.heading0,
-                o.reference_sigma,
-                o.reference_heading_sigma,
-                OBSERVATION_BLOCK,
-            )?;
-            Ok(fit_kappa_filter(&innovations, &p, initial, o.delta_mode).0)
-        };
+        let filter_fit = |p: ChassisParams| fit_kappa_at(run, p, heading0, initial, o);
         std::thread::scope(|scope| -> Result<()> {
             let mut filter = (filter_wanted && early_filter.is_none()).then(|| {
                 let p = ChassisParams {
                     uncertainty_model: UncertaintyModel::Covariance,
-                    ..params
+                    ..*params
                 };
                 scope.spawn(move || filter_fit(p))
             });
             // The restarted sub-trajectories of the coverage criterion, made when first needed.
             let mut restarts: Option<Restarts> = None;
-            for &m in &models {
-                let mut p = params;
+            for &m in models {
+                let mut p = *params;
                 p.uncertainty_model = m;
                 if m == UncertaintyModel::Covariance
                     && o.criterion == UncertaintyCriterion::Likelihood
@@ -355,8 +449,8 @@ pub fn calibrate(
                         (None, Some(f)) => f.join().map_err(failed)??,
                         (None, None) => filter_fit(p)?,
                     };
-                    timer.lap("uncertainty fit (filter)");
-                    params = with_covariance_coefficients(&params, &u.params);
+                    self.timer.lap("uncertainty fit (filter)");
+                    *params = with_covariance_coefficients(params, &u.params);
                     u.params = with_covariance_coefficients(&p, &u.params);
                     uncertainty.push(u);
                     continue;
@@ -364,42 +458,13 @@ pub fn calibrate(
                 let restarts = match &mut restarts {
                     Some(r) => &*r,
                     None => {
-                        let r = Restarts::new(&run, &params, geometry.heading0, o.delta_window)?;
-                        timer.lap("restart headings");
+                        let r = Restarts::new(run, params, heading0, o.delta_window)?;
+                        self.timer.lap("restart headings");
                         &*restarts.insert(r)
                     }
                 };
-                let pb = bar(o.quiet, &format!("{} model fit", cfg::model_name(m)));
-                let mut u = fit_uncertainty_on(
-                    &run,
-                    restarts,
-                    &p,
-                    initial,
-                    o.reference_sigma,
-                    o.delta_mode,
-                    &pb,
-                )?;
-                pb.finish_and_clear();
-                timer.lap("uncertainty fit");
-                if m == UncertaintyModel::Paper {
-                    let pb = bar(o.quiet, "delta_diff fit");
-                    u = fit_delta_diff(
-                        &run,
-                        restarts,
-                        u,
-                        initial,
-                        DiffOptions {
-                            fit: o.fit_delta_diff,
-                            ref_heading_sigma: o.reference_heading_sigma,
-                            ref_sigma: o.reference_sigma,
-                            mode: o.delta_mode,
-                        },
-                        &pb,
-                    )?;
-                    pb.finish_and_clear();
-                    timer.lap("delta_diff fit");
-                }
-                params = u.params;
+                let u = self.coverage_fit(restarts, p, m)?;
+                *params = u.params;
                 uncertainty.push(u);
             }
             Ok(())
@@ -411,30 +476,89 @@ pub fn calibrate(
         } else {
             *models.last().expect("one model")
         };
+        Ok(uncertainty)
     }
-    let evaluation = evaluate(&run, &params, geometry.heading0)?;
-    timer.lap("final evaluation");
-    let windows = if o.windows.is_empty() {
-        Vec::new()
-    } else {
-        if o.windows.iter().any(|l| l.is_nan() || *l <= 0.0) {
-            bail!("--windows: lengths must be positive metres");
-        }
-        let pb = bar(o.quiet, "sub-trajectories");
-        let w = windows_study(&run, &geometry, initial, &o.windows, o.window_start, &pb)?;
+
+    /// The coefficients of model `m` of `p` by the coverage criterion on `restarts`, and for
+    /// the paper's model `delta_diff` by the heading coverage.
+    fn coverage_fit(
+        &self,
+        restarts: &Restarts,
+        p: ChassisParams,
+        m: UncertaintyModel,
+    ) -> Result<UncertaintyFit> {
+        let (run, o, initial) = (self.run, self.o, self.initial);
+        let pb = bar(o.quiet, &format!("{} model fit", cfg::model_name(m)));
+        let mut u = fit_uncertainty_on(
+            run,
+            restarts,
+            &p,
+            initial,
+            o.reference_sigma,
+            o.delta_mode,
+            &pb,
+        )?;
         pb.finish_and_clear();
-        w
-    };
-    Ok(Calibration {
-        params,
-        geometry,
-        subtrajectories,
-        refinement,
-        uncertainty,
-        evaluation,
-        windows,
-        harmonics,
-    })
+        self.timer.lap("uncertainty fit");
+        if m == UncertaintyModel::Paper {
+            let pb = bar(o.quiet, "delta_diff fit");
+            u = fit_delta_diff(
+                run,
+                restarts,
+                u,
+                initial,
+                DiffOptions {
+                    fit: o.fit_delta_diff,
+                    ref_heading_sigma: o.reference_heading_sigma,
+                    ref_sigma: o.reference_sigma,
+                    mode: o.delta_mode,
+                },
+                &pb,
+            )?;
+            pb.finish_and_clear();
+            self.timer.lap("delta_diff fit");
+        }
+        Ok(u)
+    }
+}
+
+/// The covariance model's kappa at the geometry of `p` by the likelihood of a filter built
+/// along `run` from the start heading `heading0` (rad).
+fn fit_kappa_at(
+    run: &Run,
+    p: ChassisParams,
+    heading0: f64,
+    initial: &ChassisParams,
+    o: &CalibrationOptions,
+) -> Result<UncertaintyFit> {
+    let innovations = Innovations::new(
+        run,
+        &p,
+        heading0,
+        o.reference_sigma,
+        o.reference_heading_sigma,
+        OBSERVATION_BLOCK,
+    )?;
+    Ok(fit_kappa_filter(&innovations, &p, initial, o.delta_mode).0)
+}
+
+/// The stability study of [`calibrate`] (`o.windows`; none when empty).
+fn stability_study(
+    run: &Run,
+    geometry: &GeomFit,
+    initial: &ChassisParams,
+    o: &CalibrationOptions,
+) -> Result<Vec<WindowEstimate>> {
+    if o.windows.is_empty() {
+        return Ok(Vec::new());
+    }
+    if o.windows.iter().any(|l| l.is_nan() || *l <= 0.0) {
+        bail!("--windows: lengths must be positive metres");
+    }
+    let pb = bar(o.quiet, "sub-trajectories");
+    let w = windows_study(run, geometry, initial, &o.windows, o.window_start, &pb)?;
+    pb.finish_and_clear();
+    Ok(w)
 }
 
 /// The uncertainty models whose coefficients `calibrate` fits: `o.models` (empty: the
@@ -536,40 +660,6 @@ fn whole_run_summary(
             &robust,
         ),
     })
-}
-
-/// The filter's refinement of a sub-trajectory fit `s`: not run with
-/// a lever arm (the filter observes the axle centre) nor with the track width held.
-fn refine(run: &Run, s: &SubtrajectoryFit, o: &CalibrationOptions) -> Result<FilterRefinement> {
-    let reason = if s.antenna != (0.0, 0.0) || o.antenna.fitted() {
-        Some("the filter observes the axle centre, not a lever arm's antenna")
-    } else if !s.track_estimated {
-        Some("the track width is held")
-    } else {
-        None
-    };
-    if let Some(why) = reason {
-        return Ok(FilterRefinement {
-            params: s.params,
-            covariance: [[f64::NAN; 3]; 3],
-            kappa: f64::NAN,
-            kappa_diff: f64::NAN,
-            linearisation: f64::NAN,
-            observations: 0,
-            skipped: Some(why.to_string()),
-            innovations: None,
-        });
-    }
-    // The start heading (the filter's without reference headings): the first
-    // sub-trajectory's fitted one.
-    let heading0 = s.blocks.first().map_or(0.0, |b| b.heading);
-    refine_geometry(
-        run,
-        &s.params,
-        heading0,
-        o.reference_sigma,
-        o.reference_heading_sigma,
-    )
 }
 
 /// Wall time of each calibration phase, printed to stderr when `ODOCTL_DEBUG` is set.

@@ -6,7 +6,7 @@ use odo_core::odometry::ChassisParams;
 use crate::optim::norm2;
 use crate::stats::wrap_angle;
 
-use super::*;
+use super::run::Run;
 
 /// Errors and predicted uncertainty along a run.
 #[derive(Debug, Clone, Default)]
@@ -76,7 +76,7 @@ impl Evaluation {
     }
 
     /// Reserves room for `n` more rows in every column.
-    pub(super) fn reserve(&mut self, n: usize) {
+    pub(crate) fn reserve(&mut self, n: usize) {
         self.k.reserve(n);
         self.t.reserve(n);
         self.dist.reserve(n);
@@ -92,7 +92,7 @@ impl Evaluation {
     }
 
     /// Moves the rows of `other` to the end of `self`.
-    pub(super) fn append(&mut self, other: &mut Self) {
+    pub(crate) fn append(&mut self, other: &mut Self) {
         let Self {
             k,
             t,

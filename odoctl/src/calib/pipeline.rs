@@ -1,12 +1,12 @@
 //! The two-core pipeline of the sensitivity pass: a second thread runs the core integrator
 //! while this one follows the sensitivities.
 
-use anyhow::Result;
-use odo_core::odometry::{ChassisParams, ParamError, Pose, PoseStep};
+use odo_core::odometry::{ChassisParams, Integrator, Pose, PoseStep};
 
+use crate::csvio::Sample;
 use crate::replay::{counts, index_refs};
 
-use super::*;
+use super::sensitivity::{PoseSensitivity, SensitivityTracker};
 
 /// The cores this process may run on, asked once (the question reads the scheduler's
 /// affinity and cgroup limits: too slow to ask at every integration).
@@ -15,13 +15,13 @@ pub fn cores() -> usize {
     *CORES.get_or_init(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
 }
 
-/// Shortest stretch (samples) that [`Run::integrate_with_sensitivity`] spreads over two
-/// cores: below it, the thread costs more than it saves.
+/// Shortest stretch (samples) that `Run::integrate_with_sensitivity` spreads over two cores:
+/// below it, the thread costs more than it saves.
 pub const PIPELINE_MIN_SAMPLES: usize = 20_000;
 
 /// Samples per chunk handed from the integrating thread to the sensitivity thread (80 bytes
 /// each: 320 KiB, in the caches).
-pub(super) const PIPELINE_CHUNK: usize = 4096;
+pub(crate) const PIPELINE_CHUNK: usize = 4096;
 
 /// Chunks in flight between the two threads at most.
 const PIPELINE_DEPTH: usize = 4;
@@ -33,85 +33,58 @@ struct PipelineItem {
     at: Option<(usize, Pose)>,
 }
 
-impl Run<'_> {
-    /// [`Run::integrate_pose`] with the pose's derivatives with respect to the geometry
-    /// unknowns (see [`PoseSensitivity`]) propagated alongside: `visit(k, &pose,
-    /// &sensitivity)` at every match `k` in `a+1..=b`. A stretch of at least
-    /// [`PIPELINE_MIN_SAMPLES`] samples is integrated on a second core while this one follows
-    /// the sensitivities and visits: the same arithmetic in the same order, so the same
-    /// results to the bit.
-    pub fn integrate_with_sensitivity(
-        &self,
-        params: &ChassisParams,
-        a: usize,
-        b: usize,
-        heading0: f64,
-        mut visit: impl FnMut(usize, &Pose, &PoseSensitivity),
-    ) -> Result<(), ParamError> {
-        let samples = self.matches[b].0 - self.matches[a].0;
-        if samples >= PIPELINE_MIN_SAMPLES && cores() > 1 {
-            self.integrate_with_sensitivity_pipelined(params, a, b, heading0, visit)
-        } else {
-            self.integrate_with_sensitivity_here(params, a, b, heading0, |k, integ, d| {
-                visit(k, &integ.pose(), d)
-            })
-        }
-    }
-    /// [`Run::integrate_with_sensitivity`] as a pipeline: a scoped thread runs the core
-    /// integrator and hands each sample's motion ([`PoseStep`]) and, at the matches, the pose
-    /// on, in chunks of [`PIPELINE_CHUNK`] samples (recycled); this thread follows the
-    /// sensitivities and calls `visit`.
-    pub fn integrate_with_sensitivity_pipelined(
-        &self,
-        params: &ChassisParams,
-        a: usize,
-        b: usize,
-        heading0: f64,
-        mut visit: impl FnMut(usize, &Pose, &PoseSensitivity),
-    ) -> Result<(), ParamError> {
-        let mut integ = self.start(params, a, heading0)?;
-        let (sa, sb) = (self.matches[a].0, self.matches[b].0);
-        let (full, chunks) = std::sync::mpsc::sync_channel::<Vec<PipelineItem>>(PIPELINE_DEPTH);
-        let (recycle, empty) = std::sync::mpsc::channel::<Vec<PipelineItem>>();
-        let mut tracker = SensitivityTracker::new(params);
-        std::thread::scope(|scope| {
-            scope.spawn(move || {
-                let mut k = a + 1;
-                let mut chunk = Vec::with_capacity(PIPELINE_CHUNK);
-                for i in sa + 1..=sb {
-                    let s = &self.samples[i];
-                    let motion = integ.step_pose(counts(s), index_refs(s)).1;
-                    let at = (k <= b && self.matches[k].0 == i).then(|| {
-                        k += 1;
-                        (k - 1, integ.pose())
-                    });
-                    chunk.push(PipelineItem { motion, at });
-                    if chunk.len() == PIPELINE_CHUNK {
-                        if full.send(chunk).is_err() {
-                            return;
-                        }
-                        chunk = empty
-                            .try_recv()
-                            .unwrap_or_else(|_| Vec::with_capacity(PIPELINE_CHUNK));
+/// The sensitivity pass over matches `a..=b` (`stretch`) as a pipeline: a scoped thread runs
+/// `integ` (started at match `a`) over `samples` and hands each sample's motion
+/// ([`PoseStep`]) and, at the `matches`, the pose on, in chunks of [`PIPELINE_CHUNK`] samples
+/// (recycled); this thread follows the sensitivities of `params` and calls `visit(k, &pose,
+/// &sensitivity)` at every match `k` in `a+1..=b`.
+pub(crate) fn follow_sensitivities(
+    mut integ: Integrator,
+    params: &ChassisParams,
+    samples: &[Sample],
+    matches: &[(usize, usize)],
+    (a, b): (usize, usize),
+    mut visit: impl FnMut(usize, &Pose, &PoseSensitivity),
+) {
+    let (sa, sb) = (matches[a].0, matches[b].0);
+    let (full, chunks) = std::sync::mpsc::sync_channel::<Vec<PipelineItem>>(PIPELINE_DEPTH);
+    let (recycle, empty) = std::sync::mpsc::channel::<Vec<PipelineItem>>();
+    let mut tracker = SensitivityTracker::new(params);
+    std::thread::scope(|scope| {
+        scope.spawn(move || {
+            let mut k = a + 1;
+            let mut chunk = Vec::with_capacity(PIPELINE_CHUNK);
+            for (i, s) in (sa + 1..=sb).zip(&samples[sa + 1..=sb]) {
+                let motion = integ.step_pose(counts(s), index_refs(s)).1;
+                let at = (k <= b && matches[k].0 == i).then(|| {
+                    k += 1;
+                    (k - 1, integ.pose())
+                });
+                chunk.push(PipelineItem { motion, at });
+                if chunk.len() == PIPELINE_CHUNK {
+                    if full.send(chunk).is_err() {
+                        return;
                     }
+                    chunk = empty
+                        .try_recv()
+                        .unwrap_or_else(|_| Vec::with_capacity(PIPELINE_CHUNK));
                 }
-                if !chunk.is_empty() {
-                    let _ = full.send(chunk);
-                }
-            });
-            for mut chunk in chunks {
-                for item in &chunk {
-                    if let Some(m) = &item.motion {
-                        tracker.step(m);
-                    }
-                    if let Some((k, pose)) = &item.at {
-                        visit(*k, pose, &tracker.sens);
-                    }
-                }
-                chunk.clear();
-                let _ = recycle.send(chunk);
+            }
+            if !chunk.is_empty() {
+                let _ = full.send(chunk);
             }
         });
-        Ok(())
-    }
+        for mut chunk in chunks {
+            for item in &chunk {
+                if let Some(m) = &item.motion {
+                    tracker.step(m);
+                }
+                if let Some((k, pose)) = &item.at {
+                    visit(*k, pose, &tracker.sens);
+                }
+            }
+            chunk.clear();
+            let _ = recycle.send(chunk);
+        }
+    });
 }

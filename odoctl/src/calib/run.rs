@@ -5,10 +5,13 @@ use anyhow::Result;
 use odo_core::odometry::{ChassisParams, Integrator, ParamError, Pose, PoseStep};
 
 use crate::csvio::{RefPoint, Sample};
+use crate::optim::{self, NormalAccumulator, Objective};
 use crate::replay::{counts, index_refs};
 use crate::stats::wrap_angle;
 
-use super::*;
+use super::antenna::{observed_point, observed_with_rows, MODEL_UNKNOWNS};
+use super::pipeline::{cores, follow_sensitivities, PIPELINE_MIN_SAMPLES};
+use super::sensitivity::{PoseSensitivity, SensitivityTracker, GEOMETRY_UNKNOWNS};
 
 /// Time after a stretch's start over which its reference heading is averaged (s); see
 /// [`Run::start_heading`].
@@ -74,10 +77,10 @@ impl<'a> Run<'a> {
 
     /// The point of the chassis at `pose` that the reference measures (x east, y north, m),
     /// for a stretch integrated from its anchor with heading `heading0`: the antenna
-    /// ([`super::observed_point`]); the centre itself without a lever arm.
+    /// ([`observed_point`]); the centre itself without a lever arm.
     #[inline(always)]
     pub fn observed(&self, pose: &Pose, heading0: f64) -> (f64, f64) {
-        super::observed_point(pose, self.antenna, heading0)
+        observed_point(pose, self.antenna, heading0)
     }
 
     /// Number of common times.
@@ -245,9 +248,67 @@ impl<'a> Run<'a> {
         )
     }
 
+    /// [`Run::integrate_pose`] with the pose's derivatives with respect to the geometry
+    /// unknowns (see [`PoseSensitivity`]) propagated alongside: `visit(k, &pose,
+    /// &sensitivity)` at every match `k` in `a+1..=b`. A stretch of at least
+    /// [`PIPELINE_MIN_SAMPLES`] samples is integrated on a second core while this one follows
+    /// the sensitivities and visits: the same arithmetic in the same order, so the same
+    /// results to the bit.
+    pub fn integrate_with_sensitivity(
+        &self,
+        params: &ChassisParams,
+        a: usize,
+        b: usize,
+        heading0: f64,
+        mut visit: impl FnMut(usize, &Pose, &PoseSensitivity),
+    ) -> Result<(), ParamError> {
+        let samples = self.matches[b].0 - self.matches[a].0;
+        if samples >= PIPELINE_MIN_SAMPLES && cores() > 1 {
+            self.integrate_with_sensitivity_pipelined(params, a, b, heading0, visit)
+        } else {
+            self.integrate_with_sensitivity_here(params, a, b, heading0, |k, integ, d| {
+                visit(k, &integ.pose(), d)
+            })
+        }
+    }
+
+    /// [`Run::integrate_with_sensitivity`] on this core alone.
+    pub fn integrate_with_sensitivity_here(
+        &self,
+        params: &ChassisParams,
+        a: usize,
+        b: usize,
+        heading0: f64,
+        visit: impl FnMut(usize, &Integrator, &PoseSensitivity),
+    ) -> Result<(), ParamError> {
+        self.drive(
+            params,
+            a,
+            b,
+            heading0,
+            |integ, s| integ.step_pose(counts(s), index_refs(s)).1,
+            visit,
+        )
+    }
+
+    /// [`Run::integrate_with_sensitivity`] on two cores: the core integrator on a second
+    /// thread, the sensitivities and `visit` on this one (`pipeline::follow_sensitivities`).
+    pub fn integrate_with_sensitivity_pipelined(
+        &self,
+        params: &ChassisParams,
+        a: usize,
+        b: usize,
+        heading0: f64,
+        visit: impl FnMut(usize, &Pose, &PoseSensitivity),
+    ) -> Result<(), ParamError> {
+        let integ = self.start(params, a, heading0)?;
+        follow_sensitivities(integ, params, self.samples, &self.matches, (a, b), visit);
+        Ok(())
+    }
+
     /// The core integrator at the start of a stretch beginning at match `a`: the counts of
     /// its sample, the position [`Run::anchor`], heading `heading0`, zero sigmas.
-    pub(super) fn start(
+    pub(crate) fn start(
         &self,
         params: &ChassisParams,
         a: usize,
@@ -268,7 +329,7 @@ impl<'a> Run<'a> {
     /// The loop of the `integrate` functions: `step` advances the integrator by one sample
     /// and returns the step's motion when the sensitivities should follow it.
     #[inline(always)]
-    pub(super) fn drive(
+    fn drive(
         &self,
         params: &ChassisParams,
         a: usize,
@@ -310,5 +371,317 @@ impl<'a> Run<'a> {
             }
         }
         0.0
+    }
+
+    /// The x and y differences odometry - reference at matches `a+1..=b`, into `out`;
+    /// false when the parameters are not admissible.
+    pub fn residuals(
+        &self,
+        params: &ChassisParams,
+        a: usize,
+        b: usize,
+        heading0: f64,
+        out: &mut Vec<f64>,
+    ) -> bool {
+        out.clear();
+        out.reserve(2 * (b - a));
+        self.integrate_pose(params, a, b, heading0, |k, integ| {
+            let (px, py) = self.observed(&integ.pose(), heading0);
+            let r = self.reference_at(k);
+            out.push(px - r.x);
+            out.push(py - r.y);
+        })
+        .is_ok()
+            && out.iter().all(|v| v.is_finite())
+    }
+
+    /// [`Run::residuals`] and, with `jac`, their derivatives with respect to the geometry
+    /// unknowns `cols` (indices into [`GEOMETRY_UNKNOWNS`]; row-major: one row per residual,
+    /// one column per entry of `cols`), in the same pass.
+    #[allow(clippy::too_many_arguments)]
+    pub fn residuals_with_jacobian(
+        &self,
+        params: &ChassisParams,
+        a: usize,
+        b: usize,
+        heading0: f64,
+        out: &mut Vec<f64>,
+        jac: Option<&mut Vec<f64>>,
+        cols: &[usize],
+    ) -> bool {
+        let Some(jac) = jac else {
+            return self.residuals(params, a, b, heading0, out);
+        };
+        if cols.iter().any(|&c| c >= GEOMETRY_UNKNOWNS.len()) {
+            return false;
+        }
+        out.clear();
+        jac.clear();
+        // Room for every row at once: no regrowth (and copy) of the large Jacobian.
+        out.reserve(2 * (b - a));
+        jac.reserve(2 * (b - a) * cols.len());
+        let n = cols.len();
+        let (mut jx, mut jy) = ([0.0; MODEL_UNKNOWNS], [0.0; MODEL_UNKNOWNS]);
+        self.integrate_with_sensitivity(params, a, b, heading0, |k, p, d| {
+            let r = self.reference_at(k);
+            let (ox, oy) = observed_with_rows(p, d, self.antenna, heading0, cols, &mut jx, &mut jy);
+            out.push(ox - r.x);
+            out.push(oy - r.y);
+            jac.extend_from_slice(&jx[..n]);
+            jac.extend_from_slice(&jy[..n]);
+        })
+        .is_ok()
+            && out.iter().chain(jac.iter()).all(|v| v.is_finite())
+    }
+
+    /// [`Run::residuals_with_jacobian`] fed straight into `acc` (pair by pair, in match order:
+    /// the same sums as of the stored vectors) instead of stored: the objective and normal
+    /// equations of the eq (16) fits without a pass over tens of megabytes of Jacobian.
+    /// False when the parameters are not admissible or a residual is not finite.
+    pub fn accumulate_normal(
+        &self,
+        params: &ChassisParams,
+        a: usize,
+        b: usize,
+        heading0: f64,
+        cols: &[usize],
+        acc: &mut NormalAccumulator,
+    ) -> bool {
+        if cols.iter().any(|&c| c >= GEOMETRY_UNKNOWNS.len()) {
+            return false;
+        }
+        self.accumulate_normal_with(params, self.antenna, a, b, heading0, cols, acc)
+    }
+
+    /// [`Run::accumulate_normal`] with the lever arm `antenna` instead of the run's own (for
+    /// fits that estimate it; its columns are [`ANTENNA_FORWARD`], [`ANTENNA_LEFT`]).
+    ///
+    /// [`ANTENNA_FORWARD`]: super::antenna::ANTENNA_FORWARD
+    /// [`ANTENNA_LEFT`]: super::antenna::ANTENNA_LEFT
+    #[allow(clippy::too_many_arguments)]
+    pub fn accumulate_normal_with(
+        &self,
+        params: &ChassisParams,
+        antenna: (f64, f64),
+        a: usize,
+        b: usize,
+        heading0: f64,
+        cols: &[usize],
+        acc: &mut NormalAccumulator,
+    ) -> bool {
+        if cols.iter().any(|&c| c >= MODEL_UNKNOWNS) || cols.len() > MODEL_UNKNOWNS {
+            return false;
+        }
+        let mut finite = true;
+        let (mut jx, mut jy) = ([0.0; MODEL_UNKNOWNS], [0.0; MODEL_UNKNOWNS]);
+        let ok = self
+            .integrate_with_sensitivity(params, a, b, heading0, |k, p, d| {
+                let r = self.reference_at(k);
+                let (ox, oy) = observed_with_rows(p, d, antenna, heading0, cols, &mut jx, &mut jy);
+                let (rx, ry) = (ox - r.x, oy - r.y);
+                finite &= rx.is_finite() && ry.is_finite();
+                acc.add_pair(rx, ry, &jx, &jy);
+            })
+            .is_ok();
+        ok && finite && acc.cost().is_finite()
+    }
+
+    /// Eq (16) over matches `a..=b`.
+    pub fn eq16(&self, params: &ChassisParams, a: usize, b: usize, heading0: f64) -> Option<f64> {
+        let mut r = Vec::new();
+        self.residuals(params, a, b, heading0, &mut r)
+            .then(|| optim::objective(Objective::SumOfNorms, &r))
+    }
+}
+
+/// Cuts matches `0..len` into consecutive stretches of `window` metres of reference path (the
+/// whole run when `window <= 0`); each is `(start, end)` with at least `min_points` after the
+/// start.
+pub fn windows(run: &Run, window: f64, min_points: usize) -> Vec<(usize, usize)> {
+    let mut out = Vec::new();
+    if run.is_empty() {
+        return out;
+    }
+    let last = run.len() - 1;
+    if window <= 0.0 {
+        if last >= min_points {
+            out.push((0, last));
+        }
+        return out;
+    }
+    let mut a = 0;
+    while a < last {
+        let b = run.last_within(a, window).max(a + 1);
+        if b - a >= min_points && run.dist[b] - run.dist[a] >= 0.5 * window {
+            out.push((a, b));
+        }
+        a = b;
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calib::pipeline::PIPELINE_CHUNK;
+    use crate::calib::sensitivity::with_geometry;
+    use crate::calib::testing::sim;
+    use crate::csvio::match_times;
+    use crate::simulate::{default_truth, PathKind};
+
+    /// The analytic Jacobian of the residuals against central differences of the core
+    /// integrator's residuals, column by column (relative to the column's norm).
+    fn check_jacobian(run: &Run, params: &ChassisParams, heading0: f64, a: usize, b: usize) {
+        let cols = [0, 1, 2, 3];
+        let (mut r, mut jac) = (Vec::new(), Vec::new());
+        assert!(run.residuals_with_jacobian(params, a, b, heading0, &mut r, Some(&mut jac), &cols));
+        assert_eq!(jac.len(), r.len() * 4);
+        let x0 = [
+            params.left_diameter,
+            params.right_diameter,
+            params.track_width,
+            heading0,
+        ];
+        for c in cols {
+            // Steps large against the integrator's fixed-point noise (about 1e-8 m on a
+            // position), small against the curvature: 1e-4 of a length, 1e-4 rad.
+            let h = if c == 3 { 1e-4 } else { 1e-4 * x0[c] };
+            let at = |d: f64| {
+                let mut x = x0;
+                x[c] += d;
+                let mut out = Vec::new();
+                assert!(run.residuals(&with_geometry(params, &x), a, b, x[3], &mut out));
+                out
+            };
+            let (rp, rm) = (at(h), at(-h));
+            let (mut diff, mut norm) = (0.0f64, 0.0f64);
+            for i in 0..r.len() {
+                let fd = (rp[i] - rm[i]) / (2.0 * h);
+                diff = diff.hypot(jac[i * 4 + c] - fd);
+                norm = norm.hypot(fd);
+            }
+            assert!(norm > 0.0, "column {c} is zero");
+            // Measured: 4e-7 .. 8e-6, the central differences' own noise.
+            assert!(
+                diff / norm < 2e-5,
+                "column {} ({}): relative difference {:e} (norm {norm:e})",
+                c,
+                GEOMETRY_UNKNOWNS[c],
+                diff / norm
+            );
+        }
+    }
+
+    #[test]
+    fn analytic_jacobian_matches_central_differences() {
+        // Arcs and straights; spins on the spot (validation path); away from the truth and
+        // with a per-angle wheel function (wheel distances not proportional to the counts).
+        let est = sim(PathKind::Estimation, 30.0, 3);
+        let val = sim(PathKind::Validation, 20.0, 4);
+        let mut wavy = default_truth();
+        wavy.left_wheel.cos[0] = 2e-3;
+        wavy.right_wheel.sin[1] = -1e-3;
+        let poor = ChassisParams {
+            left_diameter: 0.27,
+            right_diameter: 0.25,
+            track_width: 0.6,
+            ..ChassisParams::DESIGNED
+        };
+        for s in [&est, &val] {
+            let run = Run::new(
+                &s.samples,
+                &s.reference,
+                match_times(&s.samples, &s.reference),
+            );
+            let last = run.len() - 1;
+            for p in [default_truth(), wavy, poor] {
+                check_jacobian(&run, &p, 0.31, 0, last);
+                check_jacobian(&run, &p, -2.0, last / 3, last);
+            }
+        }
+    }
+
+    /// The two-core pipeline visits the same matches with the same poses and sensitivities,
+    /// to the bit, as the one-core loop (through an over-range sample and index latches).
+    #[test]
+    fn pipelined_sensitivities_equal_the_one_core_loop() {
+        let mut s = sim(PathKind::Random, 300.0, 4);
+        assert!(s.samples.len() > PIPELINE_MIN_SAMPLES + 2 * PIPELINE_CHUNK);
+        // An over-range jump of both counters midway (the integrator skips that sample).
+        for row in &mut s.samples[15_000..] {
+            row.left += 1 << 20;
+            row.right += 1 << 20;
+        }
+        let run = Run::new(
+            &s.samples,
+            &s.reference,
+            match_times(&s.samples, &s.reference),
+        );
+        let last = run.len() - 1;
+        let mut p = default_truth();
+        p.left_wheel.cos[0] = 0.001;
+        for (a, b) in [(0, last), (17, last - 3), (5, PIPELINE_CHUNK + 9)] {
+            let mut here = Vec::new();
+            run.integrate_with_sensitivity_here(&p, a, b, 0.4, |k, integ, d| {
+                here.push((k, integ.pose(), *d));
+            })
+            .unwrap();
+            let mut piped = Vec::new();
+            run.integrate_with_sensitivity_pipelined(&p, a, b, 0.4, |k, pose, d| {
+                piped.push((k, *pose, *d));
+            })
+            .unwrap();
+            assert_eq!(here.len(), b - a);
+            assert!(here == piped, "stretch {a}..{b}");
+        }
+    }
+
+    #[test]
+    fn residuals_with_jacobian_keeps_the_integrators_residuals() {
+        let s = sim(PathKind::Estimation, 10.0, 5);
+        let run = Run::new(
+            &s.samples,
+            &s.reference,
+            match_times(&s.samples, &s.reference),
+        );
+        let last = run.len() - 1;
+        let p = default_truth();
+        let (mut plain, mut with, mut jac) = (Vec::new(), Vec::new(), Vec::new());
+        assert!(run.residuals(&p, 0, last, 0.3, &mut plain));
+        assert!(run.residuals_with_jacobian(&p, 0, last, 0.3, &mut with, Some(&mut jac), &[2, 0]));
+        assert_eq!(plain, with);
+        assert_eq!(jac.len(), 2 * with.len());
+        assert!(!run.residuals_with_jacobian(&p, 0, last, 0.3, &mut with, Some(&mut jac), &[4]));
+        // Streamed into the accumulator: exactly the sums of the stored vectors.
+        for (kind, newton) in [
+            (Objective::Squares, false),
+            (Objective::SumOfNorms, false),
+            (Objective::SumOfNorms, true),
+        ] {
+            let cols = [0, 1, 3];
+            assert!(run.residuals_with_jacobian(
+                &p,
+                0,
+                last,
+                0.3,
+                &mut with,
+                Some(&mut jac),
+                &cols
+            ));
+            let mut stored = NormalAccumulator::new(kind, newton, 3);
+            stored.add_all(&with, &jac);
+            let mut streamed = NormalAccumulator::new(kind, newton, 3);
+            assert!(run.accumulate_normal(&p, 0, last, 0.3, &cols, &mut streamed));
+            assert_eq!(streamed.cost(), stored.cost());
+            assert_eq!(streamed.equations(), stored.equations());
+            assert_eq!(streamed.residuals(), with.len());
+        }
+        let mut acc = NormalAccumulator::new(Objective::Squares, false, 1);
+        assert!(!run.accumulate_normal(&p, 0, last, 0.3, &[4], &mut acc));
+        let bad = ChassisParams {
+            track_width: -1.0,
+            ..p
+        };
+        assert!(!run.accumulate_normal(&bad, 0, last, 0.3, &[0], &mut acc));
     }
 }

@@ -1,12 +1,7 @@
 //! Forward sensitivities of eqs (7)-(15): the pose's derivatives with respect to the
 //! diameters, the track width and the initial heading, followed alongside the core integrator.
 
-use anyhow::Result;
-use odo_core::odometry::{trig, ChassisParams, Integrator, ParamError, PoseStep};
-
-use crate::replay::{counts, index_refs};
-
-use super::*;
+use odo_core::odometry::{trig, ChassisParams, PoseStep};
 
 /// The unknowns of the geometry fit, in the order of [`PoseSensitivity`]'s columns and of
 /// the fit's parameter vector.
@@ -16,6 +11,16 @@ pub const GEOMETRY_UNKNOWNS: [&str; 4] = [
     "track_width",
     "initial_heading",
 ];
+
+/// `base` with the geometry unknowns of `x` (the first three of [`GEOMETRY_UNKNOWNS`]: the
+/// diameters and the track width, m).
+pub(crate) fn with_geometry(base: &ChassisParams, x: &[f64]) -> ChassisParams {
+    let mut p = *base;
+    p.left_diameter = x[0];
+    p.right_diameter = x[1];
+    p.track_width = x[2];
+    p
+}
 
 /// Derivatives of an odometry pose with respect to the geometry fit's unknowns, in the order
 /// of [`GEOMETRY_UNKNOWNS`]: `left_diameter` (m), `right_diameter` (m), `track_width` (m) and
@@ -54,9 +59,11 @@ fn sinc_and_derivative(h: f64) -> (f64, f64) {
 /// `dalpha = (s_1 - s_2)/w`, `dd = ds sinc(dalpha/2)`, `x += dd sin(theta)`,
 /// `y += dd cos(theta)`, `alpha += dalpha` accumulated with `d s_i / d D_i = s_i / D_i` (the
 /// wheel distance, including the per-angle wheel function, is proportional to its diameter).
-pub(super) struct SensitivityTracker {
+///
+/// [`Integrator::step_pose`]: odo_core::odometry::Integrator::step_pose
+pub(crate) struct SensitivityTracker {
     model: SensitivityModel,
-    pub(super) sens: PoseSensitivity,
+    pub(crate) sens: PoseSensitivity,
 }
 
 /// The chassis constants of [`SensitivityTracker`]'s update.
@@ -128,7 +135,7 @@ impl SensitivityModel {
 
 impl SensitivityTracker {
     /// At the start: zero derivatives except `d heading / d heading0 = 1`.
-    pub(super) fn new(params: &ChassisParams) -> Self {
+    pub(crate) fn new(params: &ChassisParams) -> Self {
         let mut sens = PoseSensitivity::default();
         sens.heading[3] = 1.0;
         Self {
@@ -139,7 +146,7 @@ impl SensitivityTracker {
 
     /// Follows one integrated step of the integrator, from the motion it reports.
     #[inline(always)]
-    pub(super) fn step(&mut self, m: &PoseStep) {
+    pub(crate) fn step(&mut self, m: &PoseStep) {
         if let Some(t) = self.model.terms(m) {
             self.apply(&t);
         }
@@ -155,26 +162,5 @@ impl SensitivityTracker {
             s.y[p] += t.d_dd[p] * t.cos - t.dd * t.sin * d_theta;
             s.heading[p] += t.d_dalpha[p];
         }
-    }
-}
-
-impl Run<'_> {
-    /// [`Run::integrate_with_sensitivity`] on this core alone.
-    pub fn integrate_with_sensitivity_here(
-        &self,
-        params: &ChassisParams,
-        a: usize,
-        b: usize,
-        heading0: f64,
-        visit: impl FnMut(usize, &Integrator, &PoseSensitivity),
-    ) -> Result<(), ParamError> {
-        self.drive(
-            params,
-            a,
-            b,
-            heading0,
-            |integ, s| integ.step_pose(counts(s), index_refs(s)).1,
-            visit,
-        )
     }
 }

@@ -37,9 +37,10 @@ use anyhow::{anyhow, bail, Result};
 use odo_core::odometry::params::HARMONIC_KEYS;
 use odo_core::odometry::{ChassisParams, WheelHarmonics, WHEEL_HARMONICS};
 
+use crate::calib::heading_fit::fit_restart_heading;
+use crate::calib::pipeline::cores;
+use crate::calib::run::{windows, Run};
 use crate::optim;
-
-use super::*;
 
 /// Default segment length of the harmonics fit (m of reference path): about six turns of a
 /// 0.26 m wheel, long enough that a harmonic is not confused with a segment's offset and
@@ -434,6 +435,7 @@ fn mul(a: &[f64], b: &[f64], n: usize) -> Vec<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::calib::geometry::paper::{fit_geometry, GeomOptions};
     use crate::csvio::match_times;
     use crate::simulate::{default_truth, simulate_path, PathKind, SimRun, SimSettings};
     use indicatif::ProgressBar;

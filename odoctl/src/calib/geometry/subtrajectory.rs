@@ -29,8 +29,8 @@
 //!
 //! Standard errors: cluster-robust over the sub-trajectories, the linearised
 //! delete-one-sub-trajectory jackknife ([`cluster_jackknife`]) from the reduced `S_j` and
-//! `g_j` (the plain sandwich [`cluster_sandwich`] covers the truth less often with a few dozen
-//! sub-trajectories); the formal `H^-1 s^2`, which takes every residual as independent, is
+//! `g_j` (the plain sandwich [`cluster_sandwich`] covers the truth less often with a few
+//! dozen sub-trajectories); the formal `H^-1 s^2`, which takes every residual as independent, is
 //! kept beside it for comparison.
 //!
 //! The trade of the length: shorter sub-trajectories follow less drift but each spends three
@@ -38,53 +38,29 @@
 //! fit. 10 m (20 s at 0.5 m/s) loses about a twentieth of the information to the nuisance
 //! parameters at a slip of 0.1 % and keeps the drift at millimetres. On a short run the
 //! track width is set by the slip during the turns (odoctl/README.md has the measured table).
+//!
+//! [`observed_point`]: crate::calib::antenna::observed_point
+//! [`cluster_sandwich`]: super::covariance::cluster_sandwich
 
 use anyhow::{anyhow, bail, Result};
 use odo_core::odometry::ChassisParams;
 
+use crate::calib::antenna::{
+    observed_with_rows, LeverArm, ANTENNA_FORWARD, ANTENNA_LEFT, MODEL_UNKNOWNS,
+};
+use crate::calib::heading_fit::RESTART_TURN_EXACT;
+use crate::calib::pipeline::cores;
+use crate::calib::run::{windows, Run};
 use crate::optim::{self, NormalAccumulator, Objective};
 
-use super::*;
+use super::covariance::{cluster_jackknife, diagonal_std_errors, independent, inverse};
+use super::turning::turning;
 
 /// Default sub-trajectory length (m of reference path).
 pub const SUBTRAJECTORY_LENGTH: f64 = 10.0;
 
 /// Common times a sub-trajectory needs after its start to be used.
 const MIN_POINTS: usize = 10;
-
-/// A path turned by up to this (rad) is taken as the re-integrated path; a larger change of
-/// a start heading is integrated anew (see [`fit_restart_heading`]'s constant).
-const RESTART_TURN_EXACT: f64 = 0.01;
-
-/// The antenna lever arm of a fit: `(forward, left)` metres from the axle centre.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum LeverArm {
-    /// Measured, held.
-    Fixed(f64, f64),
-    /// Estimated with the geometry, from this first guess.
-    Fitted(f64, f64),
-}
-
-impl Default for LeverArm {
-    /// No lever arm: the reference is the axle centre.
-    fn default() -> Self {
-        Self::Fixed(0.0, 0.0)
-    }
-}
-
-impl LeverArm {
-    /// The (first) value.
-    pub fn value(self) -> (f64, f64) {
-        match self {
-            Self::Fixed(f, l) | Self::Fitted(f, l) => (f, l),
-        }
-    }
-
-    /// True when estimated.
-    pub fn fitted(self) -> bool {
-        matches!(self, Self::Fitted(..))
-    }
-}
 
 /// Options of [`fit_subtrajectories`].
 #[derive(Debug, Clone, Copy)]
@@ -581,6 +557,28 @@ pub fn fit_subtrajectories(
             opts.length
         );
     }
+    let blocks = cut_run(run, start, &opts)?;
+    let last = run.len() - 1;
+    let h0 = run.heading_guess(0);
+    let turned = turning(run, start, 0, last, h0);
+    let track_estimated = turned >= opts.min_turning;
+    let problem = SharedProblem {
+        run,
+        start,
+        antenna0: opts.antenna.value(),
+        cols: shared_columns(track_estimated, turned, &opts)?,
+        blocks,
+    };
+    let minimum = problem.minimise(opts.max_iter)?;
+    problem.result(minimum, track_estimated, turned)
+}
+
+/// The sub-trajectories of `opts.cuts`; at least two, else an error.
+fn cut_run(
+    run: &Run,
+    start: &ChassisParams,
+    opts: &SubtrajectoryOptions,
+) -> Result<Vec<(usize, usize)>> {
     let blocks = match opts.cuts {
         Cuts::Distance => windows(run, opts.length, MIN_POINTS),
         Cuts::Straights => straight_cuts(run, start, opts.length, MIN_POINTS),
@@ -593,11 +591,17 @@ pub fn fit_subtrajectories(
             0.5 * opts.length
         );
     }
-    let antenna0 = opts.antenna.value();
-    let last = run.len() - 1;
-    let h0 = run.heading_guess(0);
-    let turned = turning(run, start, 0, last, h0);
-    let track_estimated = turned >= opts.min_turning;
+    Ok(blocks)
+}
+
+/// The columns ([`MODEL_UNKNOWNS`] indices) of the shared unknowns: the diameters, the track
+/// width when the run turned `turned` (rad) enough to estimate it, a fitted lever arm (an error
+/// when the run turned too little for it).
+fn shared_columns(
+    track_estimated: bool,
+    turned: f64,
+    opts: &SubtrajectoryOptions,
+) -> Result<Vec<usize>> {
     let mut cols = vec![0, 1];
     if track_estimated {
         cols.push(2);
@@ -612,150 +616,223 @@ pub fn fit_subtrajectories(
         }
         cols.extend([ANTENNA_FORWARD, ANTENNA_LEFT]);
     }
-    let p = cols.len();
-    let mut x: Vec<f64> = cols
-        .iter()
-        .map(|&c| match c {
-            0 => start.left_diameter,
-            1 => start.right_diameter,
-            2 => start.track_width,
-            ANTENNA_FORWARD => antenna0.0,
-            _ => antenna0.1,
-        })
-        .collect();
-    let scale: Vec<f64> = cols
-        .iter()
-        .map(|&c| match c {
-            0 => start.left_diameter,
-            1 => start.right_diameter,
-            2 => start.track_width,
-            _ => start.track_width,
-        })
-        .collect();
-    let headings: Vec<f64> = blocks.iter().map(|&(a, _)| run.heading_guess(a)).collect();
-    let at = |x: &[f64]| unpack(start, antenna0, &cols, x);
-    let (pp, aa) = at(&x);
-    let mut evals = eval_all(run, &pp, aa, &cols, &blocks, &headings)
-        .ok_or_else(|| anyhow!("initial parameters: a sub-trajectory could not be evaluated"))?;
-    let mut evaluations = 1;
-    let mut cost: f64 = evals.iter().map(|e| e.cost).sum();
-    let mut lambda = 1e-6;
-    let mut iterations = 0;
-    'outer: while iterations < opts.max_iter {
-        let mut s = vec![0.0; p * p];
-        let mut g = vec![0.0; p];
-        for e in &evals {
-            s.iter_mut().zip(&e.s).for_each(|(a, b)| *a += b);
-            g.iter_mut().zip(&e.g).for_each(|(a, b)| *a += b);
-        }
-        let mut accepted = false;
-        for _ in 0..30 {
-            let mut m = s.clone();
-            for d in 0..p {
-                m[d * p + d] += lambda * (s[d * p + d] + 1e-12 * (1.0 + s[d * p + d]));
+    Ok(cols)
+}
+
+/// The sub-trajectory fit's least-squares problem in its shared unknowns `cols` (the
+/// sub-trajectories' nuisance parameters eliminated): from `start`'s geometry and the lever
+/// arm `antenna0`.
+struct SharedProblem<'a> {
+    run: &'a Run<'a>,
+    start: &'a ChassisParams,
+    antenna0: (f64, f64),
+    cols: Vec<usize>,
+    blocks: Vec<(usize, usize)>,
+}
+
+/// The minimum [`SharedProblem::minimise`] reached: the shared unknowns, the cost (m^2), the
+/// sub-trajectories' evaluations there, accepted iterations and passes.
+struct Minimum {
+    x: Vec<f64>,
+    cost: f64,
+    evals: Vec<BlockEval>,
+    iterations: usize,
+    evaluations: usize,
+}
+
+impl SharedProblem<'_> {
+    /// The parameters and lever arm at the shared unknowns `x`.
+    fn at(&self, x: &[f64]) -> (ChassisParams, (f64, f64)) {
+        unpack(self.start, self.antenna0, &self.cols, x)
+    }
+
+    /// Every sub-trajectory at the shared unknowns `x` from the start headings `headings`.
+    fn eval(&self, x: &[f64], headings: &[f64]) -> Option<Vec<BlockEval>> {
+        let (pp, aa) = self.at(x);
+        eval_all(self.run, &pp, aa, &self.cols, &self.blocks, headings)
+    }
+
+    /// Levenberg-Marquardt on the reduced system from `start` and the sub-trajectories' first
+    /// headings, a step accepted when the cost falls, at most `max_iter` accepted.
+    fn minimise(&self, max_iter: usize) -> Result<Minimum> {
+        let (start, antenna0, run) = (self.start, self.antenna0, self.run);
+        let p = self.cols.len();
+        let mut x: Vec<f64> = self
+            .cols
+            .iter()
+            .map(|&c| match c {
+                0 => start.left_diameter,
+                1 => start.right_diameter,
+                2 => start.track_width,
+                ANTENNA_FORWARD => antenna0.0,
+                _ => antenna0.1,
+            })
+            .collect();
+        let scale: Vec<f64> = self
+            .cols
+            .iter()
+            .map(|&c| match c {
+                0 => start.left_diameter,
+                1 => start.right_diameter,
+                2 => start.track_width,
+                _ => start.track_width,
+            })
+            .collect();
+        let headings: Vec<f64> = self
+            .blocks
+            .iter()
+            .map(|&(a, _)| run.heading_guess(a))
+            .collect();
+        let mut evals = self.eval(&x, &headings).ok_or_else(|| {
+            anyhow!("initial parameters: a sub-trajectory could not be evaluated")
+        })?;
+        let mut evaluations = 1;
+        let mut cost: f64 = evals.iter().map(|e| e.cost).sum();
+        let mut lambda = 1e-6;
+        let mut iterations = 0;
+        'outer: while iterations < max_iter {
+            let mut s = vec![0.0; p * p];
+            let mut g = vec![0.0; p];
+            for e in &evals {
+                s.iter_mut().zip(&e.s).for_each(|(a, b)| *a += b);
+                g.iter_mut().zip(&e.g).for_each(|(a, b)| *a += b);
             }
-            let Some(mut dx) = optim::solve(m, g.iter().map(|v| -v).collect()) else {
-                lambda *= 10.0;
-                continue;
-            };
-            let worst = dx
-                .iter()
-                .zip(&scale)
-                .map(|(d, s)| d.abs() / s)
-                .fold(0.0, f64::max);
-            if worst > MAX_STEP {
-                dx.iter_mut().for_each(|d| *d *= MAX_STEP / worst);
-            }
-            let quad: f64 = (0..p)
-                .map(|i| dx[i] * (0..p).map(|j| s[i * p + j] * dx[j]).sum::<f64>())
-                .sum();
-            let lin: f64 = dx.iter().zip(&g).map(|(d, g)| d * g).sum();
-            if -(2.0 * lin + quad) < PRED_TOL * cost {
-                break 'outer;
-            }
-            let xn: Vec<f64> = x.iter().zip(&dx).map(|(a, b)| a + b).collect();
-            let hn: Vec<f64> = evals
-                .iter()
-                .map(|e| {
-                    e.heading + e.h_const + e.h_lin.iter().zip(&dx).map(|(a, b)| a * b).sum::<f64>()
-                })
-                .collect();
-            let (pp, aa) = at(&xn);
-            evaluations += 1;
-            if let Some(trial) = eval_all(run, &pp, aa, &cols, &blocks, &hn) {
-                let c: f64 = trial.iter().map(|e| e.cost).sum();
-                if c < cost {
-                    x = xn;
-                    cost = c;
-                    evals = trial;
-                    lambda = (lambda / 3.0).max(1e-12);
-                    accepted = true;
+            let mut accepted = false;
+            for _ in 0..30 {
+                let mut m = s.clone();
+                for d in 0..p {
+                    m[d * p + d] += lambda * (s[d * p + d] + 1e-12 * (1.0 + s[d * p + d]));
+                }
+                let Some(mut dx) = optim::solve(m, g.iter().map(|v| -v).collect()) else {
+                    lambda *= 10.0;
+                    continue;
+                };
+                let worst = dx
+                    .iter()
+                    .zip(&scale)
+                    .map(|(d, s)| d.abs() / s)
+                    .fold(0.0, f64::max);
+                if worst > MAX_STEP {
+                    dx.iter_mut().for_each(|d| *d *= MAX_STEP / worst);
+                }
+                let quad: f64 = (0..p)
+                    .map(|i| dx[i] * (0..p).map(|j| s[i * p + j] * dx[j]).sum::<f64>())
+                    .sum();
+                let lin: f64 = dx.iter().zip(&g).map(|(d, g)| d * g).sum();
+                if -(2.0 * lin + quad) < PRED_TOL * cost {
+                    break 'outer;
+                }
+                let xn: Vec<f64> = x.iter().zip(&dx).map(|(a, b)| a + b).collect();
+                let hn: Vec<f64> = evals
+                    .iter()
+                    .map(|e| {
+                        e.heading
+                            + e.h_const
+                            + e.h_lin.iter().zip(&dx).map(|(a, b)| a * b).sum::<f64>()
+                    })
+                    .collect();
+                evaluations += 1;
+                if let Some(trial) = self.eval(&xn, &hn) {
+                    let c: f64 = trial.iter().map(|e| e.cost).sum();
+                    if c < cost {
+                        x = xn;
+                        cost = c;
+                        evals = trial;
+                        lambda = (lambda / 3.0).max(1e-12);
+                        accepted = true;
+                        break;
+                    }
+                }
+                lambda *= 4.0;
+                if lambda > 1e16 {
                     break;
                 }
             }
-            lambda *= 4.0;
-            if lambda > 1e16 {
+            if !accepted {
                 break;
             }
+            iterations += 1;
         }
-        if !accepted {
-            break;
+        Ok(Minimum {
+            x,
+            cost,
+            evals,
+            iterations,
+            evaluations,
+        })
+    }
+
+    /// The fit at `minimum`: its parameters, sub-trajectories, and the cluster-robust and
+    /// formal standard errors (from the sums of its last evaluation).
+    fn result(
+        &self,
+        minimum: Minimum,
+        track_estimated: bool,
+        turned: f64,
+    ) -> Result<SubtrajectoryFit> {
+        let Minimum {
+            x,
+            cost,
+            evals,
+            iterations,
+            evaluations,
+        } = minimum;
+        let (cols, p) = (&self.cols, self.cols.len());
+        let (params, antenna) = self.at(&x);
+        // Standard errors at the estimate (the sums of the last accepted evaluation).
+        let mut h = vec![0.0; p * p];
+        for e in &evals {
+            h.iter_mut().zip(&e.s).for_each(|(a, b)| *a += b);
         }
-        iterations += 1;
+        let points: usize = evals.iter().map(|e| e.points).sum();
+        let dof = (2 * points).saturating_sub(p + 3 * evals.len()).max(1);
+        let s2 = cost / dof as f64;
+        // Squares: the Hessian of the cost is 2 J^T J, its gradient 2 J^T r; the factors cancel in
+        // the jackknife's shifts, and H^-1 s^2 is the usual (J^T J)^-1 s^2 on the reduced J^T J.
+        let clusters: Vec<(Vec<f64>, Vec<f64>)> =
+            evals.iter().map(|e| (e.s.clone(), e.g.clone())).collect();
+        let robust = cluster_jackknife(&h, p, &clusters)
+            .ok_or_else(|| anyhow!("the sub-trajectory fit's normal equations are singular"))?;
+        let formal = independent(&h, p, s2)
+            .ok_or_else(|| anyhow!("the sub-trajectory fit's normal equations are singular"))?;
+        let (rse, fse) = (
+            diagonal_std_errors(&robust, p),
+            diagonal_std_errors(&formal, p),
+        );
+        let slot = |c: usize| if c >= ANTENNA_FORWARD { c - 1 } else { c };
+        let mut std_errors = [None; 5];
+        let mut independent_std_errors = [None; 5];
+        for (j, &c) in cols.iter().enumerate() {
+            std_errors[slot(c)] = Some(rse[j]);
+            independent_std_errors[slot(c)] = Some(fse[j]);
+        }
+        Ok(SubtrajectoryFit {
+            params,
+            antenna,
+            blocks: self
+                .blocks
+                .iter()
+                .zip(&evals)
+                .map(|(&(a, b), e)| Subtrajectory {
+                    a,
+                    b,
+                    heading: e.heading,
+                    shift: e.shift,
+                })
+                .collect(),
+            cost,
+            points,
+            iterations,
+            evaluations,
+            std_errors,
+            independent_std_errors,
+            covariance: robust,
+            covariance_unknowns: cols.iter().map(|&c| slot(c)).collect(),
+            residual_sigma: s2.sqrt(),
+            track_estimated,
+            turning: turned,
+        })
     }
-    let (params, antenna) = at(&x);
-    // Standard errors at the estimate (the sums of the last accepted evaluation).
-    let mut h = vec![0.0; p * p];
-    for e in &evals {
-        h.iter_mut().zip(&e.s).for_each(|(a, b)| *a += b);
-    }
-    let points: usize = evals.iter().map(|e| e.points).sum();
-    let dof = (2 * points).saturating_sub(p + 3 * evals.len()).max(1);
-    let s2 = cost / dof as f64;
-    // Squares: the Hessian of the cost is 2 J^T J, its gradient 2 J^T r; the factors cancel in
-    // the jackknife's shifts, and H^-1 s^2 is the usual (J^T J)^-1 s^2 on the reduced J^T J.
-    let clusters: Vec<(Vec<f64>, Vec<f64>)> =
-        evals.iter().map(|e| (e.s.clone(), e.g.clone())).collect();
-    let robust = cluster_jackknife(&h, p, &clusters)
-        .ok_or_else(|| anyhow!("the sub-trajectory fit's normal equations are singular"))?;
-    let formal = independent(&h, p, s2)
-        .ok_or_else(|| anyhow!("the sub-trajectory fit's normal equations are singular"))?;
-    let (rse, fse) = (
-        diagonal_std_errors(&robust, p),
-        diagonal_std_errors(&formal, p),
-    );
-    let slot = |c: usize| if c >= ANTENNA_FORWARD { c - 1 } else { c };
-    let mut std_errors = [None; 5];
-    let mut independent_std_errors = [None; 5];
-    for (j, &c) in cols.iter().enumerate() {
-        std_errors[slot(c)] = Some(rse[j]);
-        independent_std_errors[slot(c)] = Some(fse[j]);
-    }
-    Ok(SubtrajectoryFit {
-        params,
-        antenna,
-        blocks: blocks
-            .iter()
-            .zip(&evals)
-            .map(|(&(a, b), e)| Subtrajectory {
-                a,
-                b,
-                heading: e.heading,
-                shift: e.shift,
-            })
-            .collect(),
-        cost,
-        points,
-        iterations,
-        evaluations,
-        std_errors,
-        independent_std_errors,
-        covariance: robust,
-        covariance_unknowns: cols.iter().map(|&c| slot(c)).collect(),
-        residual_sigma: s2.sqrt(),
-        track_estimated,
-        turning: turned,
-    })
 }
 
 #[cfg(test)]

@@ -6,9 +6,11 @@ use std::rc::Rc;
 use anyhow::{anyhow, bail, Result};
 use odo_core::odometry::ChassisParams;
 
+use crate::calib::evaluation::Evaluation;
+use crate::calib::heading_fit::fit_restart_heading;
+use crate::calib::pipeline::cores;
+use crate::calib::run::{windows, Run};
 use crate::optim::norm2;
-
-use super::*;
 
 /// The restarted sub-trajectories of the uncertainty fits: consecutive stretches of `window`
 /// metres, each started from the reference position with the heading minimising eq (16) over
@@ -79,7 +81,7 @@ impl Restarts {
 
     /// The horizontal errors and sigmas only (`horizontal`, `sigma_h`; the other columns
     /// may be empty), remembered with [`Restarts::evaluate_memo`]'s evaluations.
-    pub(super) fn horizontal_memo(&self, run: &Run, p: &ChassisParams) -> Result<Rc<Evaluation>> {
+    pub(crate) fn horizontal_memo(&self, run: &Run, p: &ChassisParams) -> Result<Rc<Evaluation>> {
         self.memo_eval(run, p, false)
     }
 
@@ -108,7 +110,7 @@ impl Restarts {
     }
 
     /// The remembered evaluations whose parameters satisfy `family`, newest first.
-    pub(super) fn memo_where(
+    pub(crate) fn memo_where(
         &self,
         family: impl Fn(&ChassisParams) -> bool,
     ) -> Vec<(ChassisParams, Rc<Evaluation>)> {

@@ -1,5 +1,5 @@
 //! The geometry refined by the Kalman filter of the kappa likelihood (`--geometry-refine
-//! filter`, the default after the sub-trajectory fit).
+//! filter`, the default after the sub-trajectory fit; [`refine_subtrajectory_fit`]).
 //!
 //! [`Innovations`] carries the geometry's relative errors `(c_1, c_2, b)` as states with a wide
 //! prior, so its state after the last observation is a generalised least-squares estimate of
@@ -21,17 +21,20 @@
 //! half its variance (relative), of which the filter takes about half for a scale of all
 //! three lengths; that error, a quarter of the heading error's mean variance, is added to the
 //! covariance as one scale of the three lengths, and when it exceeds the diameters' standard
-//! error the refinement is not applied. Before the re-anchoring, the filter was linearised
-//! about the odometry integrated open-loop, whose drift left an error of
-//! `kappa (R_1 + R_2) / (8 W^2)` (`R_i` the distances the wheels rolled): it refused every log
-//! longer than a few hundred metres, and added 0.04 mm to the 1 km log's diameters' standard
-//! errors. The filter observes the axle centre: a lever arm keeps the sub-trajectory estimate.
+//! error the refinement is not applied. (Linearised about the odometry integrated open-loop
+//! instead, the filter would keep the drift's error of `kappa (R_1 + R_2) / (8 W^2)`, `R_i` the
+//! distances the wheels rolled: it would refuse every log longer than a few hundred metres.)
+//! The filter observes the axle centre: a lever arm keeps the sub-trajectory estimate.
 
 use anyhow::{anyhow, Result};
 use odo_core::odometry::ChassisParams;
 
-use super::slip_fit::{largest_likelihood, slip_rate_range, EVIDENCE_PER_PARAMETER};
-use super::{Innovations, Run, Turning, OBSERVATION_BLOCK};
+use crate::calib::antenna::LeverArm;
+use crate::calib::filter::innovations::{Innovations, Turning, OBSERVATION_BLOCK};
+use crate::calib::filter::search::{largest_likelihood, slip_rate_range, EVIDENCE_PER_PARAMETER};
+use crate::calib::run::Run;
+
+use super::subtrajectory::SubtrajectoryFit;
 
 /// Whether `calibrate` refines the sub-trajectory geometry by the filter.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
@@ -150,4 +153,39 @@ pub fn refine_geometry(
         innovations: skipped.is_none().then(|| std::sync::Arc::new(inn)),
         skipped,
     })
+}
+
+/// The filter's refinement of a sub-trajectory fit `s` ([`refine_geometry`]) with the
+/// reference's sigmas (m, rad): not run with a lever arm (`antenna`: the filter observes the
+/// axle centre) nor with the track width held; then `skipped` says why.
+pub fn refine_subtrajectory_fit(
+    run: &Run,
+    s: &SubtrajectoryFit,
+    antenna: LeverArm,
+    ref_sigma: f64,
+    ref_heading_sigma: f64,
+) -> Result<FilterRefinement> {
+    let reason = if s.antenna != (0.0, 0.0) || antenna.fitted() {
+        Some("the filter observes the axle centre, not a lever arm's antenna")
+    } else if !s.track_estimated {
+        Some("the track width is held")
+    } else {
+        None
+    };
+    if let Some(why) = reason {
+        return Ok(FilterRefinement {
+            params: s.params,
+            covariance: [[f64::NAN; 3]; 3],
+            kappa: f64::NAN,
+            kappa_diff: f64::NAN,
+            linearisation: f64::NAN,
+            observations: 0,
+            skipped: Some(why.to_string()),
+            innovations: None,
+        });
+    }
+    // The start heading (the filter's without reference headings): the first
+    // sub-trajectory's fitted one.
+    let heading0 = s.blocks.first().map_or(0.0, |b| b.heading);
+    refine_geometry(run, &s.params, heading0, ref_sigma, ref_heading_sigma)
 }

@@ -1,6 +1,6 @@
-//! The covariance model's kappa by the exact likelihood of the reference's observations: an
-//! error-state Kalman filter along the whole run, scored on its innovations (the
-//! prediction-error decomposition).
+//! The run prepared for the likelihood of the reference's observations under an error-state
+//! Kalman filter along the whole run ([`Innovations`]), scored on its innovations (the
+//! prediction-error decomposition), and the slip of the largest likelihood.
 //!
 //! The odometry is integrated once from the run's start (the reference position, averaged over
 //! the opening standstill; the reference heading averaged there, or eq (16)'s start heading
@@ -17,8 +17,8 @@
 //! `(dx, dy)` (noise: the epochs' own sigmas, else `--reference-sigma`, over their number) and,
 //! where they have headings, the middle epoch's `dalpha` (`--reference-heading-sigma-deg`):
 //! the heading error is a random walk, whose block means are smoother than its values (their
-//! steps have 2/3 of the variance), so a filter that took the means for values at the middle
-//! read the slip 13 % (q 0.001) to 26 % (q 0.003) low on 70 m runs with the true geometry;
+//! steps have 2/3 of the variance), so a filter that takes the means for values at the middle
+//! reads the slip 13 % (q 0.001) to 26 % (q 0.003) low on 70 m runs with the true geometry;
 //! the position error, an integral of it, is smooth over a metre. The
 //! log-likelihood is `-1/2 sum (ln det S_k + v_k^T S_k^-1 v_k)` over the innovations `v_k`:
 //! each is scored on a prediction from the observations before it only, so nothing a point is
@@ -27,25 +27,36 @@
 //! are not taken for an absence of slip).
 //!
 //! The filter runs over the steps of 5 cm ([`MERGED_STEP`]) between two observations composed
-//! into one transition (`filter_blocks`), so a score costs one prediction and one update per
-//! observation; a run longer than [`MAX_OBSERVATIONS`] metres uses a share of its
-//! observations. The fit of the slip on this likelihood is `slip_fit`.
+//! into one transition ([`Composed`]), so a score costs one prediction and one update per
+//! observation (`kalman.rs`); a run longer than [`MAX_OBSERVATIONS`] metres uses a share of
+//! its observations.
+//!
+//! The slip of the largest likelihood ([`Innovations::fit_with_turning`]): white wheel slip,
+//! then Gauss-Markov slip profiled over its correlation length, then opposite-phase slip when
+//! turning ([`Turning`]: the unit's `kappa_diff`, and its correlation length
+//! `kappa_diff_corr`, which the unit's covariance model carries as the same Gauss-Markov
+//! state), each kept only when the likelihood says it is there. The more likely of white and
+//! correlated wheel slip is kept and its kappa, the long-range rate, is what the unit's
+//! white-slip model gets: correlated slip is smoother over a few centimetres than white slip
+//! of the same long-range rate, and a white-slip fit alone took it for less slip (a third of
+//! it at `L` = 2 m).
 
-// Dense 9x9 matrix arithmetic reads best by index.
+// Dense matrix arithmetic reads best by index.
 #![allow(clippy::needless_range_loop)]
 
 use anyhow::{anyhow, Result};
 use odo_core::odometry::{ChassisParams, Pose};
 
+use crate::calib::run::Run;
 use crate::replay::{counts, index_refs};
 use crate::stats::wrap_angle;
 
-use super::filter_blocks::{Composed, GaussMarkovBlock, StepTerms};
-use super::*;
-
-/// Prior standard deviation of the geometry's relative errors in the filter: wide against
-/// what a calibration leaves (1e-4 .. 1e-3), so the likelihood does not depend on it.
-const GEOMETRY_PRIOR: f64 = 1e-2;
+use super::blocks::{Composed, GaussMarkovBlock, StepTerms};
+use super::kalman::{FilterRun, FilterScore, Obs, SlipModel};
+use super::search::{
+    best_over_grid, largest_likelihood, posterior_mean, search_near, slip_rate_range,
+    EVIDENCE_PER_PARAMETER,
+};
 
 /// One sample's motion and, where it has one, the reference observation after it.
 #[derive(Debug, Clone, Copy)]
@@ -64,16 +75,6 @@ struct Step {
     /// Observation after the step: position innovation base (reference - odometry, m),
     /// its noise variance per axis (m^2), heading difference (rad).
     obs: Option<Obs>,
-}
-
-#[derive(Debug, Clone, Copy)]
-struct Obs {
-    dx: f64,
-    dy: f64,
-    r: f64,
-    dh: Option<f64>,
-    /// Noise variance of `dh` (rad^2).
-    rh: f64,
 }
 
 /// Reference path over which the filter's observations are averaged (m): one observation per
@@ -101,6 +102,31 @@ pub const MAX_OBSERVATIONS: f64 = 1000.0;
 /// over a 50 Hz log 10 times faster at 1 m/s; its first-order transition over 0.2 m of arc
 /// is what each sample's was.
 const MERGED_STEP: f64 = 0.05;
+
+/// Most rounds of the alternate fit of kappa and `kappa_diff` once opposite-phase slip is in.
+const JOINT_ROUNDS: usize = 4;
+
+/// Opposite-phase slip in the filter: an error `e` on wheel 1's distance and `-e` on wheel
+/// 2's, growing by `eps |s_1 - s_2|` per sample. White (`corr` 0): `e` of variance
+/// `kappa_diff |s_1 - s_2|` per sample, the core's `kappa_diff`. Correlated: `eps` a
+/// Gauss-Markov process over the wheel-distance difference, of correlation length `corr` (m)
+/// and variance `kappa_diff / (2 corr)`, which has the same long-range variance
+/// `kappa_diff D` over a difference `D >> corr`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Turning {
+    /// Long-range variance of `e` per metre of `|s_1 - s_2|` (m^2/m).
+    pub kappa_diff: f64,
+    /// Correlation length (m of `|s_1 - s_2|`; 0: white).
+    pub corr: f64,
+}
+
+impl Turning {
+    /// No opposite-phase slip.
+    pub const NONE: Self = Self {
+        kappa_diff: 0.0,
+        corr: 0.0,
+    };
+}
 
 /// One reference epoch of a block: reference minus odometry `(x, y)` (m), its noise variance
 /// per axis (m^2), heading difference (rad), and the step it is on.
@@ -181,28 +207,25 @@ struct Settings {
     block_length: f64,
 }
 
-/// What the filter gives at one `kappa`.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct FilterScore {
-    /// Negative log-likelihood (without the constant).
-    pub nll: f64,
-    /// Share of position innovations within 1 and 3 times `sqrt(trace S)`.
-    pub horizontal: (f64, f64),
-    /// Share of heading innovations within 1 and 3 sigma (NaN without headings).
-    pub heading: (f64, f64),
-    /// The geometry's relative errors after the last observation, `(c_1, c_2, b)`: the
-    /// true wheel distance is `(1 + c_i)` times the odometry's, the true track `(1 + b)`
-    /// times the one integrated with; a generalised least-squares estimate that weights each
-    /// observation by the slip's noise at the kappa scored.
-    pub geometry: [f64; 3],
-    /// Covariance of [`FilterScore::geometry`].
-    pub geometry_cov: [[f64; 3]; 3],
-    /// Mean over the observations of the heading error's variance after each (rad^2): how far
-    /// the odometry re-anchored to the estimate turns from the truth.
-    pub heading_var: f64,
-}
-
 impl Step {
+    /// The step from `start` to `p` on a track `w` (m), the wheels having rolled `rolled` and
+    /// `rolled_diff` (m), without observation.
+    fn between(start: Pose, p: Pose, w: f64, rolled: [f64; 2], rolled_diff: f64) -> Self {
+        let dalpha = p.heading - start.heading;
+        let mid = start.heading + 0.5 * dalpha;
+        let (ddx, ddy) = (p.x - start.x, p.y - start.y);
+        let along = ddx * mid.sin() + ddy * mid.cos();
+        Self {
+            chord: ddx.hypot(ddy).copysign(along),
+            dalpha,
+            mid,
+            s: wheel_distances(start, p, w),
+            rolled,
+            rolled_diff,
+            obs: None,
+        }
+    }
+
     /// The step's linearised motion on a track `w` (m).
     fn terms(&self, w: f64) -> StepTerms {
         let (sn, cs) = self.mid.sin_cos();
@@ -241,19 +264,6 @@ impl Step {
     }
 }
 
-/// The slip the filter is run with: white or Gauss-Markov, the latter's blocks composed.
-#[derive(Clone, Copy)]
-pub(super) struct SlipModel<'a> {
-    /// Long-range wheel-distance variance (m^2 per m rolled).
-    pub kappa: f64,
-    /// Wheel slip's correlation length (m) and its two states composed; `None`: white.
-    pub wheels: Option<(f64, &'a [Vec<GaussMarkovBlock>; 2])>,
-    /// Long-range opposite-phase variance (m^2 per m of `|s_1 - s_2|`).
-    pub kappa_diff: f64,
-    /// Its correlation length (m) and state composed; `None`: white.
-    pub turning: Option<(f64, &'a [GaussMarkovBlock])>,
-}
-
 impl Innovations {
     /// Integrates the odometry with `geometry` over the whole run and takes the observations,
     /// then linearises again about the filter's estimate at the white slip of the largest
@@ -273,7 +283,7 @@ impl Innovations {
         };
         let path = OpenLoop::new(run, geometry, settings)?;
         let open_loop = Self::anchored(run, geometry, settings, &path, None)?;
-        let (lo, hi) = super::slip_fit::slip_rate_range();
+        let (lo, hi) = slip_rate_range();
         let kappa = open_loop.fit(lo, hi);
         open_loop.reanchored(run, geometry, &path, kappa)
     }
@@ -342,104 +352,21 @@ impl Innovations {
         path: &OpenLoop,
         anchors: Option<&[Pose]>,
     ) -> Result<Self> {
-        let Settings {
-            sigmas: (ref_sigma, ref_heading_sigma),
-            block_length,
-            ..
-        } = settings;
-        let rh2 = ref_heading_sigma * ref_heading_sigma;
-        // Every `stride`-th block's observation is used.
-        let distance = run.dist[run.len() - 1] - run.dist[0];
-        let stride = (distance / (MAX_OBSERVATIONS * block_length))
-            .ceil()
-            .max(1.0) as usize;
-        let mut blocks = 0usize;
         let w = geometry.track_width;
-        let (first, last) = (path.first, path.first + path.poses.len() - 1);
-        let mut k = 1;
-        // This pass's pose of each of the path's (the latest re-anchoring).
-        let mut moved = Reanchoring::default();
-        // The step being merged: its start pose and what it rolled so far.
-        let mut start = path.poses[0];
-        let (mut rolled, mut rolled_diff) = ([0.0f64; 2], 0.0f64);
-        // A step closes when it rolled MERGED_STEP or its block ends; consecutive blocks
-        // start more than a block length or BLOCK_TIME apart.
-        let rolled_mean: f64 = path.rolled.iter().map(|r| 0.5 * (r[0] + r[1])).sum();
-        let duration = run.reference_at(run.len() - 1).t - run.reference_at(0).t;
-        let blocks_most = distance / block_length + duration / BLOCK_TIME + 1.0;
-        let mut steps = Vec::with_capacity((rolled_mean / MERGED_STEP + blocks_most) as usize + 1);
-        // Observations of one block, averaged: (ref - odo) x, y, noise var, heading, count.
-        let mut block = Block::default();
-        let mut block_start = 0usize;
-        let mut observations = 0;
-        // The odometry's pose at each observed block's end; the re-anchorings: (first step
-        // after, anchor minus odometry).
-        let mut closes = Vec::new();
-        let mut close_steps = Vec::new();
-        let mut resets: Vec<(usize, [f64; 3])> = Vec::new();
-        for i in first + 1..=last {
-            let open = path.poses[i - first];
-            let p = moved.apply(open);
-            let [d1, d2, dd] = path.rolled[i - first];
-            rolled[0] += d1;
-            rolled[1] += d2;
-            rolled_diff += dd;
-            // A reference epoch joins its block; the block's averaged observation goes on the
-            // step holding its middle epoch, which is closed when the block ends.
-            let mut block_done = false;
-            if k < run.len() && run.matches[k].0 == i {
-                let r = run.reference_at(k);
-                if block.is_empty() {
-                    block_start = k;
-                }
-                block.add(Epoch {
-                    dx: r.x - p.x,
-                    dy: r.y - p.y,
-                    r: position_variance(run, k, ref_sigma),
-                    dh: r.heading.map(|h| wrap_angle(h - p.heading)),
-                    step: steps.len(),
-                });
-                block_done = k + 1 >= run.len()
-                    || run.dist[k + 1] - run.dist[block_start] > block_length
-                    || run.reference_at(k + 1).t - run.reference_at(block_start).t > BLOCK_TIME;
-                k += 1;
-            }
-            if block_done || 0.5 * (rolled[0] + rolled[1]) >= MERGED_STEP || i == last {
-                let dalpha = p.heading - start.heading;
-                let mid = start.heading + 0.5 * dalpha;
-                let (ddx, ddy) = (p.x - start.x, p.y - start.y);
-                let along = ddx * mid.sin() + ddy * mid.cos();
-                steps.push(Step {
-                    chord: ddx.hypot(ddy).copysign(along),
-                    dalpha,
-                    mid,
-                    s: wheel_distances(start, p, w),
-                    rolled,
-                    rolled_diff,
-                    obs: None,
-                });
-                start = p;
-                (rolled, rolled_diff) = ([0.0; 2], 0.0);
-            }
-            if block_done {
-                let (at, o) = block.take(rh2);
-                blocks += 1;
-                if blocks.is_multiple_of(stride) || k >= run.len() {
-                    steps[at].obs = Some(o);
-                    closes.push(p);
-                    close_steps.push(steps.len());
-                    if let Some(a) = anchors.and_then(|a| a.get(observations)) {
-                        resets.push((
-                            steps.len(),
-                            [a.x - p.x, a.y - p.y, wrap_angle(a.heading - p.heading)],
-                        ));
-                        moved = Reanchoring::new(open, *a);
-                        start = *a;
-                    }
-                    observations += 1;
-                }
-            }
-        }
+        let taken = StepsTaken::along(run, w, settings, path, anchors);
+        Ok(Self::from_steps(taken, w, settings, path))
+    }
+
+    /// The filter of the steps `taken` on a track `w` (m): their terms composed between the
+    /// observations, the re-anchorings' shifts of the pose error and the blocks' levers.
+    fn from_steps(taken: StepsTaken, w: f64, settings: Settings, path: &OpenLoop) -> Self {
+        let StepsTaken {
+            steps,
+            closes,
+            close_steps,
+            resets,
+            observations,
+        } = taken;
         // The steps after the last observation are not observed.
         let mut ends = Vec::with_capacity(observations);
         let mut obs = Vec::with_capacity(observations);
@@ -476,7 +403,7 @@ impl Innovations {
             .zip(&close_steps)
             .map(|(&e, &c)| sum_m(&terms[e.min(c)..c]))
             .collect();
-        Ok(Self {
+        Self {
             composed: Composed::new(&terms[..used], &ends),
             obs,
             p0: path.start_variances,
@@ -485,7 +412,7 @@ impl Innovations {
             levers,
             settings,
             observations,
-        })
+        }
     }
 
     /// Runs the filter with the wheel-distance variance `kappa` (m^2 per m rolled).
@@ -514,222 +441,258 @@ impl Innovations {
     }
 
     /// The two wheels' Gauss-Markov slip of correlation length `corr` (m) composed.
-    pub(super) fn wheel_slip(&self, corr: f64) -> [Vec<GaussMarkovBlock>; 2] {
+    fn wheel_slip(&self, corr: f64) -> [Vec<GaussMarkovBlock>; 2] {
         [0, 1].map(|j| self.composed.gauss_markov(j, corr))
     }
 
     /// The opposite-phase Gauss-Markov slip of correlation length `corr` (m) composed.
-    pub(super) fn turning_slip(&self, corr: f64) -> Vec<GaussMarkovBlock> {
+    fn turning_slip(&self, corr: f64) -> Vec<GaussMarkovBlock> {
         self.composed.gauss_markov(2, corr)
     }
 
     /// The filter over the composed blocks: one prediction and one update per observation.
-    pub(super) fn filter(&self, slip: SlipModel) -> FilterScore {
+    fn filter(&self, slip: SlipModel) -> FilterScore {
         self.filter_tracked(slip, None)
     }
 
     /// [`Innovations::filter`], pushing the pose error's estimate after each observation to
     /// `track` when given.
     fn filter_tracked(&self, slip: SlipModel, track: Option<&mut Vec<[f64; 3]>>) -> FilterScore {
-        // Only the states the slip model has: the arithmetic is dense in them.
-        match (slip.wheels.is_some(), slip.turning.is_some()) {
-            (false, false) => self.filter_with::<6>(slip, track),
-            (false, true) => self.filter_with::<7>(slip, track),
-            (true, false) => self.filter_with::<8>(slip, track),
-            (true, true) => self.filter_with::<9>(slip, track),
+        FilterRun {
+            composed: &self.composed,
+            obs: &self.obs,
+            p0: self.p0,
+            shifts: &self.shifts,
+        }
+        .score(slip, track)
+    }
+
+    fn nll(
+        &self,
+        kappa: f64,
+        wheels: Option<(f64, &[Vec<GaussMarkovBlock>; 2])>,
+        kappa_diff: f64,
+        turning: Option<(f64, &[GaussMarkovBlock])>,
+    ) -> f64 {
+        self.filter(SlipModel {
+            kappa,
+            wheels,
+            kappa_diff,
+            turning,
+        })
+        .nll
+    }
+
+    /// The kappa of white slip of the largest likelihood in `[lo, hi]`.
+    pub fn fit(&self, lo: f64, hi: f64) -> f64 {
+        largest_likelihood(|k| self.nll(k, None, 0.0, None), lo, hi)
+    }
+
+    /// The long-range kappa and the slip correlation length (0: white) of the largest
+    /// likelihood: the white-slip fit ([`Innovations::fit`]), then the profile over the
+    /// correlation grid; the white fit is kept unless correlated slip raises the likelihood by
+    /// more than [`EVIDENCE_PER_PARAMETER`] (it has one parameter more). Without that test a
+    /// correlation length the data cannot tell won on nearly every run, and its long-range
+    /// kappa read q 0.001 slip 15 % high (20 calibrations of the ensemble test).
+    pub fn fit_correlated(&self, lo: f64, hi: f64) -> (f64, f64) {
+        let white = self.fit(lo, hi);
+        let white_nll = self.nll(white, None, 0.0, None);
+        let (corr, kappa, nll) = best_over_grid(|corr| {
+            let gm = self.wheel_slip(corr);
+            search_near(|k| self.nll(k, Some((corr, &gm)), 0.0, None), white, lo, hi)
+        });
+        if nll + EVIDENCE_PER_PARAMETER < white_nll {
+            (kappa, corr)
+        } else {
+            (white, 0.0)
         }
     }
 
-    /// [`Innovations::filter_tracked`] over `N` states: the pose error and the geometry's
-    /// (6), the two wheels' Gauss-Markov slip (6 and 7) when the model has them, the
-    /// opposite-phase one (the last) when it has it.
-    fn filter_with<const N: usize>(
-        &self,
-        slip: SlipModel,
-        mut track: Option<&mut Vec<[f64; 3]>>,
-    ) -> FilterScore {
-        let turning_state = N - 1;
-        let mut p = [[0.0; N]; N];
-        p[0][0] = self.p0.0;
-        p[1][1] = self.p0.0;
-        p[2][2] = self.p0.1;
-        for (i, row) in p.iter_mut().enumerate().take(6).skip(3) {
-            row[i] = GEOMETRY_PRIOR * GEOMETRY_PRIOR;
-        }
-        if let Some((corr, _)) = slip.wheels {
-            p[6][6] = slip.kappa / (2.0 * corr);
-            p[7][7] = p[6][6];
-        }
-        if let Some((corr, _)) = slip.turning {
-            p[turning_state][turning_state] = slip.kappa_diff / (2.0 * corr);
-        }
-        let mut x = [0.0f64; N];
-        let mut nll = 0.0;
-        let mut heading_var = 0.0;
-        let (mut hn, mut h1, mut h3, mut an, mut a1, mut a3) = (0usize, 0, 0, 0usize, 0, 0);
-        for (b, (base, o)) in self.composed.blocks.iter().zip(&self.obs).enumerate() {
-            // The block's transition: rows 0-2 (the pose) full, the others diagonal.
-            let mut phi = [[0.0; N]; 3];
-            for r in 0..3 {
-                phi[r][r] = 1.0;
-                for c in 0..3 {
-                    phi[r][3 + c] = base.g[r][c];
-                }
-            }
-            phi[0][2] = base.r[0];
-            phi[1][2] = base.r[1];
-            let mut d = [1.0; N];
-            let mut gm: [Option<(usize, &GaussMarkovBlock, f64)>; 3] = [None; 3];
-            if let Some((_, w)) = slip.wheels {
-                gm[0] = Some((6, &w[0][b], slip.kappa));
-                gm[1] = Some((7, &w[1][b], slip.kappa));
-            }
-            if let Some((_, t)) = slip.turning {
-                gm[2] = Some((turning_state, &t[b], slip.kappa_diff));
-            }
-            for &(i, g, _) in gm.iter().flatten() {
-                for r in 0..3 {
-                    phi[r][i] = g.z[r];
-                }
-                d[i] = g.z[3];
-            }
-            // x <- Phi x, P <- Phi P Phi^T.
-            let pose = [0, 1, 2].map(|r| (0..N).map(|k| phi[r][k] * x[k]).sum::<f64>());
-            x[..3].copy_from_slice(&pose);
-            for i in 3..N {
-                x[i] *= d[i];
-            }
-            let mut y = p;
-            for r in 0..3 {
-                for c in 0..N {
-                    y[r][c] = (0..N).map(|k| phi[r][k] * p[k][c]).sum();
-                }
-            }
-            for r in 3..N {
-                for c in 0..N {
-                    y[r][c] = d[r] * p[r][c];
-                }
-            }
-            for r in 0..N {
-                for c in 0..3 {
-                    p[r][c] = (0..N).map(|k| y[r][k] * phi[c][k]).sum();
-                }
-                for c in 3..N {
-                    p[r][c] = y[r][c] * d[c];
-                }
-            }
-            // The block's noise.
-            let white = if slip.wheels.is_none() {
-                slip.kappa
-            } else {
-                0.0
-            };
-            let white_turn = if slip.turning.is_none() {
-                slip.kappa_diff
-            } else {
-                0.0
-            };
-            for r in 0..3 {
-                for c in 0..3 {
-                    p[r][c] += white * base.qw[r][c] + white_turn * base.qt[r][c];
-                }
-            }
-            for &(i, g, k) in gm.iter().flatten() {
-                let idx = [0, 1, 2, i];
-                for (a, &ia) in idx.iter().enumerate() {
-                    for (c, &ic) in idx.iter().enumerate() {
-                        p[ia][ic] += k * g.q[a][c];
-                    }
-                }
-            }
-            for (xi, d) in x.iter_mut().zip(&self.shifts[b]) {
-                *xi -= d;
-            }
-            // Position: 2-D update.
-            let v = [o.dx - x[0], o.dy - x[1]];
-            let s = [[p[0][0] + o.r, p[0][1]], [p[1][0], p[1][1] + o.r]];
-            let det = s[0][0] * s[1][1] - s[0][1] * s[1][0];
-            if det.is_nan() || det <= 0.0 {
-                return FilterScore {
-                    nll: f64::INFINITY,
-                    ..FilterScore::default()
-                };
-            }
-            let si = [
-                [s[1][1] / det, -s[0][1] / det],
-                [-s[1][0] / det, s[0][0] / det],
-            ];
-            let quad = v[0] * (si[0][0] * v[0] + si[0][1] * v[1])
-                + v[1] * (si[1][0] * v[0] + si[1][1] * v[1]);
-            nll += 0.5 * (det.ln() + quad);
-            hn += 1;
-            let tr = (s[0][0] + s[1][1]).sqrt();
-            let e = v[0].hypot(v[1]);
-            h1 += usize::from(e <= tr);
-            h3 += usize::from(e <= 3.0 * tr);
-            // K = P H^T S^-1 (H picks x, y).
-            let mut kg = [[0.0; 2]; N];
-            for (r, kr) in kg.iter_mut().enumerate() {
-                for c in 0..2 {
-                    kr[c] = p[r][0] * si[0][c] + p[r][1] * si[1][c];
-                }
-            }
-            for r in 0..N {
-                x[r] += kg[r][0] * v[0] + kg[r][1] * v[1];
-            }
-            let prow = [p[0], p[1]];
-            for r in 0..N {
-                for c in 0..N {
-                    p[r][c] -= kg[r][0] * prow[0][c] + kg[r][1] * prow[1][c];
-                }
-            }
-            // Heading: scalar update.
-            if let Some(dh) = o.dh {
-                let v = wrap_angle(dh - x[2]);
-                let s = p[2][2] + o.rh;
-                nll += 0.5 * (s.ln() + v * v / s);
-                an += 1;
-                a1 += usize::from(v.abs() <= s.sqrt());
-                a3 += usize::from(v.abs() <= 3.0 * s.sqrt());
-                let k: [f64; N] = std::array::from_fn(|r| p[r][2] / s);
-                for r in 0..N {
-                    x[r] += k[r] * v;
-                }
-                let prow = p[2];
-                for r in 0..N {
-                    for c in 0..N {
-                        p[r][c] -= k[r] * prow[c];
-                    }
-                }
-            }
-            if let Some(t) = track.as_deref_mut() {
-                t.push([x[0], x[1], x[2]]);
-            }
-            heading_var += p[2][2];
-            // Keep P symmetric against rounding.
-            for r in 0..N {
-                for c in r + 1..N {
-                    let m = 0.5 * (p[r][c] + p[c][r]);
-                    p[r][c] = m;
-                    p[c][r] = m;
-                }
-            }
-        }
-        let share = |n: usize, d: usize| {
-            if d == 0 {
-                f64::NAN
-            } else {
-                n as f64 / d as f64
-            }
+    /// [`Innovations::fit_correlated`], then opposite-phase slip ([`Turning`]): white (a
+    /// search over `kappa_diff`) and correlated (the profile over its correlation length),
+    /// kept only when it raises the likelihood by more than [`EVIDENCE_PER_PARAMETER`] per
+    /// parameter it adds, then kappa and `kappa_diff` fitted in turn, and `kappa_diff` taken as
+    /// its mean over the likelihood ([`posterior_mean`]). Returns `(kappa, corr, turning)`.
+    pub fn fit_with_turning(&self, lo: f64, hi: f64) -> (f64, f64, Turning) {
+        let (kappa, corr) = self.fit_correlated(lo, hi);
+        let gm = (corr > 0.0).then(|| self.wheel_slip(corr));
+        let wheels = gm.as_ref().map(|g| (corr, g));
+        let without = self.nll(kappa, wheels, 0.0, None);
+        let kd = largest_likelihood(|d| self.nll(kappa, wheels, d, None), lo, hi);
+        let white = Turning {
+            kappa_diff: kd,
+            corr: 0.0,
         };
-        FilterScore {
-            nll: if nll.is_finite() { nll } else { f64::INFINITY },
-            horizontal: (share(h1, hn), share(h3, hn)),
-            heading: (share(a1, an), share(a3, an)),
-            geometry: [x[3], x[4], x[5]],
-            geometry_cov: [0, 1, 2].map(|r| [0, 1, 2].map(|c| p[3 + r][3 + c])),
-            heading_var: heading_var / self.obs.len().max(1) as f64,
+        let mut best = (white, self.nll(kappa, wheels, kd, None), 1.0);
+        let (tcorr, tkd, tnll) = best_over_grid(|tc| {
+            let gt = self.turning_slip(tc);
+            search_near(|d| self.nll(kappa, wheels, d, Some((tc, &gt))), kd, lo, hi)
+        });
+        if tnll + EVIDENCE_PER_PARAMETER < best.1 {
+            let t = Turning {
+                kappa_diff: tkd,
+                corr: tcorr,
+            };
+            best = (t, tnll, 2.0);
         }
+        if best.1 > without - EVIDENCE_PER_PARAMETER * best.2 {
+            return (kappa, corr, Turning::NONE);
+        }
+        let mut turning = best.0;
+        let gt = (turning.corr > 0.0).then(|| self.turning_slip(turning.corr));
+        let turn = gt.as_deref().map(|g| (turning.corr, g));
+        // Kappa took some of the turning slip for wheel slip before `kappa_diff` was there:
+        // the two are fitted in turn until they settle.
+        let mut kappa = kappa;
+        for _ in 0..JOINT_ROUNDS {
+            let (k, _) = search_near(
+                |k| self.nll(k, wheels, turning.kappa_diff, turn),
+                kappa,
+                lo,
+                hi,
+            );
+            let (d, _) = search_near(|d| self.nll(k, wheels, d, turn), turning.kappa_diff, lo, hi);
+            let settled =
+                (k / kappa).ln().abs() < 0.01 && (d / turning.kappa_diff).ln().abs() < 0.01;
+            (kappa, turning.kappa_diff) = (k, d);
+            if settled {
+                break;
+            }
+        }
+        turning.kappa_diff = posterior_mean(
+            |l| self.nll(kappa, wheels, l.exp(), turn),
+            turning.kappa_diff,
+            hi,
+        );
+        (kappa, corr, turning)
+    }
+}
+
+/// The run's motion merged into steps with the reference's blocks averaged into
+/// observations on them ([`StepsTaken::along`]).
+struct StepsTaken {
+    /// The steps, the observed ones with their observation.
+    steps: Vec<Step>,
+    /// The odometry's pose at each observed block's end.
+    closes: Vec<Pose>,
+    /// The number of steps at each observed block's end.
+    close_steps: Vec<usize>,
+    /// The re-anchorings: the first step after, anchor minus odometry `(x, y, heading)`.
+    resets: Vec<(usize, [f64; 3])>,
+    /// Observations (positions) taken.
+    observations: usize,
+}
+
+impl StepsTaken {
+    /// The odometry `path` on a track `w` (m), moved to `anchors[b]` at the end of observed
+    /// block `b` when given, merged into steps of [`MERGED_STEP`] (never across an
+    /// observation); the reference's epochs averaged over blocks of `settings.block_length`
+    /// (at most [`BLOCK_TIME`]), every `stride`-th block observed (at most
+    /// [`MAX_OBSERVATIONS`]).
+    fn along(
+        run: &Run,
+        w: f64,
+        settings: Settings,
+        path: &OpenLoop,
+        anchors: Option<&[Pose]>,
+    ) -> Self {
+        let Settings {
+            sigmas: (ref_sigma, ref_heading_sigma),
+            block_length,
+            ..
+        } = settings;
+        let rh2 = ref_heading_sigma * ref_heading_sigma;
+        // Every `stride`-th block's observation is used.
+        let distance = run.dist[run.len() - 1] - run.dist[0];
+        let stride = (distance / (MAX_OBSERVATIONS * block_length))
+            .ceil()
+            .max(1.0) as usize;
+        let mut blocks = 0usize;
+        let (first, last) = (path.first, path.first + path.poses.len() - 1);
+        let mut k = 1;
+        // This pass's pose of each of the path's (the latest re-anchoring).
+        let mut moved = Reanchoring::default();
+        // The step being merged: its start pose and what it rolled so far.
+        let mut start = path.poses[0];
+        let (mut rolled, mut rolled_diff) = ([0.0f64; 2], 0.0f64);
+        // A step closes when it rolled MERGED_STEP or its block ends; consecutive blocks
+        // start more than a block length or BLOCK_TIME apart.
+        let rolled_mean: f64 = path.rolled.iter().map(|r| 0.5 * (r[0] + r[1])).sum();
+        let duration = run.reference_at(run.len() - 1).t - run.reference_at(0).t;
+        let blocks_most = distance / block_length + duration / BLOCK_TIME + 1.0;
+        let mut taken = Self {
+            steps: Vec::with_capacity((rolled_mean / MERGED_STEP + blocks_most) as usize + 1),
+            closes: Vec::new(),
+            close_steps: Vec::new(),
+            resets: Vec::new(),
+            observations: 0,
+        };
+        // Observations of one block, averaged: (ref - odo) x, y, noise var, heading, count.
+        let mut block = Block::default();
+        let mut block_start = 0usize;
+        for i in first + 1..=last {
+            let open = path.poses[i - first];
+            let p = moved.apply(open);
+            let [d1, d2, dd] = path.rolled[i - first];
+            rolled[0] += d1;
+            rolled[1] += d2;
+            rolled_diff += dd;
+            // A reference epoch joins its block; the block's averaged observation goes on the
+            // step holding its middle epoch, which is closed when the block ends.
+            let mut block_done = false;
+            if k < run.len() && run.matches[k].0 == i {
+                let r = run.reference_at(k);
+                if block.is_empty() {
+                    block_start = k;
+                }
+                block.add(Epoch {
+                    dx: r.x - p.x,
+                    dy: r.y - p.y,
+                    r: position_variance(run, k, ref_sigma),
+                    dh: r.heading.map(|h| wrap_angle(h - p.heading)),
+                    step: taken.steps.len(),
+                });
+                block_done = k + 1 >= run.len()
+                    || run.dist[k + 1] - run.dist[block_start] > block_length
+                    || run.reference_at(k + 1).t - run.reference_at(block_start).t > BLOCK_TIME;
+                k += 1;
+            }
+            if block_done || 0.5 * (rolled[0] + rolled[1]) >= MERGED_STEP || i == last {
+                taken
+                    .steps
+                    .push(Step::between(start, p, w, rolled, rolled_diff));
+                start = p;
+                (rolled, rolled_diff) = ([0.0; 2], 0.0);
+            }
+            if block_done {
+                let (at, o) = block.take(rh2);
+                blocks += 1;
+                if blocks.is_multiple_of(stride) || k >= run.len() {
+                    if let Some(a) = taken.observe(at, o, p, anchors) {
+                        moved = Reanchoring::new(open, a);
+                        start = a;
+                    }
+                }
+            }
+        }
+        taken
+    }
+
+    /// Puts observation `o` on step `at`, the odometry at `p` at its block's end; returns the
+    /// anchor the path moves to there, if any.
+    fn observe(&mut self, at: usize, o: Obs, p: Pose, anchors: Option<&[Pose]>) -> Option<Pose> {
+        self.steps[at].obs = Some(o);
+        self.closes.push(p);
+        self.close_steps.push(self.steps.len());
+        let anchor = anchors.and_then(|a| a.get(self.observations)).copied();
+        if let Some(a) = anchor {
+            self.resets.push((
+                self.steps.len(),
+                [a.x - p.x, a.y - p.y, wrap_angle(a.heading - p.heading)],
+            ));
+        }
+        self.observations += 1;
+        anchor
     }
 }
 

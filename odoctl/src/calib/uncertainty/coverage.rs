@@ -1,4 +1,7 @@
-//! The uncertainty coefficients (delta or kappa) by the coverage criterion.
+//! The paper's coverage criterion for the uncertainty coefficients (delta or kappa): the
+//! smallest coefficient whose 1-sigma band, widened by the reference noise, covers 68.27 % of
+//! the horizontal errors of the restarted sub-trajectories ([`Restarts`]); the heading
+//! coverage of the same band that the `delta_diff` fit uses.
 
 use std::cell::RefCell;
 
@@ -6,118 +9,16 @@ use anyhow::Result;
 use indicatif::ProgressBar;
 use odo_core::odometry::{ChassisParams, UncertaintyModel};
 
+use crate::calib::evaluation::Evaluation;
+use crate::calib::run::Run;
 use crate::optim::norm2;
 
-use super::*;
+use super::coefficients::{set_coefficient, DeltaMode, UncertaintyCriterion, UncertaintyFit};
+use super::restarts::Restarts;
 
 /// Nominal coverage of a 1-sigma band of a normal distribution.
 pub const ONE_SIGMA_COVERAGE: f64 = 0.682_689_492;
 
-/// How the two wheels' coefficients are fitted.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum DeltaMode {
-    /// Left and right equal.
-    Equal,
-    /// Keep the ratio left/right of the initial parameters; fit the common scale.
-    KeepRatio,
-}
-
-/// Result of the uncertainty fit.
-#[derive(Debug, Clone)]
-pub struct UncertaintyFit {
-    /// The model whose coefficients were fitted.
-    pub model: UncertaintyModel,
-    /// The parameters with the fitted coefficients.
-    pub params: ChassisParams,
-    /// Which keys were fitted (`delta_left`/`delta_right` or `kappa_left`/`kappa_right`).
-    pub keys: (&'static str, &'static str),
-    /// Sub-trajectories used.
-    pub windows: usize,
-    /// Points used (common times after each restart).
-    pub points: usize,
-    /// Achieved coverage of the 1-sigma band (with the reference noise).
-    pub coverage1: f64,
-    /// Achieved coverage of the 3-sigma band (with the reference noise).
-    pub coverage3: f64,
-    /// Set when the criterion could not be met inside the admissible range.
-    pub warning: Option<String>,
-    /// The `delta_diff` fit and heading coverage (paper model, reference with a heading).
-    pub diff: Option<DiffFit>,
-    /// The criterion that fitted the coefficients.
-    pub criterion: UncertaintyCriterion,
-    /// Heading 1- and 3-sigma coverage of the fit's points (likelihood criterion, reference
-    /// with a heading).
-    pub heading_coverage: Option<(f64, f64)>,
-}
-
-/// Cuts matches `0..len` into consecutive sub-trajectories of `window` metres (the whole run
-/// when `window <= 0`); each is `(start, end)` with at least `min_points` after the start.
-pub fn windows(run: &Run, window: f64, min_points: usize) -> Vec<(usize, usize)> {
-    let mut out = Vec::new();
-    if run.is_empty() {
-        return out;
-    }
-    let last = run.len() - 1;
-    if window <= 0.0 {
-        if last >= min_points {
-            out.push((0, last));
-        }
-        return out;
-    }
-    let mut a = 0;
-    while a < last {
-        let b = run.last_within(a, window).max(a + 1);
-        if b - a >= min_points && run.dist[b] - run.dist[a] >= 0.5 * window {
-            out.push((a, b));
-        }
-        a = b;
-    }
-    out
-}
-
-pub(super) fn set_coefficient(
-    base: &ChassisParams,
-    mode: DeltaMode,
-    initial: &ChassisParams,
-    v: f64,
-) -> ChassisParams {
-    let mut p = *base;
-    let ratio = |l: f32, r: f32| {
-        if l > 0.0 && r > 0.0 && mode == DeltaMode::KeepRatio {
-            f64::from(r / l)
-        } else {
-            1.0
-        }
-    };
-    match p.uncertainty_model {
-        UncertaintyModel::Paper => {
-            let q = ratio(initial.delta_left, initial.delta_right);
-            p.delta_left = v as f32;
-            p.delta_right = (v * q) as f32;
-        }
-        UncertaintyModel::Covariance => {
-            let q = ratio(initial.kappa_left, initial.kappa_right);
-            p.kappa_left = v as f32;
-            p.kappa_right = (v * q) as f32;
-        }
-    }
-    p
-}
-
-/// `base` with the covariance model's coefficients of `fitted` (the slip and opposite-phase
-/// slip; the geometry and the paper model's coefficients stay `base`'s).
-pub(super) fn with_covariance_coefficients(
-    base: &ChassisParams,
-    fitted: &ChassisParams,
-) -> ChassisParams {
-    ChassisParams {
-        kappa_left: fitted.kappa_left,
-        kappa_right: fitted.kappa_right,
-        kappa_diff: fitted.kappa_diff,
-        kappa_diff_corr: fitted.kappa_diff_corr,
-        ..*base
-    }
-}
 /// Coverage of the horizontal `k`-sigma band widened by the reference noise:
 /// the fraction of points with `e <= k sqrt(sigma_h^2 + ref_sigma^2)`.
 pub fn horizontal_coverage(ev: &Evaluation, ref_sigma: f64, k: f64) -> f64 {
@@ -168,7 +69,7 @@ pub fn heading_points(ev: &Evaluation, from: usize) -> usize {
 /// non-decreasing in `v`: 0 when it already holds there, else a bisection in log scale down
 /// to a relative width `rel_tol`. Returns the value and a warning when `hi` is not enough or
 /// the criterion is not identifiable.
-pub(super) fn smallest_covering(
+pub(crate) fn smallest_covering(
     hi: f64,
     zero_allowed: bool,
     rel_tol: f64,
@@ -225,9 +126,9 @@ pub fn fit_uncertainty(
 }
 
 /// Bisection width (natural log of the coefficient) of the horizontal fit.
-pub(super) const COEFFICIENT_LOG_TOL: f64 = 1e-7;
+pub(crate) const COEFFICIENT_LOG_TOL: f64 = 1e-7;
 /// Bisection width of `delta_diff`, and of delta when refitted inside its fit (0.01 %).
-pub(super) const DIFF_LOG_TOL: f64 = 1e-4;
+pub(crate) const DIFF_LOG_TOL: f64 = 1e-4;
 
 /// [`fit_uncertainty`] on given restarted sub-trajectories; the other coefficients (e.g.
 /// `delta_diff`) are those of `geometry`.
@@ -254,7 +155,7 @@ pub fn fit_uncertainty_on(
 }
 
 #[allow(clippy::too_many_arguments)]
-pub(super) fn fit_coefficient(
+pub(crate) fn fit_coefficient(
     run: &Run,
     restarts: &Restarts,
     geometry: &ChassisParams,
@@ -524,4 +425,81 @@ fn bracket_threshold(
         width *= 4.0;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calib::testing::sim;
+    use crate::csvio::match_times;
+    use crate::simulate::{default_truth, PathKind};
+
+    /// The coefficient fits (predicted bracket, then the bisection on known coverages) give
+    /// the plain bisection's coefficient, every coverage evaluated: paper model without and
+    /// with `delta_diff` (sigma then not a power of delta), covariance model, on simulated
+    /// runs; also the refit's coarser width on a memo left by the finer fit.
+    #[test]
+    fn fast_coefficient_fit_matches_the_plain_bisection() {
+        for seed in [1, 2] {
+            let s = sim(PathKind::Random, 150.0, seed);
+            let run = Run::new(
+                &s.samples,
+                &s.reference,
+                match_times(&s.samples, &s.reference),
+            );
+            let geometry = default_truth();
+            let h0 = run.heading_guess(0);
+            for (model, dd) in [
+                (UncertaintyModel::Paper, 0.0f32),
+                (UncertaintyModel::Paper, 2e-8),
+                (UncertaintyModel::Covariance, 0.0),
+            ] {
+                let g = ChassisParams {
+                    uncertainty_model: model,
+                    delta_diff: dd,
+                    ..geometry
+                };
+                let restarts = Restarts::new(&run, &g, h0, 10.0).unwrap();
+                let hi = f64::from(match model {
+                    UncertaintyModel::Paper => ChassisParams::MAX_DELTA,
+                    UncertaintyModel::Covariance => ChassisParams::MAX_KAPPA,
+                });
+                let coef = |p: &ChassisParams| match model {
+                    UncertaintyModel::Paper => p.delta_left,
+                    UncertaintyModel::Covariance => p.kappa_left,
+                };
+                for tol in [COEFFICIENT_LOG_TOL, DIFF_LOG_TOL] {
+                    let mut ev = Evaluation::default();
+                    let (plain, _) = smallest_covering(
+                        hi,
+                        false,
+                        tol,
+                        |v| {
+                            let p = set_coefficient(&g, DeltaMode::Equal, &g, v);
+                            restarts.evaluate_into(&run, &p, &mut ev)?;
+                            Ok(horizontal_coverage(&ev, 0.008, 1.0))
+                        },
+                        &ProgressBar::hidden(),
+                    )
+                    .unwrap();
+                    let fast = fit_coefficient(
+                        &run,
+                        &restarts,
+                        &g,
+                        &g,
+                        0.008,
+                        DeltaMode::Equal,
+                        tol,
+                        &ProgressBar::hidden(),
+                    )
+                    .unwrap();
+                    let (a, b) = (f64::from(coef(&fast.params)), f64::from(plain as f32));
+                    assert!(
+                        (a / b).ln().abs() <= tol,
+                        "seed {seed} {model:?} delta_diff {dd} width {tol}: fast {a:e}, plain {b:e}"
+                    );
+                }
+            }
+        }
+    }
 }

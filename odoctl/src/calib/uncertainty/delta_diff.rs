@@ -6,36 +6,14 @@ use anyhow::Result;
 use indicatif::ProgressBar;
 use odo_core::odometry::{ChassisParams, UncertaintyModel};
 
-use super::*;
+use crate::calib::run::Run;
 
-/// The `delta_diff` fit of the paper's model (see [`fit_delta_diff`]).
-#[derive(Debug, Clone)]
-pub struct DiffFit {
-    /// The initial `delta_diff` (from the first estimate).
-    pub initial: f64,
-    /// The fitted (or, when not fitted, the kept) `delta_diff`.
-    pub delta_diff: f64,
-    /// Whether it was fitted.
-    pub fitted: bool,
-    /// delta (`delta_left`) of the horizontal fit with the initial `delta_diff`.
-    pub delta_before: f64,
-    /// Whether delta was refitted with it (both criteria hold); false when delta was held
-    /// (see [`fit_delta_diff`]).
-    pub joint: bool,
-    /// Heading points used (common times after each restart with a reference heading).
-    pub points: usize,
-    /// Heading 1-sigma coverage (band widened by the reference heading noise) with the
-    /// horizontally fitted delta and the initial `delta_diff`.
-    pub coverage1_before: f64,
-    /// The same 3-sigma coverage.
-    pub coverage3_before: f64,
-    /// Heading 1-sigma coverage with the final coefficients.
-    pub coverage1: f64,
-    /// Heading 3-sigma coverage with the final coefficients.
-    pub coverage3: f64,
-    /// Set when the criterion could not be met inside the admissible range.
-    pub warning: Option<String>,
-}
+use super::coefficients::{DeltaMode, DiffFit, UncertaintyFit};
+use super::coverage::{
+    fit_coefficient, heading_coverage, heading_points, horizontal_coverage, smallest_covering,
+    DIFF_LOG_TOL,
+};
+use super::restarts::Restarts;
 
 /// Options of [`fit_delta_diff`].
 #[derive(Debug, Clone, Copy)]

@@ -23,10 +23,11 @@ use anyhow::Result;
 use indicatif::ProgressBar;
 use odo_core::odometry::ChassisParams;
 
+use crate::calib::evaluation::evaluate;
+use crate::calib::geometry::paper::{fit_geometry, GeomFit, GeomOptions};
+use crate::calib::run::{windows, Run};
 use crate::optim::{NormalAccumulator, Objective};
 use crate::stats::{summarize, Summary};
-
-use super::*;
 
 /// Where the stability study's fits start.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -50,6 +51,8 @@ pub const MAX_RELATIVE_SE: f64 = 0.05;
 pub const MAX_CONDITION: f64 = 1e8;
 
 /// Names of the window estimates' parameters (the first three [`GEOMETRY_UNKNOWNS`]).
+///
+/// [`GEOMETRY_UNKNOWNS`]: crate::calib::sensitivity::GEOMETRY_UNKNOWNS
 pub const WINDOW_PARAMS: [&str; 3] = ["left_diameter", "right_diameter", "track_width"];
 
 /// Why a sub-trajectory's estimate is not used.
