@@ -1,6 +1,6 @@
 //! The command line: clap's types of every subcommand and its options. The values are checked
-//! as they are parsed ([`values`]); what a command does with them is in
-//! [`crate::commands`], one module per subcommand.
+//! as they are parsed ([`values`]); what a command does with them is in `commands/`, one
+//! module per subcommand.
 
 use std::path::PathBuf;
 

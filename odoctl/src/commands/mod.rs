@@ -23,6 +23,7 @@ pub mod simulate;
 pub mod validate;
 pub mod validate_ensemble;
 
+/// A buffered new file, or an error naming it.
 fn create(path: &Path) -> Result<BufWriter<File>> {
     Ok(BufWriter::new(File::create(path).with_context(|| {
         format!("{}: cannot create", path.display())

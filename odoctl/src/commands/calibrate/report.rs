@@ -342,6 +342,7 @@ fn print_errors(c: &Calibration, e: &ErrorSummary) {
     }
 }
 
+/// The stability study: per length, the statistics of each parameter and the failed windows.
 fn print_window_stats(est: &[calib::WindowEstimate]) {
     crate::outln!(
         "stability study (estimates on consecutive sub-trajectories; failed windows left out):"
@@ -402,6 +403,7 @@ fn print_window_stats(est: &[calib::WindowEstimate]) {
     }
 }
 
+/// The wheel-function fit: each harmonic against the first estimate, with its standard errors.
 fn print_harmonics(hf: &calib::HarmonicsFit, initial: &ChassisParams) {
     crate::outln!(
         "wheel function: {} harmonic(s) per wheel, referenced to the index, after the geometry fit (its corrections refitted alongside); {} segments of {} m restarted from the reference, {} points, residual {:.4} m",

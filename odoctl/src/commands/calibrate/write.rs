@@ -320,6 +320,7 @@ fn independent_se_key(name: &str) -> &'static str {
     }
 }
 
+/// The stability study's per-window estimates (`--windows-out`).
 fn write_windows_csv(path: &Path, est: &[calib::WindowEstimate]) -> Result<()> {
     let mut w = create(path)?;
     writeln!(
