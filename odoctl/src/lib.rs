@@ -19,7 +19,7 @@ macro_rules! outln {
 }
 
 pub mod calib;
-pub mod cli_values;
+pub mod cli;
 pub mod commands;
 pub mod config;
 pub mod csvio;

@@ -2,21 +2,23 @@
 //! (`tcp:HOST:PORT`, the QEMU image's USART2), framed by the core's protocol code
 //! (`odo_core::protocol`: COBS frames with CRC-32, `FrameDecoder` with loss accounting).
 //!
-//! Subcommands `monitor`, `record`, `decode` and `config`.
+//! A [`Session`] reads and decodes the unit's frames, keeps the health counters
+//! ([`StreamStats`], [`health`]) and sends command lines; [`SegmentWriter`] writes the pose
+//! records as SAMPLES CSV, one file per segment of increasing time, live (`record`) or from a
+//! capture ([`decode_bytes`]). The commands `monitor`, `record`, `decode`, `config` and
+//! `bridge` are built on it.
 
 use std::collections::VecDeque;
 use std::fs::File;
 use std::io::{BufWriter, ErrorKind, Read, Write};
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, bail, Context, Result};
 use odo_core::protocol::{DecoderStats, Frame, FrameDecoder, Message, PoseRecord, Status};
 use odo_core::timing::SyncState;
 
-use crate::config as cfg;
 use crate::csvio::{RecordFields, Sample, SamplesLayout, UnitPose};
 
 /// A byte stream to the unit.
@@ -252,7 +254,8 @@ impl Session {
     }
 }
 
-const REPLY_TIMEOUT: Duration = Duration::from_secs(5);
+/// How long a command line waits for the unit's reply.
+pub const REPLY_TIMEOUT: Duration = Duration::from_secs(5);
 
 fn sync_name(m: SyncState) -> &'static str {
     match m {
@@ -296,7 +299,9 @@ pub fn table_row(r: &PoseRecord) -> String {
 pub const TABLE_HEADER: &str =
     "      seq    mcu t[s]      x [m]      y [m] head[deg]  sx [mm]  sy [mm] sh[deg]        left       right sync L    R    drop";
 
-fn describe(f: &Frame) -> Option<String> {
+/// One comment line (`# status: ...`, `# device: ...`, `# reply: ...`) for a frame other than a
+/// pose record; `None` for a pose record.
+pub fn describe(f: &Frame) -> Option<String> {
     match &f.message {
         Message::Status(s) => Some(format!(
             "# status: uptime {:.1} s, rate {} Hz / output_divider {}, sync {}, samples {}, dropped {}, samples lost {}, merged {}, PPS edges {} (rejected {}), index lost {}, host rx lost {} (overruns {}, line errors {}), GNSS rx lost {} (overruns {}, line errors {}), reset cause {}, settings {:?}{}",
@@ -346,51 +351,6 @@ pub fn escape_control(text: &str) -> String {
         }
     }
     out
-}
-
-/// `odoctl monitor`.
-pub fn monitor(
-    port: &str,
-    baud: u32,
-    duration: Option<f64>,
-    count: Option<u64>,
-    every: u64,
-) -> Result<ExitCode> {
-    let mut s = Session::new(open(port, baud)?, None)?;
-    let end = duration.map(|d| Instant::now() + Duration::from_secs_f64(d));
-    let mut out = std::io::stdout().lock();
-    writeln!(out, "{TABLE_HEADER}")?;
-    let mut last_report = Instant::now();
-    let mut n = 0u64;
-    while let Some(f) = s.next_frame(end)? {
-        match &f.message {
-            Message::Pose(r) => {
-                if n.is_multiple_of(every.max(1)) {
-                    writeln!(out, "{}", table_row(r))?;
-                }
-                n += 1;
-                if count.is_some_and(|c| n >= c) {
-                    break;
-                }
-            }
-            _ => {
-                if let Some(d) = describe(&f) {
-                    writeln!(out, "{d}")?;
-                }
-            }
-        }
-        if last_report.elapsed() >= Duration::from_secs(5) {
-            writeln!(out, "# link: {}", health(&s.decoder_stats(), &s.stats))?;
-            last_report = Instant::now();
-        }
-        out.flush()?;
-    }
-    writeln!(out, "# link: {}", health(&s.decoder_stats(), &s.stats))?;
-    out.flush()?;
-    if s.closed() {
-        bail!("the unit closed the connection after {n} pose records");
-    }
-    Ok(ExitCode::SUCCESS)
 }
 
 /// How `record` and `decode` fill the `t` column: GNSS time when the first record carries
@@ -542,7 +502,7 @@ pub fn segment_path(first: &Path, k: usize) -> PathBuf {
 
 /// The records of a capture as SAMPLES CSV segments: a new segment (file) wherever the
 /// time does not increase, duplicates left out and counted.
-struct SegmentWriter<'a> {
+pub struct SegmentWriter<'a> {
     /// The first segment's file (`None`: `stdout`).
     first: Option<&'a Path>,
     stdout: Option<Box<dyn Write + 'a>>,
@@ -559,7 +519,9 @@ struct SegmentWriter<'a> {
 }
 
 impl<'a> SegmentWriter<'a> {
-    fn new(
+    /// A writer of the first segment to `first`, or to `stdout` when `first` is `None`; `rate`
+    /// is the sample rate (Hz) until a Status gives one.
+    pub fn new(
         first: Option<&'a Path>,
         stdout: Option<Box<dyn Write + 'a>>,
         rate: Option<f64>,
@@ -603,7 +565,7 @@ impl<'a> SegmentWriter<'a> {
 
     /// A Status message: its rate applies to the records that follow it, in this segment
     /// and the next.
-    fn on_status(&mut self, s: &Status) {
+    pub fn on_status(&mut self, s: &Status) {
         if s.rate_hz > 0 {
             self.rate = Some(f64::from(s.rate_hz));
         }
@@ -613,7 +575,7 @@ impl<'a> SegmentWriter<'a> {
     }
 
     /// Writes `r`: to the current segment, or a new one after a restart.
-    fn push(&mut self, r: &PoseRecord) -> Result<()> {
+    pub fn push(&mut self, r: &PoseRecord) -> Result<()> {
         let continuity = match &self.current {
             Some(w) => w.continuity(r),
             None if self.segments > 0 => {
@@ -652,7 +614,7 @@ impl<'a> SegmentWriter<'a> {
     }
 
     /// Flushes; the report: (file, rows) per segment, duplicates, unwritten records.
-    fn finish(mut self) -> Result<Recorded> {
+    pub fn finish(mut self) -> Result<Recorded> {
         self.finish_segment()?;
         if self.segments == 0 {
             // No record: an empty CSV (header only) where the first segment goes.
@@ -726,118 +688,6 @@ impl Recorded {
     }
 }
 
-fn parse_rate(text: &str) -> Option<f64> {
-    text.lines().find_map(|l| {
-        l.trim()
-            .strip_prefix("rate")
-            .and_then(|r| r.trim().strip_prefix('='))
-            .and_then(|v| v.trim().parse().ok())
-    })
-}
-
-/// `odoctl record`.
-pub fn record(
-    port: &str,
-    baud: u32,
-    out: &Path,
-    raw: Option<&Path>,
-    duration: Option<f64>,
-    count: Option<u64>,
-    reset_pose: bool,
-) -> Result<ExitCode> {
-    let mut s = Session::new(open(port, baud)?, raw)?;
-    // The sample rate turns the GNSS time tag (second + sample index) into seconds.
-    let (ok, text) = s.command("get rate", REPLY_TIMEOUT)?;
-    let rate = if ok { parse_rate(&text) } else { None };
-    let mut early = Vec::new();
-    let mut started = !reset_pose;
-    if reset_pose {
-        // The unit answers and applies the reset at its next sample, whose record carries
-        // the reset pose with zero sigmas: the recording starts there.
-        let (ok, text) = s.command_with("reset_pose", REPLY_TIMEOUT, |f| {
-            if let Message::Pose(r) = &f.message {
-                early.push(*r);
-            }
-        })?;
-        if !ok {
-            bail!("reset_pose: {}", text.trim());
-        }
-    }
-    let is_start = |r: &PoseRecord| {
-        r.x == 0.0
-            && r.y == 0.0
-            && r.heading == 0.0
-            && r.sigma_x == 0.0
-            && r.sigma_y == 0.0
-            && r.sigma_heading == 0.0
-    };
-    let mut writer = SegmentWriter::new(Some(out), None, rate);
-    let end = duration.map(|d| Instant::now() + Duration::from_secs_f64(d));
-    let start_deadline = Instant::now() + REPLY_TIMEOUT;
-    let mut queue: VecDeque<PoseRecord> = early.into();
-    let mut received = 0u64;
-    loop {
-        let r = match queue.pop_front() {
-            Some(r) => r,
-            None => match s.next_frame(end)? {
-                Some(Frame {
-                    message: Message::Pose(r),
-                    ..
-                }) => r,
-                Some(f) => {
-                    if let Message::Status(st) = &f.message {
-                        writer.on_status(st);
-                    }
-                    if let Some(d) = describe(&f) {
-                        eprintln!("{d}");
-                    }
-                    continue;
-                }
-                None => break,
-            },
-        };
-        if !started {
-            if is_start(&r) {
-                started = true;
-            } else if Instant::now() > start_deadline {
-                bail!(
-                    "reset_pose: no record with the reset pose and zero sigmas within {} s",
-                    REPLY_TIMEOUT.as_secs()
-                );
-            } else {
-                continue;
-            }
-        }
-        writer.push(&r)?;
-        received += 1;
-        if count.is_some_and(|c| received >= c) {
-            break;
-        }
-    }
-    s.finish()?;
-    let recorded = writer.finish()?;
-    let rows = recorded.rows();
-    eprint!("recorded {}", recorded.report());
-    eprintln!("link: {}", health(&s.decoder_stats(), &s.stats));
-    if s.stats.record_gaps > 0 || s.stats.dropped_by_unit > 0 {
-        eprintln!("warning: records are missing; a replay integrates across the gaps and will differ from the unit there");
-    }
-    if s.closed() && count.is_none_or(|c| received < c) {
-        bail!(
-            "the unit closed the connection after {received} pose records{}",
-            if rows > 0 {
-                " (those received are kept)"
-            } else {
-                ""
-            }
-        );
-    }
-    if rows == 0 {
-        bail!("no pose record received");
-    }
-    Ok(ExitCode::SUCCESS)
-}
-
 /// Decodes a raw capture into the `record` CSV: the first segment to `out` (or `stdout`
 /// when `out` is `None`), each later segment (after a restart) to its own file
 /// ([`segment_path`]); returns what was written and left out, and the decoder and stream
@@ -872,114 +722,4 @@ pub fn decode_bytes<'a>(
         }
     }
     Ok((w.finish()?, decoder.stats(), stats))
-}
-
-/// `odoctl decode`.
-pub fn decode(file: &Path, out: Option<&Path>) -> Result<ExitCode> {
-    let bytes = std::fs::read(file).with_context(|| format!("{}: cannot read", file.display()))?;
-    let stdout: Option<Box<dyn Write>> = match out {
-        Some(_) => None,
-        None => Some(Box::new(BufWriter::new(std::io::stdout().lock()))),
-    };
-    let (recorded, d, s) = decode_bytes(&bytes, out, stdout)?;
-    eprint!("{}: {}", file.display(), recorded.report());
-    eprintln!(
-        "{}: {} pose records; {}",
-        file.display(),
-        recorded.rows(),
-        health(&d, &s)
-    );
-    if recorded.rows() == 0 {
-        bail!(
-            "{}: no pose record in {} bytes",
-            file.display(),
-            bytes.len()
-        );
-    }
-    if recorded.unwritten > 0 {
-        bail!(
-            "{}: {} records after a restart not written (give --out FILE to write each segment)",
-            file.display(),
-            recorded.unwritten
-        );
-    }
-    Ok(ExitCode::SUCCESS)
-}
-
-/// What `config` does.
-#[derive(Debug, Clone)]
-pub enum ConfigAction {
-    /// `get [KEY]`.
-    Get(Option<String>),
-    /// `set KEY VALUE`.
-    Set(String, String),
-    /// `save`.
-    Save,
-    /// Send a parameter file; then `save` when true.
-    Push(PathBuf, bool),
-    /// `get`, written to a TOML file.
-    Pull(PathBuf),
-    /// Any command line.
-    Raw(String),
-}
-
-/// `odoctl config`: prints the unit's replies; exit code 1 on an error reply.
-pub fn config(port: &str, baud: u32, action: ConfigAction) -> Result<ExitCode> {
-    // A key or value is one word: `set rate "50 baud 9600"` would send two pairs.
-    let one_word = |what: &str, w: &str| {
-        if w.is_empty() || w.chars().any(|c| c.is_whitespace() || c.is_control()) {
-            bail!(
-                "{what} `{}` must be one word (no spaces or control characters)",
-                escape_control(w)
-            );
-        }
-        Ok(())
-    };
-    match &action {
-        ConfigAction::Get(Some(k)) => one_word("key", k)?,
-        ConfigAction::Set(k, v) => {
-            one_word("key", k)?;
-            one_word("value", v)?;
-        }
-        _ => {}
-    }
-    let lines: Vec<String> = match &action {
-        ConfigAction::Get(None) => vec!["get".into()],
-        ConfigAction::Get(Some(k)) => vec![format!("get {k}")],
-        ConfigAction::Set(k, v) => vec![format!("set {k} {v}")],
-        ConfigAction::Save => vec!["save".into()],
-        ConfigAction::Push(p, save) => {
-            let mut l = cfg::push_lines(p)?;
-            if *save {
-                l.push("save".into());
-            }
-            l
-        }
-        ConfigAction::Pull(_) => vec!["get".into()],
-        ConfigAction::Raw(l) => vec![l.clone()],
-    };
-    if lines.iter().any(|l| l.contains('\n') || l.contains('\r')) {
-        bail!("a command must be one line");
-    }
-    let mut s = Session::new(open(port, baud)?, None)?;
-    for line in &lines {
-        let (ok, text) = s.command(line, REPLY_TIMEOUT)?;
-        crate::outln!("> {line}");
-        for l in text.lines() {
-            crate::outln!("{}", escape_control(l));
-        }
-        if !ok {
-            eprintln!("odoctl: the unit rejected `{line}`");
-            return Ok(ExitCode::FAILURE);
-        }
-        if let ConfigAction::Pull(path) = &action {
-            let (settings, keys) = cfg::parse_get_reply(&text)?;
-            let toml =
-                cfg::render_settings(&settings, &keys, "odoctl config pull: the unit's settings");
-            std::fs::write(path, toml)
-                .with_context(|| format!("{}: cannot write", path.display()))?;
-            crate::outln!("wrote {}", path.display());
-        }
-    }
-    Ok(ExitCode::SUCCESS)
 }

@@ -227,13 +227,12 @@ pub fn simulate(o: &SimOptions) -> SimRun {
         rate,
         speed,
         slip,
-        slip_corr,
         slip_turn,
-        slip_turn_corr,
         rtk_sigma,
         heading_sigma,
         start,
         seed,
+        ..
     } = o.settings;
     let mut rng = Rng::new(seed);
     let sub: u32 = 20; // sub-steps per sample
@@ -241,11 +240,8 @@ pub fn simulate(o: &SimOptions) -> SimRun {
     let w = o.truth.track_width;
     let p = f64::from(o.truth.ticks_per_rev);
     let (mut x, mut y, mut h) = start;
-    // Wheel turns in increments, from arbitrary offsets; index phases arbitrary.
-    let mut turn = [1234.25, -777.5];
+    // Index phases arbitrary.
     let index_phase = [(rng.uniform() * p).floor(), (rng.uniform() * p).floor()];
-    let mut index: [Option<i64>; 2] = [None, None];
-    let diam = [o.truth.left_diameter, o.truth.right_diameter];
     let eccentric = [
         EccentricWheel::new(
             o.truth.left_diameter,
@@ -260,11 +256,22 @@ pub fn simulate(o: &SimOptions) -> SimRun {
             &o.truth.right_wheel,
         ),
     ];
-    let mut eps = [rng.normal() * slip, rng.normal() * slip];
-    let mut eps_turn = if slip_turn > 0.0 {
+    let eps = [rng.normal() * slip, rng.normal() * slip];
+    let eps_turn = if slip_turn > 0.0 {
         rng.normal() * slip_turn
     } else {
         0.0
+    };
+    let mut wheels = Wheels {
+        // Wheel turns in increments, from arbitrary offsets.
+        turn: [1234.25, -777.5],
+        index: [None, None],
+        index_phase,
+        diam: [o.truth.left_diameter, o.truth.right_diameter],
+        eccentric,
+        eps,
+        eps_turn,
+        p,
     };
     let mut samples = Vec::new();
     let mut reference = Vec::new();
@@ -273,22 +280,7 @@ pub fn simulate(o: &SimOptions) -> SimRun {
     let mut plan: Vec<Segment> = vec![Segment::Stop(1.0)];
     plan.extend(o.segments.iter().copied());
     plan.push(Segment::Stop(1.0));
-    // Per segment: duration and the constant (v, omega).
-    let mut motions: Vec<(f64, f64, f64)> = Vec::new();
-    for s in &plan {
-        match *s {
-            Segment::Stop(t) => motions.push((t, 0.0, 0.0)),
-            Segment::Straight(l) => motions.push((l.abs() / speed, speed * l.signum(), 0.0)),
-            Segment::Arc(r, a) => {
-                let t = r * a.abs() / speed;
-                motions.push((t, speed, a / t));
-            }
-            Segment::Spin(a) => {
-                let t = (a.abs() * w / 2.0) / speed;
-                motions.push((t, 0.0, a / t));
-            }
-        }
-    }
+    let motions = segment_motions(&plan, speed, w);
     let total: f64 = motions.iter().map(|m| m.0).sum();
     let steps = (total / dt).ceil() as u64;
     let mut seg = 0;
@@ -320,7 +312,7 @@ pub fn simulate(o: &SimOptions) -> SimRun {
         });
         truth.push((x, y, h));
     };
-    record(n, x, y, h, &turn, &index, &mut rng);
+    record(n, x, y, h, &wheels.turn, &wheels.index, &mut rng);
     for i in 0..steps {
         let t = i as f64 * dt;
         while t >= seg_end && seg + 1 < motions.len() {
@@ -340,7 +332,86 @@ pub fn simulate(o: &SimOptions) -> SimRun {
         x += chord * mid.sin();
         y += chord * mid.cos();
         h += da;
-        let wheel = [ds + da * w / 2.0, ds - da * w / 2.0];
+        wheels.roll(
+            [ds + da * w / 2.0, ds - da * w / 2.0],
+            &o.settings,
+            &mut rng,
+        );
+        if (i + 1) % u64::from(sub) == 0 {
+            n += 1;
+            record(n, x, y, h, &wheels.turn, &wheels.index, &mut rng);
+        }
+    }
+    SimRun {
+        samples,
+        reference,
+        truth,
+    }
+}
+
+/// Per segment: its duration (s) and its constant speed (m/s) and turn rate (rad/s).
+fn segment_motions(plan: &[Segment], speed: f64, w: f64) -> Vec<(f64, f64, f64)> {
+    let mut motions: Vec<(f64, f64, f64)> = Vec::new();
+    for s in plan {
+        match *s {
+            Segment::Stop(t) => motions.push((t, 0.0, 0.0)),
+            Segment::Straight(l) => motions.push((l.abs() / speed, speed * l.signum(), 0.0)),
+            Segment::Arc(r, a) => {
+                let t = r * a.abs() / speed;
+                motions.push((t, speed, a / t));
+            }
+            Segment::Spin(a) => {
+                let t = (a.abs() * w / 2.0) / speed;
+                motions.push((t, 0.0, a / t));
+            }
+        }
+    }
+    motions
+}
+
+/// The plant's wheels (left, right): their turns in increments, their slips and the counts
+/// latched at their index lines.
+struct Wheels {
+    /// Accumulated turn (increments, fractional).
+    turn: [f64; 2],
+    /// The count latched at the last index pulse.
+    index: [Option<i64>; 2],
+    /// Turn at which the index line fires (modulo `p`).
+    index_phase: [f64; 2],
+    /// True diameters (m).
+    diam: [f64; 2],
+    /// The wheels that are not round.
+    eccentric: [Option<EccentricWheel>; 2],
+    /// Each wheel's slip.
+    eps: [f64; 2],
+    /// The opposite-phase slip of turning.
+    eps_turn: f64,
+    /// Increments per revolution.
+    p: f64,
+}
+
+impl Wheels {
+    /// One sub-step: the contact points travel `wheel` (m); the slips advance and the turns
+    /// and index latches follow.
+    fn roll(&mut self, wheel: [f64; 2], settings: &SimSettings, rng: &mut Rng) {
+        let SimSettings {
+            slip,
+            slip_corr,
+            slip_turn,
+            slip_turn_corr,
+            ..
+        } = *settings;
+        let Self {
+            turn,
+            index,
+            index_phase,
+            diam,
+            eccentric,
+            eps,
+            eps_turn,
+            p,
+        } = self;
+        let p = *p;
         // Opposite-phase slip of the turn: +e on wheel 1, -e on wheel 2.
         let half_diff = 0.5 * (wheel[0] - wheel[1]).abs();
         if slip_turn > 0.0 && half_diff > 0.0 {
@@ -349,9 +420,9 @@ pub fn simulate(o: &SimOptions) -> SimRun {
             } else {
                 0.0
             };
-            eps_turn = rho * eps_turn + (1.0 - rho * rho).sqrt() * slip_turn * rng.normal();
+            *eps_turn = rho * *eps_turn + (1.0 - rho * rho).sqrt() * slip_turn * rng.normal();
         }
-        let e = eps_turn * half_diff;
+        let e = *eps_turn * half_diff;
         for j in 0..2 {
             let rolled = wheel[j].abs();
             if slip > 0.0 && rolled > 0.0 {
@@ -379,15 +450,6 @@ pub fn simulate(o: &SimOptions) -> SimRun {
                 index[j] = Some((index_phase[j] + k0.max(k1) * p) as i64);
             }
         }
-        if (i + 1) % u64::from(sub) == 0 {
-            n += 1;
-            record(n, x, y, h, &turn, &index, &mut rng);
-        }
-    }
-    SimRun {
-        samples,
-        reference,
-        truth,
     }
 }
 

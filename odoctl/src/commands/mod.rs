@@ -1,25 +1,29 @@
-//! The subcommands behind the command line (`main.rs` only parses arguments): each reads its
-//! files, calls the library and prints or writes the result.
+//! The subcommands, one module each: a command reads its files, calls the library and prints
+//! or writes the result. `main.rs` parses the command line ([`crate::cli`]) and calls
+//! the command's `run`.
 
 use std::fs::File;
 use std::io::BufWriter;
 use std::path::Path;
 
-use anyhow::{anyhow, Context, Result};
+use anyhow::{anyhow, bail, Context, Result};
 
-mod calibrate;
-mod replay;
-mod simulate;
-mod validate;
-mod validate_ensemble;
+use crate::cli::ReferenceArgs;
+use crate::reference::geodetic::parse_origin;
+use crate::reference::{OriginChoice, ReferenceOptions};
 
-pub use crate::link::{config, decode, monitor, record, ConfigAction};
-pub use calibrate::{calibrate, CalibrateOptions, GeometryArgs};
-pub use replay::replay;
-pub use simulate::{simulate, SimulateOptions};
-pub use validate::{validate, validation_report};
-pub use validate_ensemble::{read_run_list, validate_ensemble, EnsembleOptions};
+pub mod bridge;
+pub mod calibrate;
+pub mod config;
+pub mod decode;
+pub mod monitor;
+pub mod record;
+pub mod replay;
+pub mod simulate;
+pub mod validate;
+pub mod validate_ensemble;
 
+/// A buffered new file, or an error naming it.
 fn create(path: &Path) -> Result<BufWriter<File>> {
     Ok(BufWriter::new(File::create(path).with_context(|| {
         format!("{}: cannot create", path.display())
@@ -29,4 +33,20 @@ fn create(path: &Path) -> Result<BufWriter<File>> {
 /// Helper for errors about files.
 pub fn file_err(path: &Path, e: impl std::fmt::Display) -> anyhow::Error {
     anyhow!("{}: {e}", path.display())
+}
+
+/// How `--reference` is read: the loader's options from its command-line options.
+pub fn reference_options(args: &ReferenceArgs) -> Result<ReferenceOptions> {
+    if !(0..=100).contains(&args.leap_seconds) {
+        bail!("--leap-seconds {}: must be in 0..=100", args.leap_seconds);
+    }
+    Ok(ReferenceOptions {
+        format: args.reference_format,
+        min_fix: args.min_fix,
+        origin: match &args.origin {
+            Some(s) => OriginChoice::Given(parse_origin(s)?),
+            None => OriginChoice::OpeningStandstill,
+        },
+        leap_seconds: args.leap_seconds,
+    })
 }

@@ -1,4 +1,5 @@
-//! `odoctl replay`: recorded counts through the core integrator, printed or written.
+//! `odoctl replay`: recorded counts through the core integrator, printed or written (and,
+//! with `--mcap`, recorded as ROS 2 topics).
 
 use std::io::{BufWriter, Write};
 use std::path::Path;
@@ -7,13 +8,25 @@ use std::process::ExitCode;
 use anyhow::{bail, Result};
 use odo_core::odometry::Pose;
 
+use crate::cli::ReplayArgs;
 use crate::config::{self as cfg};
 use crate::csvio;
 use crate::replay as rp;
 
 use super::create;
 
-/// `odoctl replay`.
+/// `odoctl replay`: the MCAP recording first when `--mcap` is given, then the replay.
+pub fn run(a: &ReplayArgs) -> Result<ExitCode> {
+    let (config, sets) = (a.params.config.as_deref(), &a.params.sets);
+    let start = (a.x, a.y, a.heading);
+    if let Some(m) = &a.mcap {
+        crate::ros::export::replay_hook(m, &a.samples, config, sets, start)?;
+    }
+    replay(&a.samples, config, sets, start, a.check, a.out.as_deref())
+}
+
+/// Replays `samples` from `start` (x, y, heading) to `out` (stdout when `None`); with `check`,
+/// compares with the unit's pose columns (exit code 1 on a difference).
 pub fn replay(
     samples: &Path,
     config: Option<&Path>,

@@ -8,12 +8,13 @@ use anyhow::{bail, Result};
 use odo_core::odometry::{ChassisParams, UncertaintyModel};
 
 use crate::calib::{self, Run};
+use crate::cli::ValidateArgs;
 use crate::config::{self as cfg};
 use crate::csvio;
-use crate::reference::cli::{read_matched_run, MatchedRun, ReferenceArgs, ReferenceSummary};
+use crate::reference::matched::{read_matched_run, MatchedRun, ReferenceSummary};
 use crate::stats::{coverage, summarize};
 
-use super::create;
+use super::{create, reference_options};
 
 /// The antenna lever arm `(forward, left)` (m) of a calibration result (`[fit]`), (0, 0)
 /// without one; printed when there is one. `validate` and its ensemble apply it to the runs.
@@ -33,172 +34,246 @@ pub(super) fn lever_arm(config: Option<&Path>) -> Result<(f64, f64)> {
     Ok(antenna)
 }
 
-/// `odoctl validate`.
-#[allow(clippy::too_many_arguments)]
-pub fn validate(
-    samples_path: &Path,
-    reference_path: &Path,
-    config: Option<&Path>,
-    sets: &[String],
-    heading: Option<f64>,
-    errors: Option<&Path>,
-    plots: Option<&Path>,
-    models: &[UncertaintyModel],
-    reference_sigma: f64,
-    reference_heading_sigma: f64,
-    input: &ReferenceArgs,
-) -> Result<ExitCode> {
-    if !(reference_sigma >= 0.0 && reference_heading_sigma >= 0.0) {
+/// `odoctl validate`: one run (with its MCAP tracks first when `--mcap` is given), or an
+/// ensemble of runs ([`validate_ensemble`](super::validate_ensemble)).
+pub fn run(a: &ValidateArgs) -> Result<ExitCode> {
+    if a.runs.is_some() || a.samples.len() > 1 || a.reference.len() > 1 {
+        return super::validate_ensemble::run(a);
+    }
+    if let Some(m) = &a.mcap {
+        crate::ros::tracks::validate_hook(
+            m,
+            &a.samples[0],
+            &a.reference[0],
+            &reference_options(&a.reference_input)?,
+            a.params.config.as_deref(),
+            &a.params.sets,
+            a.heading,
+        )?;
+    }
+    validate(a)
+}
+
+/// The noise of the reference that widens the predicted bands (as the calibration's criteria
+/// do).
+#[derive(Debug, Clone, Copy)]
+struct ReferenceNoise {
+    /// Horizontal RMS noise (m).
+    horizontal: f64,
+    /// Heading noise (rad).
+    heading: f64,
+}
+
+impl ReferenceNoise {
+    /// Share of horizontal errors inside `k` sigma_h widened by the reference noise.
+    fn horizontal_coverage(&self, e: &calib::Evaluation, k: f64) -> f64 {
+        let s: Vec<f64> = e.sigma_h[1..]
+            .iter()
+            .map(|s| (s * s + self.horizontal * self.horizontal).sqrt())
+            .collect();
+        coverage(&e.horizontal[1..], &s, k)
+    }
+
+    /// Share of errors of the heading change since the start (what sigma_heading, zero at the
+    /// start, predicts) inside `k` sigma_heading widened by the reference heading noise; the
+    /// start excluded.
+    fn heading_coverage(&self, e: &calib::Evaluation, k: f64) -> f64 {
+        calib::heading_coverage(e, self.heading, k, 1)
+    }
+}
+
+/// One run evaluated with the parameters: printed, and written as asked.
+fn validate(a: &ValidateArgs) -> Result<ExitCode> {
+    let noise = ReferenceNoise {
+        horizontal: a.reference_sigma,
+        heading: a.reference_heading_sigma_deg.to_radians(),
+    };
+    if !(noise.horizontal >= 0.0 && noise.heading >= 0.0) {
         bail!("--reference-sigma and --reference-heading-sigma-deg must be non-negative");
     }
-    let mut params = cfg::load(config, sets)?;
-    if let [one] = models {
+    let config = a.params.config.as_deref();
+    let models = a.models.list();
+    let mut params = cfg::load(config, &a.params.sets)?;
+    if let [one] = models.as_slice() {
         params.uncertainty_model = *one;
     }
     let MatchedRun {
         samples,
         reference,
         matches,
-    } = read_matched_run(samples_path, reference_path, input, ReferenceSummary::Print)?;
+    } = read_matched_run(
+        &a.samples[0],
+        &a.reference[0],
+        &reference_options(&a.reference_input)?,
+        ReferenceSummary::Print,
+    )?;
     let run = Run::new(&samples, &reference, matches).with_antenna(lever_arm(config)?);
     let last = run.len() - 1;
-    let h0 = match heading {
+    let h0 = match a.heading {
         Some(h) => h,
         None => calib::fit_heading(&run, &params, 0, last, run.heading_guess(0))?,
     };
     let ev = calib::evaluate(&run, &params, h0)?;
-    let report = validation_report(&ev);
+    print_summary(&run, &ev, h0, a.heading.is_some(), noise);
+    let compared = if models.len() > 1 {
+        compare_models(&run, &params, h0, &models, noise)?
+    } else {
+        Vec::new()
+    };
+    if let Some(p) = &a.errors {
+        write_errors(p, &ev)?;
+    }
+    if let Some(dir) = &a.plots {
+        write_plots(dir, &ev, &compared)?;
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The run's errors against their bands, on stdout.
+fn print_summary(
+    run: &Run,
+    ev: &calib::Evaluation,
+    h0: f64,
+    heading_given: bool,
+    noise: ReferenceNoise,
+) {
+    let report = validation_report(ev);
     crate::outln!(
         "validation: {} common times, {:.1} m of reference path, initial heading {:.6} rad ({})",
         run.len(),
         ev.dist.last().unwrap_or(&0.0),
         h0,
-        if heading.is_some() {
+        if heading_given {
             "given"
         } else {
             "fitted by eq (16)"
         }
     );
     crate::outln!("{}", report.trim_end());
-    let widened = |e: &calib::Evaluation, k: f64| -> f64 {
-        let s: Vec<f64> = e.sigma_h[1..]
-            .iter()
-            .map(|s| (s * s + reference_sigma * reference_sigma).sqrt())
-            .collect();
-        coverage(&e.horizontal[1..], &s, k)
-    };
+    let reference_sigma = noise.horizontal;
     crate::outln!(
         "  with the reference noise ({reference_sigma} m) added to the horizontal bands: {:.1} % in 1 sigma, {:.1} % in 3 sigma",
-        100.0 * widened(&ev, 1.0),
-        100.0 * widened(&ev, 3.0)
+        100.0 * noise.horizontal_coverage(ev, 1.0),
+        100.0 * noise.horizontal_coverage(ev, 3.0)
     );
-    // Heading: the error of the heading change since the start (what sigma_heading, zero at
-    // the start, predicts), bands widened by the reference heading noise; the start excluded.
-    let widened_heading =
-        |e: &calib::Evaluation, k: f64| calib::heading_coverage(e, reference_heading_sigma, k, 1);
-    let heading_deg = reference_heading_sigma.to_degrees();
-    if calib::heading_points(&ev, 1) > 0 {
+    let heading_deg = noise.heading.to_degrees();
+    if calib::heading_points(ev, 1) > 0 {
         crate::outln!(
             "  heading change since the start vs sigma_heading, the reference heading noise ({heading_deg} deg) added: {:.1} % in 1 sigma, {:.1} % in 3 sigma",
-            100.0 * widened_heading(&ev, 1.0),
-            100.0 * widened_heading(&ev, 3.0)
+            100.0 * noise.heading_coverage(ev, 1.0),
+            100.0 * noise.heading_coverage(ev, 3.0)
         );
+    }
+}
+
+/// The coverage of each model on the run, on stdout; their sigma_h for the figure.
+fn compare_models(
+    run: &Run,
+    params: &ChassisParams,
+    h0: f64,
+    models: &[UncertaintyModel],
+    noise: ReferenceNoise,
+) -> Result<Vec<(&'static str, Vec<f64>)>> {
+    let (reference_sigma, heading_deg) = (noise.horizontal, noise.heading.to_degrees());
+    crate::outln!(
+        "uncertainty models on this run (observed coverage; nominal 68.3 % in 1 sigma, 99.7 % in 3 sigma; bands widened by the reference noise, {reference_sigma} m horizontal, {heading_deg} deg heading; heading = change since the start):"
+    );
+    crate::outln!(
+        "  {:<12} {:>11} {:>11} {:>11} {:>11} {:>14}",
+        "model",
+        "horiz 1sig",
+        "horiz 3sig",
+        "head 1sig",
+        "head 3sig",
+        "final sigma_h"
+    );
+    // The paper's model with and without its proposed delta_diff term, when the file has one.
+    let mut rows: Vec<(&'static str, ChassisParams)> = Vec::new();
+    for &m in models {
+        let mut p = *params;
+        p.uncertainty_model = m;
+        if m == UncertaintyModel::Paper && p.delta_diff > 0.0 {
+            rows.push((
+                "paper",
+                ChassisParams {
+                    delta_diff: 0.0,
+                    ..p
+                },
+            ));
+            rows.push(("paper+diff", p));
+        } else {
+            rows.push((cfg::model_name(m), p));
+        }
     }
     let mut compared = Vec::new();
-    if models.len() > 1 {
-        crate::outln!(
-            "uncertainty models on this run (observed coverage; nominal 68.3 % in 1 sigma, 99.7 % in 3 sigma; bands widened by the reference noise, {reference_sigma} m horizontal, {heading_deg} deg heading; heading = change since the start):"
-        );
-        crate::outln!(
-            "  {:<12} {:>11} {:>11} {:>11} {:>11} {:>14}",
-            "model",
-            "horiz 1sig",
-            "horiz 3sig",
-            "head 1sig",
-            "head 3sig",
-            "final sigma_h"
-        );
-        // The paper's model with and without its proposed delta_diff term, when the file has one.
-        let mut rows: Vec<(&'static str, ChassisParams)> = Vec::new();
-        for &m in models {
-            let mut p = params;
-            p.uncertainty_model = m;
-            if m == UncertaintyModel::Paper && p.delta_diff > 0.0 {
-                rows.push((
-                    "paper",
-                    ChassisParams {
-                        delta_diff: 0.0,
-                        ..p
-                    },
-                ));
-                rows.push(("paper+diff", p));
+    for (name, p) in rows {
+        let e = calib::evaluate(run, &p, h0)?;
+        let pct = |v: f64| {
+            if v.is_nan() {
+                "-".to_string()
             } else {
-                rows.push((cfg::model_name(m), p));
+                format!("{:.1} %", 100.0 * v)
             }
-        }
-        for (name, p) in rows {
-            let e = calib::evaluate(&run, &p, h0)?;
-            let pct = |v: f64| {
-                if v.is_nan() {
-                    "-".to_string()
-                } else {
-                    format!("{:.1} %", 100.0 * v)
-                }
-            };
-            crate::outln!(
-                "  {:<12} {:>11} {:>11} {:>11} {:>11} {:>12.4} m",
-                name,
-                pct(widened(&e, 1.0)),
-                pct(widened(&e, 3.0)),
-                pct(widened_heading(&e, 1.0)),
-                pct(widened_heading(&e, 3.0)),
-                e.sigma_h.last().copied().unwrap_or(f64::NAN)
-            );
-            compared.push((name, e.sigma_h));
-        }
+        };
+        crate::outln!(
+            "  {:<12} {:>11} {:>11} {:>11} {:>11} {:>12.4} m",
+            name,
+            pct(noise.horizontal_coverage(&e, 1.0)),
+            pct(noise.horizontal_coverage(&e, 3.0)),
+            pct(noise.heading_coverage(&e, 1.0)),
+            pct(noise.heading_coverage(&e, 3.0)),
+            e.sigma_h.last().copied().unwrap_or(f64::NAN)
+        );
+        compared.push((name, e.sigma_h));
     }
-    if let Some(p) = errors {
-        let mut w = create(p)?;
+    Ok(compared)
+}
+
+/// The per-point errors and sigmas (`--errors`).
+fn write_errors(p: &Path, ev: &calib::Evaluation) -> Result<()> {
+    let mut w = create(p)?;
+    writeln!(
+        w,
+        "t,dist,x,y,x_ref,y_ref,horizontal_error,sigma_h,heading,heading_error,sigma_heading"
+    )?;
+    for i in 0..ev.t.len() {
         writeln!(
             w,
-            "t,dist,x,y,x_ref,y_ref,horizontal_error,sigma_h,heading,heading_error,sigma_heading"
+            "{},{:.4},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{},{:?}",
+            csvio::fmt_t(ev.t[i]),
+            ev.dist[i],
+            ev.odo[i].0,
+            ev.odo[i].1,
+            ev.reference[i].0,
+            ev.reference[i].1,
+            ev.horizontal[i],
+            ev.sigma_h[i],
+            ev.heading[i],
+            ev.heading_err[i]
+                .map(|e| format!("{e:?}"))
+                .unwrap_or_default(),
+            ev.sigma_heading[i]
         )?;
-        for i in 0..ev.t.len() {
-            writeln!(
-                w,
-                "{},{:.4},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{},{:?}",
-                csvio::fmt_t(ev.t[i]),
-                ev.dist[i],
-                ev.odo[i].0,
-                ev.odo[i].1,
-                ev.reference[i].0,
-                ev.reference[i].1,
-                ev.horizontal[i],
-                ev.sigma_h[i],
-                ev.heading[i],
-                ev.heading_err[i]
-                    .map(|e| format!("{e:?}"))
-                    .unwrap_or_default(),
-                ev.sigma_heading[i]
-            )?;
-        }
-        w.flush()?;
     }
-    if let Some(dir) = plots {
-        let mut files = crate::plots::run_figures(dir, "validate", "Validation run", &ev)?;
-        if !compared.is_empty() {
-            files.push(crate::plots::models_figure(
-                dir,
-                &ev.t,
-                &ev.horizontal,
-                &compared,
-            )?);
-        }
-        for f in files {
-            crate::outln!("wrote {}", f.display());
-        }
+    w.flush()?;
+    Ok(())
+}
+
+/// The figures (`--plots`), with the models' sigma_h compared when there are several.
+fn write_plots(dir: &Path, ev: &calib::Evaluation, compared: &[(&str, Vec<f64>)]) -> Result<()> {
+    let mut files = crate::plots::run_figures(dir, "validate", "Validation run", ev)?;
+    if !compared.is_empty() {
+        files.push(crate::plots::models_figure(
+            dir,
+            &ev.t,
+            &ev.horizontal,
+            compared,
+        )?);
     }
-    Ok(ExitCode::SUCCESS)
+    for f in files {
+        crate::outln!("wrote {}", f.display());
+    }
+    Ok(())
 }
 
 /// The text table of `validate`: error statistics and band coverage.

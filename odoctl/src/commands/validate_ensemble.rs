@@ -8,8 +8,11 @@ use anyhow::{bail, Context, Result};
 use odo_core::odometry::{ChassisParams, UncertaintyModel};
 
 use crate::calib::{self, CheckpointSample, Ensemble, Run};
+use crate::cli::{ReferenceArgs, ValidateArgs};
 use crate::config as cfg;
-use crate::reference::cli::{read_matched_run, MatchedRun, ReferenceArgs, ReferenceSummary};
+use crate::reference::matched::{read_matched_run, MatchedRun, ReferenceSummary};
+
+use super::reference_options;
 
 /// What `validate` takes for an ensemble.
 #[derive(Debug, Clone)]
@@ -30,6 +33,40 @@ pub struct EnsembleOptions<'a> {
     pub checkpoints: Vec<f64>,
     /// Figure directory.
     pub plots: Option<&'a Path>,
+}
+
+/// `odoctl validate` with several runs (`--runs`, or `--samples` and `--reference` repeated).
+pub fn run(a: &ValidateArgs) -> Result<ExitCode> {
+    if a.mcap.is_some() {
+        bail!("--mcap takes one run (--samples and --reference once), not an ensemble");
+    }
+    let list = match &a.runs {
+        Some(f) => read_run_list(f)?,
+        None if a.samples.len() == a.reference.len() => a
+            .samples
+            .iter()
+            .cloned()
+            .zip(a.reference.iter().cloned())
+            .collect(),
+        None => bail!(
+            "--samples and --reference: give them in pairs ({} and {})",
+            a.samples.len(),
+            a.reference.len()
+        ),
+    };
+    validate_ensemble(
+        &EnsembleOptions {
+            runs: list,
+            config: a.params.config.as_deref(),
+            sets: &a.params.sets,
+            models: &a.models.list(),
+            reference_sigma: a.reference_sigma,
+            reference_heading_sigma: a.reference_heading_sigma_deg.to_radians(),
+            checkpoints: a.checkpoints.clone(),
+            plots: a.plots.as_deref(),
+        },
+        &a.reference_input,
+    )
 }
 
 /// Reads a run list: one run a line, `SAMPLES REFERENCE` (separated by spaces, a tab or a
@@ -65,9 +102,9 @@ pub fn read_run_list(path: &Path) -> Result<Vec<(PathBuf, PathBuf)>> {
 
 /// `odoctl validate` with several runs: each is read as `validate` reads its run (the same
 /// matching, the calibration result's antenna lever arm applied) and replayed from its start
-/// (the reference position, averaged over the opening standstill; the reference heading averaged there when
-/// the reference has headings, else the heading minimising eq (16) on that run, which makes the
-/// horizontal figures optimistic), and compared with the reference at every checkpoint. The
+/// (the reference position, averaged over the opening standstill; the reference heading
+/// averaged there when the reference has headings, else the heading minimising eq (16) on that
+/// run, which makes the horizontal figures optimistic), and compared with the reference at every checkpoint. The
 /// bands are widened by what the reference adds to the observed error: its noise at the point
 /// and at the start, and for the horizontal error the start heading's noise turned over the
 /// distance from the start. Heading: the change since the start (what `sigma_heading`
@@ -89,64 +126,104 @@ pub fn validate_ensemble(o: &EnsembleOptions, input: &ReferenceArgs) -> Result<E
         .iter()
         .map(|_| Ensemble::new(&o.checkpoints))
         .collect();
-    let rh2 = o.reference_heading_sigma * o.reference_heading_sigma;
     let mut fitted_heading = 0usize;
     // The calibration result's lever arm, applied to every run as `validate` applies it.
     let antenna = super::validate::lever_arm(o.config)?;
+    let options = reference_options(input)?;
     for (sp, rp) in &o.runs {
         let MatchedRun {
             samples,
             reference,
             matches,
-        } = read_matched_run(sp, rp, input, ReferenceSummary::Print)?;
+        } = read_matched_run(sp, rp, &options, ReferenceSummary::Print)?;
         let run = Run::new(&samples, &reference, matches).with_antenna(antenna);
-        let last = run.len() - 1;
-        // Start heading not fitted to the judged errors when the reference has headings.
-        let mut changes = Vec::new();
-        let guess = run.heading_guess(0);
-        run.integrate_pose(&params, 0, last, guess, |_, integ| {
-            changes.push(integ.pose().heading - guess)
-        })
-        .map_err(|e| anyhow::anyhow!("parameters: {e}"))?;
-        let (h0, var_h0) = match run.start_heading(0, |k| changes.get(k - 1).copied()) {
-            Some((h, n)) => (h, rh2 / n as f64),
-            None => {
-                fitted_heading += 1;
-                (calib::fit_heading(&run, &params, 0, last, guess)?, 0.0)
-            }
-        };
-        let (lo, hi) = run.standstill(0);
-        let var = |k: usize| {
-            let s = run.reference_at(k).sigma_h.unwrap_or(o.reference_sigma);
-            s * s
-        };
-        let n0 = (hi - lo + 1) as f64;
-        let var_start = (lo..=hi).map(var).sum::<f64>() / (n0 * n0);
-        let start = run.anchor(0);
-        for (m, ens) in models.iter().zip(ensembles.iter_mut()) {
-            let p = ChassisParams {
-                uncertainty_model: *m,
-                ..params
-            };
-            let ev = calib::evaluate(&run, &p, h0)?;
-            ens.add_run(&ev.dist, |i| {
-                let (x, y) = ev.odo[i];
-                let turned = (x - start.0).powi(2) + (y - start.1).powi(2);
-                let band =
-                    (ev.sigma_h[i].powi(2) + var(ev.k[i]) + var_start + var_h0 * turned).sqrt();
-                let n = ev.start_headings[i].max(1) as f64;
-                CheckpointSample {
-                    horizontal: (ev.horizontal[i], band),
-                    heading: ev.heading_change_err[i].map(|e| {
-                        (
-                            e,
-                            (ev.sigma_heading[i].powi(2) + rh2 * (1.0 + 1.0 / n)).sqrt(),
-                        )
-                    }),
-                }
-            });
+        if add_run(&run, &params, &models, &mut ensembles, o)? {
+            fitted_heading += 1;
         }
     }
+    print_coverage(o, &models, &ensembles, fitted_heading);
+    if let Some(dir) = o.plots {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("{}: cannot create", dir.display()))?;
+        let named: Vec<(&str, &Ensemble)> = models
+            .iter()
+            .map(|m| cfg::model_name(*m))
+            .zip(ensembles.iter())
+            .collect();
+        for f in crate::plots::ensemble_figures(dir, "validate_ensemble", &named)? {
+            crate::outln!("wrote {}", f.display());
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Adds one run to the ensembles, one per model: replayed from its start, compared with the
+/// reference at every checkpoint. True when its start heading is the eq (16) heading (no
+/// reference heading).
+fn add_run(
+    run: &Run,
+    params: &ChassisParams,
+    models: &[UncertaintyModel],
+    ensembles: &mut [Ensemble],
+    o: &EnsembleOptions,
+) -> Result<bool> {
+    let rh2 = o.reference_heading_sigma * o.reference_heading_sigma;
+    let mut fitted_heading = false;
+    let last = run.len() - 1;
+    // Start heading not fitted to the judged errors when the reference has headings.
+    let mut changes = Vec::new();
+    let guess = run.heading_guess(0);
+    run.integrate_pose(params, 0, last, guess, |_, integ| {
+        changes.push(integ.pose().heading - guess)
+    })
+    .map_err(|e| anyhow::anyhow!("parameters: {e}"))?;
+    let (h0, var_h0) = match run.start_heading(0, |k| changes.get(k - 1).copied()) {
+        Some((h, n)) => (h, rh2 / n as f64),
+        None => {
+            fitted_heading = true;
+            (calib::fit_heading(run, params, 0, last, guess)?, 0.0)
+        }
+    };
+    let (lo, hi) = run.standstill(0);
+    let var = |k: usize| {
+        let s = run.reference_at(k).sigma_h.unwrap_or(o.reference_sigma);
+        s * s
+    };
+    let n0 = (hi - lo + 1) as f64;
+    let var_start = (lo..=hi).map(var).sum::<f64>() / (n0 * n0);
+    let start = run.anchor(0);
+    for (m, ens) in models.iter().zip(ensembles.iter_mut()) {
+        let p = ChassisParams {
+            uncertainty_model: *m,
+            ..*params
+        };
+        let ev = calib::evaluate(run, &p, h0)?;
+        ens.add_run(&ev.dist, |i| {
+            let (x, y) = ev.odo[i];
+            let turned = (x - start.0).powi(2) + (y - start.1).powi(2);
+            let band = (ev.sigma_h[i].powi(2) + var(ev.k[i]) + var_start + var_h0 * turned).sqrt();
+            let n = ev.start_headings[i].max(1) as f64;
+            CheckpointSample {
+                horizontal: (ev.horizontal[i], band),
+                heading: ev.heading_change_err[i].map(|e| {
+                    (
+                        e,
+                        (ev.sigma_heading[i].powi(2) + rh2 * (1.0 + 1.0 / n)).sqrt(),
+                    )
+                }),
+            }
+        });
+    }
+    Ok(fitted_heading)
+}
+
+/// The ensemble's coverage by checkpoint and its reliability, per model, on stdout.
+fn print_coverage(
+    o: &EnsembleOptions,
+    models: &[UncertaintyModel],
+    ensembles: &[Ensemble],
+    fitted_heading: usize,
+) {
     crate::outln!(
         "ensemble validation: {} runs; bands widened by the reference noise ({} m where an epoch has no sigma, {} deg heading){}",
         o.runs.len(),
@@ -178,7 +255,7 @@ pub fn validate_ensemble(o: &EnsembleOptions, input: &ReferenceArgs) -> Result<E
             format!("{:.1} %", 100.0 * v)
         }
     };
-    for (m, e) in models.iter().zip(&ensembles) {
+    for (m, e) in models.iter().zip(ensembles) {
         for c in e.coverage() {
             crate::outln!(
                 "  {:<11} {:>6.1} m {:>5} {:>12} {:>12} {:>12} {:>12}",
@@ -195,7 +272,7 @@ pub fn validate_ensemble(o: &EnsembleOptions, input: &ReferenceArgs) -> Result<E
     crate::outln!(
         "reliability (observed share inside the band of each nominal level, all checkpoints):"
     );
-    for (m, e) in models.iter().zip(&ensembles) {
+    for (m, e) in models.iter().zip(ensembles) {
         let rows: Vec<String> = e
             .reliability()
             .iter()
@@ -207,17 +284,4 @@ pub fn validate_ensemble(o: &EnsembleOptions, input: &ReferenceArgs) -> Result<E
             rows.join(", ")
         );
     }
-    if let Some(dir) = o.plots {
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("{}: cannot create", dir.display()))?;
-        let named: Vec<(&str, &Ensemble)> = models
-            .iter()
-            .map(|m| cfg::model_name(*m))
-            .zip(ensembles.iter())
-            .collect();
-        for f in crate::plots::ensemble_figures(dir, "validate_ensemble", &named)? {
-            crate::outln!("wrote {}", f.display());
-        }
-    }
-    Ok(ExitCode::SUCCESS)
 }

@@ -10,9 +10,9 @@
 //! time base (GPS time of week, as `record` writes it), refusing a log that does not overlap
 //! the samples.
 
-pub mod cli;
 pub mod geodetic;
 pub mod gps_time;
+pub mod matched;
 pub mod nmea;
 pub mod rtklib;
 pub mod simulated;

@@ -88,46 +88,113 @@ fn sentence_type(s: &str) -> &str {
 
 /// Parses an NMEA log; `file` names it in messages. UTC + `leap_seconds` = GPS time.
 pub fn parse(file: &str, text: &str, leap_seconds: i32) -> Result<GeodeticLog> {
-    let mut report = ReadReport::default();
-    let mut undated: Vec<Undated> = Vec::new();
-    let mut dates: Vec<DateMark> = Vec::new();
-    // GSTs that came before their GGA: (time of day in ms, sigmas).
-    let mut pending_gst: Vec<(i64, [f64; 3])> = Vec::new();
-    // The epoch an HDT would belong to (the last GGA, until an HDT takes it).
-    let mut hdt_target: Option<usize> = None;
-    // Time of day (ms) of the last sentence that carries one: the epoch being sent.
-    let mut epoch_time: Option<i64> = None;
-    // An HDT sent in an epoch before its GGA: (time of day in ms, heading in rad, line).
-    let mut pending_hdt: Option<(i64, f64, usize)> = None;
-    let drop_hdt = |report: &mut ReadReport, p: Option<(i64, f64, usize)>| {
+    let mut reader = LogReader::new(file);
+    for (i, raw) in text.lines().enumerate() {
+        reader.line(i + 1, raw);
+    }
+    reader.finish(leap_seconds)
+}
+
+/// A log being read: the GGA epochs so far, the date sentences, and the GST and HDT
+/// sentences waiting for their epoch.
+struct LogReader<'a> {
+    /// The log's name in messages.
+    file: &'a str,
+    report: ReadReport,
+    undated: Vec<Undated>,
+    dates: Vec<DateMark>,
+    /// GSTs that came before their GGA: (time of day in ms, sigmas).
+    pending_gst: Vec<(i64, [f64; 3])>,
+    /// The epoch an HDT would belong to (the last GGA, until an HDT takes it).
+    hdt_target: Option<usize>,
+    /// Time of day (ms) of the last sentence that carries one: the epoch being sent.
+    epoch_time: Option<i64>,
+    /// An HDT sent in an epoch before its GGA: (time of day in ms, heading in rad, line).
+    pending_hdt: Option<(i64, f64, usize)>,
+}
+
+impl<'a> LogReader<'a> {
+    fn new(file: &'a str) -> Self {
+        Self {
+            file,
+            report: ReadReport::default(),
+            undated: Vec::new(),
+            dates: Vec::new(),
+            pending_gst: Vec::new(),
+            hdt_target: None,
+            epoch_time: None,
+            pending_hdt: None,
+        }
+    }
+
+    /// An HDT that found no epoch: counted as unusable.
+    fn drop_hdt(&mut self, p: Option<(i64, f64, usize)>) {
+        let file = self.file;
         if let Some((_, _, l)) = p {
-            report.unusable(format!(
+            self.report.unusable(format!(
                 "{file}:{l}: HDT without a GGA of its epoch (or a second HDT): skipped"
             ));
         }
-    };
-    for (i, raw) in text.lines().enumerate() {
-        let line = i + 1;
+    }
+
+    /// Reads line number `line`.
+    fn line(&mut self, line: usize, raw: &str) {
+        let file = self.file;
         let raw = raw.trim();
         if raw.is_empty() {
-            continue;
+            return;
         }
         let Some(start) = raw.rfind('$') else {
-            report.corrupt(format!("{file}:{line}: not an NMEA sentence (no `$`)"));
-            continue;
+            self.report
+                .corrupt(format!("{file}:{line}: not an NMEA sentence (no `$`)"));
+            return;
         };
         if start > 0 {
-            report.stray_bytes(format!(
+            self.report.stray_bytes(format!(
                 "{file}:{line}: {start} bytes before the `$` (read from the `$`)"
             ));
         }
         let s = &raw[start..];
-        let kind = match parse_sentence(s.as_bytes()) {
+        let Some(kind) = self.checked(line, s) else {
+            return;
+        };
+        if !matches!(kind, "GGA" | "HDT" | "GST") {
+            self.report.other(kind);
+            return;
+        }
+        let parsed = match nmea::parse_str(s) {
+            Ok(p) => p,
+            Err(e) => {
+                let time = s.split(',').nth(1).unwrap_or("");
+                if kind != "HDT" && time.get(4..6) == Some("60") {
+                    self.report.unusable(format!(
+                        "{file}:{line}: {kind} in a leap second ({time}): skipped"
+                    ));
+                } else {
+                    self.report.corrupt(format!("{file}:{line}: {kind}: {e}"));
+                }
+                return;
+            }
+        };
+        match parsed {
+            nmea::ParseResult::GGA(g) => self.gga(line, &g),
+            nmea::ParseResult::HDT(h) => self.hdt(line, &h),
+            nmea::ParseResult::GST(g) => self.gst(line, &g),
+            _ => self.report.other(kind),
+        }
+    }
+
+    /// The firmware's check of sentence `s`: its type when it is for the `nmea` crate to
+    /// read; `None` when it is read here (a date and time: RMC, ZDA) or skipped (counted).
+    fn checked<'s>(&mut self, line: usize, s: &'s str) -> Option<&'s str> {
+        let file = self.file;
+        let report = &mut self.report;
+        match parse_sentence(s.as_bytes()) {
             Ok(TimeMessage::Rmc { valid: false, .. }) => {
                 report.unusable(format!(
                     "{file}:{line}: RMC with status V (data not valid): its date is not used"
                 ));
-                continue;
+                None
             }
             Ok(m) => {
                 let t = m.time();
@@ -135,171 +202,169 @@ pub fn parse(file: &str, text: &str, leap_seconds: i32) -> Result<GeodeticLog> {
                     + f64::from(t.minute) * 60.0
                     + f64::from(t.second)
                     + f64::from(t.millis) * 1e-3;
-                epoch_time = Some(ms(sod));
-                dates.push(DateMark {
+                self.epoch_time = Some(ms(sod));
+                self.dates.push(DateMark {
                     days: days_from_civil(i64::from(t.year), u32::from(t.month), u32::from(t.day)),
                     sod,
                     line,
                 });
                 report.used(sentence_type(s));
-                continue;
+                None
             }
             Err(NmeaError::BadChecksum { computed, received }) => {
                 report.corrupt(format!(
                     "{file}:{line}: checksum {received:02X}, but the sentence's is {computed:02X}"
                 ));
-                continue;
+                None
             }
             Err(e @ (NmeaError::NoChecksum | NmeaError::NoStart | NmeaError::Overflow)) => {
                 report.corrupt(format!("{file}:{line}: {e:?}: sentence skipped"));
-                continue;
+                None
             }
             Err(NmeaError::Field(name)) => {
                 report.unusable(format!(
                     "{file}:{line}: {}: field `{name}` missing or malformed",
                     sentence_type(s)
                 ));
-                continue;
+                None
             }
             Err(NmeaError::BadDate) => {
                 report.corrupt(format!(
                     "{file}:{line}: {}: date or time out of range",
                     sentence_type(s)
                 ));
-                continue;
+                None
             }
-            Err(NmeaError::Unsupported) => sentence_type(s),
-        };
-        if !matches!(kind, "GGA" | "HDT" | "GST") {
-            report.other(kind);
-            continue;
+            Err(NmeaError::Unsupported) => Some(sentence_type(s)),
         }
-        let parsed = match nmea::parse_str(s) {
+    }
+
+    /// A GGA: a new epoch, with the GST and HDT that came before it.
+    fn gga(&mut self, line: usize, g: &nmea::sentences::GgaData) {
+        let file = self.file;
+        let (Some(t), Some(lat), Some(lon), Some(alt)) =
+            (g.fix_time, g.latitude, g.longitude, g.altitude)
+        else {
+            self.report.unusable(format!(
+                "{file}:{line}: GGA without a time, position or altitude (fix quality {:?})",
+                g.fix_type
+            ));
+            return;
+        };
+        let position = match (Geodetic {
+            lat_deg: lat,
+            lon_deg: lon,
+            // Ellipsoidal = above mean sea level + geoid separation.
+            height: f64::from(alt) + f64::from(g.geoid_separation.unwrap_or(0.0)),
+        })
+        .checked()
+        {
             Ok(p) => p,
             Err(e) => {
-                let time = s.split(',').nth(1).unwrap_or("");
-                if kind != "HDT" && time.get(4..6) == Some("60") {
-                    report.unusable(format!(
-                        "{file}:{line}: {kind} in a leap second ({time}): skipped"
-                    ));
-                } else {
-                    report.corrupt(format!("{file}:{line}: {kind}: {e}"));
-                }
-                continue;
+                self.report
+                    .unusable(format!("{file}:{line}: GGA position: {e}"));
+                return;
             }
         };
-        match parsed {
-            nmea::ParseResult::GGA(g) => {
-                let (Some(t), Some(lat), Some(lon), Some(alt)) =
-                    (g.fix_time, g.latitude, g.longitude, g.altitude)
-                else {
-                    report.unusable(format!(
-                        "{file}:{line}: GGA without a time, position or altitude (fix quality {:?})",
-                        g.fix_type
-                    ));
-                    continue;
-                };
-                let position = match (Geodetic {
-                    lat_deg: lat,
-                    lon_deg: lon,
-                    // Ellipsoidal = above mean sea level + geoid separation.
-                    height: f64::from(alt) + f64::from(g.geoid_separation.unwrap_or(0.0)),
-                })
-                .checked()
-                {
-                    Ok(p) => p,
-                    Err(e) => {
-                        report.unusable(format!("{file}:{line}: GGA position: {e}"));
-                        continue;
-                    }
-                };
-                let sod = seconds_of_day(t);
-                let sigma = pending_gst
-                    .iter()
-                    .position(|(k, _)| *k == ms(sod))
-                    .map(|p| pending_gst.swap_remove(p).1);
-                report.used("GGA");
-                epoch_time = Some(ms(sod));
-                let mut heading = None;
-                hdt_target = Some(undated.len());
-                match pending_hdt.take() {
-                    Some((k, h, _)) if k == ms(sod) => {
-                        heading = Some(h);
-                        hdt_target = None;
-                        report.used("HDT");
-                    }
-                    other => drop_hdt(&mut report, other),
-                }
-                undated.push(Undated {
-                    sod,
-                    position,
-                    fix: fix_quality(g.fix_type),
-                    heading,
-                    sigma_north_east_up: sigma,
-                    line,
-                    date: dates.len().checked_sub(1),
-                });
+        let sod = seconds_of_day(t);
+        let sigma = self
+            .pending_gst
+            .iter()
+            .position(|(k, _)| *k == ms(sod))
+            .map(|p| self.pending_gst.swap_remove(p).1);
+        self.report.used("GGA");
+        self.epoch_time = Some(ms(sod));
+        let mut heading = None;
+        self.hdt_target = Some(self.undated.len());
+        match self.pending_hdt.take() {
+            Some((k, h, _)) if k == ms(sod) => {
+                heading = Some(h);
+                self.hdt_target = None;
+                self.report.used("HDT");
             }
-            nmea::ParseResult::HDT(h) => {
-                let Some(deg) = h.heading.map(f64::from).filter(|d| d.is_finite()) else {
-                    report.unusable(format!("{file}:{line}: HDT without a heading"));
-                    continue;
-                };
-                let heading = crate::stats::wrap_angle(deg.to_radians());
-                match (hdt_target, epoch_time) {
-                    // After the GGA of the epoch being sent.
-                    (Some(k), Some(t)) if ms(undated[k].sod) == t => {
-                        undated[k].heading = Some(heading);
-                        hdt_target = None;
-                        report.used("HDT");
-                    }
-                    // Before it: waits for the GGA of that time.
-                    (_, Some(t)) => {
-                        let old = pending_hdt.replace((t, heading, line));
-                        drop_hdt(&mut report, old);
-                    }
-                    (_, None) => drop_hdt(&mut report, Some((0, heading, line))),
-                }
+            other => self.drop_hdt(other),
+        }
+        self.undated.push(Undated {
+            sod,
+            position,
+            fix: fix_quality(g.fix_type),
+            heading,
+            sigma_north_east_up: sigma,
+            line,
+            date: self.dates.len().checked_sub(1),
+        });
+    }
+
+    /// An HDT: the heading of the epoch being sent, or of the GGA still to come.
+    fn hdt(&mut self, line: usize, h: &nmea::sentences::HdtData) {
+        let file = self.file;
+        let Some(deg) = h.heading.map(f64::from).filter(|d| d.is_finite()) else {
+            self.report
+                .unusable(format!("{file}:{line}: HDT without a heading"));
+            return;
+        };
+        let heading = crate::stats::wrap_angle(deg.to_radians());
+        match (self.hdt_target, self.epoch_time) {
+            // After the GGA of the epoch being sent.
+            (Some(k), Some(t)) if ms(self.undated[k].sod) == t => {
+                self.undated[k].heading = Some(heading);
+                self.hdt_target = None;
+                self.report.used("HDT");
             }
-            nmea::ParseResult::GST(g) => {
-                let (Some(t), Some(n), Some(e)) = (g.time, g.lat_sd, g.long_sd) else {
-                    report.unusable(format!(
-                        "{file}:{line}: GST without time or latitude/longitude sigmas"
-                    ));
-                    continue;
-                };
-                let sigma = [
-                    f64::from(n),
-                    f64::from(e),
-                    g.alt_sd.map_or(f64::NAN, f64::from),
-                ];
-                let key = ms(seconds_of_day(t));
-                epoch_time = Some(key);
-                report.used("GST");
-                let recent = undated.len().saturating_sub(20);
-                match undated[recent..]
-                    .iter_mut()
-                    .rev()
-                    .find(|u| ms(u.sod) == key && u.sigma_north_east_up.is_none())
-                {
-                    Some(u) => u.sigma_north_east_up = Some(sigma),
-                    None => {
-                        if pending_gst.len() >= 20 {
-                            pending_gst.remove(0);
-                        }
-                        pending_gst.push((key, sigma));
-                    }
-                }
+            // Before it: waits for the GGA of that time.
+            (_, Some(t)) => {
+                let old = self.pending_hdt.replace((t, heading, line));
+                self.drop_hdt(old);
             }
-            _ => report.other(kind),
+            (_, None) => self.drop_hdt(Some((0, heading, line))),
         }
     }
-    drop_hdt(&mut report, pending_hdt);
-    let epochs = date_epochs(file, undated, &dates, leap_seconds, &mut report)?;
-    if epochs.is_empty() {
-        bail!("{file}: no usable position (no GGA with a position): {report}");
+
+    /// A GST: the sigmas of the GGA of its time, before or after it.
+    fn gst(&mut self, line: usize, g: &nmea::sentences::GstData) {
+        let file = self.file;
+        let (Some(t), Some(n), Some(e)) = (g.time, g.lat_sd, g.long_sd) else {
+            self.report.unusable(format!(
+                "{file}:{line}: GST without time or latitude/longitude sigmas"
+            ));
+            return;
+        };
+        let sigma = [
+            f64::from(n),
+            f64::from(e),
+            g.alt_sd.map_or(f64::NAN, f64::from),
+        ];
+        let key = ms(seconds_of_day(t));
+        self.epoch_time = Some(key);
+        self.report.used("GST");
+        let recent = self.undated.len().saturating_sub(20);
+        match self.undated[recent..]
+            .iter_mut()
+            .rev()
+            .find(|u| ms(u.sod) == key && u.sigma_north_east_up.is_none())
+        {
+            Some(u) => u.sigma_north_east_up = Some(sigma),
+            None => {
+                if self.pending_gst.len() >= 20 {
+                    self.pending_gst.remove(0);
+                }
+                self.pending_gst.push((key, sigma));
+            }
+        }
     }
-    Ok(GeodeticLog { epochs, report })
+
+    /// The dated epochs in GPS time, once every line is read.
+    fn finish(mut self, leap_seconds: i32) -> Result<GeodeticLog> {
+        let file = self.file;
+        let pending = self.pending_hdt.take();
+        self.drop_hdt(pending);
+        let mut report = self.report;
+        let epochs = date_epochs(file, self.undated, &self.dates, leap_seconds, &mut report)?;
+        if epochs.is_empty() {
+            bail!("{file}: no usable position (no GGA with a position): {report}");
+        }
+        Ok(GeodeticLog { epochs, report })
+    }
 }
 
 /// Dates the GGA epochs (see the module doc), converts to GPS time and drops epochs whose

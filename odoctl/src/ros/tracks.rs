@@ -10,7 +10,8 @@ use super::recording::{self, RecordingSummary};
 use crate::calib::{self, Evaluation, Run};
 use crate::config as cfg;
 use crate::csvio::RefPoint;
-use crate::reference::cli::{read_matched_run, MatchedRun, ReferenceArgs, ReferenceSummary};
+use crate::reference::matched::{read_matched_run, MatchedRun, ReferenceSummary};
+use crate::reference::ReferenceOptions;
 use odo_core::odometry::Pose;
 
 /// Nanoseconds of a CSV time (s); the files' own time base (metadata `stamp_source` =
@@ -75,7 +76,7 @@ pub fn validate_hook(
     out: &Path,
     samples_path: &Path,
     reference_path: &Path,
-    reference_input: &ReferenceArgs,
+    reference_input: &ReferenceOptions,
     config: Option<&Path>,
     sets: &[String],
     heading: Option<f64>,

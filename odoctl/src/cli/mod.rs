@@ -1,0 +1,323 @@
+//! The command line: clap's types of every subcommand and its options. The values are checked
+//! as they are parsed ([`values`]); what a command does with them is in `commands/`, one
+//! module per subcommand.
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand};
+use odo_core::odometry::UncertaintyModel;
+
+mod calibrate;
+mod reference;
+mod simulate;
+pub mod values;
+
+pub use calibrate::{CalibrateArgs, GeometryArgs};
+pub use reference::{PosTimeArg, ReceiverArgs, ReferenceArgs};
+pub use simulate::SimulateArgs;
+
+use values as v;
+
+/// Host tool of the odometry unit: stream, configure, replay, simulate, calibrate
+#[derive(Parser)]
+#[command(name = "odoctl", version)]
+pub struct Cli {
+    /// The subcommand.
+    #[command(subcommand)]
+    pub cmd: Cmd,
+}
+
+/// The link to the unit.
+#[derive(Args, Clone)]
+pub struct PortArgs {
+    /// Serial port (`/dev/ttyUSB0`) or TCP socket of the QEMU image (`tcp:127.0.0.1:PORT`).
+    #[arg(long, short)]
+    pub port: String,
+    /// Baud rate of a serial port.
+    #[arg(long, default_value_t = 115_200, value_parser = v::baud)]
+    pub baud: u32,
+}
+
+/// The chassis parameters: a file and overrides.
+#[derive(Args, Clone)]
+pub struct ParamArgs {
+    /// Parameter file (TOML, shared key names); the designed values when absent.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Set a parameter, `KEY=VALUE` (repeatable; after `--config`).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub sets: Vec<String>,
+}
+
+/// The subcommands.
+#[derive(Subcommand)]
+pub enum Cmd {
+    /// Show the live pose stream as a table; report CRC errors, sequence gaps, dropped records.
+    Monitor(MonitorArgs),
+    /// Record the live pose stream to a SAMPLES CSV (with the unit's pose columns).
+    Record(RecordArgs),
+    /// Decode a captured raw byte stream to a SAMPLES CSV.
+    Decode(DecodeArgs),
+    /// Read and change the unit's settings.
+    Config(ConfigArgs),
+    /// Run the core integrator over recorded counts; CSV `t,x,y,heading,sigma_x,sigma_y,sigma_heading` to stdout.
+    Replay(ReplayArgs),
+    /// Estimate the chassis parameters from a run and its RTK GNSS reference (eq 16).
+    Calibrate(CalibrateArgs),
+    /// Errors of calibrated parameters on another run, against their predicted uncertainty.
+    Validate(ValidateArgs),
+    /// Write a synthetic run (SAMPLES and REFERENCE CSVs) with known true parameters.
+    Simulate(SimulateArgs),
+    /// Publish the live pose on ROS 2 (/odom, /tf, /diagnostics) over DDS (docs/ROS.md).
+    Bridge(BridgeArgs),
+}
+
+/// `odoctl monitor`.
+#[derive(Args)]
+pub struct MonitorArgs {
+    /// The link.
+    #[command(flatten)]
+    pub port: PortArgs,
+    /// Stop after this many seconds.
+    #[arg(long, allow_negative_numbers = true, value_parser = v::duration)]
+    pub duration: Option<f64>,
+    /// Stop after this many pose records.
+    #[arg(long, value_parser = v::count)]
+    pub count: Option<u64>,
+    /// Print every N-th record only.
+    #[arg(long, default_value_t = 1, value_parser = v::count)]
+    pub every: u64,
+}
+
+/// `odoctl record`.
+#[derive(Args)]
+pub struct RecordArgs {
+    /// The link.
+    #[command(flatten)]
+    pub port: PortArgs,
+    /// Output SAMPLES CSV.
+    #[arg(long, short)]
+    pub out: PathBuf,
+    /// Also keep the raw byte stream (for `decode`).
+    #[arg(long)]
+    pub raw: Option<PathBuf>,
+    /// Stop after this many seconds.
+    #[arg(long, allow_negative_numbers = true, value_parser = v::duration)]
+    pub duration: Option<f64>,
+    /// Stop after this many pose records.
+    #[arg(long, value_parser = v::count)]
+    pub count: Option<u64>,
+    /// Send `reset_pose` first, so the recording starts at zero pose and zero sigmas and
+    /// `replay --check` can reproduce it bit for bit.
+    #[arg(long)]
+    pub reset_pose: bool,
+    /// Also write the unit's poses as ROS 2 topics (/odom, /tf, /diagnostics) to this
+    /// MCAP file once recording ends (docs/ROS.md); the twist needs the unit's parameters
+    /// (`--config`, `--set`).
+    #[arg(long)]
+    pub mcap: Option<PathBuf>,
+    /// The unit's parameters, for the twist of `--mcap`.
+    #[command(flatten)]
+    pub params: ParamArgs,
+}
+
+/// `odoctl decode`.
+#[derive(Args)]
+pub struct DecodeArgs {
+    /// Raw capture.
+    pub file: PathBuf,
+    /// Output CSV (stdout when absent).
+    #[arg(long, short)]
+    pub out: Option<PathBuf>,
+}
+
+/// `odoctl config`.
+#[derive(Args)]
+pub struct ConfigArgs {
+    /// The link.
+    #[command(flatten)]
+    pub port: PortArgs,
+    /// What to do.
+    #[command(subcommand)]
+    pub action: ConfigAction,
+}
+
+/// What `config` does.
+#[derive(Subcommand, Clone)]
+pub enum ConfigAction {
+    /// Print one setting, or all.
+    Get {
+        /// Key (all settings when absent).
+        key: Option<String>,
+    },
+    /// Change a setting (in RAM; `save` makes it permanent).
+    Set {
+        /// Key.
+        key: String,
+        /// Value.
+        #[arg(allow_negative_numbers = true)]
+        value: String,
+    },
+    /// Store the settings in flash.
+    Save,
+    /// Send a parameter file (a calibration result, or unit options) in atomic `set` lines,
+    /// then `save` unless `--no-save`.
+    Push {
+        /// TOML file with the shared key names.
+        file: PathBuf,
+        /// Do not save to flash.
+        #[arg(long)]
+        no_save: bool,
+    },
+    /// Write the unit's settings (its `get` reply) to a TOML file that `push` sends back
+    /// bit for bit.
+    Pull {
+        /// TOML file to write.
+        file: PathBuf,
+    },
+    /// Send any command line and print the reply.
+    Raw {
+        /// The command line, e.g. `status`.
+        line: Vec<String>,
+    },
+}
+
+/// `odoctl replay`.
+#[derive(Args)]
+pub struct ReplayArgs {
+    /// SAMPLES CSV.
+    pub samples: PathBuf,
+    /// The chassis parameters.
+    #[command(flatten)]
+    pub params: ParamArgs,
+    /// Initial x (m).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true, value_parser = v::position)]
+    pub x: f64,
+    /// Initial y (m).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true, value_parser = v::position)]
+    pub y: f64,
+    /// Initial heading (rad, clockwise from +y).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true, value_parser = v::heading)]
+    pub heading: f64,
+    /// Compare with the unit's own pose columns of the file, bit for bit; exit non-zero
+    /// on any difference.
+    #[arg(long)]
+    pub check: bool,
+    /// Write the CSV here instead of stdout.
+    #[arg(long, short)]
+    pub out: Option<PathBuf>,
+    /// Also record the replay as ROS 2 topics (/odom, /tf, /diagnostics) in this MCAP
+    /// file (docs/ROS.md).
+    #[arg(long)]
+    pub mcap: Option<PathBuf>,
+}
+
+/// `odoctl validate`.
+#[derive(Args)]
+pub struct ValidateArgs {
+    /// SAMPLES CSV; repeat with `--reference` for an ensemble of runs.
+    #[arg(long, required_unless_present = "runs")]
+    pub samples: Vec<PathBuf>,
+    /// Reference: REFERENCE CSV, NMEA 0183 log or RTKLIB `.pos` file (one per `--samples`).
+    #[arg(long, required_unless_present = "runs")]
+    pub reference: Vec<PathBuf>,
+    /// A list of runs, one `SAMPLES REFERENCE` a line: the ensemble coverage by distance.
+    #[arg(long, conflicts_with_all = ["samples", "reference"])]
+    pub runs: Option<PathBuf>,
+    /// Checkpoints of the ensemble coverage (m of reference path from each start).
+    #[arg(long, value_delimiter = ',', default_values_t = crate::calib::CHECKPOINTS)]
+    pub checkpoints: Vec<f64>,
+    /// How `--reference` is read.
+    #[command(flatten)]
+    pub reference_input: ReferenceArgs,
+    /// The calibrated parameters.
+    #[command(flatten)]
+    pub params: ParamArgs,
+    /// Initial heading (rad); when absent, the heading minimising eq (16) on this run.
+    #[arg(long, allow_negative_numbers = true, value_parser = v::heading)]
+    pub heading: Option<f64>,
+    /// Per-point errors and sigmas to this CSV.
+    #[arg(long)]
+    pub errors: Option<PathBuf>,
+    /// Write PNG figures (trajectory, horizontal and heading error with bands) here.
+    #[arg(long)]
+    pub plots: Option<PathBuf>,
+    /// Which uncertainty models to evaluate (with the coefficients of the file): the file's
+    /// `uncertainty_model` (`config`), one, or `all` to compare their coverage.
+    #[arg(long, value_enum, default_value_t = Models::Config)]
+    pub models: Models,
+    /// Horizontal RMS noise of the reference (m): also reported is the coverage of the
+    /// bands widened by it, `sqrt((k sigma_h)^2 + (k sigma_ref)^2)`, as the calibration's
+    /// criterion uses.
+    #[arg(long, default_value_t = 0.008, allow_negative_numbers = true, value_parser = v::sigma_m)]
+    pub reference_sigma: f64,
+    /// Heading noise of the reference (degrees, 1 sigma): also reported is the coverage of
+    /// the heading bands widened by it, as `calibrate`'s `delta_diff` criterion uses.
+    #[arg(long, default_value_t = 0.5, allow_negative_numbers = true, value_parser = v::sigma_deg)]
+    pub reference_heading_sigma_deg: f64,
+    /// Also write the reference track and the odometry path (`nav_msgs/Path`) to this
+    /// MCAP file, for Foxglove (docs/ROS.md).
+    #[arg(long)]
+    pub mcap: Option<PathBuf>,
+}
+
+/// `odoctl bridge`.
+#[derive(Args)]
+pub struct BridgeArgs {
+    /// The link.
+    #[command(flatten)]
+    pub port: PortArgs,
+    /// The unit's parameters, for the twist from the counts.
+    #[command(flatten)]
+    pub params: ParamArgs,
+    /// Stop after this many seconds.
+    #[arg(long, allow_negative_numbers = true, value_parser = v::duration)]
+    pub duration: Option<f64>,
+    /// Stop after this many published records.
+    #[arg(long, value_parser = v::count)]
+    pub count: Option<u64>,
+    /// Seconds between reconnection attempts, and without records before the status
+    /// turns STALE.
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = v::retry)]
+    pub retry: f64,
+    /// Also serve the Foxglove WebSocket protocol (pose, path so far, 1-sigma ellipse).
+    #[arg(long, value_name = "HOST:PORT", num_args = 0..=1, default_missing_value = "127.0.0.1:8765")]
+    pub foxglove: Option<String>,
+    /// Publish nothing over DDS (Foxglove only).
+    #[arg(long, requires = "foxglove")]
+    pub no_dds: bool,
+}
+
+/// One uncertainty model.
+#[derive(Clone, Copy, PartialEq, Eq, Debug, clap::ValueEnum)]
+pub enum ModelChoice {
+    /// The paper's eqs (19)-(28).
+    Paper,
+    /// The first-order covariance propagation.
+    Covariance,
+}
+
+/// A choice of uncertainty models.
+#[derive(Clone, Copy, PartialEq, Eq, Debug, clap::ValueEnum)]
+pub enum Models {
+    /// The model named by the parameters (`uncertainty_model`).
+    Config,
+    /// The paper's eqs (19)-(28).
+    Paper,
+    /// The first-order covariance propagation.
+    Covariance,
+    /// Both.
+    All,
+}
+
+impl Models {
+    /// The models named; empty for `config` (the parameters' own).
+    pub fn list(self) -> Vec<UncertaintyModel> {
+        match self {
+            Self::Config => vec![],
+            Self::Paper => vec![UncertaintyModel::Paper],
+            Self::Covariance => vec![UncertaintyModel::Covariance],
+            Self::All => vec![UncertaintyModel::Paper, UncertaintyModel::Covariance],
+        }
+    }
+}

@@ -1,0 +1,132 @@
+//! `odoctl calibrate`: reads the files, maps the options ([`options`]), runs
+//! [`calib::calibrate`], prints the result ([`report`]) and writes it ([`write`]): the result
+//! TOML, the stability study's CSV, the figures, and with `--export-ros`, `--mcap` its ROS
+//! forms.
+
+use std::path::Path;
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::Result;
+use odo_core::odometry::ChassisParams;
+
+use crate::calib::{self, Calibration};
+use crate::cli::{CalibrateArgs, ReferenceArgs};
+use crate::config as cfg;
+use crate::csvio::{self, RefPoint, Sample};
+use crate::reference::matched::reference_for_samples;
+use crate::stats::{coverage, summarize, Summary};
+
+use super::reference_options;
+
+pub mod options;
+pub mod report;
+pub mod write;
+
+/// The whole run's errors at the result, as printed and written to `[fit]`.
+pub struct ErrorSummary {
+    /// Horizontal errors (m), the start left out.
+    pub horizontal: Summary,
+    /// Absolute heading errors (rad).
+    pub heading: Summary,
+    /// Heading errors (rad) and their sigmas (rad), where the reference has a heading.
+    pub heading_pairs: (Vec<f64>, Vec<f64>),
+    /// Share of horizontal errors inside 1 sigma_h.
+    pub coverage1: f64,
+    /// Share of horizontal errors inside 3 sigma_h.
+    pub coverage3: f64,
+}
+
+impl ErrorSummary {
+    /// The summary of a calibration's evaluation.
+    pub fn of(c: &Calibration) -> Self {
+        let ev = &c.evaluation;
+        let (he, hs) = ev.heading_pairs();
+        Self {
+            horizontal: summarize(&ev.horizontal[1..]),
+            heading: summarize(&he.iter().map(|e| e.abs()).collect::<Vec<_>>()),
+            heading_pairs: (he, hs),
+            coverage1: coverage(&ev.horizontal[1..], &ev.sigma_h[1..], 1.0),
+            coverage3: coverage(&ev.horizontal[1..], &ev.sigma_h[1..], 3.0),
+        }
+    }
+}
+
+/// True when the filter refined the geometry (its standard errors are the filter's).
+pub fn filter_refined(c: &Calibration) -> bool {
+    c.refinement.as_ref().is_some_and(|r| r.skipped.is_none())
+}
+
+/// `odoctl calibrate`.
+pub fn run(a: &CalibrateArgs) -> Result<ExitCode> {
+    let started = Instant::now();
+    let timer = calib::PhaseTimer::new();
+    let (samples, reference) = read_run(&a.samples, &a.reference, &a.reference_input)?;
+    timer.lap("read CSV");
+    let initial = initial_estimate(a)?;
+    let names = (
+        a.samples.display().to_string(),
+        a.reference.display().to_string(),
+    );
+    let opts = &options::calibration_options(a)?;
+    let c = calib::calibrate(&samples, &reference, (&names.0, &names.1), &initial, opts)?;
+    timer.lap("calibration");
+    let errors = ErrorSummary::of(&c);
+    report::print(&c, &initial, opts, &errors);
+    write::write_result(a, &c, opts, &errors)?;
+    timer.lap("report");
+    crate::outln!("done in {:.2} s", started.elapsed().as_secs_f64());
+    export_ros(a)?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Reads the samples and the reference (on two cores: the files are independent), the
+/// reference aligned to the samples.
+fn read_run(
+    samples: &Path,
+    reference: &Path,
+    input: &ReferenceArgs,
+) -> Result<(Vec<Sample>, Vec<RefPoint>)> {
+    let (samples, reference) = std::thread::scope(|scope| {
+        let reference = scope
+            .spawn(|| reference_options(input).and_then(|o| crate::reference::load(reference, &o)));
+        let samples = csvio::read_samples(samples);
+        (samples, reference.join().expect("CSV reader panicked"))
+    });
+    let (samples, reference) = (samples?, reference?);
+    let reference = reference_for_samples(&reference, &samples)?;
+    Ok((samples, reference))
+}
+
+/// The first estimate: `--initial` (or the designed values) with the `--set`s over it.
+fn initial_estimate(a: &CalibrateArgs) -> Result<ChassisParams> {
+    let mut initial = match &a.initial {
+        Some(p) => cfg::read_params(p, ChassisParams::DESIGNED)?,
+        None => ChassisParams::DESIGNED,
+    };
+    cfg::apply_sets(&mut initial, &a.sets)?;
+    cfg::validated(initial, "initial estimate")
+}
+
+/// The result's ROS forms, from the result file `--out`: the diff_drive_controller
+/// parameters (`--export-ros`) and the tracks (`--mcap`).
+fn export_ros(a: &CalibrateArgs) -> Result<()> {
+    let Some(result) = &a.out else {
+        return Ok(());
+    };
+    if let Some(yaml) = &a.export_ros {
+        crate::ros::diff_drive::export_hook(yaml, result)?;
+    }
+    if let Some(m) = &a.mcap {
+        crate::ros::tracks::validate_hook(
+            m,
+            &a.samples,
+            &a.reference,
+            &reference_options(&a.reference_input)?,
+            Some(result),
+            &[],
+            None,
+        )?;
+    }
+    Ok(())
+}

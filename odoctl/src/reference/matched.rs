@@ -1,0 +1,96 @@
+//! A run's reference as the commands use it: a receiver log aligned to the samples' time,
+//! with a summary of what was used ([`reference_for_samples`]), and the samples and the
+//! reference of one run read and matched ([`read_matched_run`]).
+
+use std::path::Path;
+
+use anyhow::Result;
+
+use super::{load, Reference, ReferenceOptions, TimeScale};
+use crate::csvio::{self, RefPoint, Sample};
+
+/// The reference rows for these samples: a CSV as it is; a receiver log aligned to the
+/// samples' time (refused when they do not overlap), with a summary of what was used on
+/// stdout.
+pub fn reference_for_samples(r: &Reference, samples: &[Sample]) -> Result<Vec<RefPoint>> {
+    let points = r.ref_points(time_span(samples))?;
+    print_summary(r);
+    Ok(points)
+}
+
+/// The first and last sample's time (s), NaN when there is none.
+fn time_span(samples: &[Sample]) -> (f64, f64) {
+    (
+        samples.first().map_or(f64::NAN, |s| s.t),
+        samples.last().map_or(f64::NAN, |s| s.t),
+    )
+}
+
+/// What of a receiver log was used, on stdout (nothing for a REFERENCE CSV).
+fn print_summary(r: &Reference) {
+    if r.time == TimeScale::Gps {
+        crate::outln!("reference {} ({}): {}", r.file, r.format, r.report);
+        if let Some(o) = r.origin {
+            let how = match r.origin_epochs {
+                0 => "given".to_string(),
+                1 => "the first used epoch".to_string(),
+                n => format!("the mean of the {n} epochs of the opening standstill"),
+            };
+            crate::outln!("  local origin {o} ({how}); x east, y north (m)");
+        }
+        if let Some(s) = r.median_horizontal_sigma() {
+            crate::outln!(
+                "  the log's own sigmas: median horizontal {s:.4} m (compare --reference-sigma)"
+            );
+        }
+    }
+}
+
+/// One run read to judge its odometry against the reference (`validate`, `validate --mcap`).
+#[derive(Debug, Clone)]
+pub struct MatchedRun {
+    /// SAMPLES rows.
+    pub samples: Vec<Sample>,
+    /// REFERENCE rows over the samples' time span (a receiver log aligned to them).
+    pub reference: Vec<RefPoint>,
+    /// (sample index, reference index) at common times, at least two.
+    pub matches: Vec<(usize, usize)>,
+}
+
+/// Whether [`read_matched_run`] prints what of a receiver log it used.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ReferenceSummary {
+    /// On stdout, as [`reference_for_samples`] does.
+    Print,
+    /// Not at all (a second reading of the same files).
+    Quiet,
+}
+
+/// Reads a SAMPLES file and a reference of any format (`--reference`), the reference over
+/// the samples' time span, and matches their times; fails naming both files when fewer than
+/// two times are common.
+pub fn read_matched_run(
+    samples_path: &Path,
+    reference_path: &Path,
+    options: &ReferenceOptions,
+    summary: ReferenceSummary,
+) -> Result<MatchedRun> {
+    let samples = csvio::read_samples(samples_path)?;
+    let source = load(reference_path, options)?;
+    let reference = match summary {
+        ReferenceSummary::Print => reference_for_samples(&source, &samples)?,
+        ReferenceSummary::Quiet => source.ref_points(time_span(&samples))?,
+    };
+    let matches = csvio::match_or_fail(
+        &samples,
+        &samples_path.display().to_string(),
+        &reference,
+        &reference_path.display().to_string(),
+        2,
+    )?;
+    Ok(MatchedRun {
+        samples,
+        reference,
+        matches,
+    })
+}
