@@ -16,7 +16,7 @@ pub enum DeltaMode {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
 pub enum UncertaintyCriterion {
     /// The covariance model's kappa by the likelihood of the reference's observations under
-    /// an error-state Kalman filter (`innovations.rs`: nothing a point is judged on is fitted
+    /// an error-state Kalman filter (`calib/filter/innovations.rs`: nothing a point is judged on is fitted
     /// to it); the paper's model by the coverage criterion (the default).
     #[default]
     Likelihood,
