@@ -8,6 +8,7 @@ use std::path::Path;
 
 use anyhow::{anyhow, bail, Context, Result};
 
+use crate::calib;
 use crate::cli::ReferenceArgs;
 use crate::reference::geodetic::parse_origin;
 use crate::reference::{OriginChoice, ReferenceOptions};
@@ -28,6 +29,24 @@ fn create(path: &Path) -> Result<BufWriter<File>> {
     Ok(BufWriter::new(File::create(path).with_context(|| {
         format!("{}: cannot create", path.display())
     })?))
+}
+
+/// The antenna lever arm `(forward, left)` (m) of a calibration result (`[fit]`), (0, 0)
+/// without one; printed when there is one. `validate` and its ensemble apply it to the runs.
+fn lever_arm(config: Option<&Path>) -> Result<(f64, f64)> {
+    let antenna = match config {
+        Some(p) => calib::read_lever_arm(p)?,
+        None => (0.0, 0.0),
+    };
+    if antenna != (0.0, 0.0) {
+        crate::outln!(
+            "antenna lever arm from {}: {:.4} m forward, {:.4} m left of the axle centre",
+            config.map_or(String::new(), |p| p.display().to_string()),
+            antenna.0,
+            antenna.1
+        );
+    }
+    Ok(antenna)
 }
 
 /// Helper for errors about files.

@@ -16,24 +16,6 @@ use crate::stats::{coverage, summarize};
 
 use super::{create, reference_options};
 
-/// The antenna lever arm `(forward, left)` (m) of a calibration result (`[fit]`), (0, 0)
-/// without one; printed when there is one. `validate` and its ensemble apply it to the runs.
-pub(super) fn lever_arm(config: Option<&Path>) -> Result<(f64, f64)> {
-    let antenna = match config {
-        Some(p) => calib::read_lever_arm(p)?,
-        None => (0.0, 0.0),
-    };
-    if antenna != (0.0, 0.0) {
-        crate::outln!(
-            "antenna lever arm from {}: {:.4} m forward, {:.4} m left of the axle centre",
-            config.map_or(String::new(), |p| p.display().to_string()),
-            antenna.0,
-            antenna.1
-        );
-    }
-    Ok(antenna)
-}
-
 /// `odoctl validate`: one run (with its MCAP tracks first when `--mcap` is given), or an
 /// ensemble of runs ([`validate_ensemble`](super::validate_ensemble)).
 pub fn run(a: &ValidateArgs) -> Result<ExitCode> {
@@ -107,7 +89,7 @@ fn validate(a: &ValidateArgs) -> Result<ExitCode> {
         &reference_options(&a.reference_input)?,
         ReferenceSummary::Print,
     )?;
-    let run = Run::new(&samples, &reference, matches).with_antenna(lever_arm(config)?);
+    let run = Run::new(&samples, &reference, matches).with_antenna(super::lever_arm(config)?);
     let last = run.len() - 1;
     let h0 = match a.heading {
         Some(h) => h,

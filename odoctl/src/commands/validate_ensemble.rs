@@ -128,7 +128,7 @@ pub fn validate_ensemble(o: &EnsembleOptions, input: &ReferenceArgs) -> Result<E
         .collect();
     let mut fitted_heading = 0usize;
     // The calibration result's lever arm, applied to every run as `validate` applies it.
-    let antenna = super::validate::lever_arm(o.config)?;
+    let antenna = super::lever_arm(o.config)?;
     let options = reference_options(input)?;
     for (sp, rp) in &o.runs {
         let MatchedRun {
