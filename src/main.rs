@@ -190,6 +190,7 @@ mod app {
     #[idle]
     fn idle(_: idle::Context) -> ! {
         loop {
+            board::keep_debug_port_awake();
             cortex_m::asm::wfi();
         }
     }
