@@ -59,6 +59,15 @@ impl Parallelism {
         }) << 8
     }
 
+    /// Bytes per program operation.
+    fn bytes(self) -> usize {
+        match self {
+            Self::X8 => 1,
+            Self::X16 => 2,
+            Self::X32 => 4,
+        }
+    }
+
     /// Longest 16 KiB sector erase, milliseconds.
     fn max_erase_ms(self) -> u32 {
         match self {
@@ -165,36 +174,26 @@ impl Flash for SettingsFlash {
             // Note(unsafe): CR = PSIZE | PG (RM0368 sec. 3.5.4).
             unsafe { f.flash.cr().write(|w| w.bits(parallelism.psize() | CR_PG)) };
             let base = BASE[sector] + offset;
-            for (i, word) in data.chunks_exact(4).enumerate() {
-                let addr = base + 4 * i;
-                match parallelism {
-                    Parallelism::X32 => {
-                        let value = u32::from_le_bytes([word[0], word[1], word[2], word[3]]);
-                        // Note(unsafe): an aligned word inside settings sector `sector`
-                        // (checked above), which memory.x keeps out of the program; PG is
-                        // set, x32.
-                        unsafe { core::ptr::write_volatile(addr as *mut u32, value) };
-                        f.wait()?;
-                    }
-                    Parallelism::X16 => {
-                        for (j, half) in word.chunks_exact(2).enumerate() {
-                            let value = u16::from_le_bytes([half[0], half[1]]);
-                            // Note(unsafe): an aligned half-word inside settings sector
-                            // `sector` (checked above), which memory.x keeps out of the
-                            // program; PG is set, x16.
-                            unsafe { core::ptr::write_volatile((addr + 2 * j) as *mut u16, value) };
-                            f.wait()?;
+            let unit = parallelism.bytes();
+            for (i, chunk) in data.chunks_exact(unit).enumerate() {
+                let addr = base + unit * i;
+                // Note(unsafe): `unit` aligned bytes (a word, half-word or byte, as PSIZE
+                // says; `offset` is word-aligned) inside settings sector `sector` (checked
+                // above), which memory.x keeps out of the program; PG is set.
+                unsafe {
+                    match *chunk {
+                        [a, b, c, d] => core::ptr::write_volatile(
+                            addr as *mut u32,
+                            u32::from_le_bytes([a, b, c, d]),
+                        ),
+                        [a, b] => {
+                            core::ptr::write_volatile(addr as *mut u16, u16::from_le_bytes([a, b]))
                         }
-                    }
-                    Parallelism::X8 => {
-                        for (j, byte) in word.iter().enumerate() {
-                            // Note(unsafe): a byte inside settings sector `sector` (checked
-                            // above), which memory.x keeps out of the program; PG is set, x8.
-                            unsafe { core::ptr::write_volatile((addr + j) as *mut u8, *byte) };
-                            f.wait()?;
-                        }
+                        [a] => core::ptr::write_volatile(addr as *mut u8, a),
+                        _ => {}
                     }
                 }
+                f.wait()?;
             }
             Ok(())
         })
