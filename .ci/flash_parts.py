@@ -20,6 +20,7 @@ import struct
 import sys
 from pathlib import Path
 
+sys.dont_write_bytecode = True  # no __pycache__ next to the scripts
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from elf_size import c_string, demangle, section_headers  # noqa: E402
 
