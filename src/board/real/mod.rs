@@ -80,8 +80,9 @@ pub const HSE_STARTUP_MS: u32 = 100;
 
 /// Polls of PLLRDY before the PLL counts as not locking: at least 2 ms at the 16 MHz HSI
 /// that runs the CPU whenever the PLL is started (start-up, and the clock security system's
-/// NMI after the hardware switched to the HSI; a poll takes at least one cycle), against a
-/// lock time of at most 300 us (datasheet DS10086, main PLL characteristics).
+/// NMI after the hardware switched to the HSI; a poll takes at least one cycle, about eight
+/// in practice: 16 ms), against a lock time of at most 300 us (datasheet DS10086, main PLL
+/// characteristics).
 const PLL_LOCK_POLLS: u32 = 2 * 16_000;
 
 /// Polls of a clock switch (SWS) or of the PLL's stop (PLLRDY cleared), which take a few
