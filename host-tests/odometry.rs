@@ -923,3 +923,129 @@ fn parameter_errors_name_the_exact_key() {
     assert_eq!(p.validate(), Err(ParamError::NotFinite("track_width")));
     assert_eq!(ChassisParams::DESIGNED.validate(), Ok(()));
 }
+
+/// Every single-precision parameter, out of range (above its maximum, and infinite) and NaN,
+/// is refused under its own key: the key table of `ChassisParams::validate` lines up with
+/// the fields, and the first offending key (in the documented order) is the one named.
+#[test]
+fn every_f32_parameter_names_its_key() {
+    use odo_core::odometry::params::HARMONIC_KEYS;
+    use odo_core::odometry::ParamError;
+    type Field = fn(&mut ChassisParams) -> &mut f32;
+    let mut fields: Vec<(Field, &str, f32)> = vec![
+        (
+            |p| &mut p.delta_left,
+            "delta_left",
+            ChassisParams::MAX_DELTA,
+        ),
+        (
+            |p| &mut p.delta_right,
+            "delta_right",
+            ChassisParams::MAX_DELTA,
+        ),
+        (
+            |p| &mut p.delta_diff,
+            "delta_diff",
+            ChassisParams::MAX_DELTA,
+        ),
+        (
+            |p| &mut p.kappa_left,
+            "kappa_left",
+            ChassisParams::MAX_KAPPA,
+        ),
+        (
+            |p| &mut p.kappa_right,
+            "kappa_right",
+            ChassisParams::MAX_KAPPA,
+        ),
+        (
+            |p| &mut p.kappa_diff,
+            "kappa_diff",
+            ChassisParams::MAX_KAPPA,
+        ),
+        (
+            |p| &mut p.kappa_diff_corr,
+            "kappa_diff_corr",
+            ChassisParams::MAX_KAPPA_DIFF_CORR,
+        ),
+    ];
+    let harmonics: [[Field; 6]; 2] = [
+        [
+            |p| &mut p.left_wheel.cos[0],
+            |p| &mut p.left_wheel.sin[0],
+            |p| &mut p.left_wheel.cos[1],
+            |p| &mut p.left_wheel.sin[1],
+            |p| &mut p.left_wheel.cos[2],
+            |p| &mut p.left_wheel.sin[2],
+        ],
+        [
+            |p| &mut p.right_wheel.cos[0],
+            |p| &mut p.right_wheel.sin[0],
+            |p| &mut p.right_wheel.cos[1],
+            |p| &mut p.right_wheel.sin[1],
+            |p| &mut p.right_wheel.cos[2],
+            |p| &mut p.right_wheel.sin[2],
+        ],
+    ];
+    for (wheel, fs) in harmonics.iter().enumerate() {
+        for (i, f) in fs.iter().enumerate() {
+            let key = HARMONIC_KEYS[wheel][i % 2][i / 2];
+            fields.push((*f, key, ChassisParams::MAX_HARMONIC));
+        }
+    }
+    let se = odo_core::odometry::GeometryUncertainty::MAX_SE;
+    fields.extend([
+        (
+            (|p| &mut p.geometry_uncertainty.left_diameter_se) as Field,
+            "left_diameter_se",
+            se,
+        ),
+        (
+            |p| &mut p.geometry_uncertainty.right_diameter_se,
+            "right_diameter_se",
+            se,
+        ),
+        (
+            |p| &mut p.geometry_uncertainty.track_width_se,
+            "track_width_se",
+            se,
+        ),
+        (
+            |p| &mut p.geometry_uncertainty.diameters_correlation,
+            "diameters_correlation",
+            1.0,
+        ),
+        (
+            |p| &mut p.geometry_uncertainty.left_track_correlation,
+            "left_track_correlation",
+            1.0,
+        ),
+        (
+            |p| &mut p.geometry_uncertainty.right_track_correlation,
+            "right_track_correlation",
+            1.0,
+        ),
+    ]);
+    assert_eq!(fields.len(), 25);
+    for (i, &(field, key, max)) in fields.iter().enumerate() {
+        for (value, error) in [
+            (max * 1.5, ParamError::OutOfRange(key)),
+            (f32::INFINITY, ParamError::NotFinite(key)),
+            (f32::NAN, ParamError::NotFinite(key)),
+        ] {
+            let mut p = ChassisParams::DESIGNED;
+            *field(&mut p) = value;
+            assert_eq!(p.validate(), Err(error), "{key} = {value}");
+            // A later parameter out of range as well: the earlier key is named.
+            if let Some(&(later, _, later_max)) = fields.get(i + 1) {
+                *later(&mut p) = later_max * 2.0;
+                assert_eq!(p.validate(), Err(error), "{key} before the next");
+            }
+        }
+        let mut p = ChassisParams::DESIGNED;
+        *field(&mut p) = max;
+        // At the limit: accepted (a correlation of 1 with the others at 0 is a valid
+        // correlation matrix).
+        assert_eq!(p.validate(), Ok(()), "{key} = {max}");
+    }
+}

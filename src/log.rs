@@ -9,7 +9,7 @@ use odo_core::unit::{Event, Log, Start};
 /// configuration.
 pub fn start(clock: ClockSource, loaded: &Loaded, start: &Start) {
     if clock == ClockSource::HsiFallback {
-        defmt::error!("HSE did not start: running from the HSI (+-4 %)");
+        defmt::error!("HSE did not start or the PLL did not lock on it: running from the HSI");
     }
     if start.settings_replaced {
         defmt::error!("settings: rate/mode unusable by the sampler, using the defaults");

@@ -33,9 +33,8 @@ mod board;
 mod host_link;
 #[cfg(target_os = "none")]
 mod log;
-
 #[cfg(target_os = "none")]
-use panic_probe as _;
+mod panic;
 
 #[cfg(target_os = "none")]
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true)]
@@ -190,6 +189,7 @@ mod app {
     #[idle]
     fn idle(_: idle::Context) -> ! {
         loop {
+            board::keep_debug_port_awake();
             cortex_m::asm::wfi();
         }
     }

@@ -3,19 +3,25 @@
 //! at link time), behind the settings store's `Flash` trait.
 //!
 //! Parallelism: x32 (PSIZE = 10) needs VDD >= 2.7 V, which only the brown-out reset at level
-//! 3 guarantees (option bytes, BOR_LEV = 00). The driver reads BOR_LEV at each operation and
-//! falls back to x8, valid down to 1.8 V, on any lower level: slower, never out of spec.
-//! A 16 KiB sector erase takes 250 ms typical, 500 ms max at x32 (400 / 800 ms at x8;
-//! datasheet DS10086, table "Flash memory programming"): [`MAX_ERASE_MS`].
+//! 3 guarantees (option bytes, BOR_LEV = 00); x16 needs 2.1 V, which levels 1 and 2
+//! guarantee; x8 is valid down to 1.8 V (BOR off, the factory setting). The driver reads
+//! BOR_LEV at each operation and programs and erases with the widest parallelism it allows:
+//! never out of spec. A 16 KiB sector erase takes 250/500 ms (typical/max) at x32, 300/600 ms
+//! at x16, 400/800 ms at x8 (datasheet DS10086, table "Flash memory programming"):
+//! [`MAX_ERASE_MS`].
 //!
 //! The F401 has one flash bank, so the CPU stalls on every flash read (instructions, the
-//! vector table) while an erase runs: no interrupt is served until it ends. The hardware
-//! keeps counting meanwhile (encoders, the free-running sample timer, the PPS capture) and
-//! the sampler merges the samples the stall passed over (`src/board/sampler.rs`). The store
-//! erases only when a sector is full (one save in 64); the watchdog is fed just before the
-//! erase, and its shortest timeout (LSI at 47 kHz) outlasts [`MAX_ERASE_MS`] by 5x
-//! ([`super::WATCHDOG_MS`]). The data cache is reset after every erase and program so reads
-//! see the new contents.
+//! vector table) while an erase or a program operation runs: no interrupt is served until
+//! it ends. The hardware keeps counting meanwhile (encoders, the free-running sample timer,
+//! the PPS capture) and the sampler merges the samples an erase passed over
+//! (`src/board/sampler.rs`). The store erases only when a sector is full (one save in 64);
+//! the watchdog is fed just before the erase, and its shortest timeout (LSI at 47 kHz,
+//! 2,723 ms) is 3.4 times [`MAX_ERASE_MS`] ([`super::WATCHDOG_MIN_MS`]). Every save also
+//! programs its record ([`odo_core::settings::store::RECORD_LEN`], 164 bytes): one program
+//! operation per byte at x8, per half-word at x16, per word at x32, each stalling the CPU
+//! for 16 us typical and 100 us at most, with interrupts served between them
+//! (docs/HARDWARE.md, Flash and watchdog). The data cache is reset after every erase and
+//! program so reads see the new contents.
 //!
 //! The board's driver is `real/flash.rs`; the `qemu` build keeps the two sectors in RAM
 //! (`qemu/flash.rs`, 4 KiB each): QEMU's flash is read-only.
@@ -45,7 +51,7 @@ impl core::fmt::Debug for FlashError {
 }
 
 /// Longest CPU stall of one settings-sector erase, milliseconds: 16 KiB at x8 parallelism
-/// (the slower of the two the driver may use; x32 is 500 ms).
+/// (the slowest the driver may use; x16 is 600 ms, x32 500 ms).
 pub const MAX_ERASE_MS: u32 = 800;
 
 pub use super::variant::flash::SettingsFlash;

@@ -41,6 +41,7 @@ pub use variant::{
     GnssRx, SamplerExtra, COUNTER_BITS, CYCLES_UNIT,
 };
 
+use odo_core::unit::watchdog::{IwdgSetting, LSI_MAX_HZ, LSI_NOMINAL_HZ};
 use stm32f4xx_hal::pac;
 
 /// The bus clocks the peripherals run at, Hz.
@@ -58,13 +59,20 @@ pub struct BusClocks {
 pub const GNSS_BAUD: u32 = 38_400;
 
 /// Watchdog timeout, milliseconds, at the LSI's nominal 32 kHz. The LSI runs anywhere
-/// from 17 to 47 kHz (datasheet DS10086), so the real timeout lies between 2.7 s and 7.5 s:
-/// the shortest is 3.4x the longest flash stall ([`flash::MAX_ERASE_MS`], 800 ms), before
-/// which the flash driver feeds the watchdog.
+/// from 17 to 47 kHz (datasheet DS10086), so the real timeout lies between 2.7 s and 7.5 s
+/// ([`WATCHDOG_MIN_MS`]).
 pub const WATCHDOG_MS: u32 = 4_000;
 
-/// Shortest watchdog timeout over the LSI's range (47 kHz), milliseconds.
-pub const WATCHDOG_MIN_MS: u32 = WATCHDOG_MS * 32 / 47;
+/// The IWDG setting for [`WATCHDOG_MS`]: /32, reload 3999.
+pub const WATCHDOG: IwdgSetting = match IwdgSetting::for_timeout(WATCHDOG_MS, LSI_NOMINAL_HZ) {
+    Some(setting) => setting,
+    None => panic!("WATCHDOG_MS outside the IWDG's range"),
+};
+
+/// Shortest watchdog timeout over the LSI's range (47 kHz), milliseconds: 2,723, which is
+/// 3.4 times the longest flash stall ([`flash::MAX_ERASE_MS`], 800 ms), before which the
+/// flash driver feeds the watchdog.
+pub const WATCHDOG_MIN_MS: u32 = WATCHDOG.timeout_us(LSI_MAX_HZ) / 1000;
 
 const _: () = assert!(WATCHDOG_MIN_MS > 3 * flash::MAX_ERASE_MS);
 
@@ -76,17 +84,38 @@ pub use odo_core::timing::ClockSource;
 /// for the watchdog bring-up check (docs/HARDWARE.md).
 pub const WATCHDOG_STOPS_IN_DEBUG: bool = !cfg!(feature = "watchdog-in-debug");
 
-/// Starts the independent watchdog ([`WATCHDOG_MS`]; stopped while halted by a debugger
-/// unless the `watchdog-in-debug` feature is on).
+/// Starts the independent watchdog ([`WATCHDOG`]; stopped while halted by a debugger
+/// unless the `watchdog-in-debug` feature is on). Its first period is already the configured
+/// one: the start waits for the new prescaler and reload value to reach the watchdog and
+/// feeds it once ([`variant::start_iwdg`]).
 pub fn start_watchdog(
     iwdg: pac::IWDG,
     dbgmcu: &pac::DBGMCU,
 ) -> stm32f4xx_hal::watchdog::IndependentWatchdog {
-    use stm32f4xx_hal::prelude::*;
-    let mut watchdog = stm32f4xx_hal::watchdog::IndependentWatchdog::new(iwdg);
-    watchdog.stop_on_debug(dbgmcu, WATCHDOG_STOPS_IN_DEBUG);
-    watchdog.start(WATCHDOG_MS.millis());
-    watchdog
+    dbgmcu
+        .apb1_fz()
+        .modify(|_, w| w.dbg_iwdg_stop().bit(WATCHDOG_STOPS_IN_DEBUG));
+    if !variant::start_iwdg(&iwdg, WATCHDOG) {
+        defmt::error!("watchdog: prescaler/reload update not confirmed (IWDG_SR)");
+    }
+    stm32f4xx_hal::watchdog::IndependentWatchdog::new(iwdg)
+}
+
+/// Keeps the debug port usable while the core sleeps in `wfi`, in debug builds: DBGMCU_CR
+/// DBG_SLEEP keeps HCLK running in Sleep mode, so that a debugger can attach to a sleeping
+/// core and read its memory (RTT). Set before every sleep, because probe-rs clears it when a
+/// session ends. Release builds sleep with HCLK off; the probe connects under reset
+/// (`Embed.toml`, the runner in `.cargo/config.toml`).
+#[inline(always)]
+pub fn keep_debug_port_awake() {
+    #[cfg(debug_assertions)]
+    // Note(unsafe): DBGMCU_CR DBG_SLEEP (bit 0) set; only this code and the debugger write
+    // the register, and a debugger's write in between is only undone for DBG_SLEEP.
+    unsafe {
+        (*pac::DBGMCU::ptr())
+            .cr()
+            .modify(|_, w| w.dbg_sleep().set_bit())
+    };
 }
 
 /// Why the MCU last started, read from RCC_CSR once at start.

@@ -206,41 +206,89 @@ impl ChassisParams {
                 return Err(ParamError::OutOfRange("ticks_per_rev"));
             }
         }
-        let delta = (0.0, Self::MAX_DELTA);
-        check("delta_left", self.delta_left, delta)?;
-        check("delta_right", self.delta_right, delta)?;
-        check("delta_diff", self.delta_diff, delta)?;
-        let kappa = (0.0, Self::MAX_KAPPA);
-        check("kappa_left", self.kappa_left, kappa)?;
-        check("kappa_right", self.kappa_right, kappa)?;
-        check("kappa_diff", self.kappa_diff, kappa)?;
-        let corr = (0.0, Self::MAX_KAPPA_DIFF_CORR);
-        check("kappa_diff_corr", self.kappa_diff_corr, corr)?;
-        let harmonic = (-Self::MAX_HARMONIC, Self::MAX_HARMONIC);
-        for (wheel, [cos_keys, sin_keys]) in [
-            (&self.left_wheel, HARMONIC_KEYS[0]),
-            (&self.right_wheel, HARMONIC_KEYS[1]),
-        ] {
-            for h in 0..WHEEL_HARMONICS {
-                check(cos_keys[h], wheel.cos[h], harmonic)?;
-                check(sin_keys[h], wheel.sin[h], harmonic)?;
-            }
+        for (&(key, lo, hi), value) in F32_RULES.iter().zip(self.f32_values()) {
+            check(key, value, (lo, hi))?;
         }
         let g = &self.geometry_uncertainty;
-        let se = (0.0, GeometryUncertainty::MAX_SE);
-        check("left_diameter_se", g.left_diameter_se, se)?;
-        check("right_diameter_se", g.right_diameter_se, se)?;
-        check("track_width_se", g.track_width_se, se)?;
-        let r = (-1.0, 1.0);
-        check("diameters_correlation", g.diameters_correlation, r)?;
-        check("left_track_correlation", g.left_track_correlation, r)?;
-        check("right_track_correlation", g.right_track_correlation, r)?;
         if !g.correlations_consistent() {
             return Err(ParamError::Inconsistent("right_track_correlation"));
         }
         Ok(())
     }
+
+    /// The single-precision parameters in the order of [`F32_RULES`].
+    fn f32_values(&self) -> [f32; F32_RULES.len()] {
+        let (l, r, g) = (
+            &self.left_wheel,
+            &self.right_wheel,
+            &self.geometry_uncertainty,
+        );
+        [
+            self.delta_left,
+            self.delta_right,
+            self.delta_diff,
+            self.kappa_left,
+            self.kappa_right,
+            self.kappa_diff,
+            self.kappa_diff_corr,
+            l.cos[0],
+            l.sin[0],
+            l.cos[1],
+            l.sin[1],
+            l.cos[2],
+            l.sin[2],
+            r.cos[0],
+            r.sin[0],
+            r.cos[1],
+            r.sin[1],
+            r.cos[2],
+            r.sin[2],
+            g.left_diameter_se,
+            g.right_diameter_se,
+            g.track_width_se,
+            g.diameters_correlation,
+            g.left_track_correlation,
+            g.right_track_correlation,
+        ]
+    }
 }
+
+/// Key and range (`lo..=hi`) of each single-precision parameter, in the order
+/// [`ChassisParams::validate`] checks them: one table and one loop instead of a check per
+/// key (cheaper in flash).
+const F32_RULES: [(&str, f32, f32); 25] = {
+    const DELTA: f32 = ChassisParams::MAX_DELTA;
+    const KAPPA: f32 = ChassisParams::MAX_KAPPA;
+    const H: f32 = ChassisParams::MAX_HARMONIC;
+    const SE: f32 = GeometryUncertainty::MAX_SE;
+    [
+        ("delta_left", 0.0, DELTA),
+        ("delta_right", 0.0, DELTA),
+        ("delta_diff", 0.0, DELTA),
+        ("kappa_left", 0.0, KAPPA),
+        ("kappa_right", 0.0, KAPPA),
+        ("kappa_diff", 0.0, KAPPA),
+        ("kappa_diff_corr", 0.0, ChassisParams::MAX_KAPPA_DIFF_CORR),
+        ("left_cos1", -H, H),
+        ("left_sin1", -H, H),
+        ("left_cos2", -H, H),
+        ("left_sin2", -H, H),
+        ("left_cos3", -H, H),
+        ("left_sin3", -H, H),
+        ("right_cos1", -H, H),
+        ("right_sin1", -H, H),
+        ("right_cos2", -H, H),
+        ("right_sin2", -H, H),
+        ("right_cos3", -H, H),
+        ("right_sin3", -H, H),
+        ("left_diameter_se", 0.0, SE),
+        ("right_diameter_se", 0.0, SE),
+        ("track_width_se", 0.0, SE),
+        ("diameters_correlation", -1.0, 1.0),
+        ("left_track_correlation", -1.0, 1.0),
+        ("right_track_correlation", -1.0, 1.0),
+    ]
+};
 
 /// Setting names of the wheel-function coefficients: `[wheel][cos, sin][harmonic - 1]`.
 pub const HARMONIC_KEYS: [[[&str; WHEEL_HARMONICS]; 2]; 2] = [

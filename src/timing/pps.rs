@@ -30,7 +30,7 @@
 //! `max_offset_ppm` is how far the timer's real frequency may be from `timer_hz`: it must
 //! cover the clock's whole error, or the PPS never locks. [`DisciplineConfig::for_clock`]
 //! sets it from the clock's tolerance: [`HSE_CRYSTAL_TOLERANCE_PPM`] for a crystal,
-//! [`HSI_TOLERANCE_PPM`] for the STM32's internal RC oscillator (+-4 % over temperature).
+//! [`HSI_TOLERANCE_PPM`] for the STM32's internal RC oscillator (+-4 % from -10 to 85 C).
 //! Nothing else assumes a small offset: once locked, every prediction, window and rounding
 //! uses the measured period, not `timer_hz`; `timer_hz` only sets the free-running period,
 //! the acquisition test and the length in ticks of the default glitch window (50 us of
@@ -61,8 +61,9 @@ pub const RATE_RANGE: RangeInclusive<u32> = 1..=10_000;
 pub const HSE_CRYSTAL_TOLERANCE_PPM: u32 = 500;
 
 /// Frequency tolerance to configure for a timer clocked from the STM32F401's internal 16 MHz
-/// RC oscillator (HSI), ppm: +-1 % at 25 C, +-4 % over the temperature range (datasheet),
-/// plus a 1 % margin.
+/// RC oscillator (HSI), ppm: +-1 % at 25 C, +-4 % from -10 to 85 C (datasheet DS10086), plus
+/// a 1 % margin. From -40 to 105 C the HSI may be -8/+4.5 %, beyond this bound and beyond the
+/// UARTs' tolerance as well: the HSI's range is -10 to 85 C (docs/HARDWARE.md, Clocks).
 pub const HSI_TOLERANCE_PPM: u32 = 50_000;
 
 /// Where the MCU's clock (and so the sample timer's) comes from.
@@ -70,11 +71,11 @@ pub const HSI_TOLERANCE_PPM: u32 = 50_000;
 pub enum ClockSource {
     /// PLL from the HSE: crystal or external clock accuracy.
     Hse,
-    /// PLL from the 16 MHz HSI (+-1 % at 25 C, +-4 % over temperature): a build without
+    /// PLL from the 16 MHz HSI (+-1 % at 25 C, +-4 % from -10 to 85 C): a build without
     /// the `hse` feature, or QEMU.
     Hsi,
-    /// The build asked for the HSE but it did not start, or the clock security system saw
-    /// it fail later: PLL from the HSI, reported in `status`.
+    /// The build asked for the HSE but it did not start, the PLL did not lock on it, or the
+    /// clock security system saw it fail later: PLL from the HSI, reported in `status`.
     HsiFallback,
 }
 

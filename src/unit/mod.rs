@@ -8,6 +8,7 @@
 //! - [`rx_errors`]: a UART's receive errors ([`RxErrors`]).
 //! - [`start`](mod@start): the settings and sampler configuration the unit starts with.
 //! - [`event`]: what the unit logs ([`Event`]).
+//! - [`watchdog`]: the independent watchdog's prescaler, reload value and timeouts.
 //!
 //! `src/main.rs` holds the tasks, resources and queues around these; host tests in
 //! `host-tests/unit.rs`.
@@ -19,6 +20,7 @@ pub mod rx_errors;
 pub mod sample;
 pub mod start;
 pub mod status;
+pub mod watchdog;
 
 pub use commands::{Commands, Effect, StallingFlash};
 pub use event::{Event, Log};

@@ -14,6 +14,7 @@ use super::BusClocks;
 use super::FaultLines;
 use defmt_semihosting as _;
 use odo_core::timing::ClockSource;
+use odo_core::unit::watchdog::IwdgSetting;
 use odo_core::unit::{IndexCapture, RawCounts};
 use stm32f4xx_hal::{pac, rcc::Config};
 
@@ -33,6 +34,13 @@ pub type SamplerExtra = gnss::SimGnss;
 /// The simulated receiver, wired to the GNSS UART's interrupt.
 pub fn attach_gnss(uart: GnssUart) -> (GnssRx, SamplerExtra) {
     gnss::attach(uart)
+}
+
+/// Starts the independent watchdog: nothing to do, QEMU's `netduinoplus2` models no IWDG
+/// (its registers are unimplemented and the board's sequence would wait on nothing).
+pub fn start_iwdg(iwdg: &pac::iwdg::RegisterBlock, setting: IwdgSetting) -> bool {
+    let _ = (iwdg, setting);
+    true
 }
 
 /// Starts the clocks: the HSI at 16 MHz without PLL (QEMU's RCC never reports the PLL

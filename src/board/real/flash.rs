@@ -13,9 +13,6 @@ const BASE: [usize; 2] = [0x0800_4000, 0x0800_8000];
 /// Flash sector numbers.
 const SNB: [u32; 2] = [1, 2];
 
-/// Longest 16 KiB sector erase at x32 parallelism, milliseconds.
-const MAX_ERASE_X32_MS: u32 = 500;
-
 const KEY1: u32 = 0x4567_0123;
 const KEY2: u32 = 0xCDEF_89AB;
 const SR_BSY: u32 = 1 << 16;
@@ -23,14 +20,63 @@ const SR_BSY: u32 = 1 << 16;
 const SR_ERRORS: u32 = 1 << 1 | 0b1111 << 4;
 const CR_PG: u32 = 1 << 0;
 const CR_SER: u32 = 1 << 1;
-const CR_PSIZE_X8: u32 = 0b00 << 8;
-const CR_PSIZE_X32: u32 = 0b10 << 8;
-/// FLASH_OPTCR BOR_LEV (bits 3:2): 00 is level 3, VDD 2.70-3.60 V.
-const OPTCR_BOR_LEV: u32 = 0b11 << 2;
+/// FLASH_OPTCR BOR_LEV (bits 3:2): 00 level 3 (VDD 2.70-3.60 V), 01 level 2 (2.40-3.60 V),
+/// 10 level 1 (2.10-3.60 V), 11 off (down to 1.8 V).
+const OPTCR_BOR_LEV_SHIFT: u32 = 2;
 const CR_STRT: u32 = 1 << 16;
 const CR_LOCK: u32 = 1 << 31;
 const ACR_DCEN: u32 = 1 << 10;
 const ACR_DCRST: u32 = 1 << 12;
+
+/// Program and erase parallelism (FLASH_CR PSIZE), by the supply voltage the brown-out reset
+/// guarantees (RM0368 sec. 3.5.2): x32 needs 2.7-3.6 V, x16 2.1-3.6 V, x8 1.8-3.6 V. Each
+/// program operation takes 16 us typical, 100 us at most, whatever its width; a 16 KiB
+/// sector erase 250/500 ms (typical/max) at x32, 300/600 ms at x16, 400/800 ms at x8
+/// (datasheet DS10086, flash memory programming).
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Parallelism {
+    X8,
+    X16,
+    X32,
+}
+
+impl Parallelism {
+    /// The widest the option bytes' BOR level allows: level 3 x32, levels 1 and 2 x16, off x8.
+    fn from_optcr(optcr: u32) -> Self {
+        match optcr >> OPTCR_BOR_LEV_SHIFT & 0b11 {
+            0b00 => Self::X32,
+            0b01 | 0b10 => Self::X16,
+            _ => Self::X8,
+        }
+    }
+
+    /// FLASH_CR PSIZE (bits 9:8).
+    fn psize(self) -> u32 {
+        (match self {
+            Self::X8 => 0b00,
+            Self::X16 => 0b01,
+            Self::X32 => 0b10,
+        }) << 8
+    }
+
+    /// Bytes per program operation.
+    fn bytes(self) -> usize {
+        match self {
+            Self::X8 => 1,
+            Self::X16 => 2,
+            Self::X32 => 4,
+        }
+    }
+
+    /// Longest 16 KiB sector erase, milliseconds.
+    fn max_erase_ms(self) -> u32 {
+        match self {
+            Self::X8 => MAX_ERASE_MS,
+            Self::X16 => 600,
+            Self::X32 => 500,
+        }
+    }
+}
 
 /// The two settings sectors in the MCU's flash.
 pub struct SettingsFlash {
@@ -43,19 +89,15 @@ impl SettingsFlash {
         Self { flash }
     }
 
-    /// True when the brown-out reset guarantees the 2.7 V that x32 parallelism needs.
-    fn x32_allowed(&self) -> bool {
-        self.flash.optcr().read().bits() & OPTCR_BOR_LEV == 0
+    /// The parallelism the brown-out reset level allows, read at each operation.
+    fn parallelism(&self) -> Parallelism {
+        Parallelism::from_optcr(self.flash.optcr().read().bits())
     }
 
     /// Longest CPU stall of one sector erase with the parallelism the BOR level allows,
-    /// milliseconds: 500 at x32, [`MAX_ERASE_MS`] (800) at x8.
+    /// milliseconds: 500 at x32, 600 at x16, [`MAX_ERASE_MS`] (800) at x8.
     pub fn max_stall_ms(&self) -> u32 {
-        if self.x32_allowed() {
-            MAX_ERASE_X32_MS
-        } else {
-            MAX_ERASE_MS
-        }
+        self.parallelism().max_erase_ms()
     }
 
     fn wait(&self) -> Result<(), FlashError> {
@@ -107,11 +149,7 @@ impl Flash for SettingsFlash {
 
     fn erase(&mut self, sector: usize) -> Result<(), FlashError> {
         check(sector, 0, 0, SECTOR_SIZE)?;
-        let psize = if self.x32_allowed() {
-            CR_PSIZE_X32
-        } else {
-            CR_PSIZE_X8
-        };
+        let psize = self.parallelism().psize();
         self.unlocked(|f| {
             let cr = psize | CR_SER | SNB[sector] << 3;
             // The CPU stalls from STRT to the end of the erase: give the watchdog its
@@ -131,29 +169,31 @@ impl Flash for SettingsFlash {
         if offset % 4 != 0 || data.len() % 4 != 0 {
             return Err(FlashError::Range);
         }
-        let x32 = self.x32_allowed();
+        let parallelism = self.parallelism();
         self.unlocked(|f| {
-            let psize = if x32 { CR_PSIZE_X32 } else { CR_PSIZE_X8 };
             // Note(unsafe): CR = PSIZE | PG (RM0368 sec. 3.5.4).
-            unsafe { f.flash.cr().write(|w| w.bits(psize | CR_PG)) };
+            unsafe { f.flash.cr().write(|w| w.bits(parallelism.psize() | CR_PG)) };
             let base = BASE[sector] + offset;
-            if x32 {
-                for (i, word) in data.chunks_exact(4).enumerate() {
-                    let value = u32::from_le_bytes([word[0], word[1], word[2], word[3]]);
-                    let addr = (base + 4 * i) as *mut u32;
-                    // Note(unsafe): an aligned word inside settings sector `sector`
-                    // (checked above), which memory.x keeps out of the program; PG is set.
-                    unsafe { core::ptr::write_volatile(addr, value) };
-                    f.wait()?;
+            let unit = parallelism.bytes();
+            for (i, chunk) in data.chunks_exact(unit).enumerate() {
+                let addr = base + unit * i;
+                // Note(unsafe): `unit` aligned bytes (a word, half-word or byte, as PSIZE
+                // says; `offset` is word-aligned) inside settings sector `sector` (checked
+                // above), which memory.x keeps out of the program; PG is set.
+                unsafe {
+                    match *chunk {
+                        [a, b, c, d] => core::ptr::write_volatile(
+                            addr as *mut u32,
+                            u32::from_le_bytes([a, b, c, d]),
+                        ),
+                        [a, b] => {
+                            core::ptr::write_volatile(addr as *mut u16, u16::from_le_bytes([a, b]))
+                        }
+                        [a] => core::ptr::write_volatile(addr as *mut u8, a),
+                        _ => {}
+                    }
                 }
-            } else {
-                for (i, byte) in data.iter().enumerate() {
-                    let addr = (base + i) as *mut u8;
-                    // Note(unsafe): a byte inside settings sector `sector` (checked
-                    // above), which memory.x keeps out of the program; PG is set, x8.
-                    unsafe { core::ptr::write_volatile(addr, *byte) };
-                    f.wait()?;
-                }
+                f.wait()?;
             }
             Ok(())
         })
