@@ -368,9 +368,8 @@ proptest! {
 /// queued configuration at the start of the next interrupt). Set after any sample of a
 /// second, the last one included, it applies from the first sample of the next whole
 /// second: every sample before it has the old rate and the old grid, every one from it the
-/// new rate and the new grid. Before, the rate of a second was fixed when its first sample
-/// was committed, one sample ahead: a change after the second-to-last sample came a second
-/// late (every time at 2 Hz).
+/// new rate and the new grid, also when the change comes after the second-to-last sample,
+/// when the second's first sample is already committed (programmed one sample ahead).
 #[test]
 fn a_rate_change_applies_from_the_next_whole_second() {
     let hz = u64::from(HZ);
