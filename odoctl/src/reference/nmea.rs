@@ -20,6 +20,9 @@
 //! HDT carries no time: it belongs to the epoch being sent, the time of the last sentence
 //! that carries one (GGA, GST, RMC, ZDA), whether its GGA came before or comes after it; an
 //! HDT sent first in its epoch, before any timed sentence, is taken for the previous epoch's.
+//! A GGA that repeats the previous epoch's time is counted and skipped; an HDT or GST that
+//! went with the repeat goes to that epoch. A date sentence before the GPS epoch
+//! (1980-01-06) is counted and skipped like a corrupt one.
 
 use anyhow::{bail, Result};
 use chrono::Timelike;
@@ -134,12 +137,16 @@ pub fn parse(file: &str, text: &str, leap_seconds: i32) -> Result<GeodeticLog> {
                     + f64::from(t.minute) * 60.0
                     + f64::from(t.second)
                     + f64::from(t.millis) * 1e-3;
+                let days = days_from_civil(i64::from(t.year), u32::from(t.month), u32::from(t.day));
+                if gps_time::utc_to_gps(days, sod, leap_seconds).is_err() {
+                    report.corrupt(format!(
+                        "{file}:{line}: {}: date before the GPS epoch (1980-01-06): skipped",
+                        sentence_type(s)
+                    ));
+                    continue;
+                }
                 epoch_time = Some(ms(sod));
-                dates.push(DateMark {
-                    days: days_from_civil(i64::from(t.year), u32::from(t.month), u32::from(t.day)),
-                    sod,
-                    line,
-                });
+                dates.push(DateMark { days, sod, line });
                 report.used(sentence_type(s));
                 continue;
             }
@@ -301,8 +308,9 @@ pub fn parse(file: &str, text: &str, leap_seconds: i32) -> Result<GeodeticLog> {
     Ok(GeodeticLog { epochs, report })
 }
 
-/// Dates the GGA epochs (see the module doc), converts to GPS time and drops epochs whose
-/// time is not after the previous one's.
+/// Dates the GGA epochs (see the module doc), converts to GPS time and drops epochs before
+/// the GPS epoch and epochs whose time is not after the previous one's (a repeat of the same
+/// time gives the epoch kept the HDT or GST that went with it), counting them.
 fn date_epochs(
     file: &str,
     undated: Vec<Undated>,
@@ -341,19 +349,29 @@ fn date_epochs(
         } else if mark.sod - u.sod > 43_200.0 {
             days += 1;
         }
-        let gps_time = gps_time::utc_to_gps(days, u.sod, leap_seconds)
-            .map_err(|e| anyhow::anyhow!("{file}:{}: {e}", u.line))?;
+        let gps_time = match gps_time::utc_to_gps(days, u.sod, leap_seconds) {
+            Ok(t) => t,
+            Err(e) => {
+                report.unusable(format!("{file}:{}: GGA: {e}: skipped", u.line));
+                continue;
+            }
+        };
         prev = Some(DateMark {
             days,
             sod: u.sod,
             line: u.line,
         });
-        if let Some(last) = out.last() {
+        if let Some(last) = out.last_mut() {
             if gps_time <= last.gps_time {
                 report.unusable(format!(
                     "{file}:{}: GGA time is not after the previous epoch's (line {}): skipped",
                     u.line, last.line
                 ));
+                // A repeated GGA of the same epoch may have taken its HDT or GST.
+                if gps_time == last.gps_time {
+                    last.heading = last.heading.or(u.heading);
+                    last.sigma = last.sigma.or(u.sigma);
+                }
                 continue;
             }
         }
