@@ -171,6 +171,81 @@ fn command_table() {
     }
 }
 
+/// What docs/PROTOCOL.md says of the cases a decoder written from it must know: extra
+/// spaces, the order of `set`'s checks (a range error is its pair's, before any relation),
+/// `reset_pose` with NaN, singular correlation matrices (exact replies).
+#[test]
+fn documented_edge_cases() {
+    let table: &[(&str, Result<&str, &str>)] = &[
+        ("  set  rate   20 ", Ok("ok\nrate = 20")),
+        ("set rate\t20", Ok("ok\nrate = 20")),
+        (
+            "set rate 20 output_divider 0",
+            Err("error: output_divider: out of range, 1..=10000; nothing changed"),
+        ),
+        (
+            "set output_divider 0 rate 5000",
+            Err("error: output_divider: out of range, 1..=10000; nothing changed"),
+        ),
+        (
+            "set rate 5000 output_divider abc",
+            Err("error: rate: out of range, 1..=1000; nothing changed"),
+        ),
+        (
+            "set rate 2000 rate 50",
+            Err("error: rate: out of range, 1..=1000; nothing changed"),
+        ),
+        // Each value in range, the relation (records per baud) refused in step 3.
+        (
+            "set rate 1000 output_divider 1",
+            Err("error: rate/output_divider: records need more than the baud rate (raise output_divider or baud); nothing changed"),
+        ),
+        ("set rate 20 foo", Err("error: unknown key 'foo' (try help)")),
+        ("set foo 1 rate abc", Err("error: unknown key 'foo' (try help)")),
+        ("reset_pose nan 0 0", Err("error: NaN/inf not allowed: 'nan'")),
+        ("reset_pose 0 0 1e999", Err("error: NaN/inf not allowed: '1e999'")),
+        ("reset_pose 0 -inf 0", Err("error: NaN/inf not allowed: '-inf'")),
+        (
+            "set diameters_correlation 1 left_track_correlation 0.5",
+            Err("error: diameters_correlation/left_track_correlation/right_track_correlation: no covariance has these three correlations (set them together in one line); nothing changed"),
+        ),
+        (
+            "set diameters_correlation 1 left_track_correlation 0.5 right_track_correlation 0.5",
+            Ok("ok\ndiameters_correlation = 1\nleft_track_correlation = 0.5\nright_track_correlation = 0.5"),
+        ),
+        (
+            "set diameters_correlation -1 left_track_correlation 0.3 right_track_correlation -0.3",
+            Ok("ok\ndiameters_correlation = -1\nleft_track_correlation = 0.3\nright_track_correlation = -0.3"),
+        ),
+        (
+            "set diameters_correlation 1 left_track_correlation 1 right_track_correlation 1",
+            Ok("ok\ndiameters_correlation = 1\nleft_track_correlation = 1\nright_track_correlation = 1"),
+        ),
+        (
+            "set diameters_correlation 1 left_track_correlation 1 right_track_correlation -1",
+            Err("error: diameters_correlation/left_track_correlation/right_track_correlation: no covariance has these three correlations (set them together in one line); nothing changed"),
+        ),
+    ];
+    for (line, want) in table {
+        // The line as the assembler hands it on (TAB becomes a space).
+        let got = lines(format!("{line}\n").as_bytes());
+        let [Ok(got)] = &got[..] else {
+            panic!("{line:?}: {got:?}")
+        };
+        let mut s = Settings::DEFAULT;
+        let (r, _) = run(got, &mut s);
+        assert_eq!(
+            if r.ok {
+                Ok(r.text.as_str())
+            } else {
+                Err(r.text.as_str())
+            },
+            *want,
+            "{line:?}"
+        );
+    }
+}
+
 #[test]
 fn actions() {
     let mut s = Settings::DEFAULT;
