@@ -86,6 +86,28 @@ fn command_table() {
         ("set rate abc", false, "rate: bad number"),
         ("set rate 0", false, "rate: out of range, 1..=1000"),
         ("set rate 2000", false, "rate: out of range, 1..=1000; nothing changed"),
+        // Integers beyond 64 bits are out of range too, not a bad number.
+        (
+            "set rate 99999999999999999999",
+            false,
+            "error: rate: out of range, 1..=1000; nothing changed",
+        ),
+        (
+            "set rate -99999999999999999999",
+            false,
+            "error: rate: out of range, 1..=1000; nothing changed",
+        ),
+        (
+            "set baud 184467440737095516160",
+            false,
+            "error: baud: out of range, one of 9600 19200",
+        ),
+        ("set rate 1e3", false, "error: rate: bad number; nothing changed"),
+        ("set rate 99999999999999999999x", false, "rate: bad number"),
+        // Plain decimals, never an exponent.
+        ("set left_cos1 1e-12", true, "left_cos1 = 0.000000000001"),
+        ("set delta_left 1e-10", true, "delta_left = 0.0000000001"),
+        ("set kappa_left 1e-45", true, "kappa_left = 0.000000000000000000000000000000000000000000001"),
         ("set rate 500", false, "baud"),
         (
             "rate 1",
@@ -145,6 +167,81 @@ fn command_table() {
             r.text.contains(needle),
             "{line:?}: {:?} lacks {needle:?}",
             r.text
+        );
+    }
+}
+
+/// What docs/PROTOCOL.md says of the cases a decoder written from it must know: extra
+/// spaces, the order of `set`'s checks (a range error is its pair's, before any relation),
+/// `reset_pose` with NaN, singular correlation matrices (exact replies).
+#[test]
+fn documented_edge_cases() {
+    let table: &[(&str, Result<&str, &str>)] = &[
+        ("  set  rate   20 ", Ok("ok\nrate = 20")),
+        ("set rate\t20", Ok("ok\nrate = 20")),
+        (
+            "set rate 20 output_divider 0",
+            Err("error: output_divider: out of range, 1..=10000; nothing changed"),
+        ),
+        (
+            "set output_divider 0 rate 5000",
+            Err("error: output_divider: out of range, 1..=10000; nothing changed"),
+        ),
+        (
+            "set rate 5000 output_divider abc",
+            Err("error: rate: out of range, 1..=1000; nothing changed"),
+        ),
+        (
+            "set rate 2000 rate 50",
+            Err("error: rate: out of range, 1..=1000; nothing changed"),
+        ),
+        // Each value in range, the relation (records per baud) refused in step 3.
+        (
+            "set rate 1000 output_divider 1",
+            Err("error: rate/output_divider: records need more than the baud rate (raise output_divider or baud); nothing changed"),
+        ),
+        ("set rate 20 foo", Err("error: unknown key 'foo' (try help)")),
+        ("set foo 1 rate abc", Err("error: unknown key 'foo' (try help)")),
+        ("reset_pose nan 0 0", Err("error: NaN/inf not allowed: 'nan'")),
+        ("reset_pose 0 0 1e999", Err("error: NaN/inf not allowed: '1e999'")),
+        ("reset_pose 0 -inf 0", Err("error: NaN/inf not allowed: '-inf'")),
+        (
+            "set diameters_correlation 1 left_track_correlation 0.5",
+            Err("error: diameters_correlation/left_track_correlation/right_track_correlation: no covariance has these three correlations (set them together in one line); nothing changed"),
+        ),
+        (
+            "set diameters_correlation 1 left_track_correlation 0.5 right_track_correlation 0.5",
+            Ok("ok\ndiameters_correlation = 1\nleft_track_correlation = 0.5\nright_track_correlation = 0.5"),
+        ),
+        (
+            "set diameters_correlation -1 left_track_correlation 0.3 right_track_correlation -0.3",
+            Ok("ok\ndiameters_correlation = -1\nleft_track_correlation = 0.3\nright_track_correlation = -0.3"),
+        ),
+        (
+            "set diameters_correlation 1 left_track_correlation 1 right_track_correlation 1",
+            Ok("ok\ndiameters_correlation = 1\nleft_track_correlation = 1\nright_track_correlation = 1"),
+        ),
+        (
+            "set diameters_correlation 1 left_track_correlation 1 right_track_correlation -1",
+            Err("error: diameters_correlation/left_track_correlation/right_track_correlation: no covariance has these three correlations (set them together in one line); nothing changed"),
+        ),
+    ];
+    for (line, want) in table {
+        // The line as the assembler hands it on (TAB becomes a space).
+        let got = lines(format!("{line}\n").as_bytes());
+        let [Ok(got)] = &got[..] else {
+            panic!("{line:?}: {got:?}")
+        };
+        let mut s = Settings::DEFAULT;
+        let (r, _) = run(got, &mut s);
+        assert_eq!(
+            if r.ok {
+                Ok(r.text.as_str())
+            } else {
+                Err(r.text.as_str())
+            },
+            *want,
+            "{line:?}"
         );
     }
 }
@@ -254,6 +351,51 @@ fn long_replies_fit_and_split_into_frames() {
         assert_eq!(joined, r.text.as_str());
         println!("{line}: {} bytes, {} frames", r.text.len(), parts.len());
     }
+}
+
+/// The longest value texts: every f32 key at a subnormal or near the smallest normal (the
+/// longest plain decimals, 47 characters) still fits one `get` reply, whose lines are
+/// plain decimals that set back the identical bits.
+#[test]
+fn get_with_the_longest_values_fits_and_round_trips() {
+    let long = [
+        -f32::from_bits(0x007F_FFFF), // the largest subnormal, negative
+        f32::from_bits(0x0080_0001),  // just above the smallest normal
+        f32::from_bits(1),            // the smallest subnormal
+    ];
+    let mut s = Settings::DEFAULT;
+    for k in Key::ALL {
+        for v in long {
+            let _ = s.set(k, &format!("{v}"));
+        }
+    }
+    let (r, _) = run("get", &mut s);
+    assert!(
+        !r.text.ends_with("..."),
+        "truncated: {} bytes",
+        r.text.len()
+    );
+    assert!(r.text.len() <= MAX_REPLY);
+    let mut back = Settings::DEFAULT;
+    let mut longest = 0;
+    for l in r.text.lines().skip(1) {
+        let (k, v) = l.split_once(" = ").expect("key = value");
+        assert!(
+            !v.contains(['e', 'E']) || v.chars().all(char::is_alphabetic),
+            "{l}"
+        );
+        longest = longest.max(v.len());
+        back.set(Key::from_name(k).expect("a key"), v).expect(l);
+    }
+    assert_eq!(back.to_bytes(), s.to_bytes());
+    assert!(
+        longest >= 47,
+        "the test reaches the longest texts: {longest}"
+    );
+    println!(
+        "get: {} bytes, longest value {longest} characters",
+        r.text.len()
+    );
 }
 
 fn token() -> impl Strategy<Value = String> {

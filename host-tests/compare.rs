@@ -298,7 +298,7 @@ fn switching_to_pps_reports_no_false_overcapture() {
 /// The reference: catch-up committing every grid point one by one.
 fn catch_up_by_steps(disc: &mut Discipline, due: Sample, now: u64, guard: u64) -> CatchUp {
     let limit = now + guard;
-    let (mut sample, mut merged) = (due, 0u32);
+    let (mut sample, mut merged) = (disc.begin_second(due), 0u32);
     loop {
         let next = disc.next_sample(now);
         if next.tick > limit {
@@ -361,5 +361,66 @@ proptest! {
         let got = catch_up(&mut d, due, now, GUARD);
         prop_assert_eq!(got, want);
         prop_assert_eq!(d.next_sample(now), reference.next_sample(now));
+    }
+}
+
+/// A new rate reaches the sampler between two of its interrupts (the firmware applies the
+/// queued configuration at the start of the next interrupt). Set after any sample of a
+/// second, the last one included, it applies from the first sample of the next whole
+/// second: every sample before it has the old rate and the old grid, every one from it the
+/// new rate and the new grid, also when the change comes after the second-to-last sample,
+/// when the second's first sample is already committed (programmed one sample ahead).
+#[test]
+fn a_rate_change_applies_from_the_next_whole_second() {
+    let hz = u64::from(HZ);
+    for (old, new) in [
+        (2u32, 5u32),
+        (3, 1),
+        (1, 2),
+        (50, 100),
+        (100, 50),
+        (1000, 7),
+    ] {
+        let picks = (0..old).filter(|k| *k < 3 || k + 3 >= old || *k == old / 2);
+        for k in picks {
+            let mut tim = SimTim::new(1, Vec::new());
+            let mut d = disc(SyncMode::Free, old);
+            let s0 = d.next_sample(0);
+            let s1 = d.next_sample(0);
+            tim.ccr2 = s1.tick as u32;
+            let mut sched = CompareSchedule {
+                ext: TimerExtender::new(0),
+                next: s1,
+                guard: GUARD,
+            };
+            let mut samples = vec![s0];
+            while let Some(irq) = tim.next_irq() {
+                if irq >= 4 * hz {
+                    break;
+                }
+                tim.run_to(irq.max(tim.t) + 20);
+                let Some(s) = sched.on_interrupt(&mut tim, &mut d).sample else {
+                    continue;
+                };
+                samples.push(s);
+                if (s.second, s.index) == (1, k) {
+                    let mut cfg = *d.config();
+                    cfg.rate_hz = new;
+                    d.set_config(cfg).expect("valid");
+                }
+            }
+            let case = format!("{old} -> {new} Hz after sample {k}");
+            for s in &samples {
+                let rate = if s.second <= 1 { old } else { new };
+                assert_eq!(s.rate, rate, "{case}: {s:?}");
+                let tick = u64::from(s.second) * hz + u64::from(s.index) * hz / u64::from(rate);
+                assert_eq!(s.tick, tick, "{case}: {s:?}");
+            }
+            for second in 0..4 {
+                let n = samples.iter().filter(|s| s.second == second).count();
+                let rate = if second <= 1 { old } else { new };
+                assert_eq!(n, rate as usize, "{case}: second {second}");
+            }
+        }
     }
 }

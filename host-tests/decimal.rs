@@ -5,21 +5,24 @@
 use odo_core::decimal::*;
 use proptest::prelude::*;
 
-/// The text the settings printed before `decimal` existed (std `{}` / `{:e}`).
-fn legacy64(v: f64) -> String {
-    if v != 0.0 && !(1e-9..1e9).contains(&v.abs()) {
-        format!("{v:e}")
-    } else {
-        format!("{v}")
-    }
+/// The text std's `{}` gives: a plain decimal at every magnitude, never an exponent.
+fn plain64(v: f64) -> String {
+    format!("{v}")
 }
 
-fn legacy32(v: f32) -> String {
-    if v != 0.0 && !(1e-9..1e9).contains(&v.abs()) {
-        format!("{v:e}")
-    } else {
-        format!("{v}")
-    }
+fn plain32(v: f32) -> String {
+    format!("{v}")
+}
+
+/// Plain decimal syntax: an optional `-`, digits, an optional `.` and digits.
+fn is_plain(text: &str) -> bool {
+    let t = text.strip_prefix('-').unwrap_or(text);
+    let mut parts = t.splitn(2, '.');
+    let int = parts.next().unwrap_or("");
+    let frac = parts.next();
+    !int.is_empty()
+        && int.bytes().all(|b| b.is_ascii_digit())
+        && frac.is_none_or(|f| !f.is_empty() && f.bytes().all(|b| b.is_ascii_digit()))
 }
 
 /// Digits and exponent of std's `{:e}` of a finite non-negative value.
@@ -30,11 +33,12 @@ fn std_digits(e_text: &str) -> (String, i32) {
 
 fn check_f64(v: f64) -> Result<(), TestCaseError> {
     let text = Shortest(v).to_string();
-    prop_assert_eq!(&text, &legacy64(v), "style of {:e}", v);
+    prop_assert_eq!(&text, &plain64(v), "style of {:e}", v);
     if !v.is_finite() {
         prop_assert!(shortest_f64(v).is_none());
         return Ok(());
     }
+    prop_assert!(is_plain(&text), "{}", text);
     let d = shortest_f64(v).unwrap();
     let (digits, exp) = std_digits(&format!("{:e}", v.abs()));
     prop_assert_eq!(std::str::from_utf8(d.digits()).unwrap(), digits.as_str());
@@ -51,11 +55,12 @@ fn check_f64(v: f64) -> Result<(), TestCaseError> {
 
 fn check_f32(v: f32) -> Result<(), TestCaseError> {
     let text = Shortest(v).to_string();
-    prop_assert_eq!(&text, &legacy32(v), "style of {:e}", v);
+    prop_assert_eq!(&text, &plain32(v), "style of {:e}", v);
     if !v.is_finite() {
         prop_assert!(shortest_f32(v).is_none());
         return Ok(());
     }
+    prop_assert!(is_plain(&text), "{}", text);
     let d = shortest_f32(v).unwrap();
     let (digits, exp) = std_digits(&format!("{:e}", v.abs()));
     prop_assert_eq!(std::str::from_utf8(d.digits()).unwrap(), digits.as_str());
@@ -186,7 +191,8 @@ fn halfway(odd: u128, e2: i32, nudge: i32) -> String {
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(100_000))]
 
-    /// (a) digits and exponent equal std's `{:e}`; (b) the text is the old settings style
+    /// (a) digits and exponent equal std's `{:e}`; (b) the text is std's `{}`, a plain
+    /// decimal,
     /// and parses back to the identical value with std and with `parse_f64`.
     #[test]
     fn f64_shortest_round_trip(bits in bits64()) {
@@ -293,66 +299,79 @@ fn long_inputs_never_panic() {
 
 #[test]
 fn boundary_table() {
-    let f64s: &[(f64, &str)] = &[
-        (0.0, "0"),
-        (-0.0, "-0"),
-        (5e-324, "5e-324"),
-        (-5e-324, "-5e-324"),
-        (f64::MIN_POSITIVE, "2.2250738585072014e-308"),
-        (2.225073858507201e-308, "2.225073858507201e-308"),
-        (f64::MAX, "1.7976931348623157e308"),
-        (f64::MIN, "-1.7976931348623157e308"),
-        (9007199254740992.0, "9.007199254740992e15"),
-        (9007199254740993.0, "9.007199254740992e15"),
-        (9007199254740994.0, "9.007199254740994e15"),
-        (9007199254740991.0, "9.007199254740991e15"),
-        (0.2608, "0.2608"),
-        (0.26, "0.26"),
-        (0.563, "0.563"),
-        (3.9e-8, "0.000000039"),
-        (20000.0, "20000"),
-        (1e-7, "0.0000001"),
-        (563.0, "563"),
-        (-0.00012, "-0.00012"),
-        (1e-9, "0.000000001"),
-        (9.99999999e-10, "9.99999999e-10"),
-        (999999999.0, "999999999"),
-        (1e9, "1e9"),
-        (1.5e300, "1.5e300"),
-        (0.1 + 0.2, "0.30000000000000004"),
-        (0.03, "0.03"),
-        (f64::INFINITY, "inf"),
-        (f64::NEG_INFINITY, "-inf"),
-        (f64::NAN, "NaN"),
-        (1125899906842624.0 + 0.25, "1.1258999068426243e15"),
-        (1125899906842624.0 + 0.75, "1.1258999068426248e15"),
+    let zeros = |n: usize| "0".repeat(n);
+    let f64s: &[(f64, String)] = &[
+        (0.0, "0".into()),
+        (-0.0, "-0".into()),
+        (5e-324, format!("0.{}5", zeros(323))),
+        (-5e-324, format!("-0.{}5", zeros(323))),
+        (
+            f64::MIN_POSITIVE,
+            format!("0.{}22250738585072014", zeros(307)),
+        ),
+        (
+            2.225073858507201e-308,
+            format!("0.{}2225073858507201", zeros(307)),
+        ),
+        (f64::MAX, format!("17976931348623157{}", zeros(292))),
+        (f64::MIN, format!("-17976931348623157{}", zeros(292))),
+        (9007199254740992.0, "9007199254740992".into()),
+        (9007199254740993.0, "9007199254740992".into()),
+        (9007199254740994.0, "9007199254740994".into()),
+        (9007199254740991.0, "9007199254740991".into()),
+        (0.2608, "0.2608".into()),
+        (0.26, "0.26".into()),
+        (0.563, "0.563".into()),
+        (3.9e-8, "0.000000039".into()),
+        (20000.0, "20000".into()),
+        (1e-7, "0.0000001".into()),
+        (563.0, "563".into()),
+        (-0.00012, "-0.00012".into()),
+        (1e-9, "0.000000001".into()),
+        (9.99999999e-10, "0.000000000999999999".into()),
+        (1e-10, "0.0000000001".into()),
+        (1e-12, "0.000000000001".into()),
+        (999999999.0, "999999999".into()),
+        (1e9, "1000000000".into()),
+        (1.5e300, format!("15{}", zeros(299))),
+        (0.1 + 0.2, "0.30000000000000004".into()),
+        (0.03, "0.03".into()),
+        (f64::INFINITY, "inf".into()),
+        (f64::NEG_INFINITY, "-inf".into()),
+        (f64::NAN, "NaN".into()),
+        (1125899906842624.0 + 0.25, "1125899906842624.3".into()),
+        (1125899906842624.0 + 0.75, "1125899906842624.8".into()),
     ];
-    for &(v, text) in f64s {
+    for (v, text) in f64s {
+        let (v, text) = (*v, text.as_str());
         assert_eq!(Shortest(v).to_string(), text, "{v:e}");
         check_f64(v).unwrap();
         if v.is_finite() {
             assert_eq!(parse_f64(text).map(f64::to_bits), Ok(v.to_bits()), "{text}");
         }
     }
-    let f32s: &[(f32, &str)] = &[
-        (0.0, "0"),
-        (-0.0, "-0"),
-        (1e-45, "1e-45"),
-        (f32::MIN_POSITIVE, "1.1754944e-38"),
-        (f32::MAX, "3.4028235e38"),
-        (16777216.0, "16777216"),
-        (16777217.0, "16777216"),
-        (3.9e-8, "0.000000039"),
-        (1e-7, "0.0000001"),
-        (0.05, "0.05"),
-        (-0.05, "-0.05"),
-        (0.001, "0.001"),
-        (0.01, "0.01"),
-        (0.06, "0.06"),
-        (1.234567e-9, "0.000000001234567"),
-        (3.123e-8, "0.00000003123"),
+    let f32s: &[(f32, String)] = &[
+        (0.0, "0".into()),
+        (-0.0, "-0".into()),
+        (1e-45, format!("0.{}1", zeros(44))),
+        (f32::MIN_POSITIVE, format!("0.{}11754944", zeros(37))),
+        (f32::MAX, format!("34028235{}", zeros(31))),
+        (16777216.0, "16777216".into()),
+        (16777217.0, "16777216".into()),
+        (3.9e-8, "0.000000039".into()),
+        (1e-7, "0.0000001".into()),
+        (0.05, "0.05".into()),
+        (-0.05, "-0.05".into()),
+        (0.001, "0.001".into()),
+        (0.01, "0.01".into()),
+        (0.06, "0.06".into()),
+        (1.234567e-9, "0.000000001234567".into()),
+        (3.123e-8, "0.00000003123".into()),
+        (1e-12, "0.000000000001".into()),
+        (-3.9e-10, "-0.00000000039".into()),
     ];
-    for &(v, text) in f32s {
+    for (v, text) in f32s {
+        let (v, text) = (*v, text.as_str());
         assert_eq!(Shortest(v).to_string(), text, "{v:e}");
         check_f32(v).unwrap();
         assert_eq!(parse_f32(text).map(f32::to_bits), Ok(v.to_bits()), "{text}");
@@ -467,9 +486,9 @@ fn syntax_table() {
 #[test]
 fn writes_into_any_writer() {
     let mut s = heapless::String::<32>::new();
-    write_f64(-1.5e-300, &mut s).unwrap();
+    write_f64(-1.5e-10, &mut s).unwrap();
     write_f32(0.1, &mut s).unwrap();
-    assert_eq!(s.as_str(), "-1.5e-3000.1");
+    assert_eq!(s.as_str(), "-0.000000000150.1");
     // A writer that is too small reports the error.
     let mut tiny = heapless::String::<3>::new();
     assert!(write_f64(0.2608, &mut tiny).is_err());

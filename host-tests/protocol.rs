@@ -766,3 +766,53 @@ fn reset_cause_from_rcc_csr_table() {
     assert_eq!(ResetCause::from_code(8), ResetCause::Unknown);
     assert_eq!(ResetCause::Watchdog.name(), "watchdog");
 }
+
+/// Every count docs/PROTOCOL.md states is the code's constant: lengths, limits and sizes are
+/// written from these, and this test fails when either side changes alone.
+#[test]
+fn doc_counts_are_the_code_constants() {
+    use odo_core::console::{MAX_LINE, MAX_SET_PAIRS, MAX_WORDS};
+    use odo_core::settings::store::{RECORD_LEN, SLOT_LEN};
+    use odo_core::settings::{Key, Settings};
+    let doc = include_str!("../docs/PROTOCOL.md");
+    // The settings sectors (`memory.x`): 16 KiB each.
+    let slots = 16 * 1024 / SLOT_LEN;
+    for phrase in [
+        format!("`header` ({HEADER_LEN} bytes)"),
+        format!("`body` (0..={MAX_BODY_LEN} bytes in version 1)"),
+        format!("`crc` ({CRC_LEN} bytes)"),
+        format!("the largest raw frame of version 1 is {MAX_RAW_FRAME} bytes"),
+        format!("the largest encoded frame is {MAX_ENCODED_FRAME}\n"),
+        format!("**{MAX_WIRE_FRAME} encoded bytes**"),
+        format!("### 0x01 PoseRecord ({} bytes)", PoseRecord::BODY_LEN),
+        format!("### 0x02 Status ({} bytes)", Status::BODY_LEN),
+        format!(
+            "| 0x03 | DeviceInfo | {} + n (n <= {MAX_FIRMWARE_VERSION}) |",
+            DeviceInfo::FIXED_LEN
+        ),
+        format!(
+            "| 0x04 | CommandReply | {} + n (n <= {MAX_REPLY_TEXT}) |",
+            CommandReply::FIXED_LEN
+        ),
+        format!("At most **{MAX_LINE} bytes** per line"),
+        format!("At most {MAX_WORDS} words per line"),
+        format!("up to {MAX_SET_PAIRS} pairs"),
+        format!("at most {MAX_SET_PAIRS} pairs"),
+        format!("one in {slots}, when the current sector is full"),
+        format!("16 KiB each, {slots}\nslots each"),
+        format!("log of {SLOT_LEN}-byte slots"),
+        format!("one {RECORD_LEN}-byte record"),
+        format!("the {}-byte serialised", Settings::SERIALIZED_LEN),
+        format!("version 4: {} bytes", Settings::SERIALIZED_LEN),
+    ] {
+        assert!(doc.contains(&phrase), "PROTOCOL.md lacks {phrase:?}");
+    }
+    // No stated number of keys or `get` lines: the key table is the count.
+    let section = doc.split("## 4. Commands").nth(1).expect("section 4");
+    for n in [Key::COUNT, Key::COUNT + 1] {
+        for unit in ["lines", "keys"] {
+            let phrase = format!("{n} {unit}");
+            assert!(!section.contains(&phrase), "PROTOCOL.md states {phrase:?}");
+        }
+    }
+}

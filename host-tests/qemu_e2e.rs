@@ -297,10 +297,12 @@ fn rate_switch(link: &mut UnitLink) {
     let k = flagged[0];
     let switch = records[k];
     assert_eq!(switch.mcu_time_us % 1_000_000, 0, "at a whole second");
-    // The sampler takes the rate at the first second it has not committed a sample of: the
-    // next or, when the command arrives at the last sample of a second, the one after.
+    // At the first whole second after the command ran: it ran before the sample after
+    // `t_cmd` (whose record follows the reply), so at the latest at the first second that
+    // begins with or after that sample.
+    let latest = (t_cmd + 20_000).next_multiple_of(1_000_000);
     assert!(
-        switch.mcu_time_us > t_sent && switch.mcu_time_us <= t_cmd + 2_000_000,
+        switch.mcu_time_us > t_sent && switch.mcu_time_us <= latest,
         "switch at {} us, command sent after {t_sent} us, answered by {t_cmd} us",
         switch.mcu_time_us
     );
@@ -360,4 +362,89 @@ fn rate_switch(link: &mut UnitLink) {
         k,
         records.len() - k
     );
+}
+
+/// Rate switches at 2 and 3 Hz, where every command lands within two sample periods of the
+/// next whole second: each takes effect at the first second that begins after the command
+/// ran. The Status announcing the new rate is the first one after the reply (or, when a
+/// second began between the command and its reply, the one just before it), at a whole
+/// second, and the record after it is the first at the new rate, flagged.
+#[test]
+fn qemu_rate_switch_at_low_rates() {
+    let Some(qemu) = support::qemu::boot(
+        Path::new(env!("CARGO_MANIFEST_DIR")),
+        "qemu_rate_switch_at_low_rates",
+    ) else {
+        return;
+    };
+    let mut link = UnitLink::connect(qemu.port, DEADLINE);
+    while link.records.len() < 3 {
+        link.next_frame();
+    }
+    let mut old = Settings::DEFAULT.rate;
+    for rate in [2u32, 3, 2, 3, 2, 3, 1, 2] {
+        let sent_at = link.frames.len();
+        let line = if rate == 1 {
+            // 1 Hz needs a lower stated wheel speed (the counts rule).
+            "set rate 1 max_wheel_speed 1".to_string()
+        } else {
+            format!("rate {rate}")
+        };
+        expect(&mut link, &line, true, &format!("rate = {rate}"));
+        let reply_at = link.frames.len() - 1;
+        // Frames up to the second Status after the reply.
+        let mut after = 0;
+        while after < 2 {
+            if matches!(link.next_frame().message, Message::Status(_)) {
+                after += 1;
+            }
+        }
+        let frames = &link.frames[sent_at..];
+        let status_at: Vec<usize> = (0..frames.len())
+            .filter(|&i| matches!(frames[i].message, Message::Status(_)))
+            .collect();
+        let status = |i: usize| match &frames[i].message {
+            Message::Status(s) => *s,
+            _ => unreachable!(),
+        };
+        let switch = *status_at
+            .iter()
+            .find(|&&i| status(i).rate_hz == rate)
+            .unwrap_or_else(|| panic!("`{line}`: no Status at {rate} Hz"));
+        let first_after = *status_at
+            .iter()
+            .find(|&&i| i > reply_at - sent_at)
+            .expect("a Status after the reply");
+        let last_before = status_at.iter().rev().find(|&&i| i < reply_at - sent_at);
+        assert!(
+            switch == first_after || Some(&switch) == last_before,
+            "`{line}`: the switch's Status is frame {switch}, the reply frame {}, the first \
+             Status after it frame {first_after}",
+            reply_at - sent_at
+        );
+        for &i in status_at.iter().filter(|&&i| i < switch) {
+            assert_eq!(status(i).rate_hz, old, "`{line}`: {:?}", status(i));
+        }
+        let announce = status(switch);
+        assert_eq!(announce.uptime_us % 1_000_000, 0, "{announce:?}");
+        let Message::Pose(first) = &frames[switch + 1].message else {
+            panic!(
+                "after the switch's Status: {:?}",
+                frames[switch + 1].message
+            )
+        };
+        assert!(first.flags.rate_switch, "{first:?}");
+        assert_eq!(first.mcu_time_us, announce.uptime_us);
+        let flagged = frames
+            .iter()
+            .filter(|f| matches!(&f.message, Message::Pose(r) if r.flags.rate_switch))
+            .count();
+        assert_eq!(flagged, 1, "`{line}`: one record marks the switch");
+        println!(
+            "`{line}`: reply frame {}, switch at {:.3} s (frame {switch})",
+            reply_at - sent_at,
+            announce.uptime_us as f64 * 1e-6
+        );
+        old = rate;
+    }
 }

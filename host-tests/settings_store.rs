@@ -238,3 +238,127 @@ fn generation_wraps_around() {
     }
     assert_eq!(expected, 8);
 }
+
+/// Records of another origin (or damaged flash): valid CRCs, generations anywhere on the
+/// circle, usable or not, in any slots of both sectors.
+fn foreign_flash(records: &[(usize, usize, u32, bool)], slots: usize) -> SimFlash {
+    let mut f = SimFlash::new(slots * SLOT_LEN);
+    for (i, &(sector, slot, generation, usable)) in records.iter().enumerate() {
+        let mut s = variant(50 + i as u32);
+        if !usable {
+            s.rate = 0; // well formed, but refused on loading
+        }
+        let at = (slot % slots) * SLOT_LEN;
+        if f.mem[sector][at..at + SLOT_LEN].iter().all(|&b| b == 0xFF) {
+            f.program(sector, at, &encode_record(&s, generation))
+                .unwrap();
+        }
+    }
+    f
+}
+
+/// The newest of `gens` as the store orders them: the serial-number maximum when every
+/// generation lies within 2^31 - 1 behind one of them, else the highest.
+fn newest(gens: &[u32]) -> u32 {
+    use odo_core::settings::store::generation_is_newer;
+    gens.iter()
+        .copied()
+        .find(|&g| gens.iter().all(|&h| h == g || generation_is_newer(g, h)))
+        .unwrap_or_else(|| gens.iter().copied().max().unwrap())
+}
+
+/// Generations more than 2^31 apart (three spread around the circle, two exactly 2^31
+/// apart): loading takes the highest, and a save that returns Ok loads back with the
+/// generation it returned, after clearing the records that would outrank it.
+#[test]
+fn generations_more_than_half_the_circle_apart() {
+    let third = 0x5555_5555u32;
+    for gens in [
+        vec![1, 1 + third, 1 + 2 * third],
+        vec![0x8000_0000, 0],
+        vec![0xFFFF_FFFF, 0x7FFF_FFFF],
+        vec![5, 0x8000_0005, 0xC000_0000, 0x4000_0000],
+    ] {
+        for sectors in [[0, 1, 0, 1], [1, 0, 0, 1], [0, 0, 1, 1]] {
+            let records: Vec<_> = gens
+                .iter()
+                .enumerate()
+                .map(|(i, &g)| (sectors[i], i, g, true))
+                .collect();
+            let f = foreign_flash(&records, 3);
+            let max = *gens.iter().max().unwrap();
+            assert_eq!(load(&f).2, max, "{gens:x?} in sectors {sectors:?}");
+            assert_eq!(newest(&gens), max);
+            let mut store = SettingsStore::new(f);
+            assert!(store.next_save_erases().unwrap(), "it clears");
+            let g = store.save(&variant(7)).expect("save");
+            assert_eq!(load(store.flash()), (variant(7), SettingsSource::Flash, g));
+            // From then on, ordinary saves.
+            let g2 = store.save(&variant(8)).expect("save");
+            assert_eq!(g2, g.wrapping_add(1).max(1));
+            assert_eq!(load(store.flash()), (variant(8), SettingsSource::Flash, g2));
+            assert_eq!(store.into_inner().violations, 0);
+        }
+    }
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(2_000))]
+
+    /// Any records with valid CRCs (generations anywhere, usable or not, in any slots):
+    /// loading takes the newest usable one (serial order when the generations allow one,
+    /// else the highest), whatever the slots, and every save that returns Ok loads back
+    /// with the generation it returned, newer than the one loaded before it.
+    #[test]
+    fn any_generations_load_the_newest_and_saves_load_back(
+        records in proptest::collection::vec(
+            (0usize..2, 0usize..3, proptest::prelude::any::<u32>(), proptest::prelude::any::<bool>()),
+            0..6,
+        ),
+        near in proptest::prelude::any::<bool>(),
+    ) {
+        // Half the cases close to the wrap or to each other, where the orders differ.
+        let records: Vec<_> = records
+            .into_iter()
+            .map(|(s, slot, g, usable)| (s, slot, if near { (g % 8).wrapping_add(u32::MAX - 3) } else { g }, usable))
+            .collect();
+        let f = foreign_flash(&records, 3);
+        // The records as written (a slot taken twice keeps the first).
+        let mut written: Vec<(u32, bool)> = Vec::new();
+        let mut taken = std::collections::HashSet::new();
+        for &(sector, slot, g, usable) in &records {
+            if taken.insert((sector, slot)) {
+                written.push((g, usable));
+            }
+        }
+        let gens: Vec<u32> = written.iter().map(|w| w.0).collect();
+        let usable: Vec<u32> = written.iter().filter(|w| w.1).map(|w| w.0).collect();
+        let (_, source, generation) = load(&f);
+        if usable.is_empty() {
+            proptest::prop_assert_eq!(source, SettingsSource::Defaults);
+        } else {
+            // The order of all valid records decides; the newest usable one in it is loaded.
+            let top = newest(&gens);
+            let pick = if gens.iter().all(|&h| h == top || odo_core::settings::store::generation_is_newer(top, h)) {
+                // Serial order: the usable one with the least distance behind `top`.
+                *usable.iter().min_by_key(|&&g| top.wrapping_sub(g)).unwrap()
+            } else {
+                *usable.iter().max().unwrap()
+            };
+            proptest::prop_assert_eq!((source, generation), (SettingsSource::Flash, pick), "{:x?}", written);
+        }
+        let mut store = SettingsStore::new(f);
+        for i in 0..4 {
+            let before = load(store.flash());
+            let g = store.save(&variant(i)).expect("save");
+            proptest::prop_assert_eq!(load(store.flash()), (variant(i), SettingsSource::Flash, g));
+            if before.1 == SettingsSource::Flash {
+                proptest::prop_assert!(
+                    odo_core::settings::store::generation_is_newer(g, before.2),
+                    "{:#x} after {:#x}", g, before.2
+                );
+            }
+        }
+        proptest::prop_assert_eq!(store.into_inner().violations, 0);
+    }
+}

@@ -293,6 +293,33 @@ fn settings_dirty_means_different_from_the_stored_settings() {
     assert!(c.store_state().dirty);
 }
 
+/// `set left_cos1 -0` from the defaults changes the stored bytes and the DeviceInfo
+/// checksum: `unsaved_changes` says so too, and `set left_cos1 0` clears it again.
+#[test]
+fn negative_zero_is_an_unsaved_change() {
+    let mut c = commands(MemFlash::new(4, 0));
+    let clean = c
+        .device_info([0; 12], ResetCause::Unknown)
+        .settings_checksum;
+    let (reply, effect) = line(&mut c, "set left_cos1 -0", false);
+    assert!(reply.text.ends_with("left_cos1 = -0"), "{}", reply.text);
+    assert!(
+        matches!(effect, Effect::SettingsChanged { .. }),
+        "{effect:?}"
+    );
+    let info = c.device_info([0; 12], ResetCause::Unknown);
+    assert_ne!(info.settings_checksum, clean);
+    assert!(c.store_state().dirty, "the bytes differ from the defaults'");
+    line(&mut c, "set left_cos1 0", false);
+    assert!(!c.store_state().dirty);
+    // Saved as -0: +0 is then the unsaved change.
+    line(&mut c, "set left_cos1 -0", false);
+    line(&mut c, "save", false);
+    assert!(!c.store_state().dirty);
+    line(&mut c, "set left_cos1 0", false);
+    assert!(c.store_state().dirty, "+0 differs from the stored -0");
+}
+
 #[test]
 fn heartbeat_is_due_once_a_second_and_reports_the_counters() {
     let rate = Settings::DEFAULT.rate;

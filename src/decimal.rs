@@ -14,9 +14,9 @@
 //!   [`DecimalError::Overflow`] (where core would return infinity). `f32` is parsed
 //!   directly, never through `f64` (no double rounding).
 //! * [`write_f64`] / [`write_f32`] (and the [`Shortest`] `Display` adaptor) write the
-//!   shortest decimal that parses back to the identical value, with the same digits and
-//!   exponent as core's `{}` / `{:e}` (the free-format Dragon4 / Burger–Dybvig algorithm,
-//!   including core's choice of the closest and, on a tie, the larger digit string).
+//!   shortest decimal that parses back to the identical value, as a plain decimal, the text
+//!   of core's `{}` (the free-format Dragon4 / Burger–Dybvig algorithm, including core's
+//!   choice of the closest and, on a tie, the larger digit string).
 //!
 //! # Exactness limit of the parser
 //!
@@ -33,10 +33,12 @@
 //!
 //! # Output style
 //!
-//! Plain decimal when `1e-9 <= |v| < 1e9` (`0.2608`, `563`, `-0.00012`, `0.000000039`),
-//! scientific otherwise (`1e9`, `3.9e-10`, `-1.7976931348623157e308`), exactly as core's
-//! `{}` and `{:e}` respectively print those values; zero is `0` or `-0`, and non-finite
-//! values `NaN`, `inf`, `-inf`. Formatter flags (width, precision) are ignored.
+//! Plain decimal at every magnitude, never an exponent (`0.2608`, `563`, `-0.00012`,
+//! `0.000000039`, `0.00000000000039`, `1000000000`), exactly as core's `{}` prints the
+//! value: digits, an optional `-` and an optional `.`; zero is `0` or `-0`, and non-finite
+//! values `NaN`, `inf`, `-inf`. The longest text is that of the smallest subnormal `f64`
+//! (`0.` and 323 zeros before `5`) or of `f64::MAX` (309 digits). Formatter flags (width,
+//! precision) are ignored.
 
 use core::cmp::Ordering;
 use core::fmt;
@@ -528,42 +530,21 @@ fn write_bits(bits: u64, f: &Format, out: &mut dyn fmt::Write) -> fmt::Result {
     let zeros = |out: &mut dyn fmt::Write, n: i32| -> fmt::Result {
         (0..n).try_for_each(|_| out.write_char('0'))
     };
+    // Plain decimal at any magnitude (|k| <= 324 zeros at most).
     if mag == 0 {
         out.write_str("0")
-    } else if (-8..=9).contains(&k) {
-        // Plain: 1e-9 <= |v| < 1e9.
-        if k <= 0 {
-            out.write_str("0.")?;
-            zeros(out, -k)?;
-            put(out, digits)
-        } else if k < len {
-            let (int, frac) = digits.split_at(k as usize);
-            put(out, int)?;
-            out.write_str(".")?;
-            put(out, frac)
-        } else {
-            put(out, digits)?;
-            zeros(out, k - len)
-        }
+    } else if k <= 0 {
+        out.write_str("0.")?;
+        zeros(out, -k)?;
+        put(out, digits)
+    } else if k < len {
+        let (int, frac) = digits.split_at(k as usize);
+        put(out, int)?;
+        out.write_str(".")?;
+        put(out, frac)
     } else {
-        let (first, more) = digits.split_at(1);
-        put(out, first)?;
-        if !more.is_empty() {
-            out.write_str(".")?;
-            put(out, more)?;
-        }
-        // The exponent (|k - 1| <= 324), without core's formatting machinery.
-        let e = (k - 1).unsigned_abs();
-        out.write_str(if k < 1 { "e-" } else { "e" })?;
-        let ds = [(e / 100 % 10) as u8, (e / 10 % 10) as u8, (e % 10) as u8].map(|d| b'0' + d);
-        let skip = if e >= 100 {
-            0
-        } else if e >= 10 {
-            1
-        } else {
-            2
-        };
-        put(out, &ds[skip..])
+        put(out, digits)?;
+        zeros(out, k - len)
     }
 }
 

@@ -212,6 +212,13 @@ mod app {
         let entry_counts = cx.shared.acq.lock(|acq| acq.snapshot_now());
         let entry = board::cycles();
         let sampler = cx.local.sampler;
+        // Before the grid advances: a rate set before the first sample of a second applies
+        // from that sample on.
+        while let Some(cfg) = cx.local.cfg_out.dequeue() {
+            // A rejected configuration keeps the running one; the command task validated
+            // it already (`discipline_config` of validated settings).
+            let _ = sampler.set_config(cfg);
+        }
         let event = sampler.on_interrupt();
         // Reported with the next sample.
         cx.local.pps.on_interrupt(event.pps, event.overcapture);
@@ -222,11 +229,6 @@ mod app {
             let counts = entry_counts.unwrap_or_else(|| acq.snapshot(sample.tick));
             (counts, acq.faults(sample.tick), acq.sample_index())
         });
-        while let Some(cfg) = cx.local.cfg_out.dequeue() {
-            // A rejected configuration keeps the running one; the command task validated
-            // it already (`discipline_config` of validated settings).
-            let _ = sampler.set_config(cfg);
-        }
         sampler.follow_clock();
         let (pps, pps_overcapture) = cx.local.pps.take();
         let raw = RawSample {
@@ -368,10 +370,12 @@ mod app {
                     discipline,
                 } => {
                     cx.shared.store_state.lock(|s| *s = c.store_state());
+                    // The processing task first: it switches `output_divider` only once
+                    // the samples have the new rate, whichever sample that is.
+                    cx.shared.requests.lock(|r| r.settings = Some(settings));
                     if cx.local.cfg_in.enqueue(discipline).is_err() {
                         defmt::warn!("sampler configuration queue full");
                     }
-                    cx.shared.requests.lock(|r| r.settings = Some(settings));
                 }
                 Effect::Saved { generation } => {
                     let state = c.store_state();

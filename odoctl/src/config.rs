@@ -474,6 +474,33 @@ mod tests {
         assert_eq!(chassis_value_text(&back, Key::KappaDiffCorr), "0.0012");
     }
 
+    /// Parameter files (`simulate --truth-out`, `calibrate`) write every key as a plain
+    /// decimal, never an exponent, however small, and read back bit for bit.
+    #[test]
+    fn small_values_are_written_as_plain_decimals() {
+        let mut p = ChassisParams::DESIGNED;
+        p.delta_left = 1e-10;
+        p.kappa_right = f32::from_bits(1); // the smallest subnormal
+        p.left_wheel.cos[0] = -1e-12;
+        let text = render_params(&p, "truth", &[]);
+        assert!(text.contains("\ndelta_left = 0.0000000001\n"), "{text}");
+        assert!(text.contains(&format!("\nkappa_right = 0.{}1\n", "0".repeat(44))));
+        assert!(text.contains("\nleft_cos1 = -0.000000000001\n"), "{text}");
+        for line in text
+            .lines()
+            .filter(|l| !l.starts_with('#') && !l.is_empty())
+        {
+            let (_, v) = line.split_once(" = ").expect("key = value");
+            assert!(v.starts_with('"') || !v.contains(['e', 'E']), "{line}");
+        }
+        let back = parse_params("t.toml", &text, ChassisParams::DESIGNED).unwrap();
+        assert_eq!(
+            with_chassis(&back).to_bytes(),
+            with_chassis(&p).to_bytes(),
+            "bit for bit"
+        );
+    }
+
     fn error_of(r: Result<ChassisParams>) -> ConfigError {
         r.unwrap_err()
             .downcast::<ConfigError>()

@@ -734,3 +734,108 @@ fn cli_simulated_antenna_moves_every_reference() {
     assert!(fixed_worst < 2e-4, "{fixed_worst}");
     assert!(worst > 0.01, "{worst}");
 }
+
+/// A simulated log's lines, and the log with line `k` replaced by `f(line)` (the checksum
+/// recomputed).
+fn edit_sentence(text: &str, k: usize, f: impl Fn(&str) -> String) -> String {
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let body = lines[k][1..lines[k].rfind('*').unwrap()].to_string();
+    lines[k] = reference::nmea::with_checksum(&f(&body));
+    lines.join("\r\n") + "\r\n"
+}
+
+/// One RMC dated 1980-01-01 (before the GPS epoch) in an otherwise good log is counted and
+/// skipped like a corrupt sentence: the epochs are dated by the other date sentences, none
+/// is lost, and their times are those of the clean log.
+#[test]
+fn a_date_before_the_gps_epoch_is_counted_and_skipped() {
+    let epochs = still_epochs(2300.0 * WEEK + 600.0, 40);
+    let clean = String::from_utf8(nmea_bytes(&epochs, 18)).unwrap();
+    let o = ReferenceOptions::default();
+    let want = reference::parse("c.nmea", clean.as_bytes(), &o).unwrap();
+    let rmcs: Vec<usize> = (0..clean.lines().count())
+        .filter(|&i| clean.lines().nth(i).unwrap().contains("RMC"))
+        .collect();
+    for k in [rmcs[0], rmcs[17], *rmcs.last().unwrap()] {
+        let bad = edit_sentence(&clean, k, |body| {
+            let mut f: Vec<&str> = body.split(',').collect();
+            f[9] = "010180";
+            f.join(",")
+        });
+        let r = reference::parse("d.nmea", bad.as_bytes(), &o)
+            .unwrap_or_else(|e| panic!("line {}: {e:#}", k + 1));
+        let rep = &r.report.read;
+        assert_eq!(rep.corrupt, 1, "{rep}");
+        assert!(
+            rep.problems[0]
+                .starts_with(&format!("d.nmea:{}: RMC: date before the GPS epoch", k + 1)),
+            "{rep}"
+        );
+        let t = |r: &reference::Reference| r.epochs.iter().map(|e| e.t).collect::<Vec<_>>();
+        assert_eq!(t(&r), t(&want), "line {}", k + 1);
+    }
+    // A ZDA too.
+    let zda = (0..clean.lines().count())
+        .find(|&i| clean.lines().nth(i).unwrap().contains("ZDA"))
+        .unwrap();
+    let bad = edit_sentence(&clean, zda, |body| {
+        let mut f: Vec<&str> = body.split(',').collect();
+        f[2..5].copy_from_slice(&["05", "01", "1980"]);
+        f.join(",")
+    });
+    let r = reference::parse("z.nmea", bad.as_bytes(), &o).unwrap();
+    assert_eq!(r.report.read.corrupt, 1, "{}", r.report.read);
+    assert_eq!(r.epochs.len(), want.epochs.len());
+}
+
+/// A GGA repeated before its epoch's GST and HDT (the repeat is skipped): the epoch keeps
+/// the heading and the sigmas that followed the repeat.
+#[test]
+fn a_repeated_gga_keeps_the_hdt_and_gst_that_follow_it() {
+    let epochs: Vec<reference::Epoch> = still_epochs(2300.0 * WEEK + 600.0, 10)
+        .into_iter()
+        .enumerate()
+        .map(|(k, e)| reference::Epoch {
+            heading: Some(0.1 * k as f64),
+            ..e
+        })
+        .collect();
+    let clean = String::from_utf8(nmea_bytes(&epochs, 18)).unwrap();
+    let mut lines: Vec<&str> = clean.lines().collect();
+    let ggas: Vec<usize> = (0..lines.len())
+        .filter(|&i| lines[i].contains("GGA"))
+        .collect();
+    let k = ggas[4];
+    lines.insert(k + 1, lines[k]);
+    let text = lines.join("\r\n") + "\r\n";
+    let r = reference::parse("r.nmea", text.as_bytes(), &ReferenceOptions::default()).unwrap();
+    assert_eq!(r.epochs.len(), 10);
+    assert_eq!(r.report.read.unusable, 1, "the repeat: {}", r.report.read);
+    for (k, e) in r.epochs.iter().enumerate() {
+        let h = e
+            .heading
+            .unwrap_or_else(|| panic!("epoch {k} lost its heading"));
+        assert!((h - 0.1 * k as f64).abs() < 1e-4, "epoch {k}: {h}");
+        assert!(e.sigma_east_north.is_some(), "epoch {k} lost its sigmas");
+    }
+}
+
+/// Binary data before an NMEA log whose first byte is `%` (an RTKLIB header's first
+/// character) does not make the log RTKLIB: it is detected as NMEA and read.
+#[test]
+fn a_binary_prefix_starting_with_percent_is_not_rtklib() {
+    let epochs = still_epochs(2300.0 * WEEK + 600.0, 10);
+    let clean = nmea_bytes(&epochs, 18);
+    for prefix in [
+        &b"%\xb5\x62\x01\x07\x5c\x00\r\n"[..],
+        b"%\x00\x01\x02",
+        b"%binary\r\n%\xff\xfe\r\n",
+    ] {
+        let mut bytes = prefix.to_vec();
+        bytes.extend_from_slice(&clean);
+        let r = reference::parse("p.nmea", &bytes, &ReferenceOptions::default())
+            .unwrap_or_else(|e| panic!("{prefix:?}: {e:#}"));
+        assert_eq!(r.format, Format::Nmea, "{prefix:?}");
+        assert_eq!(r.epochs.len(), 10, "{prefix:?}");
+    }
+}

@@ -105,9 +105,8 @@ pub enum Value {
 
 impl fmt::Display for Value {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        // Shortest round-trip decimal, plain for 1e-9 <= |v| < 1e9 and scientific
-        // otherwise (`crate::decimal`, which keeps core's float formatting out of the
-        // firmware).
+        // Shortest round-trip decimal, plain, never an exponent (`crate::decimal`, which
+        // keeps core's float formatting out of the firmware).
         match *self {
             Value::F64(v) => decimal::write_f64(v, f),
             Value::F32(v) => decimal::write_f32(v, f),

@@ -487,12 +487,18 @@ pub fn parse_value(key: Key, text: &str) -> Result<Value, SettingError> {
                 .map(Value::F32)
                 .map_err(|_| SettingError::OutOfRange(key))
         }
-        Kind::U32 { .. } | Kind::U32Set(_) => match text.parse::<i64>() {
-            Ok(v) => u32::try_from(v)
+        Kind::U32 { .. } | Kind::U32Set(_) => {
+            let digits = text.strip_prefix(['+', '-']).unwrap_or(text);
+            if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) {
+                return Err(SettingError::BadNumber(key));
+            }
+            // An integer beyond u32, even beyond 64 bits, is out of range.
+            text.parse::<i64>()
+                .ok()
+                .and_then(|v| u32::try_from(v).ok())
                 .map(Value::U32)
-                .map_err(|_| SettingError::OutOfRange(key)),
-            Err(_) => Err(SettingError::BadNumber(key)),
-        },
+                .ok_or(SettingError::OutOfRange(key))
+        }
         Kind::Word(words) => words
             .iter()
             .find(|w| **w == text)

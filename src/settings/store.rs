@@ -4,7 +4,11 @@
 //! sector that holds the newest usable record; when that sector is full, the *other* sector
 //! is erased and the record goes to its first slot. A record carries a generation number
 //! (+1 per save, wrapping from 0xFFFF_FFFF to 1) and a CRC-32; loading takes the usable
-//! record with the newest generation in serial-number order ([`generation_is_newer`]).
+//! record with the newest generation in serial-number order ([`generation_is_newer`]),
+//! which holds when the generations of the records with a valid CRC lie within 2^31 of each
+//! other, as this store's always do. Flash of another origin whose generations do not
+//! (foreign or damaged records) loads the highest generation, and the next save clears both
+//! sectors around its record, so that a save that returns `Ok` always loads back.
 //! The sector holding the newest usable record is never erased and a record is never
 //! overwritten, so a power cut at any moment of a save (during the erase, or after any
 //! programmed word) leaves the previous settings loadable; the new ones are loadable once
@@ -118,14 +122,122 @@ pub struct Loaded {
     pub generation: u32,
 }
 
+/// Half the generation circle, 2^31.
+const HALF: u32 = 1 << 31;
+
+/// How generations compare: as numbers, or rotated by 2^31 (so that a run across the wrap
+/// from 0xFFFF_FFFF to 1 is in order).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Order {
+    Plain,
+    Rotated,
+}
+
+impl Order {
+    /// The key that orders `generation`.
+    const fn key(self, generation: u32) -> u32 {
+        match self {
+            Self::Plain => generation,
+            Self::Rotated => generation ^ HALF,
+        }
+    }
+}
+
+/// The generations of the records with a valid CRC: their least and largest key in each
+/// [`Order`].
+#[derive(Debug, Clone, Copy)]
+struct Span {
+    plain: (u32, u32),
+    rotated: (u32, u32),
+}
+
+impl Span {
+    fn new(generation: u32) -> Self {
+        let r = Order::Rotated.key(generation);
+        Self {
+            plain: (generation, generation),
+            rotated: (r, r),
+        }
+    }
+
+    fn add(&mut self, generation: u32) {
+        let r = Order::Rotated.key(generation);
+        self.plain = (self.plain.0.min(generation), self.plain.1.max(generation));
+        self.rotated = (self.rotated.0.min(r), self.rotated.1.max(r));
+    }
+
+    /// The order in which every generation lies within 2^31 - 1 behind the newest, the
+    /// serial-number order of [`generation_is_newer`]; `None` when no half of the circle
+    /// holds them all (records not written by this store).
+    fn order(&self) -> Option<Order> {
+        if self.plain.1 - self.plain.0 < HALF {
+            Some(Order::Plain)
+        } else if self.rotated.1 - self.rotated.0 < HALF {
+            Some(Order::Rotated)
+        } else {
+            None
+        }
+    }
+}
+
 #[derive(Debug, Clone, Copy, Default)]
 struct Scan {
-    /// Newest generation of any record with a valid CRC (usable or not).
-    max_generation: Option<u32>,
-    /// Newest usable record: (generation, sector, settings).
-    best: Option<(u32, usize, Settings)>,
+    /// Generations of the records with a valid CRC (usable or not).
+    span: Option<Span>,
+    /// Newest usable record in each [`Order`] (plain, rotated): (generation, sector,
+    /// settings); the first found of equal generations.
+    best: [Option<(u32, usize, Settings)>; 2],
     /// Per sector: first slot after the last non-erased slot, if inside the sector.
     next_free: [Option<usize>; 2],
+}
+
+impl Scan {
+    fn add(&mut self, generation: u32, sector: usize, settings: Option<Settings>) {
+        match &mut self.span {
+            Some(span) => span.add(generation),
+            None => self.span = Some(Span::new(generation)),
+        }
+        let Some(settings) = settings else {
+            return;
+        };
+        for (best, order) in self.best.iter_mut().zip([Order::Plain, Order::Rotated]) {
+            if best.is_none_or(|(g, _, _)| order.key(generation) > order.key(g)) {
+                *best = Some((generation, sector, settings));
+            }
+        }
+    }
+
+    /// The order the records follow; plain (the highest generation) when they follow none.
+    fn order(&self) -> Order {
+        self.span.and_then(|s| s.order()).unwrap_or(Order::Plain)
+    }
+
+    /// The newest usable record: (generation, sector, settings).
+    fn best(&self) -> Option<(u32, usize, Settings)> {
+        self.best[self.order() as usize]
+    }
+
+    /// The generation of the next record, and whether it is newer than every record with a
+    /// valid CRC. If not (records of another origin), the save clears both sectors for it
+    /// to load, and it follows the generation loaded now.
+    fn next_generation(&self) -> (u32, bool) {
+        // 0 is never written (it stands for the defaults): 0xFFFF_FFFF is followed by 1.
+        let after = |g: u32| g.wrapping_add(1).max(1);
+        let Some(span) = self.span else {
+            return (1, true);
+        };
+        if let Some(order) = span.order() {
+            let (oldest, newest) = match order {
+                Order::Plain => span.plain,
+                Order::Rotated => (span.rotated.0 ^ HALF, span.rotated.1 ^ HALF),
+            };
+            let generation = after(newest);
+            if generation_is_newer(generation, oldest) {
+                return (generation, true);
+            }
+        }
+        (after(self.best().map_or(0, |b| b.0)), false)
+    }
 }
 
 /// The settings store over a [`Flash`].
@@ -177,22 +289,8 @@ impl<F: Flash> SettingsStore<F> {
                     continue;
                 }
                 used_end = slot + 1;
-                let Some((generation, settings)) = parse_record(&buf) else {
-                    continue;
-                };
-                if scan
-                    .max_generation
-                    .is_none_or(|g| generation_is_newer(generation, g))
-                {
-                    scan.max_generation = Some(generation);
-                }
-                if let Some(settings) = settings {
-                    if scan
-                        .best
-                        .is_none_or(|(g, _, _)| generation_is_newer(generation, g))
-                    {
-                        scan.best = Some((generation, sector, settings));
-                    }
+                if let Some((generation, settings)) = parse_record(&buf) {
+                    scan.add(generation, sector, settings);
                 }
             }
             scan.next_free[sector] = (used_end < slots).then_some(used_end);
@@ -204,7 +302,7 @@ impl<F: Flash> SettingsStore<F> {
     /// [`SettingsSource::Defaults`]. Fails only when the flash cannot be read.
     pub fn load(&mut self) -> Result<Loaded, StoreError<F::Error>> {
         let scan = self.scan()?;
-        Ok(match scan.best {
+        Ok(match scan.best() {
             Some((generation, _, settings)) => Loaded {
                 settings,
                 source: SettingsSource::Flash,
@@ -227,28 +325,31 @@ impl<F: Flash> SettingsStore<F> {
         })
     }
 
-    /// Whether the next [`Self::save`] must erase a sector first (the sector holding the
-    /// newest usable record is full: every 64th save on the real geometry). On the
-    /// STM32F401 an erase stalls the CPU, and the sampling, for up to 0.8 s; compare that with
-    /// [`Settings::max_unread_interval`] before saving while the wheels may turn. Reads the
-    /// flash, changes nothing.
+    /// Whether the next [`Self::save`] must erase a sector (the sector holding the newest
+    /// usable record is full: every 64th save on the real geometry; or records of another
+    /// origin must be cleared). On the STM32F401 an erase stalls the CPU, and the sampling,
+    /// for up to 0.8 s; compare that with [`Settings::max_unread_interval`] before saving
+    /// while the wheels may turn. Reads the flash, changes nothing.
     pub fn next_save_erases(&mut self) -> Result<bool, StoreError<F::Error>> {
         let scan = self.scan()?;
-        let target = scan.best.map_or(0, |(_, sector, _)| sector);
-        Ok(scan.next_free[target].is_none())
+        let target = scan.best().map_or(0, |(_, sector, _)| sector);
+        Ok(!scan.next_generation().1 || scan.next_free[target].is_none())
     }
 
-    /// Saves `settings` (validated first); returns the new record's generation. At most one
-    /// sector erase and one record program; safe against a power cut at any point.
+    /// Saves `settings` (validated first); returns the new record's generation, which the
+    /// next [`Self::load`] returns with these settings. One record program and at most one
+    /// sector erase, safe against a power cut at any point, on flash this store wrote. On
+    /// flash holding records whose generations lie more than 2^31 apart (of another origin
+    /// or damaged: no order makes a new record the newest) it erases the other sector,
+    /// writes the record there and then erases the sector it came from.
     pub fn save(&mut self, settings: &Settings) -> Result<u32, StoreError<F::Error>> {
         settings.validate().map_err(|_| StoreError::Invalid)?;
         let scan = self.scan()?;
-        // 0 is never written (it stands for the defaults): 0xFFFF_FFFF is followed by 1.
-        let generation = scan.max_generation.unwrap_or(0).wrapping_add(1).max(1);
-        let target = scan.best.map_or(0, |(_, sector, _)| sector);
+        let (generation, newest) = scan.next_generation();
+        let target = scan.best().map_or(0, |(_, sector, _)| sector);
         let (sector, slot) = match scan.next_free[target] {
-            Some(slot) => (target, slot),
-            None => {
+            Some(slot) if newest => (target, slot),
+            _ => {
                 let other = 1 - target;
                 self.flash.erase(other).map_err(StoreError::Flash)?;
                 (other, 0)
@@ -265,6 +366,10 @@ impl<F: Flash> SettingsStore<F> {
         if back != record {
             return Err(StoreError::Verify);
         }
+        if !newest {
+            // The record is written: clear the records that could outrank it.
+            self.flash.erase(target).map_err(StoreError::Flash)?;
+        }
         Ok(generation)
     }
 }
@@ -272,6 +377,8 @@ impl<F: Flash> SettingsStore<F> {
 /// Whether generation `a` is newer than `b` in serial-number arithmetic (RFC 1982 with 32
 /// bits): `a` follows `b` by 1 to 2^31 - 1 saves, across the wrap from 0xFFFF_FFFF to 1.
 /// The records in the two sectors span at most a few hundred saves, far inside that window.
+/// Records more than 2^31 apart follow no such order: loading then takes the highest
+/// generation, and the next save clears them.
 pub const fn generation_is_newer(a: u32, b: u32) -> bool {
     let ahead = a.wrapping_sub(b);
     ahead != 0 && ahead < 1 << 31

@@ -117,13 +117,17 @@ pub struct CatchUp {
 /// stall. After a stall the delivered `sample`'s snapshot was taken up to one sample
 /// period (plus the latency) after its tick; the next one is on time again.
 ///
+/// If `due` is the first sample of a second, that second takes the rate configured now
+/// ([`Discipline::begin_second`]), and so does the returned `sample`.
+///
 /// If `due.tick > now` (not a late interrupt, a spurious or early one), `due` is still
 /// the `sample`. Allocation-free; the points of a long stall are skipped at once
 /// ([`Discipline::skip_to`]: a few operations per second of stall), so the work does not
 /// grow with the rate (a 0.8 s stall at 1 kHz is not 800 iterations).
 pub fn catch_up(disc: &mut Discipline, due: Sample, now: u64, guard: u64) -> CatchUp {
     let limit = now.saturating_add(guard);
-    let mut sample = due;
+    // At the first sample of a second, the second takes the rate configured now.
+    let mut sample = disc.begin_second(due);
     // Points of a long stall are skipped by arithmetic; an interrupt on time (within the
     // guard) has none to skip, and pays nothing for it.
     let mut merged: u32 = if now > due.tick.saturating_add(guard) {

@@ -125,7 +125,8 @@ pub enum SyncState {
 pub struct DisciplineConfig {
     /// Nominal frequency of the timer ticks, Hz.
     pub timer_hz: u32,
-    /// Samples per second ([`RATE_RANGE`]); changes take effect at the next second.
+    /// Samples per second ([`RATE_RANGE`]); a change takes effect at the first second that
+    /// begins after it ([`Discipline::begin_second`]).
     pub rate_hz: u32,
     /// PPS-locked or free-running.
     pub mode: SyncMode,
@@ -322,13 +323,14 @@ impl Discipline {
         })
     }
 
-    /// The configuration in use (a new rate applies from the next second).
+    /// The configuration in use (a new rate applies from the next second that begins).
     pub fn config(&self) -> &DisciplineConfig {
         &self.cfg
     }
 
     /// Changes the configuration. A mode change applies at once (to `free`: free-running;
-    /// to `pps`: acquisition starts from free-running); a rate change at the next second.
+    /// to `pps`: acquisition starts from free-running); a rate change at the first second
+    /// that begins after it ([`Discipline::begin_second`]).
     pub fn set_config(&mut self, cfg: DisciplineConfig) -> Result<(), ConfigError> {
         cfg.validate()?;
         let mode_changed = cfg.mode != self.cfg.mode || cfg.timer_hz != self.cfg.timer_hz;
@@ -365,9 +367,45 @@ impl Discipline {
         (self.anchor as i64 + d * self.period as i64) as u64
     }
 
+    /// Moves the cursor past a second whose samples are all committed, and gives a second
+    /// none of whose samples is committed the configured rate.
+    fn advance_cursor(&mut self) {
+        if self.cursor_index >= self.rate {
+            self.cursor_index = 0;
+            self.cursor_second = self.cursor_second.wrapping_add(1);
+        }
+        if self.cursor_index == 0 {
+            self.rate = self.cfg.rate_hz;
+        }
+    }
+
+    /// The rate of a second is open until a sample after its first is committed: the first
+    /// sample's tick (the second's start) does not depend on it. Called at the instant of
+    /// `first`, the last committed sample, before the next commit: if `first` begins its
+    /// second, that second takes the rate configured now ([`Discipline::set_config`] may
+    /// have changed it since `first` was committed), and `first` is returned with it. Any
+    /// other sample is returned as it is. So a rate set before the first sample of a second
+    /// is taken applies from that sample on.
+    pub fn begin_second(&mut self, first: Sample) -> Sample {
+        let open = first.index == 0
+            && first.second == self.cursor_second
+            && self.cursor_index == 1
+            && self.last_tick.is_some_and(|(t, _)| t == first.tick);
+        if !open {
+            return first;
+        }
+        self.rate = self.cfg.rate_hz;
+        self.last_tick = Some((first.tick, self.rate));
+        Sample {
+            rate: self.rate,
+            ..first
+        }
+    }
+
     /// Re-anchors the grid at the start of the cursor's second and changes the period
     /// from there, so committed samples stay where they are.
     fn change_period(&mut self, period: u64) {
+        self.advance_cursor();
         self.anchor = self.second_start(self.cursor_second);
         self.anchor_second = self.cursor_second;
         self.period = period;
@@ -411,16 +449,12 @@ impl Discipline {
     pub fn next_sample(&mut self, now: u64) -> Sample {
         self.check_deadline(now);
         loop {
+            self.advance_cursor();
             let second = self.cursor_second;
             let index = self.cursor_index;
             let rate = self.rate;
             let tick = self.second_start(second) + u64::from(index) * self.period / u64::from(rate);
             self.cursor_index += 1;
-            if self.cursor_index >= self.rate {
-                self.cursor_index = 0;
-                self.cursor_second = self.cursor_second.wrapping_add(1);
-                self.rate = self.cfg.rate_hz;
-            }
             // Half the shorter of the two sample periods (the rates differ at a rate change).
             let fastest = self.last_tick.map_or(rate, |(_, r)| r.max(rate));
             let min_gap = self.period / (2 * u64::from(fastest));
@@ -453,6 +487,7 @@ impl Discipline {
         self.check_deadline(now);
         let mut skipped: u32 = 0;
         loop {
+            self.advance_cursor();
             let start = self.second_start(self.cursor_second);
             if now < start {
                 return skipped;
@@ -461,9 +496,7 @@ impl Discipline {
             if self.second_start(self.cursor_second.wrapping_add(1)) <= now {
                 // The rest of this second and the start of the next one have passed.
                 skipped = skipped.saturating_add(self.rate - self.cursor_index);
-                self.cursor_index = 0;
-                self.cursor_second = self.cursor_second.wrapping_add(1);
-                self.rate = self.cfg.rate_hz;
+                self.cursor_index = self.rate;
                 continue;
             }
             // The latest k with floor(k * period / rate) <= now - start.

@@ -93,8 +93,9 @@ impl<F: StallingFlash> Commands<F> {
 
     /// The working settings differ from those the unit would start with after a reset
     /// (the stored record's, or the defaults when none is stored): `save` is pending.
+    /// Compared as the stored bytes (and the DeviceInfo checksum), so `-0` differs from `0`.
     pub fn dirty(&self) -> bool {
-        self.settings != self.stored
+        self.settings.to_bytes() != self.stored.to_bytes()
     }
 
     /// The working settings.

@@ -4,14 +4,16 @@
 //! Oracles: no panic; a reply starts with `ok` or `error: ` and fits [`MAX_REPLY`]; an error
 //! changes nothing; `SettingsChanged` exactly when the stored bytes changed; the working
 //! settings always validate; a `reset_pose` pose is inside the integrator's range; a save
-//! loads back bit for bit; every key's `get` text set back is no change (exact text form).
+//! loads back bit for bit; every key's `get` text is a plain decimal (never an exponent) and
+//! set back is no change (exact text form); an integer of any size beyond a key's range is
+//! out of range, not a bad number.
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
 use odo_core::console::{execute, Action, LineAssembler, MAX_REPLY};
 use odo_core::odometry::Pose;
 use odo_core::settings::store::SettingsStore;
-use odo_core::settings::{Key, Settings};
+use odo_core::settings::{Key, Kind, Settings};
 use odo_fuzz::CutFlash;
 
 fuzz_target!(|data: &[u8]| {
@@ -51,9 +53,27 @@ fuzz_target!(|data: &[u8]| {
         }
     }
     for k in Key::ALL {
-        let line = format!("set {} {}", k.name(), settings.get(k));
+        let value = settings.get(k).to_string();
+        let word = value.bytes().all(|b| b.is_ascii_lowercase());
+        assert!(word || !value.contains(['e', 'E']), "{}: {value}", k.name());
+        let line = format!("set {} {value}", k.name());
         let (reply, action) = execute(&line, &mut settings);
         assert!(reply.ok, "{line:?}: {}", reply.text);
         assert_eq!(action, Action::None, "{line:?}: the text form is not exact");
+        if matches!(k.kind(), Kind::U32 { .. } | Kind::U32Set(_)) {
+            for digits in [
+                "99999999999999999999",
+                "-99999999999999999999",
+                "4294967296",
+            ] {
+                let line = format!("set {} {digits}", k.name());
+                let (reply, _) = execute(&line, &mut settings);
+                assert!(
+                    reply.text.contains("out of range"),
+                    "{line:?}: {}",
+                    reply.text
+                );
+            }
+        }
     }
 });

@@ -1,14 +1,17 @@
-//! The settings store under power cuts: from a flash holding one record of any generation
-//! (the wrap included), a sequence of saves, each cut at any step with any partial bits,
-//! then finished after the reboot.
+//! The settings store under power cuts: from a flash holding up to four records of any
+//! generations (the wrap included, and generations more than 2^31 apart, as foreign or
+//! damaged flash has them), usable or not, a sequence of saves, each cut at any step with any
+//! partial bits, then finished after the reboot.
 //!
-//! Oracles: no panic; after a cut the store loads the previous settings or the new ones,
-//! from flash once anything was saved; a save that returns Ok loads back bit for bit with
-//! the generation it returned, newer than the one before; no word is programmed twice.
+//! Oracles: no panic; a save that returns Ok loads back bit for bit with the generation it
+//! returned, newer than the one loaded before; after a cut the store loads the previous
+//! settings or the new ones, from flash once anything was saved (on flash whose records this
+//! store could have written: generations within 2^31 of the newest); no word is programmed
+//! twice.
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use odo_core::settings::store::{encode_record, generation_is_newer, SettingsStore};
+use odo_core::settings::store::{encode_record, generation_is_newer, SettingsStore, SLOT_LEN};
 use odo_core::settings::{Settings, SettingsSource};
 use odo_fuzz::CutFlash;
 
@@ -25,18 +28,47 @@ fn load(flash: &CutFlash) -> (Vec<u8>, SettingsSource, u32) {
     (l.settings.to_bytes().to_vec(), l.source, l.generation)
 }
 
+/// Whether records of generations `gens` are in the order this store keeps: one of them
+/// newest in serial order, and the one after it newer than all.
+fn in_order(gens: &[u32]) -> bool {
+    let Some(&top) = gens
+        .iter()
+        .find(|&&g| gens.iter().all(|&h| h == g || generation_is_newer(g, h)))
+    else {
+        return gens.is_empty();
+    };
+    let next = top.wrapping_add(1).max(1);
+    gens.iter().all(|&h| generation_is_newer(next, h))
+}
+
 fuzz_target!(|data: &[u8]| {
-    let Some((head, ops)) = data.split_first_chunk::<6>() else {
+    let Some((head, rest)) = data.split_first_chunk::<2>() else {
         return;
     };
     let slots = usize::from(head[0] % 4) + 1;
+    let seeded = usize::from(head[1] % 5);
+    let Some((seeds, ops)) = rest.split_at_checked(seeded * 6) else {
+        return;
+    };
     let mut flash = CutFlash::new(slots);
-    if head[1] & 1 == 1 {
-        let generation = u32::from_le_bytes([head[2], head[3], head[4], head[5]]);
-        let sector = usize::from(head[1] >> 1 & 1);
-        flash.mem[sector][..odo_core::settings::store::RECORD_LEN]
-            .copy_from_slice(&encode_record(&variant(0), generation));
+    let mut gens = Vec::new();
+    for seed in seeds.chunks_exact(6) {
+        let sector = usize::from(seed[0] & 1);
+        let at = usize::from(seed[0] >> 1 & 3) % slots * SLOT_LEN;
+        let generation = u32::from_le_bytes([seed[1], seed[2], seed[3], seed[4]]);
+        let mut s = variant(seed[5]);
+        if seed[0] & 0x80 != 0 {
+            s.rate = 0; // well formed, refused on loading
+        }
+        let slot = &mut flash.mem[sector][at..at + SLOT_LEN];
+        if slot.iter().all(|&b| b == 0xFF) {
+            let record = encode_record(&s, generation);
+            slot[..record.len()].copy_from_slice(&record);
+            gens.push(generation);
+        }
     }
+    // Power-cut safety is promised for flash this store could have written.
+    let mut ours = in_order(&gens);
     let mut now = load(&flash);
     for op in ops.chunks_exact(4) {
         let new = variant(op[0]);
@@ -57,13 +89,15 @@ fuzz_target!(|data: &[u8]| {
                         "{now:?} -> {after:?}"
                     );
                 }
+                ours = true;
             }
-            Err(_) => {
+            Err(_) if ours => {
                 assert!(after == now || is_new, "cut at {cut}: {now:?} -> {after:?}");
                 if now.1 == SettingsSource::Flash {
                     assert_eq!(after.1, SettingsSource::Flash);
                 }
             }
+            Err(_) => {}
         }
         assert_eq!(flash.violations, 0, "a word programmed twice");
         now = after;

@@ -48,9 +48,10 @@ impl fmt::Display for Format {
 }
 
 /// Recognises the format from the first 50 non-blank lines: a `$` sentence with a `*hh`
-/// checksum is NMEA (binary data before it, as in a receiver's mixed log, is passed over); a `%`
-/// header or a data row starting `yyyy/mm/dd` or `week tow` with at least 14 columns is
-/// RTKLIB; anything else is taken as CSV (whose own parser then names what is wrong).
+/// checksum is NMEA (binary data before it, as in a receiver's mixed log, is passed over,
+/// even when it starts with `%`); a `%` header of text or a data row starting `yyyy/mm/dd`
+/// or `week tow` with at least 14 columns is RTKLIB; anything else is taken as CSV (whose
+/// own parser then names what is wrong).
 pub fn detect(text: &str) -> Format {
     for line in text
         .lines()
@@ -58,7 +59,7 @@ pub fn detect(text: &str) -> Format {
         .filter(|l| !l.is_empty())
         .take(50)
     {
-        if line.starts_with('%') {
+        if is_rtklib_header(line) {
             return Format::Rtklib;
         }
         if let Some(i) = line.find('$') {
@@ -82,6 +83,17 @@ pub fn detect(text: &str) -> Format {
         }
     }
     Format::Csv
+}
+
+/// An RTKLIB header line: `%`, then nothing or a space and printable ASCII (`% program :
+/// RTKPOST`), not binary data that happens to start with `%`.
+fn is_rtklib_header(line: &str) -> bool {
+    line.strip_prefix('%').is_some_and(|rest| {
+        (rest.is_empty() || rest.starts_with([' ', '\t']))
+            && rest
+                .bytes()
+                .all(|b| b == b'\t' || (b' '..=b'~').contains(&b))
+    })
 }
 
 /// Solution quality of an epoch, as GGA's quality field and RTKLIB's Q column give it.
@@ -651,6 +663,11 @@ mod tests {
                 Format::Nmea,
             ),
             ("% program : RTKPOST\n", Format::Rtklib),
+            ("%\n%  GPST latitude(deg)\n", Format::Rtklib),
+            // Binary data before an NMEA log that happens to start with `%`.
+            ("%\u{fffd}\u{1}b\u{fffd}\n$GNGGA,x*11\n", Format::Nmea),
+            ("%\u{b5}\u{62}$GNRMC,x*11\n", Format::Nmea),
+            ("%\u{1}\u{2}\n%\u{fffd}\n$GPZDA,x*11\n", Format::Nmea),
             (
                 "2024/02/04 00:00:00.000 49.2 16.6 300 1 12 0.01 0.01 0.02 0 0 0 1.0 99.9\n",
                 Format::Rtklib,

@@ -20,6 +20,9 @@
 //! HDT carries no time: it belongs to the epoch being sent, the time of the last sentence
 //! that carries one (GGA, GST, RMC, ZDA), whether its GGA came before or comes after it; an
 //! HDT sent first in its epoch, before any timed sentence, is taken for the previous epoch's.
+//! A GGA that repeats the previous epoch's time is counted and skipped; an HDT or GST that
+//! went with the repeat goes to that epoch. A date sentence before the GPS epoch
+//! (1980-01-06) is counted and skipped like a corrupt one.
 
 use anyhow::{bail, Result};
 use chrono::Timelike;
@@ -88,7 +91,7 @@ fn sentence_type(s: &str) -> &str {
 
 /// Parses an NMEA log; `file` names it in messages. UTC + `leap_seconds` = GPS time.
 pub fn parse(file: &str, text: &str, leap_seconds: i32) -> Result<GeodeticLog> {
-    let mut reader = LogReader::new(file);
+    let mut reader = LogReader::new(file, leap_seconds);
     for (i, raw) in text.lines().enumerate() {
         reader.line(i + 1, raw);
     }
@@ -100,6 +103,8 @@ pub fn parse(file: &str, text: &str, leap_seconds: i32) -> Result<GeodeticLog> {
 struct LogReader<'a> {
     /// The log's name in messages.
     file: &'a str,
+    /// GPS - UTC (s), for the date sentences' check against the GPS epoch.
+    leap_seconds: i32,
     report: ReadReport,
     undated: Vec<Undated>,
     dates: Vec<DateMark>,
@@ -114,9 +119,10 @@ struct LogReader<'a> {
 }
 
 impl<'a> LogReader<'a> {
-    fn new(file: &'a str) -> Self {
+    fn new(file: &'a str, leap_seconds: i32) -> Self {
         Self {
             file,
+            leap_seconds,
             report: ReadReport::default(),
             undated: Vec::new(),
             dates: Vec::new(),
@@ -202,12 +208,16 @@ impl<'a> LogReader<'a> {
                     + f64::from(t.minute) * 60.0
                     + f64::from(t.second)
                     + f64::from(t.millis) * 1e-3;
+                let days = days_from_civil(i64::from(t.year), u32::from(t.month), u32::from(t.day));
+                if gps_time::utc_to_gps(days, sod, self.leap_seconds).is_err() {
+                    report.corrupt(format!(
+                        "{file}:{line}: {}: date before the GPS epoch (1980-01-06): skipped",
+                        sentence_type(s)
+                    ));
+                    return None;
+                }
                 self.epoch_time = Some(ms(sod));
-                self.dates.push(DateMark {
-                    days: days_from_civil(i64::from(t.year), u32::from(t.month), u32::from(t.day)),
-                    sod,
-                    line,
-                });
+                self.dates.push(DateMark { days, sod, line });
                 report.used(sentence_type(s));
                 None
             }
@@ -367,8 +377,9 @@ impl<'a> LogReader<'a> {
     }
 }
 
-/// Dates the GGA epochs (see the module doc), converts to GPS time and drops epochs whose
-/// time is not after the previous one's.
+/// Dates the GGA epochs (see the module doc), converts to GPS time and drops epochs before
+/// the GPS epoch and epochs whose time is not after the previous one's (a repeat of the same
+/// time gives the epoch kept the HDT or GST that went with it), counting them.
 fn date_epochs(
     file: &str,
     undated: Vec<Undated>,
@@ -407,19 +418,29 @@ fn date_epochs(
         } else if mark.sod - u.sod > 43_200.0 {
             days += 1;
         }
-        let gps_time = gps_time::utc_to_gps(days, u.sod, leap_seconds)
-            .map_err(|e| anyhow::anyhow!("{file}:{}: {e}", u.line))?;
+        let gps_time = match gps_time::utc_to_gps(days, u.sod, leap_seconds) {
+            Ok(t) => t,
+            Err(e) => {
+                report.unusable(format!("{file}:{}: GGA: {e}: skipped", u.line));
+                continue;
+            }
+        };
         prev = Some(DateMark {
             days,
             sod: u.sod,
             line: u.line,
         });
-        if let Some(last) = out.last() {
+        if let Some(last) = out.last_mut() {
             if gps_time <= last.gps_time {
                 report.unusable(format!(
                     "{file}:{}: GGA time is not after the previous epoch's (line {}): skipped",
                     u.line, last.line
                 ));
+                // A repeated GGA of the same epoch may have taken its HDT or GST.
+                if gps_time == last.gps_time {
+                    last.heading = last.heading.or(u.heading);
+                    last.sigma_north_east_up = last.sigma_north_east_up.or(u.sigma_north_east_up);
+                }
                 continue;
             }
         }
