@@ -3,7 +3,7 @@
 and fail when a loadable section overlaps the settings sectors (memory.x).
 
 With `--no-float-formatting` also fail when the image links core's float formatting
-(`core::fmt::float`, `flt2dec`: Grisu and Dragon): issue 20's `{:.0}` of an f64 cost 12.9 KiB
+(`core::fmt::float`, `flt2dec`: Grisu and Dragon): a `{:.0}` of an f64 costs about 13 KiB
 of flash. The firmware writes numbers as integers or leaves formatting to the host (defmt).
 
 Usage: elf_size.py [--no-float-formatting] ELF"""
@@ -134,7 +134,7 @@ def main():
                 f"{path}: links core's float formatting ({sum(s for _, s in found)} bytes in these "
                 f"symbols):\n{listing}\n"
                 "A `{}`, `{:?}` or `{:.N}` of an f32/f64 in the firmware (a `write!`, a `format_args!`, "
-                "a Display impl) pulls it in (issue 20: 12.9 KiB). Write the number as integers (as "
+                "a Display impl) pulls it in (about 13 KiB). Write the number as integers (as "
                 "src/decimal.rs does) or log it with defmt, which formats on the host."
             )
         print("float formatting: none linked")

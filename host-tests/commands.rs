@@ -483,7 +483,7 @@ proptest! {
     }
 }
 
-/// Issue 20 item 10: a line of only spaces or tabs is ignored like an empty line, not
+/// A line of only spaces or tabs is ignored like an empty line, not
 /// answered with `error: unknown command ''`.
 #[test]
 fn blank_lines_are_ignored() {
@@ -494,7 +494,7 @@ fn blank_lines_are_ignored() {
     );
 }
 
-/// Issue 20 item 8: `set KEY -0` on a key at 0 changes the stored bytes and checksum, so the
+/// `set KEY -0` on a key at 0 changes the stored bytes and checksum, so the
 /// unit must be told (`SettingsChanged`), and `defaults` after it must restore +0.
 #[test]
 fn negative_zero_is_a_change() {
@@ -508,7 +508,7 @@ fn negative_zero_is_a_change() {
     assert_eq!(run("set left_cos1 0", &mut s).1, Action::None);
 }
 
-/// Issue 20 item 7: `reset_pose` refuses a coordinate the integrator cannot hold (clamped
+/// `reset_pose` refuses a coordinate the integrator cannot hold (clamped
 /// and wrapping before), with an error naming it; in-range extremes are accepted.
 #[test]
 fn reset_pose_out_of_range_is_refused() {

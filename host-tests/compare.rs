@@ -170,7 +170,7 @@ fn compare_action_table() {
     }
 }
 
-/// The race of issue 19: an interrupt (a PPS capture) entered just before a compare tick, the
+/// The compare race: an interrupt (a PPS capture) entered just before a compare tick, the
 /// compare firing at any point of the handler's reads. Every sample is still delivered,
 /// each within a few microseconds of its tick: no compare is lost for 2^32 ticks.
 #[test]

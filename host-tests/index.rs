@@ -113,7 +113,7 @@ proptest! {
     }
 }
 
-/// Issue 20 item 12: latched counts about 2^63 apart (unreachable on a board, but the core
+/// Latched counts about 2^63 apart (unreachable on a board, but the core
 /// promises no panic) multiplied with overflow; now exact, with saturated turns.
 #[test]
 fn index_counts_far_apart_do_not_overflow() {

@@ -405,7 +405,7 @@ fn overrange_sample_is_flagged_and_not_integrated() {
     assert!(st.overrange);
 }
 
-/// Issue 20 item 7: a pose beyond the fixed-point range is reported by `check_range` and
+/// A pose beyond the fixed-point range is reported by `check_range` and
 /// clamped by `reset_pose`, so the steps after it cannot overflow (they wrapped in release
 /// and panicked with overflow checks before).
 #[test]

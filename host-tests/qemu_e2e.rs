@@ -268,7 +268,7 @@ fn qemu_end_to_end() {
     rate_switch(&mut link);
 }
 
-/// Issue 19, item 12: `set rate 100 output_divider 4` at 50 Hz / 1 switches everything at
+/// `set rate 100 output_divider 4` at 50 Hz / 1 switches everything at
 /// one whole second: the Status just before the flagged record announces 100 Hz / 4; the
 /// records before it are 20 ms apart, those after it 40 ms (every 4th sample at 100 Hz).
 fn rate_switch(link: &mut UnitLink) {

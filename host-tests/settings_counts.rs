@@ -161,7 +161,7 @@ fn erase_stall_against_the_counter_range() {
     assert!(d.survives_stall(648));
     assert!(!d.survives_stall(650));
     assert!(!d.survives_stall(800));
-    // Issue 19: at 2 Hz the gap is 500 ms + the stall: the x32 erase (BOR level 3) no longer
+    // At 2 Hz the gap is 500 ms + the stall: the x32 erase (BOR level 3) no longer
     // passes (counts 48,971 > 32,767 would alias TIM3).
     let mut two_hz = d;
     two_hz.rate = 2;

@@ -193,7 +193,7 @@ fn full_size_sectors_wrap() {
     assert_eq!(f.violations, 0);
 }
 
-/// Issue 20 item 9: a valid record of generation 0xFFFF_FFFF made the next save write
+/// A valid record of generation 0xFFFF_FFFF made the next save write
 /// generation 1, which verified, but every later load returned the old record. Generations
 /// are ordered with wrap-around (serial-number arithmetic); go across the wrap through both
 /// sectors.

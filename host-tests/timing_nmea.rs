@@ -269,7 +269,7 @@ proptest! {
     }
 }
 
-/// Issue 20 item 11: second 60 is a leap second only at 23:59:60 (`000060.00` became 00:01:00);
+/// Second 60 is a leap second only at 23:59:60 (`000060.00` became 00:01:00);
 /// the leap second itself still parses and maps onto the next second.
 #[test]
 fn nmea_second_60_only_at_23_59_60() {

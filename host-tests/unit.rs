@@ -929,7 +929,7 @@ fn raw_of(s: Sample, disc: &odo_core::timing::Discipline, left: u32, right: u32)
     r
 }
 
-/// Issue 19, item 12: `set rate 50 output_divider 1` at 1 kHz / 10. The sampler switches at
+/// `set rate 50 output_divider 1` at 1 kHz / 10. The sampler switches at
 /// the next whole second; the records, the heartbeat and the rate reported switch at that
 /// same sample, which is sent with the rate switch flag after a Status announcing it.
 #[test]
@@ -1034,7 +1034,7 @@ fn a_heartbeat_without_room_is_retried() {
     assert!(!p.heartbeat_due());
 }
 
-/// Issue 19, item 4: the first record after a stall (or a late interrupt) is flagged; set once,
+/// The first record after a stall (or a late interrupt) is flagged; set once,
 /// kept while records are skipped or dropped.
 #[test]
 fn a_late_sample_is_flagged_once() {
@@ -1076,7 +1076,7 @@ fn a_late_sample_is_flagged_once() {
     assert_eq!(p.live(&r, 0).late_samples, 0);
 }
 
-/// Issue 19, item 3: index pulses lost to a full queue are counted with the next one queued.
+/// Index pulses lost to a full queue are counted with the next one queued.
 #[test]
 fn index_pulses_lost_to_a_full_queue_are_counted() {
     let mut lost = 0;
@@ -1151,7 +1151,7 @@ fn uart_status_flags_table() {
     assert_eq!(e.line_errors(), 4);
 }
 
-/// Issue 19, item 3: a sample lost to a full queue does not lose its PPS edge: the edge goes
+/// A sample lost to a full queue does not lose its PPS edge: the edge goes
 /// back into the latch and travels with the next sample (a later glitch does not hide it).
 #[test]
 fn a_dropped_sample_gives_its_pps_edge_to_the_next() {

@@ -127,7 +127,7 @@ pub fn chassis_keys() -> impl Iterator<Item = Key> {
         .filter(|k| k.info().group == Group::Chassis)
 }
 
-/// The keys every calibration file carries (issue 5); the others are written when they differ
+/// The keys every calibration file carries; the others are written when they differ
 /// from the designed values.
 pub const MAIN_KEYS: [Key; 6] = [
     Key::LeftDiameter,

@@ -1,4 +1,4 @@
-//! The SAMPLES and REFERENCE CSV files (formats fixed by issue 5; other tools depend on them).
+//! The SAMPLES and REFERENCE CSV files (fixed formats: other tools depend on them).
 //!
 //! * SAMPLES: header row; columns `t` (s), `left`, `right` (absolute increment counts of wheel
 //!   1 and 2, integers); optional `left_index`, `right_index` (counts latched at each wheel's

@@ -544,7 +544,7 @@ fn histogram(
     Ok(())
 }
 
-/// The ensemble coverage of several runs (issue 21): `<prefix>_coverage.png`, the share of
+/// The ensemble coverage of several runs: `<prefix>_coverage.png`, the share of
 /// horizontal and heading errors inside 1 and 3 sigma at each checkpoint against the distance
 /// travelled, with the nominal 68.3 % and 99.7 % and the band 60-76 % a calibrated model's
 /// 1-sigma coverage should stay in; and `<prefix>_reliability.png`, the observed against the

@@ -1,4 +1,4 @@
-//! Hostile and odd input to odoctl (issue 20): a link the unit closes, captures across a
+//! Hostile and odd input to odoctl: a link the unit closes, captures across a
 //! restart and a GPS week rollover, numeric options out of range, a value of several words,
 //! control characters from the unit, TOML values one ulp from the unit's parse.
 

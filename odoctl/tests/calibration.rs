@@ -1,4 +1,4 @@
-//! Calibration on simulated runs with known truth (issue 5's acceptance figures).
+//! Calibration on simulated runs with known truth (the acceptance figures).
 
 mod common;
 
@@ -38,7 +38,7 @@ fn calibrate_recovers_the_truth_from_the_papers_poor_first_estimate() {
             &sim.reference,
             ("s", "r"),
             &poor_first_estimate(),
-            // The paper's coverage criterion (issue 21 made the likelihood the default).
+            // The paper's coverage criterion (the default is the likelihood).
             &paper_criterion(),
         )
         .unwrap();

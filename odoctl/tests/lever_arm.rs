@@ -1,4 +1,4 @@
-//! The antenna lever arm in the calibration (issue 17): from simulated NMEA and RTKLIB logs of
+//! The antenna lever arm in the calibration: from simulated NMEA and RTKLIB logs of
 //! an antenna 0.35 m ahead of the axle, `calibrate --fit-antenna` recovers the geometry and the
 //! lever arm, in both methods, as accurately as the CSV of the same run without an antenna;
 //! `validate` reads the lever arm back from the result and applies it.

@@ -215,7 +215,7 @@ fn record_and_monitor_against_a_unit_on_tcp() {
     unit.join().unwrap();
 }
 
-/// Issue 19, item 12: a capture whose rate changes inside it (50 Hz, then 10 Hz from a whole
+/// A capture whose rate changes inside it (50 Hz, then 10 Hz from a whole
 /// second, announced by a Status and the rate switch flag). `decode` turns each record's GNSS
 /// sample index into seconds with the rate in use at that record, so the `t` column
 /// stays exact and increasing across the switch, and `replay` integrates the file (it uses

@@ -1,4 +1,4 @@
-//! End to end through the firmware's QEMU image (issue 4): `odoctl config`, `record` and
+//! End to end through the firmware's QEMU image: `odoctl config`, `record` and
 //! `replay --check` against the real firmware on QEMU's `netduinoplus2`, its USART2 on a TCP
 //! socket. Skipped (with a message) without `qemu-system-arm` or without the image
 //! (`target/qemu/thumbv7em-none-eabihf/release/odo-unit`, built by
