@@ -136,7 +136,7 @@ def fuzz(log, seconds):
     target = os.path.basename(log).rsplit(".", 1)[0]
     print(
         f"| `{target}` | {thousands(int(runs[-1])) if runs else '?'} | {seconds} s "
-        f"| {cov[-1] if cov else '?'} | {corpus[-1] if corpus else '?'} | none |"
+        f"| {thousands(int(cov[-1])) if cov else '?'} | {thousands(int(corpus[-1])) if corpus else '?'} | none |"
     )
 
 
