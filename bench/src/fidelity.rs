@@ -8,9 +8,10 @@ use odo_testkit::drive::Drive;
 use odo_testkit::reference::Reference;
 use odo_testkit::Rng;
 
+use crate::markdown::{number, thousands};
 use crate::naive::NaiveIntegrator;
 
-/// Prints the fidelity table.
+/// Prints the fidelity table (Markdown, for docs/RESULTS.md).
 pub fn run() {
     let p = ChassisParams {
         left_diameter: 0.2608,
@@ -37,11 +38,12 @@ pub fn run() {
     let mut g = [0i64; 2];
     let mut path = 0.0f64;
     let mut samples = 0u64;
-    println!("fidelity: synthetic drive at 50 Hz, about 1 m/s, straights, arcs, pivots, reversing");
     println!(
-        "fidelity: encoder resolution {:.4} mm per increment",
+        "The testkit's drive at 50 Hz (about 1 m/s: straights, arcs, pivots, reversing); the \
+         encoder resolves {:.4} mm per increment.",
         c[0] * 1e3
     );
+    println!();
     println!("| path | samples | fixed-point position error | fixed-point heading error | naive f32 position error | naive f32 heading error |");
     println!("| --- | --- | --- | --- | --- | --- |");
     for target_km in [1.0f64, 10.0, 100.0] {
@@ -66,8 +68,12 @@ pub fn run() {
         let naive_pos = (f64::from(naive.x) - reference.x).hypot(f64::from(naive.y) - reference.y);
         let naive_head = (f64::from(naive.alpha) - reference.alpha).abs();
         println!(
-            "| {target_km:.0} km | {samples} | {:.2e} m | {:.2e} rad | {:.2e} m | {:.2e} rad |",
-            fixed_pos, fixed_head, naive_pos, naive_head
+            "| {target_km:.0} km | {} | {} m | {} rad | {} m | {} rad |",
+            thousands(samples),
+            number(fixed_pos),
+            number(fixed_head),
+            number(naive_pos),
+            number(naive_head)
         );
     }
 }

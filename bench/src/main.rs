@@ -6,9 +6,10 @@
 //! `libm::sinf`/`cosf` f32 version of the same step, the frame encoder, the command parser,
 //! and the stack used by one step. On the host: numerical fidelity of the integrator
 //! against an f64 reference after 1, 10 and 100 km, beside a naive f32 integrator; and
-//! (`odo-bench calibrate`, host) the speed of `odoctl`'s calibration on simulated runs.
+//! (`odo-bench calibrate [accuracy|speed]`, host) the accuracy and the speed of `odoctl`'s
+//! calibration on simulated runs.
 //!
-//! `bench/run` builds and runs both and prints the tables.
+//! Every table is printed as Markdown: `bench/run` runs them and writes docs/RESULTS.md.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 mod inputs;
@@ -18,15 +19,18 @@ mod naive;
 mod calibration;
 #[cfg(not(target_os = "none"))]
 mod fidelity;
+#[cfg(not(target_os = "none"))]
+mod markdown;
 
-/// `odo-bench` prints the fidelity table; `odo-bench calibrate` the calibration speed
-/// (`odoctl`'s eq 16 fit and whole calibration on simulated runs).
+/// `odo-bench` prints the fidelity table; `odo-bench calibrate [accuracy|speed]` the
+/// calibration's accuracy and speed tables (both without a second argument).
 #[cfg(not(target_os = "none"))]
 fn main() {
-    if std::env::args().nth(1).as_deref() == Some("calibrate") {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    if args.first().map(String::as_str) == Some("calibrate") {
         // As odoctl's main does (odoctl::memory), so the in-process figures are odoctl's.
         odoctl::memory::keep_freed_memory();
-        calibration::run();
+        calibration::run(args.get(1).map(String::as_str));
     } else {
         fidelity::run();
     }

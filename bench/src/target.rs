@@ -1,4 +1,5 @@
-//! Instruction counts on the Cortex-M4F, under QEMU `-icount shift=0,sleep=off`.
+//! Instruction counts on the Cortex-M4F, under QEMU `-icount shift=0,sleep=off`, printed as
+//! Markdown tables (`bench/run` puts them into docs/RESULTS.md).
 
 use core::hint::black_box;
 use core::sync::atomic::{compiler_fence, Ordering};
@@ -45,13 +46,28 @@ fn stats(v: &mut [u32]) -> (u32, u32) {
     (v[v.len() / 2], v[v.len() - 1])
 }
 
+/// A count with thousands separators (`7,394`).
+pub struct Thousands(pub u32);
+
+impl core::fmt::Display for Thousands {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let (high, low) = (self.0 / 1000, self.0 % 1000);
+        if high > 0 {
+            write!(f, "{},{:03}", Thousands(high), low)
+        } else {
+            write!(f, "{low}")
+        }
+    }
+}
+
+/// Prints the table row of `name`: median and worst of `v` (sorted); returns the median.
 pub fn report(name: &str, v: &mut [u32]) -> u32 {
     let (median, worst) = stats(v);
     hprintln!(
-        "bench {:<34} median {:>6} worst {:>6} instructions",
+        "| {} | {} | {} |",
         name,
-        median,
-        worst
+        Thousands(median),
+        Thousands(worst)
     );
     median
 }
@@ -125,15 +141,71 @@ fn main() -> ! {
         *e = count(0, || {});
     }
     let (overhead, _) = stats(&mut empty);
+
+    hprintln!("| operation | median | worst |");
+    hprintln!("| --- | ---: | ---: |");
+    let medians = integrator_rows(overhead);
+    let protocol = crate::target_protocol::run(overhead);
+    // Stack used by one step: paint the stack below the current frame, step, find the
+    // deepest overwritten word.
+    let step_stack = stack_of_step(&ChassisParams::DESIGNED);
+
+    let step = medians.step.max(1);
+    hprintln!();
+    hprintln!("| figure | value |");
+    hprintln!("| --- | ---: |");
     hprintln!(
-        "bench counter overhead {} instructions (subtracted)",
-        overhead
+        "| odometry part of the paper-model step (median difference) | {} instructions |",
+        Thousands(medians.step.saturating_sub(medians.uncertainty))
+    );
+    hprintln!(
+        "| naive step / fixed-point step (medians) | {}.{:02}x |",
+        medians.naive / step,
+        (medians.naive % step) * 100 / step
+    );
+    hprintln!(
+        "| counter overhead (subtracted from every count) | {} instruction{} |",
+        overhead,
+        if overhead == 1 { "" } else { "s" }
+    );
+    hprintln!(
+        "| pose frame on the wire | {} bytes |",
+        protocol.frame_bytes
+    );
+    hprintln!(
+        "| stack of one integrator step (painted, incl. a 64-byte margin) | {} bytes |",
+        step_stack
+    );
+    hprintln!(
+        "| stack of frame encoding incl. its output buffer (painted) | {} bytes |",
+        protocol.encode_stack
     );
 
+    debug::exit(debug::EXIT_SUCCESS);
+    loop {
+        cortex_m::asm::nop();
+    }
+}
+
+/// Medians of the integrator rows that the figures table derives from.
+struct Medians {
+    /// The paper-model step.
+    step: u32,
+    /// The paper model's uncertainty alone.
+    uncertainty: u32,
+    /// The naive f32 step.
+    naive: u32,
+}
+
+/// Prints the integrator's rows of the instruction table.
+fn integrator_rows(overhead: u32) -> Medians {
     let mut full = [0u32; SAMPLES];
     let designed = ChassisParams::DESIGNED;
     integrator_steps(&designed, false, false, overhead, &mut full);
-    let full_median = report("step, paper model (odometry+unc.)", &mut full);
+    let step = report(
+        "integrator step, paper model (odometry + uncertainty)",
+        &mut full,
+    );
 
     // Uncertainty alone: Jacobian plus the paper's propagation.
     let coefficients = UncertaintyCoefficients {
@@ -155,10 +227,9 @@ fn main() -> ! {
             black_box(&paper);
         });
     }
-    let unc_median = report("  of which uncertainty (paper)", &mut unc);
-    hprintln!(
-        "bench   of which odometry (median difference) {} instructions",
-        full_median.saturating_sub(unc_median)
+    let uncertainty = report(
+        "of which the uncertainty (Jacobian + eqs 23-28), paper model",
+        &mut unc,
     );
 
     let mut cov = CovarianceUncertainty::default();
@@ -170,18 +241,18 @@ fn main() -> ! {
             black_box(&cov);
         });
     }
-    report("  uncertainty (covariance model)", &mut unc);
+    report("uncertainty alone, covariance model", &mut unc);
 
     let covariance = ChassisParams {
         uncertainty_model: UncertaintyModel::Covariance,
         ..designed
     };
     integrator_steps(&covariance, false, false, overhead, &mut full);
-    report("step, covariance model", &mut full);
+    report("integrator step, covariance model", &mut full);
     integrator_steps(&designed, false, true, overhead, &mut full);
-    report("step + sigma(), paper model", &mut full);
+    report("step + `sigma()` for a record, paper model", &mut full);
     integrator_steps(&covariance, false, true, overhead, &mut full);
-    report("step + sigma(), covariance model", &mut full);
+    report("step + `sigma()`, covariance model", &mut full);
     // Opposite-phase slip as a Gauss-Markov state (`kappa_diff_corr`).
     let turning = ChassisParams {
         kappa_diff: 4.0e-4,
@@ -189,18 +260,24 @@ fn main() -> ! {
         ..covariance
     };
     integrator_steps(&turning, false, true, overhead, &mut full);
-    report("step + sigma(), cov. + turn corr.", &mut full);
+    report(
+        "step + `sigma()`, covariance model with `kappa_diff_corr` set",
+        &mut full,
+    );
 
     let with_diff = ChassisParams {
         delta_diff: 2.0e-8,
         ..designed
     };
     integrator_steps(&with_diff, false, false, overhead, &mut full);
-    report("step, paper model + delta_diff", &mut full);
+    report("integrator step, paper model with `delta_diff`", &mut full);
 
     let wobbly = odo_testkit::wobbly_wheels();
     integrator_steps(&wobbly, true, false, overhead, &mut full);
-    report("step, per-angle wheel functions", &mut full);
+    report(
+        "integrator step, per-angle wheel functions referenced by the index",
+        &mut full,
+    );
 
     let mut naive = NaiveIntegrator::new([0.26, 0.26], 0.563, 20_000, 3.9e-8);
     for (k, d) in increments().iter().enumerate() {
@@ -209,26 +286,14 @@ fn main() -> ! {
             black_box(&naive);
         });
     }
-    let naive_median = report("naive f32 step (libm sinf/cosf)", &mut full);
-    hprintln!(
-        "bench ratio naive/fixed-point step (medians) {}.{:02}",
-        naive_median / full_median.max(1),
-        (naive_median % full_median.max(1)) * 100 / full_median.max(1)
+    let naive = report(
+        "the same step written naively (f32, `libm` `sinf`/`cosf`/`sqrtf`)",
+        &mut full,
     );
-
-    crate::target_protocol::run(overhead);
-
-    // Stack used by one step: paint the stack below the current frame, step, find the
-    // deepest overwritten word.
-    let used = stack_of_step(&designed);
-    hprintln!(
-        "bench stack of one integrator step (stack painting, incl. 64 B margin) {} bytes",
-        used
-    );
-
-    debug::exit(debug::EXIT_SUCCESS);
-    loop {
-        cortex_m::asm::nop();
+    Medians {
+        step,
+        uncertainty,
+        naive,
     }
 }
 

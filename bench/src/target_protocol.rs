@@ -1,16 +1,23 @@
 //! Instruction counts of the frame encoder, the frame decoder and the command parser on the
-//! Cortex-M4F (see `target.rs` for the method).
+//! Cortex-M4F (see `target.rs` for the method), as rows of its instruction table.
 
 use core::hint::black_box;
-use cortex_m_semihosting::hprintln;
 use odo_core::console::{execute, parse};
 use odo_core::protocol::{encode_frame, FrameDecoder, Message, PoseRecord, MAX_ENCODED_FRAME};
 use odo_core::settings::Settings;
 
 use crate::target::{count, report, stack_used};
 
-/// Runs the protocol benchmarks.
-pub fn run(overhead: u32) {
+/// What the protocol benchmarks measure besides instructions.
+pub struct Protocol {
+    /// A pose frame on the wire, bytes.
+    pub frame_bytes: usize,
+    /// Stack of one frame encoding with its output buffer, bytes.
+    pub encode_stack: usize,
+}
+
+/// Runs the protocol benchmarks: prints their rows of the instruction table.
+pub fn run(overhead: u32) -> Protocol {
     let mut v = [0u32; 64];
     let mut frame = [0u8; MAX_ENCODED_FRAME];
     let mut len = 0;
@@ -34,8 +41,7 @@ pub fn run(overhead: u32) {
             black_box(&frame);
         });
     }
-    report("frame encoder (pose record)", &mut v);
-    hprintln!("bench pose frame on the wire: {} bytes", len);
+    report("frame encoder, one pose frame (COBS + CRC-32)", &mut v);
 
     let mut decoder = FrameDecoder::new();
     for slot in v.iter_mut() {
@@ -45,7 +51,7 @@ pub fn run(overhead: u32) {
             });
         });
     }
-    report("frame decoder (pose record)", &mut v);
+    report("frame decoder, one pose frame", &mut v);
 
     let lines = [
         "set left_diameter 0.2608",
@@ -63,7 +69,7 @@ pub fn run(overhead: u32) {
             black_box(parse(black_box(line)).is_ok());
         });
     }
-    report("command parser (8 lines)", &mut parse_counts);
+    report("command parser, 8 lines", &mut parse_counts);
     let mut settings = Settings::DEFAULT;
     for (slot, line) in parse_counts.iter_mut().zip(lines) {
         *slot = count(overhead, || {
@@ -71,7 +77,10 @@ pub fn run(overhead: u32) {
             black_box((&reply, &action));
         });
     }
-    report("command execute incl. reply (8 lines)", &mut parse_counts);
+    report(
+        "command execution with its reply, 8 lines",
+        &mut parse_counts,
+    );
 
     let record = Message::Pose(PoseRecord {
         x: 1.0,
@@ -82,8 +91,8 @@ pub fn run(overhead: u32) {
         black_box(encode_frame(black_box(&record), 7, &mut out).is_ok());
         black_box(&out);
     });
-    hprintln!(
-        "bench stack of frame encoding incl. its output buffer (stack painting) {} bytes",
-        used
-    );
+    Protocol {
+        frame_bytes: len,
+        encode_stack: used,
+    }
 }

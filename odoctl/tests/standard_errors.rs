@@ -3,6 +3,9 @@
 //! nearly always (issue 16), for the sub-trajectory estimator and for its refinement by the
 //! filter on the 70 m estimation path; and the lever arm is recovered from simulated receiver
 //! logs (issue 17).
+//!
+//! `ODO_RESULTS_DIR=DIR` writes the coverage table there as Markdown, a file per row under
+//! `DIR/standard_errors/` (`bench/run` puts it into docs/RESULTS.md).
 
 mod common;
 
@@ -35,6 +38,38 @@ fn slippy(length: f64, seed: u64) -> simulate::SimRun {
             ..Default::default()
         },
     )
+}
+
+/// The coverage table's header (Markdown).
+const TABLE_HEADER: &str = "| estimator | runs | estimates | within 2 SE | within 3 SE | formal errors within 2 SE | held to |\n\
+                            | --- | --- | ---: | ---: | ---: | ---: | --- |\n";
+
+/// Writes `text` as `$ODO_RESULTS_DIR/standard_errors/NAME.md` when that variable is set
+/// (`bench/run` joins the files in name order), with the table's header as `0_header.md`.
+fn write_results(name: &str, text: &str) {
+    let Some(dir) = std::env::var_os("ODO_RESULTS_DIR") else {
+        return;
+    };
+    let dir = std::path::Path::new(&dir).join("standard_errors");
+    std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
+    // The first test to get here writes the header; the others find it written.
+    let header = dir.join("0_header.md");
+    if let Ok(mut f) = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&header)
+    {
+        use std::io::Write;
+        f.write_all(TABLE_HEADER.as_bytes())
+            .unwrap_or_else(|e| panic!("{}: {e}", header.display()));
+    }
+    let path = dir.join(format!("{name}.md"));
+    std::fs::write(&path, text).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+}
+
+/// A percentage of `k` in `n`.
+fn pct(k: usize, n: usize) -> f64 {
+    100.0 * k as f64 / n as f64
 }
 
 fn errors_in_se(fit: &calib::SubtrajectoryFit, truth: &ChassisParams) -> [f64; 3] {
@@ -77,6 +112,18 @@ fn subtrajectory_standard_errors_cover_the_truth_over_many_seeds() {
         100.0 * formal,
         started.elapsed().as_secs_f64()
     );
+    write_results(
+        "1_subtrajectory",
+        &format!(
+            "| sub-trajectories (the default geometry fit, unrefined), cluster-robust | {seeds} \
+             random paths of {length} m, slip 0.2 % over 0.5 m and turning slip 0.5 % over 0.2 m \
+             | {n} | {:.1} % | {:.1} % | {:.1} % | 2 SE 85-100 %, 3 SE at least 97 %, formal \
+             below 70 % |\n",
+            pct(within2, n),
+            pct(within3, n),
+            pct(formal_within2, n)
+        ),
+    );
     assert!((0.85..=1.0).contains(&c2), "within 2 SE: {c2}");
     assert!(c3 >= 0.97, "within 3 SE: {c3}");
     // The formal errors, which take the residuals as independent, do not hold.
@@ -117,12 +164,22 @@ fn paper_method_cluster_errors_against_the_formal_ones() {
             formal2 += usize::from(e <= 2.0 * fit.std_errors[i].unwrap());
         }
     }
-    let pct = |k: usize| 100.0 * k as f64 / n as f64;
     eprintln!(
         "paper method, {PAPER_SEEDS} runs of 250 m: cluster-robust within 2 SE {:.1} %, within 3 SE {:.1} %; formal within 2 SE {:.1} %",
-        pct(robust2),
-        pct(robust3),
-        pct(formal2)
+        pct(robust2, n),
+        pct(robust3, n),
+        pct(formal2, n)
+    );
+    write_results(
+        "2_paper",
+        &format!(
+            "| `--method paper` (eq 16), cluster-robust over stretches | the first {PAPER_SEEDS} of \
+             those runs | {n} | {:.1} % | {:.1} % | {:.1} % | more than the formal errors within \
+             2 SE |\n",
+            pct(robust2, n),
+            pct(robust3, n),
+            pct(formal2, n)
+        ),
     );
     assert!(robust2 > formal2, "{robust2} {formal2}");
 }
@@ -193,6 +250,27 @@ fn filter_refinement_on_the_70_m_path_beats_the_subtrajectory_track_and_its_erro
         "70 m, {seeds} seeds: RMS error refined {:.4} / {:.4} / {:.3} mm, sub-trajectory {:.4} / {:.4} / {:.3} mm; refined within 2 SE {:.1} %, 3 SE {:.1} %",
         rr[0], rr[1], rr[2], rp[0], rp[1], rp[2], 100.0 * c2, 100.0 * c3
     );
+    write_results(
+        "3_filter",
+        &format!(
+            "| sub-trajectories refined by the filter (the default), the filter's covariance | \
+             {seeds} runs of the 70 m estimation path, simulator defaults, from \
+             0.300/0.300/0.700 | {n} | {:.1} % | {:.1} % | - | 2 SE 85-100 %, 3 SE at least \
+             97 % |\n",
+            pct(within2, n),
+            pct(within3, n)
+        ),
+    );
+    write_results(
+        "9_filter_rms",
+        &format!(
+            "\nOn those {seeds} runs of the 70 m path the refined estimate's RMS error is \
+             {:.4} / {:.4} / {:.3} mm (left / right / track), the unrefined sub-trajectory \
+             fit's {:.4} / {:.4} / {:.3} mm (held to: refined track below 0.8 times the \
+             unrefined and below 0.32 mm; diameters below 0.025 mm and 1.3 times the unrefined).\n",
+            rr[0], rr[1], rr[2], rp[0], rp[1], rp[2]
+        ),
+    );
     assert!(
         rr[2] < 0.8 * rp[2],
         "track: refined {} mm, sub-trajectory {} mm",
@@ -229,6 +307,18 @@ fn filter_refinement_holds_on_a_long_log() {
     println!(
         "1 km: linearisation bound {:.2e} of the lengths, diameters' standard errors {:.2e} / {:.2e} m",
         r.linearisation, se[0], se[1]
+    );
+    write_results(
+        "9_long_log",
+        &format!(
+            "\nOn a 1 km random path (seed 1, simulator defaults) the filter's linearisation \
+             bound is {:.1e} of the lengths ({:.3} um of the left diameter), against the \
+             diameters' standard errors of {:.2} / {:.2} um (held to below a tenth of them).\n",
+            r.linearisation,
+            r.linearisation * truth.left_diameter * 1e6,
+            se[0] * 1e6,
+            se[1] * 1e6
+        ),
     );
     assert!(
         r.linearisation > 0.0 && r.linearisation * truth.left_diameter < 0.1 * se[0],

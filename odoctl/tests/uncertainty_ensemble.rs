@@ -14,6 +14,8 @@
 //! `ODOCTL_ENSEMBLE_COVERAGE_CRITERION=1` adds the covariance model fitted by the paper's
 //! coverage criterion (the default before issue 21); `ODOCTL_ENSEMBLE_FIGURES=DIR` draws each
 //! regime's coverage and reliability figures there (the README's, `docs/figures/`).
+//! `ODO_RESULTS_DIR=DIR` writes the tables there as Markdown (`bench/run` puts them into
+//! docs/RESULTS.md with the figures).
 //!
 //! Slip regimes are named by the random-walk intensity `q` of a wheel's distance error
 //! (m per sqrt(m) of its travel): the simulator's Gauss-Markov slip of standard deviation
@@ -273,6 +275,43 @@ fn print_table(
     }
 }
 
+/// Writes `text` to `$ODO_RESULTS_DIR/NAME.md` when that variable is set (`bench/run`).
+fn write_results(name: &str, text: &str) {
+    if let Some(dir) = std::env::var_os("ODO_RESULTS_DIR") {
+        let path = std::path::Path::new(&dir).join(format!("{name}.md"));
+        std::fs::write(&path, text).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    }
+}
+
+/// The header of the coverage tables (Markdown).
+fn table_header() -> String {
+    let at = CHECKPOINTS.map(|d| format!("{d:.0}")).join("/");
+    format!(
+        "| slip regime | model (criterion) | horizontal 1σ at {at} m | heading 1σ at {at} m | 3σ lowest (horizontal / heading) |\n\
+         | --- | --- | --- | --- | --- |\n"
+    )
+}
+
+/// One row of the coverage tables: the 1-sigma shares at every checkpoint, the lowest
+/// 3-sigma shares.
+fn table_row(regime: &str, model: &str, c: &[CheckpointCoverage]) -> String {
+    let one = |f: fn(&CheckpointCoverage) -> f64| {
+        c.iter()
+            .map(|k| format!("{:.0}", 100.0 * f(k)))
+            .collect::<Vec<_>>()
+            .join("/")
+    };
+    let lowest =
+        |f: fn(&CheckpointCoverage) -> f64| 100.0 * c.iter().map(f).fold(f64::INFINITY, f64::min);
+    format!(
+        "| {regime} | {model} | {} % | {} % | {:.1} / {:.1} % |\n",
+        one(|k| k.horizontal.0),
+        one(|k| k.heading.0),
+        lowest(|k| k.horizontal.1),
+        lowest(|k| k.heading.1)
+    )
+}
+
 /// The checkpoints where `c` is outside `floor` (1-sigma in `floor.one_sigma`..76 %, 3-sigma
 /// at least `floor.three_sigma`), or not reached by every run.
 fn misses(regime: &str, c: &[CheckpointCoverage], floor: Floor) -> Vec<String> {
@@ -303,6 +342,16 @@ fn calibrated_uncertainty_covers_the_true_errors_across_slip_regimes() {
     // The model `calibrate` selects by default.
     let default_model = UncertaintyModel::Covariance;
     let mut failed = Vec::new();
+    let mut table = format!(
+        "Per slip regime, {CALIBRATIONS} calibrations on 70 m runs and {RUNS} runs replayed \
+         from their true start, each with one of them. Target for the default model \
+         (covariance, likelihood): 1-sigma {:.0}-{:.0} %, 3-sigma at least {:.0} %, at every \
+         checkpoint (nominal 68.3 %; a round 2-D error covers 63.2 % inside `sigma_h`).\n\n{}",
+        100.0 * TARGET.one_sigma,
+        100.0 * TARGET.one_sigma_max,
+        100.0 * TARGET.three_sigma,
+        table_header()
+    );
     for r in regimes() {
         let ([paper, covariance], params) =
             ensemble(r.name, r.settings, UncertaintyCriterion::Likelihood);
@@ -331,6 +380,12 @@ fn calibrated_uncertainty_covers_the_true_errors_across_slip_regimes() {
                 UncertaintyModel::Paper => "coverage",
             };
             print_table(r.name, name, criterion, &params, &c);
+            let label = if m == default_model {
+                format!("**{name} ({criterion}, default)**")
+            } else {
+                format!("{name} ({criterion})")
+            };
+            table.push_str(&table_row(r.name, &label, &c));
             if m == default_model {
                 failed.extend(misses(r.name, &c, TARGET));
             }
@@ -348,6 +403,7 @@ fn calibrated_uncertainty_covers_the_true_errors_across_slip_regimes() {
             );
         }
     }
+    write_results("uncertainty_coverage", &table);
     assert!(
         failed.is_empty(),
         "issue 21's target (60-76 % / >= 97 %) missed:\n{}",
@@ -386,6 +442,19 @@ fn turning_slip_with_the_simulated_slips_coefficients_meets_the_target() {
         one_sigma: 0.57,
         ..TARGET
     };
+    write_results(
+        "uncertainty_coverage_turning",
+        &format!(
+            "With each calibration's `kappa_diff` and `kappa_diff_corr` replaced by the simulated \
+             turning slip's (`kappa_diff` {kappa_diff:.1e}, `kappa_diff_corr` {l} m; the rest as \
+             calibrated; held to 1-sigma {:.0}-{:.0} %, 3-sigma at least {:.0} %):\n\n{}{}",
+            100.0 * floor.one_sigma,
+            100.0 * floor.one_sigma_max,
+            100.0 * floor.three_sigma,
+            table_header(),
+            table_row(r.name, "covariance (simulated turning slip)", &c)
+        ),
+    );
     let failed = misses(r.name, &c, floor);
     assert!(failed.is_empty(), "{}", failed.join("\n"));
 }
@@ -400,6 +469,11 @@ fn turning_slip_with_the_simulated_slips_coefficients_meets_the_target() {
 #[test]
 fn the_filter_likelihood_recovers_kappa_with_the_true_geometry() {
     use odoctl::calib::{Innovations, Run};
+    let mut table = String::from(
+        "kappa fitted with the true geometry on 70 m runs (seeds 1-20), against the true q^2:\n\n\
+         | slip | mean of ln(kappa / q^2) | its standard deviation | held to (abs(mean) / sd) |\n\
+         | --- | ---: | ---: | ---: |\n",
+    );
     for (q, corr, mean_limit, sd_limit) in [
         (0.001, 0.1, 0.15, 0.4),
         (0.003, 0.1, 0.15, 0.4),
@@ -431,9 +505,13 @@ fn the_filter_likelihood_recovers_kappa_with_the_true_geometry() {
         let mean = logs.iter().sum::<f64>() / n;
         let sd = (logs.iter().map(|l| (l - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
         println!("q {q}, L {corr}: ln(kappa / q^2) mean {mean:.3}, sd {sd:.3}: {logs:.2?}");
+        table.push_str(&format!(
+            "| q {q}, correlated over {corr} m | {mean:+.3} | {sd:.3} | < {mean_limit} / < {sd_limit} |\n"
+        ));
         assert!(
             mean.abs() < mean_limit && sd < sd_limit,
             "q {q}, L {corr}: mean {mean}, sd {sd}: {logs:?}"
         );
     }
+    write_results("kappa_recovery", &table);
 }
