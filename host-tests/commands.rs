@@ -1,9 +1,9 @@
 //! Text commands: line assembly, parsing, execution against the settings (atomic, errors
 //! change nothing), and fuzz-style proptests of both.
 
-use odo_core::console::*;
-use odo_core::protocol::{CommandReply, MAX_REPLY_TEXT};
-use odo_core::settings::{Key, Settings};
+use odo_unit::console::*;
+use odo_unit::protocol::{CommandReply, MAX_REPLY_TEXT};
+use odo_unit::settings::{Key, Settings};
 use proptest::prelude::*;
 
 fn lines(bytes: &[u8]) -> Vec<Result<String, LineError>> {
@@ -512,7 +512,7 @@ fn negative_zero_is_a_change() {
 /// and wrapping before), with an error naming it; in-range extremes are accepted.
 #[test]
 fn reset_pose_out_of_range_is_refused() {
-    use odo_core::odometry::integrator::{MAX_HEADING, MAX_POSITION};
+    use odo_unit::odometry::integrator::{MAX_HEADING, MAX_POSITION};
     let mut s = Settings::DEFAULT;
     for (line, what) in [
         ("reset_pose 3e9 0 0", "x must be within"),

@@ -1,9 +1,9 @@
-//! The sample timer's interrupt (`odo_core::timing::compare`) on a simulated TIM5: the race
+//! The sample timer's interrupt (`odo_unit::timing::compare`) on a simulated TIM5: the race
 //! of a compare firing between the handler's reads, the re-arm decision, the PPS capture off
 //! in free mode, and the bounded catch-up after a stall.
 
-use odo_core::timing::compare::{set_capture, SR_CAPTURE, SR_COMPARE, SR_OVERCAPTURE};
-use odo_core::timing::*;
+use odo_unit::timing::compare::{set_capture, SR_CAPTURE, SR_COMPARE, SR_OVERCAPTURE};
+use odo_unit::timing::*;
 use proptest::prelude::*;
 
 const HZ: u32 = 84_000_000;

@@ -1,8 +1,8 @@
-//! `odo_core::decimal` against std: shortest digits and round trips over arbitrary bit
+//! `odo_unit::decimal` against std: shortest digits and round trips over arbitrary bit
 //! patterns, correctly rounded parsing of random and exactly-halfway decimal strings, the
 //! accepted syntax, boundary tables, and no panic on any input.
 
-use odo_core::decimal::*;
+use odo_unit::decimal::*;
 use proptest::prelude::*;
 
 /// The text std's `{}` gives: a plain decimal at every magnitude, never an exponent.

@@ -1,7 +1,7 @@
-//! Host tests of `odo_core::odometry::index`: the whole-turn check of the counts between
+//! Host tests of `odo_unit::odometry::index`: the whole-turn check of the counts between
 //! index pulses, and the extension of a latched raw count near a reference.
 
-use odo_core::odometry::index::{self, extend_near, IndexCheck, IndexTracker};
+use odo_unit::odometry::index::{self, extend_near, IndexCheck, IndexTracker};
 use proptest::prelude::*;
 
 #[test]

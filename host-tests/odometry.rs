@@ -5,9 +5,9 @@
 //! f64 with `libm`-free std trigonometry. The firmware's integrator (fixed point, f32 and an
 //! integer sin/cos kernel) must agree with it.
 
-use odo_core::odometry::trig;
-use odo_core::odometry::uncertainty::{StepGeometry, StepJacobian};
-use odo_core::odometry::{
+use odo_unit::odometry::trig;
+use odo_unit::odometry::uncertainty::{StepGeometry, StepJacobian};
+use odo_unit::odometry::{
     ChassisParams, CounterExtender, IndexRefs, Integrator, Pose, PoseSigma, UncertaintyModel,
     WheelCounts,
 };
@@ -410,8 +410,8 @@ fn overrange_sample_is_flagged_and_not_integrated() {
 /// and panicked with overflow checks before).
 #[test]
 fn pose_beyond_the_fixed_point_range_is_refused_or_clamped() {
-    use odo_core::odometry::integrator::{MAX_HEADING, MAX_POSITION};
-    use odo_core::odometry::PoseRangeError;
+    use odo_unit::odometry::integrator::{MAX_HEADING, MAX_POSITION};
+    use odo_unit::odometry::PoseRangeError;
     let pose = |x, y, heading| Pose { x, y, heading };
     assert_eq!(
         pose(MAX_POSITION, -MAX_POSITION, -MAX_HEADING).check_range(),
@@ -905,7 +905,7 @@ proptest! {
 
 #[test]
 fn parameter_errors_name_the_exact_key() {
-    use odo_core::odometry::ParamError;
+    use odo_unit::odometry::ParamError;
     let mut p = ChassisParams::DESIGNED;
     p.right_wheel.sin[1] = 0.2;
     assert_eq!(p.validate(), Err(ParamError::OutOfRange("right_sin2")));
@@ -929,8 +929,8 @@ fn parameter_errors_name_the_exact_key() {
 /// the fields, and the first offending key (in the documented order) is the one named.
 #[test]
 fn every_f32_parameter_names_its_key() {
-    use odo_core::odometry::params::HARMONIC_KEYS;
-    use odo_core::odometry::ParamError;
+    use odo_unit::odometry::params::HARMONIC_KEYS;
+    use odo_unit::odometry::ParamError;
     type Field = fn(&mut ChassisParams) -> &mut f32;
     let mut fields: Vec<(Field, &str, f32)> = vec![
         (
@@ -993,7 +993,7 @@ fn every_f32_parameter_names_its_key() {
             fields.push((*f, key, ChassisParams::MAX_HARMONIC));
         }
     }
-    let se = odo_core::odometry::GeometryUncertainty::MAX_SE;
+    let se = odo_unit::odometry::GeometryUncertainty::MAX_SE;
     fields.extend([
         (
             (|p| &mut p.geometry_uncertainty.left_diameter_se) as Field,

@@ -1,11 +1,11 @@
 //! Wire protocol: message round trips, the documented example frame, bit-error detection,
 //! streaming resynchronisation and a fuzz-style proptest of the frame decoder.
 
-use odo_core::crc;
-use odo_core::odometry::UncertaintyModel;
-use odo_core::protocol::*;
-use odo_core::settings::SettingsSource;
-use odo_core::timing::SyncState;
+use odo_unit::crc;
+use odo_unit::odometry::UncertaintyModel;
+use odo_unit::protocol::*;
+use odo_unit::settings::SettingsSource;
+use odo_unit::timing::SyncState;
 use proptest::prelude::*;
 
 fn sample_pose() -> PoseRecord {
@@ -597,7 +597,7 @@ fn encoder_numbers_frames_and_buffer_limits() {
     // A pose frame is 114 bytes on the wire (settings' bandwidth rule uses it).
     assert_eq!(
         encode(&example_pose(), 0).len() * 10,
-        odo_core::settings::POSE_FRAME_BITS as usize
+        odo_unit::settings::POSE_FRAME_BITS as usize
     );
 }
 
@@ -771,9 +771,9 @@ fn reset_cause_from_rcc_csr_table() {
 /// written from these, and this test fails when either side changes alone.
 #[test]
 fn doc_counts_are_the_code_constants() {
-    use odo_core::console::{MAX_LINE, MAX_SET_PAIRS, MAX_WORDS};
-    use odo_core::settings::store::{RECORD_LEN, SLOT_LEN};
-    use odo_core::settings::{Key, Settings};
+    use odo_unit::console::{MAX_LINE, MAX_SET_PAIRS, MAX_WORDS};
+    use odo_unit::settings::store::{RECORD_LEN, SLOT_LEN};
+    use odo_unit::settings::{Key, Settings};
     let doc = include_str!("../docs/PROTOCOL.md");
     // The settings sectors (`memory.x`): 16 KiB each.
     let slots = 16 * 1024 / SLOT_LEN;

@@ -21,10 +21,10 @@
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use odo_core::protocol::{Message, ResetCause};
-use odo_core::settings::Settings;
-use odo_core::settings::SettingsSource;
-use odo_core::timing::SyncState;
+use odo_unit::protocol::{Message, ResetCause};
+use odo_unit::settings::Settings;
+use odo_unit::settings::SettingsSource;
+use odo_unit::timing::SyncState;
 
 mod support;
 use support::qemu::UnitLink;

@@ -14,7 +14,7 @@
 //! records over more than one lap of the script after the lock and checks: the sync state goes
 //! FreeRunning -> Locked, then Holdover for the 3 s outage and Locked again; from the
 //! first time-tagged record on, every record carries GPS week/time of week of the simulated
-//! date (odo_core's own UTC-to-GPS conversion) with `sample_in_second` stepping 0..49 and
+//! date (odo_unit's own UTC-to-GPS conversion) with `sample_in_second` stepping 0..49 and
 //! wrapping at each second; sample `k` of GNSS second `n` falls on the receiver's edge plus
 //! `k/50` of its second, to the microsecond; consecutive samples are 20,000.74 us of MCU time
 //! apart on average (the +37 ppm removed); the glitch is rejected (heartbeats'
@@ -27,10 +27,10 @@
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use odo_core::protocol::{PoseRecord, Status};
-use odo_core::settings::Settings;
-use odo_core::timing::SyncState;
-use odo_core::timing::UtcDateTime;
+use odo_unit::protocol::{PoseRecord, Status};
+use odo_unit::settings::Settings;
+use odo_unit::timing::SyncState;
+use odo_unit::timing::UtcDateTime;
 
 mod support;
 use support::qemu::UnitLink;

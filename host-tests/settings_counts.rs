@@ -2,9 +2,9 @@
 //! constants, its boundary through `set_many` on either wheel, the unread interval it gives,
 //! and the flash erase stall it allows.
 
-use odo_core::odometry::integrator::MAX_STEP_COUNTS;
-use odo_core::odometry::ChassisParams;
-use odo_core::settings::*;
+use odo_unit::odometry::integrator::MAX_STEP_COUNTS;
+use odo_unit::odometry::ChassisParams;
+use odo_unit::settings::*;
 
 mod support;
 use support::settings::variant;

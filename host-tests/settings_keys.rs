@@ -1,9 +1,9 @@
-//! The settings key table (`odo_core::settings::keys`): key access and text round trips,
+//! The settings key table (`odo_unit::settings::keys`): key access and text round trips,
 //! boundary tables, error values and messages, atomic multi-key changes, and the table
 //! against docs/PROTOCOL.md's list of keys.
 
-use odo_core::odometry::ChassisParams;
-use odo_core::settings::*;
+use odo_unit::odometry::ChassisParams;
+use odo_unit::settings::*;
 use proptest::prelude::*;
 
 mod support;

@@ -1,13 +1,13 @@
-//! The settings record (`odo_core::settings::record`): the codec against the layout
+//! The settings record (`odo_unit::settings::record`): the codec against the layout
 //! docs/PROTOCOL.md documents, byte for byte, and the flash records of every format version
 //! (v1, v2 and v3 records written by older firmware still load; damaged or mislabelled ones are
 //! refused).
 
-use odo_core::crc::crc32;
-use odo_core::settings::store::{
+use odo_unit::crc::crc32;
+use odo_unit::settings::store::{
     encode_record, Flash, SettingsStore, MAGIC, RECORD_LEN, SLOT_LEN, WORD,
 };
-use odo_core::settings::*;
+use odo_unit::settings::*;
 
 mod support;
 use support::settings::{load, variant, SimFlash};
@@ -141,8 +141,8 @@ fn format_version_2_record_loads_with_an_exact_geometry() {
     let mut f = SimFlash::new(4 * SLOT_LEN);
     f.program(0, 0, &v2_record(&old, 7)).unwrap();
     let expect = Settings {
-        chassis: odo_core::odometry::ChassisParams {
-            geometry_uncertainty: odo_core::odometry::GeometryUncertainty::EXACT,
+        chassis: odo_unit::odometry::ChassisParams {
+            geometry_uncertainty: odo_unit::odometry::GeometryUncertainty::EXACT,
             kappa_diff: 0.0,
             kappa_diff_corr: 0.0,
             ..old.chassis
@@ -162,7 +162,7 @@ fn format_version_3_record_loads_with_white_turning_slip() {
     let mut f = SimFlash::new(4 * SLOT_LEN);
     f.program(0, 0, &v3_record(&old, 12)).unwrap();
     let expect = Settings {
-        chassis: odo_core::odometry::ChassisParams {
+        chassis: odo_unit::odometry::ChassisParams {
             kappa_diff_corr: 0.0,
             ..old.chassis
         },
@@ -274,16 +274,16 @@ fn layout_v4_by_hand(s: &Settings) -> Vec<u8> {
         }
     }
     b.push(match c.uncertainty_model {
-        odo_core::odometry::UncertaintyModel::Paper => 0,
-        odo_core::odometry::UncertaintyModel::Covariance => 1,
+        odo_unit::odometry::UncertaintyModel::Paper => 0,
+        odo_unit::odometry::UncertaintyModel::Covariance => 1,
     });
     b.push(match s.mode {
-        odo_core::timing::SyncMode::Pps => 0,
-        odo_core::timing::SyncMode::Free => 1,
+        odo_unit::timing::SyncMode::Pps => 0,
+        odo_unit::timing::SyncMode::Free => 1,
     });
     b.push(match s.time_tag_pps {
-        odo_core::timing::TimeTagPps::Previous => 0,
-        odo_core::timing::TimeTagPps::Next => 1,
+        odo_unit::timing::TimeTagPps::Previous => 0,
+        odo_unit::timing::TimeTagPps::Next => 1,
     });
     b.push(0);
     for v in [s.rate, s.output_divider, s.baud] {
@@ -309,12 +309,12 @@ fn layout_v4_by_hand(s: &Settings) -> Vec<u8> {
 #[test]
 fn table_codec_is_the_documented_layout_byte_for_byte() {
     let mut s = variant(9);
-    s.chassis.uncertainty_model = odo_core::odometry::UncertaintyModel::Covariance;
+    s.chassis.uncertainty_model = odo_unit::odometry::UncertaintyModel::Covariance;
     s.chassis.right_wheel.sin[2] = -0.031;
-    s.time_tag_pps = odo_core::timing::TimeTagPps::Next;
-    s.mode = odo_core::timing::SyncMode::Pps;
+    s.time_tag_pps = odo_unit::timing::TimeTagPps::Next;
+    s.mode = odo_unit::timing::SyncMode::Pps;
     s.max_wheel_speed = 3.25;
-    s.chassis.geometry_uncertainty = odo_core::odometry::GeometryUncertainty {
+    s.chassis.geometry_uncertainty = odo_unit::odometry::GeometryUncertainty {
         left_diameter_se: 2.5e-5,
         right_diameter_se: 2.25e-5,
         track_width_se: 4.0e-4,
@@ -328,8 +328,8 @@ fn table_codec_is_the_documented_layout_byte_for_byte() {
         assert_eq!(s.to_bytes().to_vec(), layout_v4_by_hand(&s));
         // Version 1 is its first 112 bytes.
         let without_se = Settings {
-            chassis: odo_core::odometry::ChassisParams {
-                geometry_uncertainty: odo_core::odometry::GeometryUncertainty::EXACT,
+            chassis: odo_unit::odometry::ChassisParams {
+                geometry_uncertainty: odo_unit::odometry::GeometryUncertainty::EXACT,
                 kappa_diff: 0.0,
                 kappa_diff_corr: 0.0,
                 ..s.chassis
@@ -352,7 +352,7 @@ fn table_codec_is_the_documented_layout_byte_for_byte() {
         assert_eq!(
             v3,
             Settings {
-                chassis: odo_core::odometry::ChassisParams {
+                chassis: odo_unit::odometry::ChassisParams {
                     kappa_diff_corr: 0.0,
                     ..s.chassis
                 },

@@ -1,9 +1,9 @@
-//! The settings flash store (`odo_core::settings::store`): defaults from empty or garbage
+//! The settings flash store (`odo_unit::settings::store`): defaults from empty or garbage
 //! flash, the A/B sectors' alternation, fallback past damaged records, generations (with
 //! wrap-around), and a power cut at every erase/program step of two saves.
 
-use odo_core::settings::store::{encode_record, Flash, SettingsStore, SLOT_LEN};
-use odo_core::settings::*;
+use odo_unit::settings::store::{encode_record, Flash, SettingsStore, SLOT_LEN};
+use odo_unit::settings::*;
 
 mod support;
 use support::settings::{load, variant, SimFlash};
@@ -199,7 +199,7 @@ fn full_size_sectors_wrap() {
 /// sectors.
 #[test]
 fn generation_wraps_around() {
-    use odo_core::settings::store::generation_is_newer;
+    use odo_unit::settings::store::generation_is_newer;
     for (a, b, newer) in [
         (2, 1, true),
         (1, 2, false),
@@ -260,7 +260,7 @@ fn foreign_flash(records: &[(usize, usize, u32, bool)], slots: usize) -> SimFlas
 /// The newest of `gens` as the store orders them: the serial-number maximum when every
 /// generation lies within 2^31 - 1 behind one of them, else the highest.
 fn newest(gens: &[u32]) -> u32 {
-    use odo_core::settings::store::generation_is_newer;
+    use odo_unit::settings::store::generation_is_newer;
     gens.iter()
         .copied()
         .find(|&g| gens.iter().all(|&h| h == g || generation_is_newer(g, h)))
@@ -339,7 +339,7 @@ proptest::proptest! {
         } else {
             // The order of all valid records decides; the newest usable one in it is loaded.
             let top = newest(&gens);
-            let pick = if gens.iter().all(|&h| h == top || odo_core::settings::store::generation_is_newer(top, h)) {
+            let pick = if gens.iter().all(|&h| h == top || odo_unit::settings::store::generation_is_newer(top, h)) {
                 // Serial order: the usable one with the least distance behind `top`.
                 *usable.iter().min_by_key(|&&g| top.wrapping_sub(g)).unwrap()
             } else {
@@ -354,7 +354,7 @@ proptest::proptest! {
             proptest::prop_assert_eq!(load(store.flash()), (variant(i), SettingsSource::Flash, g));
             if before.1 == SettingsSource::Flash {
                 proptest::prop_assert!(
-                    odo_core::settings::store::generation_is_newer(g, before.2),
+                    odo_unit::settings::store::generation_is_newer(g, before.2),
                     "{:#x} after {:#x}", g, before.2
                 );
             }

@@ -1,8 +1,8 @@
-//! The free-running 32-bit sample timer (`odo_core::timing::clock`): counter and capture
+//! The free-running 32-bit sample timer (`odo_unit::timing::clock`): counter and capture
 //! extension to 64 bits, and the catch-up of the sample grid after a CPU stall, in free mode
 //! and locked to the PPS.
 
-use odo_core::timing::*;
+use odo_unit::timing::*;
 use proptest::prelude::*;
 
 mod support;

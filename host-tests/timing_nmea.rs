@@ -1,8 +1,8 @@
-//! The NMEA time messages (`odo_core::timing::nmea`): ZDA/RMC parsing with checksum, the
+//! The NMEA time messages (`odo_unit::timing::nmea`): ZDA/RMC parsing with checksum, the
 //! error table, the line buffer, leap seconds, UTC to GPS week and time of week.
 
-use odo_core::timing::nmea::{civil_from_days, days_from_civil, parse_sentence, MAX_SENTENCE};
-use odo_core::timing::*;
+use odo_unit::timing::nmea::{civil_from_days, days_from_civil, parse_sentence, MAX_SENTENCE};
+use odo_unit::timing::*;
 use proptest::prelude::*;
 
 fn with_checksum(body: &str) -> String {

@@ -1,8 +1,8 @@
-//! The PPS discipline and sample scheduler (`odo_core::timing::pps`) on a crystal: lock,
+//! The PPS discipline and sample scheduler (`odo_unit::timing::pps`) on a crystal: lock,
 //! holdover and reacquisition against simulated crystal offsets, jitter, lost and spurious
 //! pulses; the glitch and acquisition windows; free mode; configuration; capture resolution.
 
-use odo_core::timing::*;
+use odo_unit::timing::*;
 use proptest::prelude::*;
 
 mod support;

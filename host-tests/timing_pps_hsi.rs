@@ -1,8 +1,8 @@
-//! The PPS discipline (`odo_core::timing::pps`) on the HSI clock tolerance (+-5 %): lock by
+//! The PPS discipline (`odo_unit::timing::pps`) on the HSI clock tolerance (+-5 %): lock by
 //! a confirmed period within three edges, glitches, holdover and relock, the acquisition
 //! boundaries, and the tolerance constants.
 
-use odo_core::timing::*;
+use odo_unit::timing::*;
 use proptest::prelude::*;
 
 mod support;

@@ -1,8 +1,8 @@
-//! The time tag (`odo_core::timing::tag`): which PPS edge a time message names
+//! The time tag (`odo_unit::timing::tag`): which PPS edge a time message names
 //! (`time_tag_pps` previous/next), the measured second of an HSI timer, and the GNSS second
 //! of each label through the discipline's holdover.
 
-use odo_core::timing::*;
+use odo_unit::timing::*;
 
 mod support;
 use support::pps_sim::*;

@@ -11,7 +11,7 @@
 //! wheel sigma equals the true per-sample slip sigma at the path's typical sample; its
 //! coverage is printed and bounded to state how far it is from nominal.
 
-use odo_core::odometry::{
+use odo_unit::odometry::{
     ChassisParams, IndexRefs, Integrator, Pose, PoseSigma, UncertaintyModel, WheelCounts,
 };
 use std::f64::consts::PI;
@@ -190,7 +190,7 @@ fn covariance_model_coverage_is_near_nominal_and_paper_model_is_stated() {
 /// nominal values and no slip, must cover the resulting errors at the nominal rates.
 #[test]
 fn covariance_model_covers_the_calibrations_geometry_error() {
-    use odo_core::odometry::GeometryUncertainty;
+    use odo_unit::odometry::GeometryUncertainty;
     let g = GeometryUncertainty {
         left_diameter_se: 2.0e-5,
         right_diameter_se: 2.5e-5,
@@ -442,7 +442,7 @@ fn covariance_model_covers_gauss_markov_opposite_phase_slip() {
 /// none on a straight line.
 #[test]
 fn turning_correlation_zero_or_tiny_is_the_white_model() {
-    use odo_core::odometry::uncertainty::MIN_TURN_CORRELATION;
+    use odo_unit::odometry::uncertainty::MIN_TURN_CORRELATION;
     let run = |corr: f32, right: i64| {
         let p = ChassisParams {
             uncertainty_model: UncertaintyModel::Covariance,

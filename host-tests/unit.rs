@@ -1,19 +1,19 @@
-//! Host tests of `odo_core::unit`: what the firmware's tasks decide. The processing task's
+//! Host tests of `odo_unit::unit`: what the firmware's tasks decide. The processing task's
 //! records, drop, index-mismatch and motion accounting, heartbeats and settings
 //! application; the command task's effects (settings changed, save refused while moving,
 //! save, save failure, reset, status, version); start-up fallbacks; the PPS latch of the
 //! sample interrupt; the host link's transmit ring and sequence numbers.
 
-use odo_core::console::Reply;
-use odo_core::odometry::Pose;
-use odo_core::protocol::{Queued, ResetCause, TxLink, TxRing};
-use odo_core::settings::store::{Flash, SettingsStore, SLOT_LEN};
-use odo_core::settings::{Settings, SettingsSource};
-use odo_core::timing::{
+use odo_unit::console::Reply;
+use odo_unit::odometry::Pose;
+use odo_unit::protocol::{Queued, ResetCause, TxLink, TxRing};
+use odo_unit::settings::store::{Flash, SettingsStore, SLOT_LEN};
+use odo_unit::settings::{Settings, SettingsSource};
+use odo_unit::timing::{
     ClockSource, PpsEvent, PpsStats, Sample, SyncMode, SyncState, TimeTagPps,
     HSE_CRYSTAL_TOLERANCE_PPM, HSI_TOLERANCE_PPM,
 };
-use odo_core::unit::*;
+use odo_unit::unit::*;
 
 const HZ: u32 = 84_000_000;
 const BITS: [u32; 2] = [32, 16];
@@ -42,8 +42,8 @@ fn raw(seq: u32, left: u32, right: u32) -> RawSample {
         sample,
         RawCounts { left, right },
         (false, false),
-        &odo_core::timing::Discipline::new(
-            odo_core::timing::DisciplineConfig::for_clock(HZ, HSI_TOLERANCE_PPM),
+        &odo_unit::timing::Discipline::new(
+            odo_unit::timing::DisciplineConfig::for_clock(HZ, HSI_TOLERANCE_PPM),
             0,
         )
         .unwrap(),
@@ -63,7 +63,7 @@ fn record(
     p: &mut Processor,
     r: &RawSample,
     log: &mut Events,
-) -> Option<odo_core::protocol::PoseRecord> {
+) -> Option<odo_unit::protocol::PoseRecord> {
     match p.on_sample(r, log) {
         SampleOutcome::Record(rec) => Some(rec),
         SampleOutcome::Skipped => None,
@@ -261,7 +261,7 @@ fn moving_means_a_wheel_moved_beyond_the_threshold_within_one_second() {
     assert!(!p.live(&raw(k, 0, 8), 0).moving, "8 increments");
     record(&mut p, &raw(k + 1, 0, 9), &mut log);
     assert!(p.live(&raw(k + 1, 0, 9), 0).moving, "moved again");
-    assert_eq!(odo_core::unit::processor::MOTION_THRESHOLD, 8);
+    assert_eq!(odo_unit::unit::processor::MOTION_THRESHOLD, 8);
 }
 
 #[test]
@@ -509,8 +509,8 @@ fn discipline_config_follows_settings_and_clock() {
     assert_eq!(cfg.max_offset_ppm, HSI_TOLERANCE_PPM);
     let mut changed = s;
     for (line, mode) in [("mode pps", SyncMode::Pps), ("mode free", SyncMode::Free)] {
-        let (_, action) = odo_core::console::execute(line, &mut changed);
-        assert_eq!(action, odo_core::console::Action::SettingsChanged, "{line}");
+        let (_, action) = odo_unit::console::execute(line, &mut changed);
+        assert_eq!(action, odo_unit::console::Action::SettingsChanged, "{line}");
         assert_eq!(discipline_config(&changed, HZ, ClockSource::Hsi).mode, mode);
     }
     for (value, tag) in [
@@ -518,7 +518,7 @@ fn discipline_config_follows_settings_and_clock() {
         ("previous", TimeTagPps::Previous),
     ] {
         let line = format!("set time_tag_pps {value}");
-        let (reply, _) = odo_core::console::execute(&line, &mut changed);
+        let (reply, _) = odo_unit::console::execute(&line, &mut changed);
         assert!(reply.ok, "{}", reply.text);
         assert_eq!(time_tag(&changed), tag);
     }
@@ -923,7 +923,7 @@ fn status_text_reports_every_counter() {
 }
 
 /// Sample `s` of a real discipline as the sampler hands it on, with counts (left, right).
-fn raw_of(s: Sample, disc: &odo_core::timing::Discipline, left: u32, right: u32) -> RawSample {
+fn raw_of(s: Sample, disc: &odo_unit::timing::Discipline, left: u32, right: u32) -> RawSample {
     let mut r = RawSample::first(s, RawCounts { left, right }, (false, false), disc);
     r.state = SyncState::FreeRunning;
     r
@@ -934,7 +934,7 @@ fn raw_of(s: Sample, disc: &odo_core::timing::Discipline, left: u32, right: u32)
 /// same sample, which is sent with the rate switch flag after a Status announcing it.
 #[test]
 fn a_rate_switch_is_one_instant_for_records_heartbeat_and_status() {
-    use odo_core::timing::{Discipline, DisciplineConfig, SyncMode};
+    use odo_unit::timing::{Discipline, DisciplineConfig, SyncMode};
     let mut fast = Settings::DEFAULT;
     fast.rate = 1000;
     fast.output_divider = 10;
@@ -1123,7 +1123,7 @@ fn p_store() -> StoreState {
 /// USART_SR (RM0368 sec. 19.6.1): what each flag does to the counters and the byte.
 #[test]
 fn uart_status_flags_table() {
-    use odo_core::unit::rx_errors::{SR_FE, SR_NF, SR_ORE, SR_PE, SR_RXNE};
+    use odo_unit::unit::rx_errors::{SR_FE, SR_NF, SR_ORE, SR_PE, SR_RXNE};
     let mut e = RxErrors::default();
     for (sr, want) in [
         (0, RxByte::None),

@@ -1,7 +1,7 @@
-//! Host tests of `odo_core::unit::watchdog`: the IWDG prescaler and reload value for a
+//! Host tests of `odo_unit::unit::watchdog`: the IWDG prescaler and reload value for a
 //! timeout, and the timeouts they give over the LSI's frequency range.
 
-use odo_core::unit::watchdog::{
+use odo_unit::unit::watchdog::{
     IwdgSetting, LSI_MAX_HZ, LSI_MIN_HZ, LSI_NOMINAL_HZ, MAX_PRESCALER, MAX_RELOAD,
 };
 

@@ -1,6 +1,6 @@
 //! Frames from the tasks to the host link: encoded outside the lock, queued whole.
 
-use odo_core::protocol::{self, Message, Queued, TxLink};
+use odo_unit::protocol::{self, Message, Queued, TxLink};
 use rtic::Mutex;
 use stm32f4xx_hal::pac::Interrupt;
 

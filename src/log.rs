@@ -1,9 +1,9 @@
-//! The unit's log lines (defmt): start-up, and the events of [`odo_core::unit::Event`].
+//! The unit's log lines (defmt): start-up, and the events of [`odo_unit::unit::Event`].
 
-use odo_core::settings::store::Loaded;
-use odo_core::settings::SettingsSource;
-use odo_core::timing::{ClockSource, DisciplineConfig, SyncMode, SyncState};
-use odo_core::unit::{Event, Log, Start};
+use odo_unit::settings::store::Loaded;
+use odo_unit::settings::SettingsSource;
+use odo_unit::timing::{ClockSource, DisciplineConfig, SyncMode, SyncState};
+use odo_unit::unit::{Event, Log, Start};
 
 /// What start-up made of the clock (`clock`), the stored settings and the sampler
 /// configuration.

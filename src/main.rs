@@ -1,11 +1,11 @@
 //! The RTIC application of the odometry unit (STM32F401): tasks, resources and queues
-//! around `odo_core` (what each task decides lives in `odo_core::unit`).
+//! around `odo_unit` (what each task decides lives in `odo_unit::unit`).
 //!
 //! Data path of one sample: a TIM5 compare match is the sample instant (the grid comes
-//! from the PPS discipline, `odo_core::timing::pps`); the TIM5 interrupt (priority 4)
+//! from the PPS discipline, `odo_unit::timing::pps`); the TIM5 interrupt (priority 4)
 //! snapshots both encoder counters as its first action, then the fault lines, labels the
-//! instant (`odo_core::timing::catch_up`, which also merges the points a stall passed over)
-//! and hands an `odo_core::unit::RawSample` to the processing task through a lock-free
+//! instant (`odo_unit::timing::catch_up`, which also merges the points a stall passed over)
+//! and hands an `odo_unit::unit::RawSample` to the processing task through a lock-free
 //! queue. The processing task (priority 2) extends the counters to 64 bits, applies index pulses, integrates, tags GNSS time, builds the pose
 //! record and queues its frame for the host link whole, or drops it and counts it. The
 //! USART2 interrupt (priority 3) moves queued bytes to the UART and received bytes to the
@@ -48,10 +48,10 @@ mod app {
     };
     use crate::host_link::{queue_now, send, send_blocking, Link, RECORD_RESERVE};
     use heapless::spsc::{Consumer, Producer, Queue};
-    use odo_core::protocol::{CommandReply, Message};
-    use odo_core::settings::store::SettingsStore;
-    use odo_core::timing::{DisciplineConfig, SyncState};
-    use odo_core::unit::{
+    use odo_unit::protocol::{CommandReply, Message};
+    use odo_unit::settings::store::SettingsStore;
+    use odo_unit::timing::{DisciplineConfig, SyncState};
+    use odo_unit::unit::{
         self, Commands, Effect, HeartbeatInputs, IndexCapture, Live, PpsLatch, Processor,
         RawSample, Requests, SampleOutcome, StoreState,
     };

@@ -16,7 +16,7 @@
 use std::time::Instant;
 
 use indicatif::ProgressBar;
-use odo_core::odometry::{ChassisParams, UncertaintyModel};
+use odo_unit::odometry::{ChassisParams, UncertaintyModel};
 use odoctl::calib::{
     self, CalibrationOptions, Cuts, GeomOptions, GeometryRefine, Method, Run, WindowStart,
 };

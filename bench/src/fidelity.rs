@@ -3,10 +3,10 @@
 //! each against the f64 reference model of the paper (`odo_testkit::reference`), after 1, 10
 //! and 100 km of the testkit's drive (`odo_testkit::drive::Drive`) at 50 Hz.
 
-use odo_core::odometry::{ChassisParams, IndexRefs, Integrator, Pose, WheelCounts};
 use odo_testkit::drive::Drive;
 use odo_testkit::reference::Reference;
 use odo_testkit::Rng;
+use odo_unit::odometry::{ChassisParams, IndexRefs, Integrator, Pose, WheelCounts};
 
 use crate::markdown::{number, thousands};
 use crate::naive::NaiveIntegrator;

@@ -5,10 +5,10 @@ use core::hint::black_box;
 use core::sync::atomic::{compiler_fence, Ordering};
 use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln};
-use odo_core::odometry::uncertainty::{
+use odo_unit::odometry::uncertainty::{
     CovarianceUncertainty, PaperUncertainty, StepGeometry, StepJacobian, UncertaintyCoefficients,
 };
-use odo_core::odometry::{
+use odo_unit::odometry::{
     ChassisParams, IndexRefs, Integrator, Pose, UncertaintyModel, WheelCounts,
 };
 

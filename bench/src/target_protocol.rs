@@ -2,9 +2,9 @@
 //! Cortex-M4F (see `target.rs` for the method), as rows of its instruction table.
 
 use core::hint::black_box;
-use odo_core::console::{execute, parse};
-use odo_core::protocol::{encode_frame, FrameDecoder, Message, PoseRecord, MAX_ENCODED_FRAME};
-use odo_core::settings::Settings;
+use odo_unit::console::{execute, parse};
+use odo_unit::protocol::{encode_frame, FrameDecoder, Message, PoseRecord, MAX_ENCODED_FRAME};
+use odo_unit::settings::Settings;
 
 use crate::target::{count, report, stack_used};
 

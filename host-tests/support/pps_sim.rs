@@ -6,7 +6,7 @@
 use std::collections::VecDeque;
 use std::ops::Range;
 
-use odo_core::timing::*;
+use odo_unit::timing::*;
 use proptest::collection::vec;
 use proptest::prelude::*;
 

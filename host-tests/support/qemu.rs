@@ -92,8 +92,8 @@ pub fn boot(repo: &Path, test: &str) -> Option<Qemu> {
 
 /// A frame from the reader thread, or the end of the stream with the decoder's counters.
 enum Event {
-    Frame(Box<odo_core::protocol::Frame>),
-    Closed(odo_core::protocol::DecoderStats),
+    Frame(Box<odo_unit::protocol::Frame>),
+    Closed(odo_unit::protocol::DecoderStats),
 }
 
 /// The host side of the unit's link: a reader thread decodes frames with the core's
@@ -103,15 +103,15 @@ pub struct UnitLink {
     rx: std::sync::mpsc::Receiver<Event>,
     deadline: std::time::Instant,
     /// Pose records received so far.
-    pub records: Vec<odo_core::protocol::PoseRecord>,
+    pub records: Vec<odo_unit::protocol::PoseRecord>,
     /// Status heartbeats received so far.
-    pub heartbeats: Vec<odo_core::protocol::Status>,
+    pub heartbeats: Vec<odo_unit::protocol::Status>,
     /// Frame sequence numbers of every frame.
     pub seqs: Vec<u32>,
     /// DeviceInfo frames received.
     pub device_info: usize,
     /// Every frame, in order.
-    pub frames: Vec<odo_core::protocol::Frame>,
+    pub frames: Vec<odo_unit::protocol::Frame>,
 }
 
 impl UnitLink {
@@ -133,7 +133,7 @@ impl UnitLink {
         let (tx, rx) = std::sync::mpsc::channel();
         let mut reader = stream.try_clone().expect("clone socket");
         std::thread::spawn(move || {
-            let mut decoder = odo_core::protocol::FrameDecoder::new();
+            let mut decoder = odo_unit::protocol::FrameDecoder::new();
             let mut buf = [0u8; 4096];
             loop {
                 let n = reader.read(&mut buf).unwrap_or(0);
@@ -163,8 +163,8 @@ impl UnitLink {
     }
 
     /// The next frame (also filed in `records`, `heartbeats`, `seqs`, `device_info`).
-    pub fn next_frame(&mut self) -> odo_core::protocol::Frame {
-        use odo_core::protocol::Message;
+    pub fn next_frame(&mut self) -> odo_unit::protocol::Frame {
+        use odo_unit::protocol::Message;
         use std::sync::mpsc::RecvTimeoutError;
         let left = self
             .deadline
@@ -195,7 +195,7 @@ impl UnitLink {
             .expect("send command");
         let mut text = String::new();
         loop {
-            if let odo_core::protocol::Message::Reply(r) = self.next_frame().message {
+            if let odo_unit::protocol::Message::Reply(r) = self.next_frame().message {
                 text.push_str(&r.text);
                 if !r.more {
                     println!("> {line}\n{text}");
@@ -212,11 +212,11 @@ impl UnitLink {
 /// firmware and the host run the same integer and IEEE-754 arithmetic. Returns the distance
 /// the replay drove, metres.
 pub fn assert_replay_bit_exact(
-    params: &odo_core::odometry::ChassisParams,
-    records: &[odo_core::protocol::PoseRecord],
+    params: &odo_unit::odometry::ChassisParams,
+    records: &[odo_unit::protocol::PoseRecord],
 ) -> f64 {
-    use odo_core::odometry::{IndexRefs, Integrator, Pose, WheelCounts};
-    let counts = |r: &odo_core::protocol::PoseRecord| WheelCounts {
+    use odo_unit::odometry::{IndexRefs, Integrator, Pose, WheelCounts};
+    let counts = |r: &odo_unit::protocol::PoseRecord| WheelCounts {
         left: r.gamma_left,
         right: r.gamma_right,
     };

@@ -2,8 +2,8 @@
 //! erase/program step ([`SimFlash`]), distinct valid settings ([`variant`]) and a fresh
 //! store's load of a flash ([`load`]).
 
-use odo_core::settings::store::{Flash, SettingsStore, WORD};
-use odo_core::settings::{Settings, SettingsSource};
+use odo_unit::settings::store::{Flash, SettingsStore, WORD};
+use odo_unit::settings::{Settings, SettingsSource};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum SimError {

@@ -1,8 +1,8 @@
 //! Settings by their shared key names, all from the core's key table
-//! (`odo_core::settings::keys`): parameter TOML files, `--set KEY=VALUE`, the calibration
+//! (`odo_unit::settings::keys`): parameter TOML files, `--set KEY=VALUE`, the calibration
 //! result file, and the `set` lines of `odoctl config push`.
 //!
-//! Values are parsed by the unit's own parser ([`odo_core::settings::parse_value`]: f32
+//! Values are parsed by the unit's own parser ([`odo_unit::settings::parse_value`]: f32
 //! keys correctly rounded straight from the decimal text, never through f64) and written in
 //! the unit's text form, so a value goes from a file to the unit bit for bit. A parameter
 //! TOML holds any of the chassis keys at top level (missing keys keep the designed values of
@@ -15,11 +15,11 @@ use std::fmt::{self, Write as _};
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use odo_core::settings::{
+use odo_unit::settings::{
     validate_chassis, Choice, Group, Key, SettingError, Settings, RELATED_KEYS,
 };
 
-use odo_core::odometry::{ChassisParams, UncertaintyModel};
+use odo_unit::odometry::{ChassisParams, UncertaintyModel};
 
 /// Why a file, an assignment or a value was refused. `origin` names the file (or `--set`).
 #[derive(Debug, Clone, PartialEq)]
@@ -313,7 +313,7 @@ pub fn load(config: Option<&Path>, sets: &[String]) -> Result<ChassisParams> {
 /// The `set` lines that send a TOML text of any keys to the unit: every key the file gives,
 /// the related keys ([`RELATED_KEYS`]) first, then in the table's order, in the unit's text
 /// form, at most
-/// [`odo_core::console::MAX_SET_PAIRS`] pairs per (atomic) `set`. The values are
+/// [`odo_unit::console::MAX_SET_PAIRS`] pairs per (atomic) `set`. The values are
 /// checked first as in [`parse_settings`] (over the defaults).
 pub fn push_lines_of(origin: &str, text: &str) -> Result<Vec<String>> {
     let (s, given) = parse_settings(origin, text, Settings::DEFAULT)?;
@@ -330,7 +330,7 @@ pub fn push_lines_of(origin: &str, text: &str) -> Result<Vec<String>> {
         return Err(ConfigError::NothingToSend(origin.into()).into());
     }
     Ok(pairs
-        .chunks(odo_core::console::MAX_SET_PAIRS)
+        .chunks(odo_unit::console::MAX_SET_PAIRS)
         .map(|c| format!("set {}", c.join(" ")))
         .collect())
 }
@@ -379,7 +379,7 @@ pub fn render_settings(s: &Settings, keys: &[Key], comment: &str) -> String {
     for k in Key::ALL.into_iter().filter(|k| keys.contains(k)) {
         let v = value_text(s, k);
         let _ = match k.info().kind {
-            odo_core::settings::Kind::Word(_) => writeln!(out, "{} = \"{v}\"", k.name()),
+            odo_unit::settings::Kind::Word(_) => writeln!(out, "{} = \"{v}\"", k.name()),
             _ => writeln!(out, "{} = {v}", k.name()),
         };
     }

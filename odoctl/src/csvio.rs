@@ -372,7 +372,7 @@ fn real<T: std::str::FromStr + Into<f64> + Copy>(v: &str) -> Result<T, &'static 
 /// A coordinate the unit's integrator can start from (|v| <= 2^30 m).
 fn position(v: &str) -> Result<f64, &'static str> {
     let x: f64 = real(v)?;
-    if x.abs() > odo_core::odometry::integrator::MAX_POSITION {
+    if x.abs() > odo_unit::odometry::integrator::MAX_POSITION {
         return Err("within +-1073741824 m (the integrator's range)");
     }
     Ok(x)
@@ -381,7 +381,7 @@ fn position(v: &str) -> Result<f64, &'static str> {
 /// A heading the unit's integrator can start from (|v| <= 2^32 rad).
 fn heading(v: &str) -> Result<f64, &'static str> {
     let h: f64 = real(v)?;
-    if h.abs() > odo_core::odometry::integrator::MAX_HEADING {
+    if h.abs() > odo_unit::odometry::integrator::MAX_HEADING {
         return Err("within +-4294967296 rad (the integrator's range)");
     }
     Ok(h)

@@ -3,7 +3,7 @@
 //! the paper's calibration against an RTK GNSS reference (Jilek, Burian, Kriz).
 //!
 //! The library holds everything the binary does, so the tests can reach it; the odometry
-//! itself is always `odo_core`'s integrator, never a copy.
+//! itself is always `odo_unit`'s integrator, never a copy.
 // Unsafe code only in `memory` (one allocator setting, through libc).
 #![deny(unsafe_code)]
 #![warn(missing_docs)]

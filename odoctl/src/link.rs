@@ -1,6 +1,6 @@
 //! The link to the unit: a serial port (`serialport`, no libudev) or a TCP socket
 //! (`tcp:HOST:PORT`, the QEMU image's USART2), framed by the core's protocol code
-//! (`odo_core::protocol`: COBS frames with CRC-32, `FrameDecoder` with loss accounting).
+//! (`odo_unit::protocol`: COBS frames with CRC-32, `FrameDecoder` with loss accounting).
 //!
 //! A [`Session`] reads and decodes the unit's frames, keeps the health counters
 //! ([`StreamStats`], [`health`]) and sends command lines; [`SegmentWriter`] writes the pose
@@ -16,8 +16,8 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, bail, Context, Result};
-use odo_core::protocol::{DecoderStats, Frame, FrameDecoder, Message, PoseRecord, Status};
-use odo_core::timing::SyncState;
+use odo_unit::protocol::{DecoderStats, Frame, FrameDecoder, Message, PoseRecord, Status};
+use odo_unit::timing::SyncState;
 
 use crate::csvio::{RecordFields, Sample, SamplesLayout, UnitPose};
 
@@ -267,7 +267,7 @@ fn sync_name(m: SyncState) -> &'static str {
 
 /// One line of the human table of `monitor`.
 pub fn table_row(r: &PoseRecord) -> String {
-    let wheel = |w: &odo_core::protocol::WheelStatus| {
+    let wheel = |w: &odo_unit::protocol::WheelStatus| {
         format!(
             "{}{}{}{}",
             if w.fault { 'F' } else { '-' },
@@ -375,7 +375,7 @@ impl TimeBase {
             Some(rate) if self.gnss && r.flags.time_valid => {
                 let week0 = *self.week0.get_or_insert(r.gnss.week);
                 let weeks = f64::from(i32::from(r.gnss.week) - i32::from(week0));
-                weeks * f64::from(odo_core::timing::nmea::SECONDS_PER_WEEK)
+                weeks * f64::from(odo_unit::timing::nmea::SECONDS_PER_WEEK)
                     + f64::from(r.gnss.tow_ms) * 1e-3
                     + f64::from(r.gnss.sample_in_second) / rate
             }

@@ -1,4 +1,4 @@
-//! Replay of recorded counts through the core integrator (`odo_core::odometry::Integrator`).
+//! Replay of recorded counts through the core integrator (`odo_unit::odometry::Integrator`).
 
 use std::fmt::Write as _;
 use std::io::Write;
@@ -6,7 +6,7 @@ use std::io::Write;
 use anyhow::{anyhow, Result};
 
 use crate::csvio::{fmt_t, Sample};
-use odo_core::odometry::{ChassisParams, IndexRefs, Integrator, Pose, PoseSigma, WheelCounts};
+use odo_unit::odometry::{ChassisParams, IndexRefs, Integrator, Pose, PoseSigma, WheelCounts};
 
 /// The integrator's input of a SAMPLES row: absolute counts.
 pub fn counts(s: &Sample) -> WheelCounts {

@@ -27,8 +27,8 @@
 use std::f64::consts::PI;
 
 use crate::csvio::{RefPoint, Sample};
-use odo_core::odometry::{ChassisParams, WheelHarmonics, WHEEL_HARMONICS};
 pub use odo_testkit::Rng;
+use odo_unit::odometry::{ChassisParams, WheelHarmonics, WHEEL_HARMONICS};
 
 /// A piece of the path.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -510,7 +510,7 @@ impl EccentricWheel {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use odo_core::odometry::Pose;
+    use odo_unit::odometry::Pose;
 
     #[test]
     fn an_eccentric_wheel_rolls_its_wheel_function() {

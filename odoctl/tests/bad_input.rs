@@ -8,7 +8,7 @@ use std::io::Write;
 use std::net::TcpListener;
 
 use common::{odoctl, read, scratch};
-use odo_core::protocol::{CommandReply, DeviceInfo, Message, PoseRecord, Status};
+use odo_unit::protocol::{CommandReply, DeviceInfo, Message, PoseRecord, Status};
 use odoctl::simulate::PathKind;
 
 fn s(p: &std::path::Path) -> &str {
@@ -383,7 +383,7 @@ fn monitor_escapes_control_characters() {
 /// read through f64 and rounded twice, one ulp away).
 #[test]
 fn toml_f32_keys_parse_as_the_unit_does() {
-    use odo_core::settings::{Key, Settings, Value};
+    use odo_unit::settings::{Key, Settings, Value};
     let text = "5.44023805559845641255378723144531250000000000000001e-5";
     let mut unit = Settings::DEFAULT;
     unit.set(Key::DeltaLeft, text).unwrap();
@@ -398,7 +398,7 @@ fn toml_f32_keys_parse_as_the_unit_does() {
     let p = odoctl::config::parse_params(
         "t.toml",
         &format!("delta_left = {text}\n"),
-        odo_core::odometry::ChassisParams::DESIGNED,
+        odo_unit::odometry::ChassisParams::DESIGNED,
     )
     .unwrap();
     assert_eq!(p.delta_left.to_bits(), expected.to_bits());

@@ -5,7 +5,7 @@ mod common;
 use std::time::Instant;
 
 use indicatif::ProgressBar;
-use odo_core::odometry::{ChassisParams, Pose};
+use odo_unit::odometry::{ChassisParams, Pose};
 use odoctl::calib::{self, CalibrationOptions, Run, UncertaintyCriterion, WindowStart};
 use odoctl::csvio::match_times;
 use odoctl::simulate::PathKind;

@@ -65,7 +65,7 @@ fn simulate_calibrate_validate_with_plots() {
     ]);
     let out = success_stdout(&o);
     assert!(out.contains("stability study"), "{out}");
-    let p = odoctl::config::read_params(&cal, odo_core::odometry::ChassisParams::DESIGNED).unwrap();
+    let p = odoctl::config::read_params(&cal, odo_unit::odometry::ChassisParams::DESIGNED).unwrap();
     let t = common::truth();
     assert!((p.left_diameter - t.left_diameter).abs() < 0.5e-3, "{out}");
     assert!(
@@ -393,7 +393,7 @@ fn wheel_harmonics_reach_the_output_and_config_push() {
         out.contains("wheel function: 1 harmonic(s) per wheel"),
         "{out}"
     );
-    let p = odoctl::config::read_params(&cal, odo_core::odometry::ChassisParams::DESIGNED).unwrap();
+    let p = odoctl::config::read_params(&cal, odo_unit::odometry::ChassisParams::DESIGNED).unwrap();
     assert!((p.left_wheel.cos[0] - 0.003).abs() < 3e-4, "{out}");
     assert!(p.right_wheel.cos[0].abs() < 3e-4, "{out}");
     let text = read(&cal);

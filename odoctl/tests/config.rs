@@ -2,9 +2,9 @@
 //! and its `config push` lines carry every key bit for bit, and both sides know the same
 //! keys.
 
-use odo_core::console::{execute, MAX_SET_PAIRS};
-use odo_core::settings::{Key, Kind, Settings, Value};
-use odo_core::timing::{SyncMode, TimeTagPps};
+use odo_unit::console::{execute, MAX_SET_PAIRS};
+use odo_unit::settings::{Key, Kind, Settings, Value};
+use odo_unit::timing::{SyncMode, TimeTagPps};
 use odoctl::config::{self, ConfigError};
 
 /// xorshift64*: deterministic test values.
@@ -45,7 +45,7 @@ fn every_key_changed(rng: &mut Rng) -> Settings {
     c.delta_left = rng.f32_bits_to(1e-3, false);
     c.delta_right = rng.f32_bits_to(1e-3, false);
     c.delta_diff = rng.f32_bits_to(1e-3, false).max(f32::from_bits(1));
-    c.uncertainty_model = odo_core::odometry::UncertaintyModel::Covariance;
+    c.uncertainty_model = odo_unit::odometry::UncertaintyModel::Covariance;
     c.kappa_left = rng.f32_bits_to(1e-2, false);
     c.kappa_right = rng.f32_bits_to(1e-2, false);
     c.kappa_diff = rng.f32_bits_to(1e-2, false).max(f32::from_bits(1));
@@ -222,7 +222,7 @@ fn push_refuses_bad_files() {
         Some(&ConfigError::Setting {
             origin: "u.toml".into(),
             line: 2,
-            error: odo_core::settings::SettingError::OutOfRange(Key::Baud)
+            error: odo_unit::settings::SettingError::OutOfRange(Key::Baud)
         })
     );
     assert!(

@@ -6,7 +6,7 @@ mod common;
 use std::time::Duration;
 
 use common::{odoctl, read, scratch, success_stdout};
-use odo_core::protocol::Message;
+use odo_unit::protocol::Message;
 use odoctl::simulate::PathKind;
 
 fn s(p: &std::path::Path) -> &str {
@@ -74,7 +74,7 @@ fn decode_counts_corrupted_frames_and_resynchronises() {
         .find(|&i| {
             let mut b = bytes.clone();
             b[i] ^= 0x40;
-            let mut dec = odo_core::protocol::FrameDecoder::new();
+            let mut dec = odo_unit::protocol::FrameDecoder::new();
             dec.feed(&b, |_| {});
             dec.stats().crc_errors == 1
         })
@@ -222,8 +222,8 @@ fn record_and_monitor_against_a_unit_on_tcp() {
 /// the counts of each row, whatever the time step) bit for bit.
 #[test]
 fn decode_and_replay_follow_a_rate_change_inside_a_capture() {
-    use odo_core::protocol::{GnssTime, Status};
-    use odo_core::timing::SyncState;
+    use odo_unit::protocol::{GnssTime, Status};
+    use odo_unit::timing::SyncState;
     let d = scratch("link_rate_change");
     let sim = common::sim(PathKind::Validation, 15.0, 11);
     let params = common::truth();
@@ -326,11 +326,11 @@ fn config_pull_writes_what_push_sends_back() {
         "{text}"
     );
     let lines = odoctl::config::push_lines(&file).unwrap();
-    let mut back = odo_core::settings::Settings::DEFAULT;
+    let mut back = odo_unit::settings::Settings::DEFAULT;
     back.chassis.track_width = 0.7;
     back.rate = 100;
     for l in &lines {
-        assert!(odo_core::console::execute(l, &mut back).0.ok, "{l}");
+        assert!(odo_unit::console::execute(l, &mut back).0.ok, "{l}");
     }
     assert_eq!(back.to_bytes(), unit.to_bytes());
     assert_eq!(
@@ -338,6 +338,6 @@ fn config_pull_writes_what_push_sends_back() {
             .iter()
             .map(|l| l.split_whitespace().count() / 2)
             .sum::<usize>(),
-        odo_core::settings::Key::COUNT
+        odo_unit::settings::Key::COUNT
     );
 }

@@ -302,7 +302,7 @@ fn day_week_and_leap_second_table() {
         // The end of the year.
         (
             gps_time::utc_to_gps(
-                odo_core::timing::nmea::days_from_civil(2026, 12, 31),
+                odo_unit::timing::nmea::days_from_civil(2026, 12, 31),
                 86_399.0,
                 18,
             )

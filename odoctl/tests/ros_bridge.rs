@@ -11,7 +11,7 @@ use std::path::Path;
 use std::process::{Child, Command, Stdio};
 
 use common::scratch;
-use odo_core::odometry::ChassisParams;
+use odo_unit::odometry::ChassisParams;
 use odoctl::simulate::PathKind;
 
 fn cyclonedds_ready() -> bool {

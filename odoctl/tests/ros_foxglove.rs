@@ -16,10 +16,10 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use common::scratch;
-use odo_core::console::{execute, LineAssembler};
-use odo_core::odometry::ChassisParams;
-use odo_core::protocol::{CommandReply, FrameEncoder, Message, PoseRecord, MAX_ENCODED_FRAME};
-use odo_core::settings::Settings;
+use odo_unit::console::{execute, LineAssembler};
+use odo_unit::odometry::ChassisParams;
+use odo_unit::protocol::{CommandReply, FrameEncoder, Message, PoseRecord, MAX_ENCODED_FRAME};
+use odo_unit::settings::Settings;
 use odoctl::simulate::PathKind;
 
 fn client_ready() -> bool {

@@ -12,7 +12,7 @@ use std::path::Path;
 use std::process::Command;
 
 use common::{odoctl, scratch, success_stdout};
-use odo_core::odometry::{ChassisParams, Integrator, Pose};
+use odo_unit::odometry::{ChassisParams, Integrator, Pose};
 use odoctl::replay::{counts, index_refs};
 
 /// Whether the reader can run; panics when it cannot and CI requires it.
@@ -38,8 +38,8 @@ fn python_ready() -> bool {
 /// A parameter file with every key the reader uses written out.
 fn params_toml(p: &ChassisParams) -> String {
     let model = match p.uncertainty_model {
-        odo_core::odometry::UncertaintyModel::Paper => "paper",
-        odo_core::odometry::UncertaintyModel::Covariance => "covariance",
+        odo_unit::odometry::UncertaintyModel::Paper => "paper",
+        odo_unit::odometry::UncertaintyModel::Covariance => "covariance",
     };
     format!(
         "left_diameter = {:?}\nright_diameter = {:?}\ntrack_width = {:?}\nticks_per_rev = {}\n\
@@ -188,7 +188,7 @@ fn covariance_model_recording_with_time_tags_and_a_fault_read_back_independently
     }
     std::fs::write(dir.join("cov_samples.csv"), text).unwrap();
     let mut p = ChassisParams::DESIGNED;
-    p.uncertainty_model = odo_core::odometry::UncertaintyModel::Covariance;
+    p.uncertainty_model = odo_unit::odometry::UncertaintyModel::Covariance;
     p.kappa_left = 2.0e-6;
     p.kappa_right = 1.0e-6;
     replay_to_mcap(&dir, "cov", &p);

@@ -9,7 +9,7 @@
 
 mod common;
 
-use odo_core::odometry::ChassisParams;
+use odo_unit::odometry::ChassisParams;
 use odoctl::calib::{self, CalibrationOptions, GeometryRefine, Run, SubtrajectoryOptions};
 use odoctl::csvio::match_times;
 use odoctl::simulate::{self, PathKind, SimSettings};

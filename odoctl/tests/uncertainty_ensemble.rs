@@ -22,7 +22,7 @@
 //! `slip` and correlation length `L` gives a distance variance `2 slip^2 L d` for `d >> L`,
 //! so `slip = q / sqrt(2 L)`.
 
-use odo_core::odometry::{ChassisParams, Integrator, Pose, UncertaintyModel};
+use odo_unit::odometry::{ChassisParams, Integrator, Pose, UncertaintyModel};
 use odoctl::calib::{
     self, CalibrationOptions, CheckpointCoverage, CheckpointSample, Ensemble, UncertaintyCriterion,
     CHECKPOINTS,

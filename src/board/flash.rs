@@ -17,7 +17,7 @@
 //! (`src/board/sampler.rs`). The store erases only when a sector is full (one save in 64);
 //! the watchdog is fed just before the erase, and its shortest timeout (LSI at 47 kHz,
 //! 2,723 ms) is 3.4 times [`MAX_ERASE_MS`] ([`super::WATCHDOG_MIN_MS`]). Every save also
-//! programs its record ([`odo_core::settings::store::RECORD_LEN`], 164 bytes): one program
+//! programs its record ([`odo_unit::settings::store::RECORD_LEN`], 164 bytes): one program
 //! operation per byte at x8, per half-word at x16, per word at x32, each stalling the CPU
 //! for 16 us typical and 100 us at most, with interrupts served between them
 //! (docs/HARDWARE.md, Flash and watchdog). The data cache is reset after every erase and
@@ -56,7 +56,7 @@ pub const MAX_ERASE_MS: u32 = 800;
 
 pub use super::variant::flash::SettingsFlash;
 
-impl odo_core::unit::StallingFlash for SettingsFlash {
+impl odo_unit::unit::StallingFlash for SettingsFlash {
     fn max_stall_ms(&self) -> u32 {
         SettingsFlash::max_stall_ms(self)
     }

@@ -41,7 +41,7 @@ pub use variant::{
     GnssRx, SamplerExtra, COUNTER_BITS, CYCLES_UNIT,
 };
 
-use odo_core::unit::watchdog::{IwdgSetting, LSI_MAX_HZ, LSI_NOMINAL_HZ};
+use odo_unit::unit::watchdog::{IwdgSetting, LSI_MAX_HZ, LSI_NOMINAL_HZ};
 use stm32f4xx_hal::pac;
 
 /// The bus clocks the peripherals run at, Hz.
@@ -76,8 +76,8 @@ pub const WATCHDOG_MIN_MS: u32 = WATCHDOG.timeout_us(LSI_MAX_HZ) / 1000;
 
 const _: () = assert!(WATCHDOG_MIN_MS > 3 * flash::MAX_ERASE_MS);
 
-use odo_core::protocol::{reset_cause::RCC_CSR_RMVF, ResetCause};
-pub use odo_core::timing::ClockSource;
+use odo_unit::protocol::{reset_cause::RCC_CSR_RMVF, ResetCause};
+pub use odo_unit::timing::ClockSource;
 
 /// The watchdog stops while a debugger halts the core (DBGMCU_APB1_FZ DBG_IWDG_STOP), so
 /// that a debug session is not reset; the `watchdog-in-debug` feature keeps it running,
@@ -152,8 +152,8 @@ pub fn clock_source(at_start: ClockSource) -> ClockSource {
 }
 
 /// What `status` reports of the board, `at_start` being the clock source start-up found.
-pub fn report(at_start: ClockSource) -> odo_core::unit::BoardReport {
-    odo_core::unit::BoardReport {
+pub fn report(at_start: ClockSource) -> odo_unit::unit::BoardReport {
+    odo_unit::unit::BoardReport {
         clock: clock_source(at_start),
         stack: stack::high_water(),
         cycles_unit: CYCLES_UNIT,

@@ -3,7 +3,7 @@
 //! same counter.
 //!
 //! TIM5 counts timer ticks (84 MHz on the board) from 0 to 2^32 - 1 and wraps (every 51 s);
-//! [`TimerExtender`](odo_core::timing::TimerExtender) makes the 64-bit tick timeline of the
+//! [`TimerExtender`](odo_unit::timing::TimerExtender) makes the 64-bit tick timeline of the
 //! discipline from it, which needs a reading at least every 2^31 ticks (25 s): every sample
 //! interrupt reads it, and the slowest rate is 1 Hz. Each compare interrupt reads the counter as
 //! its first action (after the encoders, see `src/board/real/encoders.rs`), and [`catch_up`] labels
@@ -15,7 +15,7 @@
 //! that the counter passed while it was being written is caught by reading the counter back and
 //! forcing the compare event (EGR CC2G). The handler's reads, their order (flags before the
 //! counter, so that a compare firing between them is not lost) and its decisions are
-//! [`odo_core::timing::compare`], host-tested on a simulated timer.
+//! [`odo_unit::timing::compare`], host-tested on a simulated timer.
 //!
 //! The PPS capture (CH1, rising edge, input filter [`PPS_FILTER`]) latches the counter at
 //! the edge; a second edge before the interrupt reads it sets the over-capture flag (one
@@ -32,11 +32,11 @@
 
 use super::variant::sampler::Timeline;
 use super::SamplerExtra;
-use odo_core::timing::{ConfigError, Discipline, DisciplineConfig, Sample, SyncMode};
+use odo_unit::timing::{ConfigError, Discipline, DisciplineConfig, Sample, SyncMode};
 use stm32f4xx_hal::pac;
 use stm32f4xx_hal::rcc::Enable;
 
-pub use odo_core::timing::TimerEvent as Event;
+pub use odo_unit::timing::TimerEvent as Event;
 
 /// Input filter of the PPS input (IC1F = 0b0011: 8 consecutive samples at 84 MHz). It
 /// rejects pulses shorter than about 95 ns and delays the capture by as much, a constant

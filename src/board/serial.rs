@@ -1,7 +1,7 @@
 //! The UARTs: the host link on USART2 (commands in, frames out) and the GNSS NMEA input on
 //! USART1 (receive only).
 //!
-//! Transmission is interrupt-driven from [`TxRing`] (`odo_core::protocol::tx_ring`), a byte
+//! Transmission is interrupt-driven from [`TxRing`] (`odo_unit::protocol::tx_ring`), a byte
 //! ring that producers fill with whole frames only ([`TxRing::push_frame`] refuses a frame
 //! that does not fit, so a record the link cannot carry is dropped whole and counted by the
 //! caller). The USART2 interrupt moves bytes to the data register while TXE is set and the ring is not empty; TXEIE is on
@@ -12,9 +12,9 @@
 //! ring.
 
 use heapless::spsc::Producer;
-use odo_core::protocol::TxRing;
-use odo_core::unit::RxByte;
-pub use odo_core::unit::RxErrors;
+use odo_unit::protocol::TxRing;
+use odo_unit::unit::RxByte;
+pub use odo_unit::unit::RxErrors;
 use stm32f4xx_hal::pac;
 use stm32f4xx_hal::rcc::Enable;
 

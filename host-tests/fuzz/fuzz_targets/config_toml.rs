@@ -6,7 +6,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use odo_core::odometry::ChassisParams;
+use odo_unit::odometry::ChassisParams;
 use odoctl::config;
 
 fuzz_target!(|data: &[u8]| {

@@ -10,10 +10,10 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use odo_core::console::{execute, Action, LineAssembler, MAX_REPLY};
-use odo_core::odometry::Pose;
-use odo_core::settings::store::SettingsStore;
-use odo_core::settings::{Key, Kind, Settings};
+use odo_unit::console::{execute, Action, LineAssembler, MAX_REPLY};
+use odo_unit::odometry::Pose;
+use odo_unit::settings::store::SettingsStore;
+use odo_unit::settings::{Key, Kind, Settings};
 use odo_fuzz::CutFlash;
 
 fuzz_target!(|data: &[u8]| {

@@ -6,8 +6,8 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use odo_core::protocol::FrameDecoder;
-use odo_core::protocol::{encode_frame, CommandReply, Frame, Message, MAX_ENCODED_FRAME};
+use odo_unit::protocol::FrameDecoder;
+use odo_unit::protocol::{encode_frame, CommandReply, Frame, Message, MAX_ENCODED_FRAME};
 
 fn encode(frame: &Frame) -> Vec<u8> {
     let mut out = [0u8; MAX_ENCODED_FRAME];

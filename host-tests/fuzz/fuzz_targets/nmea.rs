@@ -6,7 +6,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use odo_core::timing::nmea::{parse_sentence, GpsTime, LineBuffer, UtcDateTime};
+use odo_unit::timing::nmea::{parse_sentence, GpsTime, LineBuffer, UtcDateTime};
 
 fuzz_target!(|data: &[u8]| {
     // One sentence as a whole, then the stream through the line buffer.

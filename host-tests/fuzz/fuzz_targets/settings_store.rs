@@ -11,8 +11,8 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use odo_core::settings::store::{encode_record, generation_is_newer, SettingsStore, SLOT_LEN};
-use odo_core::settings::{Settings, SettingsSource};
+use odo_unit::settings::store::{encode_record, generation_is_newer, SettingsStore, SLOT_LEN};
+use odo_unit::settings::{Settings, SettingsSource};
 use odo_fuzz::CutFlash;
 
 /// Distinct valid settings.

@@ -1,6 +1,6 @@
 //! Support of the fuzz targets: a NOR flash that loses power at a chosen step.
 
-use odo_core::settings::store::{Flash, WORD};
+use odo_unit::settings::store::{Flash, WORD};
 
 /// Why a [`CutFlash`] operation failed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -31,7 +31,7 @@ pub struct CutFlash {
 impl CutFlash {
     /// Erased sectors of `slots` 256-byte slots each.
     pub fn new(slots: usize) -> Self {
-        let size = slots * odo_core::settings::store::SLOT_LEN;
+        let size = slots * odo_unit::settings::store::SLOT_LEN;
         Self {
             mem: [vec![0xFF; size], vec![0xFF; size]],
             cut_at: None,

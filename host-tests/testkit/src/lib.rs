@@ -19,7 +19,7 @@ mod rng;
 
 pub use rng::Rng;
 
-use odo_core::odometry::{ChassisParams, WheelHarmonics};
+use odo_unit::odometry::{ChassisParams, WheelHarmonics};
 
 /// The designed chassis with out-of-round wheels: per-angle wheel functions of eqs (3)-(5)
 /// (three harmonics each, up to 2e-3 relative) for the wheel-function tests and benchmarks.

@@ -4,7 +4,7 @@
 
 use std::f64::consts::{PI, TAU};
 
-use odo_core::odometry::{ChassisParams, Pose, WheelHarmonics};
+use odo_unit::odometry::{ChassisParams, Pose, WheelHarmonics};
 
 /// The paper's odometry and uncertainty in f64.
 #[derive(Debug, Clone)]

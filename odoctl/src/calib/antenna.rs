@@ -4,7 +4,7 @@
 //! ([`crate::reference::antenna_position`]: heading 0 = north, clockwise; x east, y north),
 //! and the derivatives of that point with respect to the fit's unknowns.
 
-use odo_core::odometry::Pose;
+use odo_unit::odometry::Pose;
 
 use super::sensitivity::PoseSensitivity;
 

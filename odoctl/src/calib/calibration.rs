@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Result};
 use indicatif::{ProgressBar, ProgressStyle};
-use odo_core::odometry::{ChassisParams, GeometryUncertainty, UncertaintyModel};
+use odo_unit::odometry::{ChassisParams, GeometryUncertainty, UncertaintyModel};
 
 use crate::config as cfg;
 use crate::csvio;

@@ -1,7 +1,7 @@
 //! Errors and predicted uncertainty along a run (`validate`, and the uncertainty fits).
 
 use anyhow::{anyhow, Result};
-use odo_core::odometry::ChassisParams;
+use odo_unit::odometry::ChassisParams;
 
 use crate::optim::norm2;
 use crate::stats::wrap_angle;

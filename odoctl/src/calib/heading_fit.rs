@@ -4,7 +4,7 @@
 //! segments, the whole-run heading of the sub-trajectory estimate).
 
 use anyhow::{anyhow, Result};
-use odo_core::odometry::ChassisParams;
+use odo_unit::odometry::ChassisParams;
 
 use crate::optim::{self, LmOptions, NormalAccumulator, Objective};
 

@@ -1,7 +1,7 @@
 //! The two-core pipeline of the sensitivity pass: a second thread runs the core integrator
 //! while this one follows the sensitivities.
 
-use odo_core::odometry::{ChassisParams, Integrator, Pose, PoseStep};
+use odo_unit::odometry::{ChassisParams, Integrator, Pose, PoseStep};
 
 use crate::csvio::Sample;
 use crate::replay::{counts, index_refs};

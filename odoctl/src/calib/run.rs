@@ -2,7 +2,7 @@
 //! the start of a stretch, and the core integrator run along it.
 
 use anyhow::Result;
-use odo_core::odometry::{ChassisParams, Integrator, ParamError, Pose, PoseStep};
+use odo_unit::odometry::{ChassisParams, Integrator, ParamError, Pose, PoseStep};
 
 use crate::csvio::{RefPoint, Sample};
 use crate::optim::{self, NormalAccumulator, Objective};

@@ -1,7 +1,7 @@
 //! Forward sensitivities of eqs (7)-(15): the pose's derivatives with respect to the
 //! diameters, the track width and the initial heading, followed alongside the core integrator.
 
-use odo_core::odometry::{trig, ChassisParams, PoseStep};
+use odo_unit::odometry::{trig, ChassisParams, PoseStep};
 
 /// The unknowns of the geometry fit, in the order of [`PoseSensitivity`]'s columns and of
 /// the fit's parameter vector.
@@ -60,7 +60,7 @@ fn sinc_and_derivative(h: f64) -> (f64, f64) {
 /// `y += dd cos(theta)`, `alpha += dalpha` accumulated with `d s_i / d D_i = s_i / D_i` (the
 /// wheel distance, including the per-angle wheel function, is proportional to its diameter).
 ///
-/// [`Integrator::step_pose`]: odo_core::odometry::Integrator::step_pose
+/// [`Integrator::step_pose`]: odo_unit::odometry::Integrator::step_pose
 pub(crate) struct SensitivityTracker {
     model: SensitivityModel,
     pub(crate) sens: PoseSensitivity,

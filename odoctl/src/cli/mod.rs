@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
-use odo_core::odometry::UncertaintyModel;
+use odo_unit::odometry::UncertaintyModel;
 
 mod calibrate;
 mod reference;

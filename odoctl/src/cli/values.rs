@@ -3,7 +3,7 @@
 //! anything else (NaN, infinities, out of range) with a message giving the range; clap names
 //! the option.
 
-use odo_core::odometry::integrator::{MAX_HEADING, MAX_POSITION};
+use odo_unit::odometry::integrator::{MAX_HEADING, MAX_POSITION};
 
 /// A finite number in `lo..=hi` (or `lo < v` when `open_lo`), in `unit`.
 fn real(text: &str, lo: f64, hi: f64, open_lo: bool, unit: &str) -> Result<f64, String> {
@@ -57,13 +57,13 @@ pub fn baud(text: &str) -> Result<u32, String> {
 }
 
 /// An x or y the unit's integrator can hold, metres (+-2^30 m,
-/// `odo_core::odometry::integrator::MAX_POSITION`).
+/// `odo_unit::odometry::integrator::MAX_POSITION`).
 pub fn position(text: &str) -> Result<f64, String> {
     real(text, -MAX_POSITION, MAX_POSITION, false, "m")
 }
 
 /// A heading the unit's integrator can hold, radians (+-2^32 rad,
-/// `odo_core::odometry::integrator::MAX_HEADING`).
+/// `odo_unit::odometry::integrator::MAX_HEADING`).
 pub fn heading(text: &str) -> Result<f64, String> {
     real(text, -MAX_HEADING, MAX_HEADING, false, "rad")
 }

@@ -5,7 +5,7 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Result};
-use odo_core::protocol::Message;
+use odo_unit::protocol::Message;
 
 use crate::cli::MonitorArgs;
 use crate::link::{describe, health, open, table_row, Session, TABLE_HEADER};

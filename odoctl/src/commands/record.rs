@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Result};
-use odo_core::protocol::{Frame, Message, PoseRecord};
+use odo_unit::protocol::{Frame, Message, PoseRecord};
 
 use crate::cli::RecordArgs;
 use crate::link::{describe, health, open, SegmentWriter, Session, REPLY_TIMEOUT};

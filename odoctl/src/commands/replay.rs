@@ -6,7 +6,7 @@ use std::path::Path;
 use std::process::ExitCode;
 
 use anyhow::{bail, Result};
-use odo_core::odometry::Pose;
+use odo_unit::odometry::Pose;
 
 use crate::cli::ReplayArgs;
 use crate::config::{self as cfg};

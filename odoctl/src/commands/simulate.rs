@@ -5,7 +5,7 @@ use std::io::Write;
 use std::process::ExitCode;
 
 use anyhow::{bail, Context, Result};
-use odo_core::odometry::ChassisParams;
+use odo_unit::odometry::ChassisParams;
 
 use crate::cli::{PosTimeArg, ReceiverArgs, SimulateArgs};
 use crate::config::{self as cfg};

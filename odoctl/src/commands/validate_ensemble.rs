@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{bail, Context, Result};
-use odo_core::odometry::{ChassisParams, UncertaintyModel};
+use odo_unit::odometry::{ChassisParams, UncertaintyModel};
 
 use crate::calib::{self, CheckpointSample, Ensemble, Run};
 use crate::cli::{ReferenceArgs, ValidateArgs};

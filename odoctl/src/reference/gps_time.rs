@@ -1,11 +1,11 @@
 //! UTC and GPS time for receiver logs, in f64 seconds since the GPS epoch (1980-01-06 00:00:00
 //! GPS). The calendar arithmetic and the UTC -> GPS mapping are the firmware's
-//! (`odo_core::timing::nmea`); this only adds the fraction of the second and a leap-second count
+//! (`odo_unit::timing::nmea`); this only adds the fraction of the second and a leap-second count
 //! other than the core's built-in [`GPS_UTC_LEAP_SECONDS`] (`--leap-seconds N`).
 
 use anyhow::{anyhow, Result};
-use odo_core::timing::nmea::{civil_from_days, days_from_civil, UtcDateTime};
-pub use odo_core::timing::nmea::{GPS_UTC_LEAP_SECONDS, SECONDS_PER_WEEK};
+use odo_unit::timing::nmea::{civil_from_days, days_from_civil, UtcDateTime};
+pub use odo_unit::timing::nmea::{GPS_UTC_LEAP_SECONDS, SECONDS_PER_WEEK};
 
 /// GPS minus UTC (s) unless `--leap-seconds` says otherwise: 18 since 2017-01-01.
 pub const DEFAULT_LEAP_SECONDS: i32 = GPS_UTC_LEAP_SECONDS as i32;

@@ -2,7 +2,7 @@
 //! heading of HDT and the standard deviations of GST.
 //!
 //! Every line is checked by the firmware's sentence parser first
-//! (`odo_core::timing::nmea::parse_sentence`: `$`, `*hh` checksum, any talker), which also
+//! (`odo_unit::timing::nmea::parse_sentence`: `$`, `*hh` checksum, any talker), which also
 //! reads RMC and ZDA (date and time, the same code as on the unit). GGA, HDT and GST are
 //! read by the `nmea` crate. Other sentences are counted by type and skipped; corrupt lines
 //! (checksum, syntax, binary data between sentences) are counted and skipped; a line with
@@ -26,7 +26,7 @@
 
 use anyhow::{bail, Result};
 use chrono::Timelike;
-use odo_core::timing::nmea::{days_from_civil, parse_sentence, NmeaError, TimeMessage};
+use odo_unit::timing::nmea::{days_from_civil, parse_sentence, NmeaError, TimeMessage};
 
 use super::geodetic::Geodetic;
 use super::{gps_time, Epoch, FixQuality, GeodeticLog, ReadReport};

@@ -12,7 +12,7 @@
 //! Hand-written: no crate on the registry reads `.pos` files.
 
 use anyhow::{bail, Result};
-use odo_core::timing::nmea::days_from_civil;
+use odo_unit::timing::nmea::days_from_civil;
 
 use super::geodetic::Geodetic;
 use super::{gps_time, Epoch, FixQuality, GeodeticLog, ReadReport};
@@ -101,7 +101,7 @@ fn row(tokens: &[&str], layout: Layout, leap_seconds: i32) -> Result<Epoch, Stri
             return Err(format!("time `{first} {clock}` is out of range"));
         }
         let days = days_from_civil(y, m, dd);
-        if odo_core::timing::nmea::civil_from_days(days) != (y, m, dd) {
+        if odo_unit::timing::nmea::civil_from_days(days) != (y, m, dd) {
             return Err(format!("date `{first}` does not exist"));
         }
         let sod = f64::from(hh * 3600 + mm * 60) + ss;

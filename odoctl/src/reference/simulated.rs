@@ -13,7 +13,7 @@ use std::f64::consts::SQRT_2;
 use std::io::Write;
 
 use anyhow::Result;
-use odo_core::timing::nmea::civil_from_days;
+use odo_unit::timing::nmea::civil_from_days;
 
 use super::geodetic::{Geodetic, LocalFrame};
 use super::nmea::with_checksum;
@@ -281,7 +281,7 @@ mod tests {
     }
 
     fn civil_days(y: i64, m: u32, d: u32) -> i64 {
-        odo_core::timing::nmea::days_from_civil(y, m, d)
+        odo_unit::timing::nmea::days_from_civil(y, m, d)
     }
 
     #[test]

@@ -16,7 +16,7 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use anyhow::{anyhow, Result};
-use odo_core::protocol::{Message, PoseRecord};
+use odo_unit::protocol::{Message, PoseRecord};
 use ros2_client::qos::{Durability, History, WhenFull};
 use ros2_client::{
     Context, ContextOptions, MessageTypeName, Name, Node, NodeName, NodeOptions, QosProfile,
@@ -28,7 +28,7 @@ use super::msgs::{self, level};
 use super::stamps::gps_to_unix_nanos;
 use super::stream::{Messages, OdomSample, OdomStream};
 use crate::link::{self, Session};
-use odo_core::odometry::{ChassisParams, Pose};
+use odo_unit::odometry::{ChassisParams, Pose};
 
 /// What `odoctl bridge` does.
 #[derive(Debug, Clone)]

@@ -8,7 +8,7 @@
 use std::f64::consts::{FRAC_PI_2, PI};
 
 use super::msgs::{Covariance6, Quaternion};
-use odo_core::odometry::{ChassisParams, Pose, UncertaintyModel};
+use odo_unit::odometry::{ChassisParams, Pose, UncertaintyModel};
 
 /// Variance given to the dimensions a planar odometry does not observe (z, roll, pitch; vz,
 /// roll and pitch rates): large, finite, never zero (m^2, rad^2, (m/s)^2, (rad/s)^2).

@@ -12,7 +12,7 @@ use std::path::Path;
 use anyhow::{Context, Result};
 
 use crate::config as cfg;
-use odo_core::odometry::ChassisParams;
+use odo_unit::odometry::ChassisParams;
 
 /// Node name the parameters are written under (the controller's name in the user's
 /// controller manager configuration; rename it there if theirs differs).

@@ -11,7 +11,7 @@ use super::stamps::{self, Stamps};
 use crate::config as cfg;
 use crate::csvio::Sample;
 use crate::replay::{counts, index_refs};
-use odo_core::odometry::{ChassisParams, Integrator, Pose};
+use odo_unit::odometry::{ChassisParams, Integrator, Pose};
 
 /// The samples of a replay from `initial`: the integrator's pose, sigmas and position-heading
 /// covariance after each row (the first row: `initial`, zero covariance, no twist), the
@@ -147,7 +147,7 @@ fn write(
     out: &Path,
     meta: &BTreeMap<String, String>,
     odom: &[OdomSample],
-    model: Option<odo_core::odometry::UncertaintyModel>,
+    model: Option<odo_unit::odometry::UncertaintyModel>,
 ) -> Result<RecordingSummary> {
     let mut rec = recording::create(out, meta)?;
     if let Some(m) = model {

@@ -18,7 +18,7 @@ use super::conventions::ODOM_FRAME;
 use super::msgs::{self, MsgType};
 pub use super::stream::OdomSample;
 use super::stream::{header, ros_pose, OdomStream, StreamCounts};
-use odo_core::odometry::{Pose, UncertaintyModel};
+use odo_unit::odometry::{Pose, UncertaintyModel};
 
 /// What a finished recording holds: the stream's counts and the paths written.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]

@@ -2,7 +2,7 @@
 //! the leap seconds), else the unit's MCU time; one source per recording, named in the file's
 //! metadata.
 
-use odo_core::timing::GPS_UTC_LEAP_SECONDS;
+use odo_unit::timing::GPS_UTC_LEAP_SECONDS;
 
 use crate::csvio::Sample;
 
@@ -134,7 +134,7 @@ mod tests {
 
     #[test]
     fn gps_epoch() {
-        let days = odo_core::timing::nmea::days_from_civil(1980, 1, 6);
+        let days = odo_unit::timing::nmea::days_from_civil(1980, 1, 6);
         assert_eq!(days * 86_400, GPS_EPOCH_UNIX);
         assert_eq!(LEAP_SECONDS, 18);
     }
@@ -145,7 +145,7 @@ mod tests {
         let ns = gps_to_unix_nanos(2296, 0, 0.0).unwrap();
         assert_eq!(
             ns,
-            (odo_core::timing::nmea::days_from_civil(2024, 1, 7) * 86_400 - 18) as u64
+            (odo_unit::timing::nmea::days_from_civil(2024, 1, 7) * 86_400 - 18) as u64
                 * 1_000_000_000
         );
     }

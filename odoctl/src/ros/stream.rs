@@ -2,14 +2,14 @@
 //! the live bridge (`/odom`, `/tf`, `/diagnostics` on the rules of docs/ROS.md).
 
 use anyhow::{anyhow, Result};
-use odo_core::protocol::StatusFlags;
-use odo_core::timing::SyncState;
+use odo_unit::protocol::StatusFlags;
+use odo_unit::timing::SyncState;
 
 use super::conventions::{
     quaternion_of_heading, BaseTwist, ContinuousOdom, PoseCovariance, BASE_FRAME, ODOM_FRAME,
 };
 use super::msgs::{self, level};
-use odo_core::odometry::{Pose, UncertaintyModel};
+use odo_unit::odometry::{Pose, UncertaintyModel};
 
 /// One sample to publish or record: the unit's pose (ours), its covariance, the interval's twist.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]

@@ -12,7 +12,7 @@ use crate::config as cfg;
 use crate::csvio::RefPoint;
 use crate::reference::matched::{read_matched_run, MatchedRun, ReferenceSummary};
 use crate::reference::ReferenceOptions;
-use odo_core::odometry::Pose;
+use odo_unit::odometry::Pose;
 
 /// Nanoseconds of a CSV time (s); the files' own time base (metadata `stamp_source` =
 /// `samples_t`).

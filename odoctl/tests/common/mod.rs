@@ -10,12 +10,12 @@ use std::process::{Command, Output};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use odo_core::console::{execute, Action, LineAssembler};
-use odo_core::odometry::{ChassisParams, IndexRefs, Integrator, Pose, WheelCounts};
-use odo_core::protocol::{
+use odo_unit::console::{execute, Action, LineAssembler};
+use odo_unit::odometry::{ChassisParams, IndexRefs, Integrator, Pose, WheelCounts};
+use odo_unit::protocol::{
     CommandReply, FrameEncoder, Message, PoseRecord, StatusFlags, WheelStatus, MAX_ENCODED_FRAME,
 };
-use odo_core::settings::Settings;
+use odo_unit::settings::Settings;
 use odoctl::csvio::Sample;
 use odoctl::simulate::{self, PathKind, SimRun, SimSettings};
 
@@ -173,7 +173,7 @@ pub fn fake_unit(samples: Vec<Sample>, period: Duration) -> (u16, JoinHandle<Set
             sock.write_all(&buf[..n]).is_ok()
         };
         // A heartbeat first, as a unit that is up sends them.
-        let status = odo_core::protocol::Status {
+        let status = odo_unit::protocol::Status {
             rate_hz: 50,
             samples_lost: 1,
             merged_samples: 2,

@@ -115,7 +115,7 @@ impl SimDrive {
 
     /// The raw counters at `tick` (left 32-bit, right 16-bit); index pulses passed since the
     /// previous call are kept for [`Self::take_index`].
-    pub fn snapshot(&mut self, tick: u64) -> odo_core::unit::RawCounts {
+    pub fn snapshot(&mut self, tick: u64) -> odo_unit::unit::RawCounts {
         let t = tick as i64;
         let now = position(t);
         let counts = [now[0], now[1] + glitch(t)];
@@ -137,7 +137,7 @@ impl SimDrive {
             }
             self.last[wheel] = now[wheel];
         }
-        odo_core::unit::RawCounts {
+        odo_unit::unit::RawCounts {
             left: Self::raw(0, counts[0]),
             right: Self::raw(1, counts[1]),
         }

@@ -1,7 +1,7 @@
 //! The settings sectors kept in RAM (4 KiB each): QEMU's flash is read-only.
 
 use crate::board::flash::{check, FlashError};
-use odo_core::settings::store::Flash;
+use odo_unit::settings::store::Flash;
 
 /// Bytes per emulated sector.
 pub const SECTOR_SIZE: usize = 4096;

@@ -42,7 +42,7 @@
 //! CC1 interrupt for each; this model delivers at most one per period).
 
 use heapless::spsc::{Consumer, Producer, Queue};
-use odo_core::timing::UtcDateTime;
+use odo_unit::timing::UtcDateTime;
 use stm32f4xx_hal::pac::Interrupt;
 
 use crate::board::serial::{GnssUart, RxErrors};

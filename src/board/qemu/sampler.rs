@@ -4,7 +4,7 @@
 
 use super::gnss::SimGnss;
 use crate::board::sampler::{Event, Sampler};
-use odo_core::timing::{catch_up, Sample, SyncMode};
+use odo_unit::timing::{catch_up, Sample, SyncMode};
 use stm32f4xx_hal::pac;
 
 const SR_UIF: u32 = 1 << 0;

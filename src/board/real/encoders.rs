@@ -17,7 +17,7 @@
 //! has to read it before the next index pulse (one wheel turn later). Two pulses before the
 //! read set the over-capture flag, reported as a lost pulse.
 
-use odo_core::unit::{IndexCapture, RawCounts};
+use odo_unit::unit::{IndexCapture, RawCounts};
 use stm32f4xx_hal::pac;
 use stm32f4xx_hal::rcc::Enable;
 

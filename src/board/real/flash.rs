@@ -2,7 +2,7 @@
 //! store's [`Flash`] trait; see `src/board/flash.rs` for the sectors, parallelism and stalls.
 
 use crate::board::flash::{check, FlashError, MAX_ERASE_MS};
-use odo_core::settings::store::Flash;
+use odo_unit::settings::store::Flash;
 use stm32f4xx_hal::pac;
 
 /// Bytes per settings sector.

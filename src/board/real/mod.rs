@@ -10,9 +10,9 @@ use super::serial::GnssUart;
 use super::BusClocks;
 use super::FaultLines;
 use defmt_rtt as _;
-use odo_core::timing::ClockSource;
-use odo_core::unit::watchdog::IwdgSetting;
-use odo_core::unit::{IndexCapture, RawCounts};
+use odo_unit::timing::ClockSource;
+use odo_unit::unit::watchdog::IwdgSetting;
+use odo_unit::unit::{IndexCapture, RawCounts};
 use stm32f4xx_hal::pac;
 
 /// Widths of the raw counters (left, right), bits.

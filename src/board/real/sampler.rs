@@ -1,9 +1,9 @@
 //! TIM5 on the board: CH2 output compare at each sample's tick on the free-running 32-bit
 //! counter, CH1 input capture of the PPS (`src/board/sampler.rs`). The interrupt's logic is
-//! [`odo_core::timing::compare`]; this file gives it TIM5's registers.
+//! [`odo_unit::timing::compare`]; this file gives it TIM5's registers.
 
 use crate::board::sampler::{Event, Sampler};
-use odo_core::timing::{compare, CompareSchedule, CompareTimer, Sample, TimerExtender};
+use odo_unit::timing::{compare, CompareSchedule, CompareTimer, Sample, TimerExtender};
 use stm32f4xx_hal::pac;
 
 /// The counter's 64-bit timeline and the programmed compare.

@@ -45,7 +45,7 @@
 #![allow(clippy::needless_range_loop)]
 
 use anyhow::{anyhow, Result};
-use odo_core::odometry::{ChassisParams, Pose};
+use odo_unit::odometry::{ChassisParams, Pose};
 
 use crate::calib::run::Run;
 use crate::replay::{counts, index_refs};
@@ -819,7 +819,7 @@ fn wheel_distances(a: Pose, b: Pose, w: f64) -> [f64; 2] {
 mod tests {
     use super::*;
     use crate::simulate::{default_truth, simulate_path, PathKind, SimSettings};
-    use odo_core::odometry::Integrator;
+    use odo_unit::odometry::Integrator;
 
     /// 40 m of the estimation path with the truth's geometry and 0.2 % slip.
     fn slipping_run(seed: u64) -> crate::simulate::SimRun {

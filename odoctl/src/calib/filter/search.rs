@@ -11,7 +11,7 @@
 //!
 //! [`Composed::gauss_markov`]: super::blocks::Composed::gauss_markov
 
-use odo_core::odometry::ChassisParams;
+use odo_unit::odometry::ChassisParams;
 
 use crate::calib::pipeline::cores;
 use crate::optim::brent_min;

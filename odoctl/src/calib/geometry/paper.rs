@@ -4,7 +4,7 @@
 
 use anyhow::{anyhow, bail, Result};
 use indicatif::ProgressBar;
-use odo_core::odometry::ChassisParams;
+use odo_unit::odometry::ChassisParams;
 
 use crate::calib::antenna::{
     observed_with_rows, LeverArm, ANTENNA_FORWARD, ANTENNA_LEFT, MODEL_UNKNOWNS,

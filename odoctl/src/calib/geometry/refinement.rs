@@ -27,7 +27,7 @@
 //! The filter observes the axle centre: a lever arm keeps the sub-trajectory estimate.
 
 use anyhow::{anyhow, Result};
-use odo_core::odometry::ChassisParams;
+use odo_unit::odometry::ChassisParams;
 
 use crate::calib::antenna::LeverArm;
 use crate::calib::filter::innovations::{Innovations, Turning, OBSERVATION_BLOCK};

@@ -43,7 +43,7 @@
 //! [`cluster_sandwich`]: super::covariance::cluster_sandwich
 
 use anyhow::{anyhow, bail, Result};
-use odo_core::odometry::ChassisParams;
+use odo_unit::odometry::ChassisParams;
 
 use crate::calib::antenna::{
     observed_with_rows, LeverArm, ANTENNA_FORWARD, ANTENNA_LEFT, MODEL_UNKNOWNS,

@@ -1,7 +1,7 @@
 //! How much a stretch turned, and what that says of the track width: eq (8), only turning
 //! reveals it.
 
-use odo_core::odometry::ChassisParams;
+use odo_unit::odometry::ChassisParams;
 
 use crate::calib::run::Run;
 

@@ -34,8 +34,8 @@
 //! coefficient in radius, 0.027 mm over 3 km at 8 mm RTK noise and 50 Hz.
 
 use anyhow::{anyhow, bail, Result};
-use odo_core::odometry::params::HARMONIC_KEYS;
-use odo_core::odometry::{ChassisParams, WheelHarmonics, WHEEL_HARMONICS};
+use odo_unit::odometry::params::HARMONIC_KEYS;
+use odo_unit::odometry::{ChassisParams, WheelHarmonics, WHEEL_HARMONICS};
 
 use crate::calib::heading_fit::fit_restart_heading;
 use crate::calib::pipeline::cores;

@@ -21,7 +21,7 @@
 
 use anyhow::Result;
 use indicatif::ProgressBar;
-use odo_core::odometry::ChassisParams;
+use odo_unit::odometry::ChassisParams;
 
 use crate::calib::evaluation::evaluate;
 use crate::calib::geometry::paper::{fit_geometry, GeomFit, GeomOptions};

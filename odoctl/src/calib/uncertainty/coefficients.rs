@@ -1,7 +1,7 @@
 //! The uncertainty coefficients a calibration fits: which model's (delta or kappa), how the
 //! two wheels' relate, by which criterion, and the result ([`UncertaintyFit`]).
 
-use odo_core::odometry::{ChassisParams, UncertaintyModel};
+use odo_unit::odometry::{ChassisParams, UncertaintyModel};
 
 /// How the two wheels' coefficients are fitted.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]

@@ -4,7 +4,7 @@ use std::cell::RefCell;
 
 use anyhow::Result;
 use indicatif::ProgressBar;
-use odo_core::odometry::{ChassisParams, UncertaintyModel};
+use odo_unit::odometry::{ChassisParams, UncertaintyModel};
 
 use crate::calib::run::Run;
 

@@ -1,7 +1,7 @@
 //! The covariance model's kappa by the likelihood of the reference's observations under the
 //! error-state Kalman filter ([`Innovations`]): nothing a point is judged on is fitted to it.
 
-use odo_core::odometry::{ChassisParams, UncertaintyModel};
+use odo_unit::odometry::{ChassisParams, UncertaintyModel};
 
 use crate::calib::filter::innovations::Innovations;
 use crate::calib::filter::search::slip_rate_range;

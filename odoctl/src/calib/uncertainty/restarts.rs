@@ -4,7 +4,7 @@ use std::cell::RefCell;
 use std::rc::Rc;
 
 use anyhow::{anyhow, bail, Result};
-use odo_core::odometry::ChassisParams;
+use odo_unit::odometry::ChassisParams;
 
 use crate::calib::evaluation::Evaluation;
 use crate::calib::heading_fit::fit_restart_heading;

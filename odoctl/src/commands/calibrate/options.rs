@@ -2,7 +2,7 @@
 //! the uncertainty model the result selects.
 
 use anyhow::Result;
-use odo_core::odometry::UncertaintyModel;
+use odo_unit::odometry::UncertaintyModel;
 
 use crate::calib::{CalibrationOptions, LeverArm};
 use crate::cli::{CalibrateArgs, GeometryArgs, ModelChoice, Models};

@@ -1,7 +1,7 @@
 //! What `calibrate` prints: the estimates with their standard errors, how they were found,
 //! the uncertainty fits, the errors at the result and the stability study.
 
-use odo_core::odometry::{ChassisParams, UncertaintyModel};
+use odo_unit::odometry::{ChassisParams, UncertaintyModel};
 
 use super::{filter_refined, ErrorSummary};
 use crate::calib::{
@@ -423,7 +423,7 @@ fn print_harmonics(hf: &calib::HarmonicsFit, initial: &ChassisParams) {
         "radius [mm]"
     );
     for (i, k) in hf.keys.iter().enumerate() {
-        let before = odo_core::settings::Key::from_name(k)
+        let before = odo_unit::settings::Key::from_name(k)
             .and_then(|key| {
                 crate::config::chassis_value_text(initial, key)
                     .parse::<f64>()
