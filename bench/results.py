@@ -32,7 +32,7 @@ SECTIONS = [
 ]
 
 # The budgets of the release image (bytes): the STM32F401's flash and RAM the firmware is
-# allowed (README, status).
+# allowed (README, Status).
 FLASH_BUDGET = 64 * 1024
 RAM_BUDGET = 16 * 1024
 

@@ -1,8 +1,8 @@
 //! The standard errors `calibrate` reports hold: over many simulated runs with correlated
 //! slip, the truth lies within 2 reported standard errors about 95 % of the time and within 3
-//! nearly always (issue 16), for the sub-trajectory estimator and for its refinement by the
+//! nearly always, for the sub-trajectory estimator and for its refinement by the
 //! filter on the 70 m estimation path; and the lever arm is recovered from simulated receiver
-//! logs (issue 17).
+//! logs.
 //!
 //! `ODO_RESULTS_DIR=DIR` writes the coverage table there as Markdown, a file per row under
 //! `DIR/standard_errors/` (`bench/run` puts it into docs/RESULTS.md).

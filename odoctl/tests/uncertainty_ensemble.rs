@@ -1,4 +1,4 @@
-//! Issue 21: the calibrated uncertainty against the truth, over an ensemble of simulated runs.
+//! The calibrated uncertainty against the truth, over an ensemble of simulated runs.
 //!
 //! Per slip regime: twenty 70 m estimation runs (seeds 1-20) are each calibrated as a user
 //! would (`calib::calibrate`, both models, the default criterion: sub-trajectory geometry
@@ -10,10 +10,10 @@
 //! Horizontal: `|e| <= k sigma_h`; heading: `|e| <= k sigma_heading`. Target for the model
 //! `calibrate` selects by default (covariance): 1-sigma coverage in 60-76 % and 3-sigma at
 //! least 97 % at every checkpoint, horizontal and heading (see [`regimes`]). The other model's
-//! figures are printed (`--nocapture`) for the README's table;
+//! figures are printed (`--nocapture`) beside it;
 //! `ODOCTL_ENSEMBLE_COVERAGE_CRITERION=1` adds the covariance model fitted by the paper's
-//! coverage criterion (the default before issue 21); `ODOCTL_ENSEMBLE_FIGURES=DIR` draws each
-//! regime's coverage and reliability figures there (the README's, `docs/figures/`).
+//! coverage criterion; `ODOCTL_ENSEMBLE_FIGURES=DIR` draws each
+//! regime's coverage and reliability figures there (`bench/run` draws them into `docs/figures/`).
 //! `ODO_RESULTS_DIR=DIR` writes the tables there as Markdown (`bench/run` puts them into
 //! docs/RESULTS.md with the figures).
 //!
@@ -38,7 +38,7 @@ const RUNS: u64 = 400;
 const CALIBRATIONS: u64 = 20;
 
 /// What the coverage is held to: 1-sigma in `one_sigma..=one_sigma_max`, 3-sigma at least
-/// `three_sigma`, at every checkpoint. The README's table has the figures.
+/// `three_sigma`, at every checkpoint (docs/RESULTS.md, Uncertainty coverage, has the figures).
 #[derive(Clone, Copy)]
 struct Floor {
     one_sigma: f64,
@@ -406,7 +406,7 @@ fn calibrated_uncertainty_covers_the_true_errors_across_slip_regimes() {
     write_results("uncertainty_coverage", &table);
     assert!(
         failed.is_empty(),
-        "issue 21's target (60-76 % / >= 97 %) missed:\n{}",
+        "the coverage target (60-76 % / >= 97 %) missed:\n{}",
         failed.join("\n")
     );
 }

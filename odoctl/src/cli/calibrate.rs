@@ -125,12 +125,12 @@ pub struct GeometryArgs {
     /// Where the default method cuts the run: `distance` (exactly every
     /// --subtrajectory-length metres, the default) or `straights` (near every
     /// --subtrajectory-length metres, at the point farthest from any turning, so that no arc
-    /// or spin is split: better on short runs' track width, see odoctl/README.md).
+    /// or spin is split: better on short runs' track width, see docs/RESULTS.md).
     #[arg(long, value_enum, default_value_t = calib::Cuts::Distance)]
     pub subtrajectory_cuts: calib::Cuts,
     /// After the default method: `filter` (the default) refines the geometry by the Kalman
     /// filter of the kappa likelihood, which weights the turns by the slip's heading noise,
-    /// where its linearisation holds (short logs; see odoctl/README.md); `none` keeps the
+    /// where its linearisation holds (docs/CALIBRATION.md); `none` keeps the
     /// sub-trajectory estimate.
     #[arg(long, value_enum, default_value_t = calib::GeometryRefine::Filter)]
     pub geometry_refine: calib::GeometryRefine,

@@ -449,7 +449,7 @@ fn lever_arm_of(run: &Run, x: &[f64]) -> (f64, f64) {
 /// `sum J_k^T u_k`. `None` with fewer than two
 /// stretches or a singular Hessian. Eq (16)'s residuals are one drifting path, correlated
 /// along the whole run, so even these errors hold only when the drift within a stretch
-/// dominates (see the README's figures).
+/// dominates (docs/RESULTS.md, Standard errors).
 #[allow(clippy::too_many_arguments)]
 pub fn paper_cluster_errors(
     run: &Run,

@@ -37,7 +37,7 @@
 //! unknowns and needs turning to see the track width; longer ones carry more drift into the
 //! fit. 10 m (20 s at 0.5 m/s) loses about a twentieth of the information to the nuisance
 //! parameters at a slip of 0.1 % and keeps the drift at millimetres. On a short run the
-//! track width is set by the slip during the turns (odoctl/README.md has the measured table).
+//! track width is set by the slip during the turns (docs/RESULTS.md, Calibration accuracy).
 //!
 //! [`observed_point`]: crate::calib::antenna::observed_point
 //! [`cluster_sandwich`]: super::covariance::cluster_sandwich
@@ -90,8 +90,8 @@ pub enum Cuts {
     /// one sub-trajectory with straight path before and after it, where the reference fixes
     /// the heading on both sides of the turn; no piece is shorter than half a length (a
     /// short last one joins the one before). Better on the 70 m track width
-    /// (odoctl/README.md), not yet the default: with a few sub-trajectories its standard
-    /// errors from a 10 Hz log are not always above those from the 50 Hz CSV of the same run
+    /// (docs/RESULTS.md, Calibration accuracy), not yet the default: with a few
+    /// sub-trajectories its standard errors from a 10 Hz log are not always above those from the 50 Hz CSV of the same run
     /// (tests/reference.rs).
     Straights,
 }

@@ -474,7 +474,7 @@ mod tests {
 
     /// A 0.1 mm first harmonic of the radius on each wheel (left in cos, right in sin),
     /// 3 km, RTK noise 8 mm, slip 0.001: recovered within 3 standard errors, each about
-    /// 0.025 mm of radius (measured: see odoctl/README.md).
+    /// 0.025 mm of radius (docs/CALIBRATION.md).
     #[test]
     #[allow(clippy::needless_range_loop)]
     fn eccentric_wheels_are_recovered() {
