@@ -11,7 +11,8 @@
 //!   or `.pos` sigmas give it; the uncertainty fit uses it instead of `--reference-sigma`). Rows are matched to samples by equal `t` within [`MATCH_TOLERANCE`].
 //!
 //! Columns are found by their header name, in any order. Blank lines and lines starting with
-//! `#` are skipped. Time must increase strictly from row to row. Every error names the file and
+//! `#` are skipped. A leading UTF-8 byte-order mark is ignored, and fields may be quoted as
+//! spreadsheets save them (RFC 4180: `"1.5"`, `"a,b"`, `""` for a quote; within one line). Time must increase strictly from row to row. Every error names the file and
 //! the line.
 
 use std::fmt::Write as _;
@@ -208,6 +209,48 @@ struct Table<'a> {
     body: &'a str,
 }
 
+/// Splits a line with quoted fields (RFC 4180: `"1.5"`, `"a,b"`, `""` for a quote inside a
+/// quoted field; a quoted field ends on its line), each field trimmed; `Err` says what is
+/// wrong with the line.
+fn split_quoted(line: &str) -> Result<Vec<String>, String> {
+    let blank = |c: &char| *c == ' ' || *c == '\t';
+    let mut out = Vec::new();
+    let mut chars = line.chars().peekable();
+    loop {
+        while chars.next_if(blank).is_some() {}
+        let mut field = String::new();
+        if chars.next_if_eq(&'"').is_some() {
+            loop {
+                match chars.next() {
+                    None => {
+                        return Err(format!(
+                            "field {} has no closing quote (`\"`)",
+                            out.len() + 1
+                        ))
+                    }
+                    Some('"') if chars.next_if_eq(&'"').is_none() => break,
+                    Some(c) => field.push(c),
+                }
+            }
+            while chars.next_if(blank).is_some() {}
+            if let Some(c) = chars.peek().filter(|&&c| c != ',') {
+                return Err(format!(
+                    "field {}: `{c}` after its closing quote",
+                    out.len() + 1
+                ));
+            }
+        } else {
+            while let Some(c) = chars.next_if(|&c| c != ',') {
+                field.push(c);
+            }
+        }
+        out.push(field.trim().to_owned());
+        if chars.next().is_none() {
+            return Ok(out);
+        }
+    }
+}
+
 /// A line that is not a row: blank, or a `#` comment.
 fn skipped(line: &str) -> bool {
     let t = line.trim_start();
@@ -217,6 +260,8 @@ fn skipped(line: &str) -> bool {
 impl<'a> Table<'a> {
     /// Reads the header (the first line that is not skipped).
     fn parse(file: &'a str, text: &'a str) -> Result<Self> {
+        // A byte-order mark, as spreadsheets save UTF-8, is not part of the first column.
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         let mut offset = 0;
         for (i, raw) in text.split('\n').enumerate() {
             let next = (offset + raw.len() + 1).min(text.len());
@@ -225,10 +270,7 @@ impl<'a> Table<'a> {
                 return Ok(Self {
                     file,
                     header_line: i + 1,
-                    columns: line
-                        .split(',')
-                        .map(|f| f.trim().trim_matches('"').to_string())
-                        .collect(),
+                    columns: split_quoted(line).map_err(|e| anyhow!("{file}:{}: {e}", i + 1))?,
                     body: &text[next..],
                 });
             }
@@ -253,27 +295,37 @@ impl<'a> Table<'a> {
                 continue;
             }
             let lineno = self.header_line + 1 + i;
-            fields.clear();
-            let mut start = 0;
-            for (j, b) in line.bytes().enumerate() {
-                if b == b',' {
-                    fields.push(line[start..j].trim());
-                    start = j + 1;
+            // Quoted fields (rare) are unquoted into owned text; the rest are slices.
+            let quoted: Vec<String>;
+            let unquoted: Vec<&str>;
+            let row: &[&str] = if line.contains('"') {
+                quoted = split_quoted(line).map_err(|e| anyhow!("{}:{lineno}: {e}", self.file))?;
+                unquoted = quoted.iter().map(String::as_str).collect();
+                &unquoted
+            } else {
+                fields.clear();
+                let mut start = 0;
+                for (j, b) in line.bytes().enumerate() {
+                    if b == b',' {
+                        fields.push(line[start..j].trim());
+                        start = j + 1;
+                    }
                 }
-            }
-            fields.push(line[start..].trim());
-            if fields.len() != self.columns.len() {
+                fields.push(line[start..].trim());
+                &fields
+            };
+            if row.len() != self.columns.len() {
                 bail!(
                     "{}:{lineno}: {} fields, but the header has {} columns",
                     self.file,
-                    fields.len(),
+                    row.len(),
                     self.columns.len()
                 );
             }
             f(Row {
                 file: self.file,
                 line: lineno,
-                fields: &fields,
+                fields: row,
             })?;
             rows += 1;
         }
@@ -676,6 +728,54 @@ mod tests {
         assert!(e.contains("s.csv:6") && e.contains("`right`"), "{e}");
         let e = samples_error("# only a comment\n\n");
         assert!(e.contains("empty file"), "{e}");
+    }
+
+    /// As spreadsheets save a CSV: a byte-order mark, CRLF, quoted fields.
+    #[test]
+    fn bom_crlf_and_quoted_fields() {
+        let text = "\u{feff}t,left,right\r\n0,1,2\r\n0.02,3,4\r\n";
+        let s = parse_samples("s.csv", text).unwrap();
+        assert_eq!((s.len(), s[0].left, s[1].t, s[1].right), (2, 1, 0.02, 4));
+        // Quoted numbers, quoted header names, a quoted comma and doubled quotes in an
+        // ignored column, spaces around the quotes.
+        let text = "\u{feff}\"t\",\"x\",\"y\",\"note, \"\"here\"\"\"\r\n\
+                    \"1.5\", \"2\" ,3,\"a,b\"\r\n\
+                    2.5,\"-1.25\",4,\"say \"\"hi\"\"\"\r\n";
+        let r = parse_reference("r.csv", text).unwrap();
+        assert_eq!(r.len(), 2);
+        assert_eq!((r[0].t, r[0].x, r[0].y), (1.5, 2.0, 3.0));
+        assert_eq!((r[1].t, r[1].x, r[1].y), (2.5, -1.25, 4.0));
+        assert_eq!(
+            split_quoted(r#""say ""hi""", ,"a,b""#).unwrap(),
+            [r#"say "hi""#, "", "a,b"]
+        );
+        // An unterminated quote, in a row or in the header, names the file and the line.
+        let e = parse_reference("r.csv", "t,x,y\n1,2,3\n\"2,3,4\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("r.csv:3: field 1 has no closing quote"),
+            "{e}"
+        );
+        let e = parse_reference("r.csv", "# c\nt,\"x,y\n1,2,3\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("r.csv:2: field 2 has no closing quote"),
+            "{e}"
+        );
+        let e = parse_reference("r.csv", "t,x,y\n1,\"2\"x,3\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("r.csv:2: field 2: `x` after its closing quote"),
+            "{e}"
+        );
+        // A quoted bad number is still a column error.
+        let e = parse_samples("s.csv", "t,left,right\n0,\"1.5\",0\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("s.csv:2") && e.contains("`left`"), "{e}");
     }
 
     #[test]

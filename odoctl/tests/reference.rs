@@ -195,7 +195,7 @@ fn property_enu_through_nmea_and_pos_within_a_millimetre_anywhere() {
             .collect();
         let o = ReferenceOptions {
             origin: OriginChoice::Given(origin),
-            leap_seconds: leap,
+            leap_seconds: Some(leap),
             ..ReferenceOptions::default()
         };
         for (name, bytes) in [
@@ -322,7 +322,7 @@ fn day_week_and_leap_second_table() {
             "t.nmea",
             &nmea_bytes(&epochs, written),
             &ReferenceOptions {
-                leap_seconds: read,
+                leap_seconds: Some(read),
                 ..ReferenceOptions::default()
             },
         )

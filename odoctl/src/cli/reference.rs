@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use clap::Args;
 
 use super::values as v;
-use crate::reference::{gps_time, Format, MinFix};
+use crate::reference::{Format, MinFix};
 
 /// How `--reference` is read (`calibrate`, `validate`).
 #[derive(Debug, Clone, Args)]
@@ -22,9 +22,10 @@ pub struct ReferenceArgs {
     /// moving).
     #[arg(long, value_name = "LAT,LON,H", allow_hyphen_values = true)]
     pub origin: Option<String>,
-    /// GPS - UTC (s) for the UTC times of NMEA logs (18 since 2017-01-01).
-    #[arg(long, default_value_t = gps_time::DEFAULT_LEAP_SECONDS, allow_negative_numbers = true, value_parser = v::leap_seconds)]
-    pub leap_seconds: i32,
+    /// GPS - UTC (s) for every UTC time of the log (NMEA, RTKLIB in UTC); by default each
+    /// epoch's from its date by the built-in leap-second table (18 since 2017-01-01).
+    #[arg(long, allow_negative_numbers = true, value_parser = v::leap_seconds)]
+    pub leap_seconds: Option<i32>,
 }
 
 /// Receiver logs of a simulated run (`simulate`).
@@ -63,9 +64,10 @@ pub struct ReceiverArgs {
     /// and REFERENCE CSVs then carry GPS time of week, as `record` writes it.
     #[arg(long, value_name = "WEEK,TOW")]
     pub gps_start: Option<String>,
-    /// GPS - UTC (s) written into the NMEA log's UTC times.
-    #[arg(long = "gnss-leap-seconds", default_value_t = gps_time::DEFAULT_LEAP_SECONDS, value_parser = v::leap_seconds)]
-    pub leap_seconds: i32,
+    /// GPS - UTC (s) written into the NMEA log's UTC times; by default the leap-second
+    /// table's at the run's start, as the reader takes it.
+    #[arg(long = "gnss-leap-seconds", value_parser = v::leap_seconds)]
+    pub leap_seconds: Option<i32>,
 }
 
 /// `--pos-time`.

@@ -56,8 +56,8 @@ pub fn file_err(path: &Path, e: impl std::fmt::Display) -> anyhow::Error {
 
 /// How `--reference` is read: the loader's options from its command-line options.
 pub fn reference_options(args: &ReferenceArgs) -> Result<ReferenceOptions> {
-    if !(0..=100).contains(&args.leap_seconds) {
-        bail!("--leap-seconds {}: must be in 0..=100", args.leap_seconds);
+    if let Some(l) = args.leap_seconds.filter(|l| !(0..=100).contains(l)) {
+        bail!("--leap-seconds {l}: must be in 0..=100");
     }
     Ok(ReferenceOptions {
         format: args.reference_format,

@@ -213,9 +213,12 @@ fn write_logs(logs: &ReceiverArgs, run: &SimRun, sim: &ReceiverSim) -> Result<()
     if epochs.is_empty() {
         bail!("--gnss-rate {}: no sample falls on its epochs", sim.rate);
     }
+    let leap = logs
+        .leap_seconds
+        .unwrap_or_else(|| gps_time::leap_seconds_at_gps(sim.gps_start));
     if let Some(p) = &logs.nmea {
         let mut w = create(p)?;
-        simulated::write_nmea(&mut w, &epochs, logs.leap_seconds)?;
+        simulated::write_nmea(&mut w, &epochs, leap)?;
         w.flush()?;
     }
     if let Some(p) = &logs.pos {
@@ -238,7 +241,7 @@ fn write_logs(logs: &ReceiverArgs, run: &SimRun, sim: &ReceiverSim) -> Result<()
         sim.antenna.0,
         sim.antenna.1,
         sim.origin,
-        gps_time::describe(sim.gps_start, logs.leap_seconds)
+        gps_time::describe(sim.gps_start, leap)
     );
     Ok(())
 }

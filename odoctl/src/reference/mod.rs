@@ -187,6 +187,8 @@ pub struct ReadReport {
     pub stray_bytes: usize,
     /// The first problems (at most [`ReadReport::KEPT`]), `FILE:LINE: ...`.
     pub problems: Vec<String>,
+    /// Warnings about what was read (a date past the leap-second table), `FILE:LINE: ...`.
+    pub warnings: Vec<String>,
 }
 
 impl ReadReport {
@@ -294,8 +296,9 @@ pub struct ReferenceOptions {
     pub min_fix: MinFix,
     /// The local origin.
     pub origin: OriginChoice,
-    /// GPS - UTC (s) for NMEA logs (UTC times) and RTKLIB files written in UTC.
-    pub leap_seconds: i32,
+    /// GPS - UTC (s) for NMEA logs (UTC times) and RTKLIB files written in UTC; `None`: by
+    /// each epoch's date ([`gps_time::leap_seconds_on`]).
+    pub leap_seconds: Option<i32>,
 }
 
 impl Default for ReferenceOptions {
@@ -304,7 +307,7 @@ impl Default for ReferenceOptions {
             format: None,
             min_fix: MinFix::Fixed,
             origin: OriginChoice::OpeningStandstill,
-            leap_seconds: gps_time::DEFAULT_LEAP_SECONDS,
+            leap_seconds: None,
         }
     }
 }
@@ -389,7 +392,7 @@ pub struct Reference {
     pub origin: Option<Geodetic>,
     /// How many epochs the origin averages (0 for a given origin or a CSV).
     pub origin_epochs: usize,
-    /// GPS - UTC (s) used for UTC times (and in messages).
+    /// GPS - UTC (s) in messages: the one given, else the table's at the first epoch.
     pub leap_seconds: i32,
     /// What was used and left out.
     pub report: UseReport,
@@ -398,7 +401,11 @@ pub struct Reference {
 /// Reads a reference file of any format.
 pub fn load(path: &Path, o: &ReferenceOptions) -> Result<Reference> {
     let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
-    parse(&path.display().to_string(), &bytes, o)
+    let r = parse(&path.display().to_string(), &bytes, o)?;
+    for w in &r.report.read.warnings {
+        eprintln!("warning: {w}");
+    }
+    Ok(r)
 }
 
 /// Parses a reference file's content; `file` names it in messages.
@@ -491,7 +498,7 @@ impl Reference {
         }
         let (origin, origin_epochs) = choose_origin(&used, o.origin);
         let frame = LocalFrame::new(origin);
-        let epochs = used
+        let epochs: Vec<LocalEpoch> = used
             .iter()
             .map(|e| {
                 let [x, y, up] = frame.to_enu(&e.position);
@@ -507,6 +514,11 @@ impl Reference {
                 }
             })
             .collect();
+        let leap_seconds = o.leap_seconds.unwrap_or_else(|| {
+            epochs.first().map_or(gps_time::DEFAULT_LEAP_SECONDS, |e| {
+                gps_time::leap_seconds_at_gps(e.t)
+            })
+        });
         Ok(Self {
             file: file.to_string(),
             format,
@@ -514,7 +526,7 @@ impl Reference {
             epochs,
             origin: Some(origin),
             origin_epochs,
-            leap_seconds: o.leap_seconds,
+            leap_seconds,
             report,
         })
     }

@@ -13,7 +13,9 @@
 //! date (an RMC with status A, a ZDA, or the previous dated epoch), taking the day that puts
 //! it within 12 hours of that date's time, so a log running over midnight gets the next
 //! day; epochs before the first date sentence take its date the same way. UTC becomes GPS
-//! time with the leap seconds (`--leap-seconds`, 18 by default). A leap second 23:59:60 is
+//! time with the leap seconds of its date ([`gps_time::leap_seconds_on`]; a date past the
+//! table's validity is warned about), or those of `--leap-seconds` for the whole log when
+//! given. A leap second 23:59:60 is
 //! skipped (the `nmea` crate does not represent it).
 //!
 //! Association: a GST belongs to the GGA of the same time of day (before or after it). An
@@ -89,8 +91,9 @@ fn sentence_type(s: &str) -> &str {
     }
 }
 
-/// Parses an NMEA log; `file` names it in messages. UTC + `leap_seconds` = GPS time.
-pub fn parse(file: &str, text: &str, leap_seconds: i32) -> Result<GeodeticLog> {
+/// Parses an NMEA log; `file` names it in messages. UTC + leap seconds = GPS time, with
+/// `leap_seconds` for every epoch when given, else those of each epoch's date.
+pub fn parse(file: &str, text: &str, leap_seconds: Option<i32>) -> Result<GeodeticLog> {
     let mut reader = LogReader::new(file, leap_seconds);
     for (i, raw) in text.lines().enumerate() {
         reader.line(i + 1, raw);
@@ -103,8 +106,8 @@ pub fn parse(file: &str, text: &str, leap_seconds: i32) -> Result<GeodeticLog> {
 struct LogReader<'a> {
     /// The log's name in messages.
     file: &'a str,
-    /// GPS - UTC (s), for the date sentences' check against the GPS epoch.
-    leap_seconds: i32,
+    /// GPS - UTC (s) when given, for the date sentences' check against the GPS epoch.
+    leap_seconds: Option<i32>,
     report: ReadReport,
     undated: Vec<Undated>,
     dates: Vec<DateMark>,
@@ -119,7 +122,7 @@ struct LogReader<'a> {
 }
 
 impl<'a> LogReader<'a> {
-    fn new(file: &'a str, leap_seconds: i32) -> Self {
+    fn new(file: &'a str, leap_seconds: Option<i32>) -> Self {
         Self {
             file,
             leap_seconds,
@@ -209,7 +212,8 @@ impl<'a> LogReader<'a> {
                     + f64::from(t.second)
                     + f64::from(t.millis) * 1e-3;
                 let days = days_from_civil(i64::from(t.year), u32::from(t.month), u32::from(t.day));
-                if gps_time::utc_to_gps(days, sod, self.leap_seconds).is_err() {
+                let leap = gps_time::leap_seconds_for(days, self.leap_seconds);
+                if gps_time::utc_to_gps(days, sod, leap).is_err() {
                     report.corrupt(format!(
                         "{file}:{line}: {}: date before the GPS epoch (1980-01-06): skipped",
                         sentence_type(s)
@@ -364,7 +368,7 @@ impl<'a> LogReader<'a> {
     }
 
     /// The dated epochs in GPS time, once every line is read.
-    fn finish(mut self, leap_seconds: i32) -> Result<GeodeticLog> {
+    fn finish(mut self, leap_seconds: Option<i32>) -> Result<GeodeticLog> {
         let file = self.file;
         let pending = self.pending_hdt.take();
         self.drop_hdt(pending);
@@ -384,7 +388,7 @@ fn date_epochs(
     file: &str,
     undated: Vec<Undated>,
     dates: &[DateMark],
-    leap_seconds: i32,
+    leap_seconds: Option<i32>,
     report: &mut ReadReport,
 ) -> Result<Vec<Epoch>> {
     if undated.is_empty() {
@@ -418,7 +422,14 @@ fn date_epochs(
         } else if mark.sod - u.sod > 43_200.0 {
             days += 1;
         }
-        let gps_time = match gps_time::utc_to_gps(days, u.sod, leap_seconds) {
+        if report.warnings.is_empty() {
+            let at = format!("{file}:{}", u.line);
+            report
+                .warnings
+                .extend(gps_time::leap_table_warning(&at, days, leap_seconds));
+        }
+        let leap = gps_time::leap_seconds_for(days, leap_seconds);
+        let gps_time = match gps_time::utc_to_gps(days, u.sod, leap) {
             Ok(t) => t,
             Err(e) => {
                 report.unusable(format!("{file}:{}: GGA: {e}: skipped", u.line));
@@ -483,7 +494,7 @@ mod tests {
             "{}\n$GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*47\n",
             zda("123518.00", 23, 11, 2026)
         );
-        let l = parse("a.nmea", &log, 18).unwrap();
+        let l = parse("a.nmea", &log, Some(18)).unwrap();
         let e = &l.epochs[0];
         assert!((e.position.lat_deg - (48.0 + 7.038 / 60.0)).abs() < 1e-12);
         assert!((e.position.lon_deg - (11.0 + 31.0 / 60.0)).abs() < 1e-12);
@@ -501,7 +512,7 @@ mod tests {
             "$GPGST,172814.0,0.006,0.023,0.020,273.6,0.023,0.020,0.031*6A".to_string(),
         ]
         .join("\r\n");
-        let l = parse("t.nmea", &log, 18).unwrap();
+        let l = parse("t.nmea", &log, Some(18)).unwrap();
         let e = &l.epochs[0];
         assert!((e.position.lat_deg - (37.0 + 23.465_877_04 / 60.0)).abs() < 1e-12);
         assert!((e.position.lon_deg + (122.0 + 2.269_578_64 / 60.0)).abs() < 1e-12);
@@ -541,7 +552,7 @@ mod tests {
                     4
                 )
             );
-            let l = parse("h.nmea", &log, 18).unwrap();
+            let l = parse("h.nmea", &log, Some(18)).unwrap();
             let p = l.epochs[0].position;
             assert!(
                 (p.lat_deg - sn * (34.0 + 2.5 / 60.0)).abs() < 1e-12,
@@ -567,7 +578,7 @@ mod tests {
             gga("GN", "000000.10", "4912.0", "N", "01636.0", "E", 5),
         ]
         .join("\r\n");
-        let l = parse("d.nmea", &log, 18).unwrap();
+        let l = parse("d.nmea", &log, Some(18)).unwrap();
         let day = days_from_civil(2026, 12, 31);
         let base = gps_time::utc_to_gps(day, 86_399.8, 18).unwrap();
         let ts: Vec<f64> = l.epochs.iter().map(|e| e.gps_time - base).collect();
@@ -580,7 +591,7 @@ mod tests {
         assert_eq!(midnight, (1_798_761_600.0 - 315_964_800.0) + 18.0);
         assert!((l.epochs[2].gps_time - midnight).abs() < 1e-6);
         // The leap-second count moves every epoch by whole seconds.
-        let l19 = parse("d.nmea", &log, 19).unwrap();
+        let l19 = parse("d.nmea", &log, Some(19)).unwrap();
         assert!((l19.epochs[2].gps_time - midnight - 1.0).abs() < 1e-6);
     }
 
@@ -597,7 +608,7 @@ mod tests {
             gga("GN", "120000.00", "4912.0", "N", "01636.0", "E", 4),
         ]
         .join("\n");
-        let l = parse("r.nmea", &log, 18).unwrap();
+        let l = parse("r.nmea", &log, Some(18)).unwrap();
         let want = gps_time::utc_to_gps(days_from_civil(2026, 9, 23), 43_200.0, 18).unwrap();
         assert_eq!(l.epochs[0].gps_time, want);
         assert_eq!((l.report.unusable, l.report.used["RMC"]), (1, 1));
@@ -618,7 +629,7 @@ mod tests {
             let bad = gga("GP", time, "4912.0", "N", "01636.0", "E", 4);
             let good = gga("GP", "120000.00", "4912.0", "N", "01636.0", "E", 4);
             let log = format!("{zda}\r\n{bad}\r\n{good}\r\n");
-            let r = parse("n.nmea", &log, 18).unwrap();
+            let r = parse("n.nmea", &log, Some(18)).unwrap();
             assert_eq!(r.epochs.len(), 1, "{time}");
         }
     }
@@ -626,7 +637,7 @@ mod tests {
     #[test]
     fn missing_date_is_an_error() {
         let log = gga("GP", "120000.00", "4912.0", "N", "01636.0", "E", 4);
-        let e = parse("n.nmea", &log, 18).unwrap_err().to_string();
+        let e = parse("n.nmea", &log, Some(18)).unwrap_err().to_string();
         assert!(e.starts_with("n.nmea: no date") && e.contains("RMC"), "{e}");
     }
 
@@ -651,7 +662,7 @@ mod tests {
             good.clone(), // 10: same time as line 1's epoch? no: 12:00:00.00 again
         ]
         .join("\n");
-        let l = parse("c.nmea", &log, 18).unwrap();
+        let l = parse("c.nmea", &log, Some(18)).unwrap();
         assert_eq!(l.epochs.len(), 1, "{:?}", l.report);
         assert_eq!(l.epochs[0].line, 5);
         // 2, 3, 4, 9 corrupt; 5 read after its stray bytes; 8 and 10 (time not after line
@@ -670,7 +681,7 @@ mod tests {
         let e = parse(
             "c.nmea",
             &[zda("120000.00", 23, 11, 2026), bad_sum].join("\n"),
-            18,
+            Some(18),
         )
         .unwrap_err()
         .to_string();
@@ -698,7 +709,7 @@ mod tests {
             gga("GN", "100000.20", "4912.0", "S", "01636.0", "W", 4),
         ]
         .join("\n");
-        let l = parse("g.nmea", &log, 18).unwrap();
+        let l = parse("g.nmea", &log, Some(18)).unwrap();
         let e = &l.epochs;
         assert_eq!(
             e[0].sigma_north_east_up.map(|s| [s[0], s[1]]),
@@ -743,7 +754,7 @@ mod tests {
             gga("100000.30"),
         ]
         .join("\n");
-        let l = parse("b.nmea", &log, 18).unwrap();
+        let l = parse("b.nmea", &log, Some(18)).unwrap();
         let deg: Vec<f64> = l
             .epochs
             .iter()
@@ -770,10 +781,69 @@ mod tests {
         ]
         .join("\n");
         // One leap-second count serves the whole log: 17, valid until the insertion.
-        let l = parse("l.nmea", &log, 17).unwrap();
+        let l = parse("l.nmea", &log, Some(17)).unwrap();
         assert_eq!(l.epochs.len(), 2);
         assert_eq!(l.report.unusable, 2, "{}", l.report);
         assert!(l.report.problems[0].contains("leap second"));
         assert_eq!(l.epochs[0].gps_time, 1_167_264_016.5);
+    }
+
+    /// GPS seconds of `sod` UTC on a date with `leap` leap seconds.
+    fn gps_of(y: i64, m: u32, d: u32, sod: f64, leap: i32) -> f64 {
+        gps_time::utc_to_gps(days_from_civil(y, m, d), sod, leap).unwrap()
+    }
+
+    /// A log of one dated epoch at 12:00:00 UTC.
+    fn noon_log(d: u32, m: u32, y: u32) -> String {
+        [
+            zda("120000.00", d, m, y),
+            gga("GP", "120000.00", "4912.0", "N", "01636.0", "E", 4),
+        ]
+        .join("\n")
+    }
+
+    #[test]
+    fn leap_seconds_come_from_the_date_unless_given() {
+        for (y, leap) in [(2008, 14), (2014, 16), (2017, 18), (2026, 18)] {
+            let l = parse("y.nmea", &noon_log(15, 3, y), None).unwrap();
+            assert_eq!(
+                l.epochs[0].gps_time,
+                gps_of(i64::from(y), 3, 15, 43_200.0, leap)
+            );
+            assert!(l.report.warnings.is_empty(), "{:?}", l.report.warnings);
+            // The option wins for the whole log.
+            let o = parse("y.nmea", &noon_log(15, 3, y), Some(18)).unwrap();
+            assert_eq!(
+                o.epochs[0].gps_time,
+                gps_of(i64::from(y), 3, 15, 43_200.0, 18)
+            );
+        }
+        // The 2015 leap second: the last second of June with 16, the first of July with 17;
+        // one UTC second apart, two GPS seconds apart.
+        let log = [
+            zda("235959.00", 30, 6, 2015),
+            gga("GP", "235959.00", "4912.0", "N", "01636.0", "E", 4),
+            gga("GP", "000000.00", "4912.0", "N", "01636.0", "E", 4),
+        ]
+        .join("\n");
+        let l = parse("b.nmea", &log, None).unwrap();
+        assert_eq!(l.epochs[0].gps_time, gps_of(2015, 6, 30, 86_399.0, 16));
+        assert_eq!(l.epochs[1].gps_time, gps_of(2015, 7, 1, 0.0, 17));
+        assert_eq!(l.epochs[1].gps_time - l.epochs[0].gps_time, 2.0);
+        // With the option both take the same count: one second apart.
+        let o = parse("b.nmea", &log, Some(17)).unwrap();
+        assert_eq!(o.epochs[1].gps_time - o.epochs[0].gps_time, 1.0);
+        // A date past the table: its last count, with a warning naming the line.
+        let l = parse("f.nmea", &noon_log(1, 5, 2040), None).unwrap();
+        assert_eq!(l.epochs[0].gps_time, gps_of(2040, 5, 1, 43_200.0, 18));
+        assert_eq!(l.report.warnings.len(), 1);
+        assert!(
+            l.report.warnings[0].starts_with("f.nmea:2: date 2040-05-01 is past the leap-second"),
+            "{:?}",
+            l.report.warnings
+        );
+        let o = parse("f.nmea", &noon_log(1, 5, 2040), Some(19)).unwrap();
+        assert!(o.report.warnings.is_empty());
+        assert_eq!(o.epochs[0].gps_time, gps_of(2040, 5, 1, 43_200.0, 19));
     }
 }

@@ -3,7 +3,7 @@
 //! `age`, `ratio`.
 //!
 //! Time as `yyyy/mm/dd hh:mm:ss.sss` or `week tow`, in GPST (or in UTC when the column header
-//! says `UTC`: converted with the leap seconds). Latitude and longitude in degrees, or in
+//! says `UTC`: converted with the leap seconds of the date, or `--leap-seconds` when given). Latitude and longitude in degrees, or in
 //! degrees minutes seconds (`latitude(d'")`, three columns each). Q: 1 fix, 2 float, 3 SBAS,
 //! 4 DGPS, 5 single, 6 PPP. Heights are ellipsoidal unless the header says geodetic (then
 //! only the local up changes, not east and north). Solutions in ECEF or ENU (`x-ecef(m)`,
@@ -63,7 +63,7 @@ fn header(file: &str, line: usize, h: &str) -> Result<Option<Layout>> {
 }
 
 /// One data row: (GPS time, position, Q, sigmas).
-fn row(tokens: &[&str], layout: Layout, leap_seconds: i32) -> Result<Epoch, String> {
+fn row(tokens: &[&str], layout: Layout, leap_seconds: Option<i32>) -> Result<Epoch, String> {
     let num = |i: usize, what: &str| -> Result<f64, String> {
         let v = tokens
             .get(i)
@@ -105,7 +105,11 @@ fn row(tokens: &[&str], layout: Layout, leap_seconds: i32) -> Result<Epoch, Stri
             return Err(format!("date `{first}` does not exist"));
         }
         let sod = f64::from(hh * 3600 + mm * 60) + ss;
-        let leap = if layout.utc { leap_seconds } else { 0 };
+        let leap = if layout.utc {
+            gps_time::leap_seconds_for(days, leap_seconds)
+        } else {
+            0
+        };
         gps_time::utc_to_gps(days, sod, leap).map_err(|e| e.to_string())?
     } else {
         let week = first
@@ -161,8 +165,9 @@ fn row(tokens: &[&str], layout: Layout, leap_seconds: i32) -> Result<Epoch, Stri
     })
 }
 
-/// Parses a `.pos` file; `file` names it in messages. `leap_seconds` converts UTC times.
-pub fn parse(file: &str, text: &str, leap_seconds: i32) -> Result<GeodeticLog> {
+/// Parses a `.pos` file; `file` names it in messages. UTC times become GPS time with
+/// `leap_seconds` when given, else with those of their date (GPST times need none).
+pub fn parse(file: &str, text: &str, leap_seconds: Option<i32>) -> Result<GeodeticLog> {
     let mut report = ReadReport::default();
     let mut layout = Layout::default();
     let mut epochs: Vec<Epoch> = Vec::new();
@@ -190,6 +195,15 @@ pub fn parse(file: &str, text: &str, leap_seconds: i32) -> Result<GeodeticLog> {
                         ));
                         continue;
                     }
+                }
+                if layout.utc && report.warnings.is_empty() {
+                    let (days, _) =
+                        gps_time::gps_to_utc(e.gps_time, gps_time::DEFAULT_LEAP_SECONDS);
+                    report.warnings.extend(gps_time::leap_table_warning(
+                        &format!("{file}:{line}"),
+                        days,
+                        leap_seconds,
+                    ));
                 }
                 report.used("pos");
                 epochs.push(e);
@@ -222,8 +236,8 @@ mod tests {
              2300      0.000   49.200000000   16.600000000   300.0000   1  12   0.0057   0.0058   0.0113  -0.0010   0.0000   0.0000   1.00  999.9\n\
              2300      0.100  -49.200000000  -16.600000000   300.0000   2  12   0.0557   0.0558   0.1113   0.0000   0.0000   0.0000   1.10    2.1\n"
         );
-        let a = parse("c.pos", &cal, 18).unwrap();
-        let b = parse("w.pos", &wt, 18).unwrap();
+        let a = parse("c.pos", &cal, Some(18)).unwrap();
+        let b = parse("w.pos", &wt, Some(18)).unwrap();
         for l in [&a, &b] {
             assert_eq!(l.epochs.len(), 2);
             assert_eq!(l.epochs[0].gps_time, 2300.0 * gps_time::WEEK);
@@ -244,10 +258,31 @@ mod tests {
     fn utc_header_applies_the_leap_seconds_and_dms_is_read() {
         let t = "%  UTC                   latitude(d'\")   longitude(d'\")  height(m)   Q  ns   sdn(m)   sde(m)   sdu(m)  sdne(m)  sdeu(m)  sdun(m) age(s)  ratio\n\
                  2024/02/03 23:59:42.000  -49 12 00.0000  -16 36 36.0000   300.0000   1  12   0.0057   0.0058   0.0113  0 0 0 1.0 999.9\n";
-        let l = parse("u.pos", t, 18).unwrap();
+        let l = parse("u.pos", t, Some(18)).unwrap();
         assert_eq!(l.epochs[0].gps_time, 2300.0 * gps_time::WEEK);
         assert!((l.epochs[0].position.lat_deg + 49.2).abs() < 1e-12);
         assert!((l.epochs[0].position.lon_deg + 16.61).abs() < 1e-12);
+    }
+
+    #[test]
+    fn utc_times_take_the_leap_seconds_of_their_date() {
+        let head = "%  UTC                   latitude(deg) longitude(deg)  height(m)   Q  ns\n";
+        let pos = |date: &str| format!("{head}{date} 12:00:00.000  49.2  16.6  300.0  1  12\n");
+        let gps =
+            |y, m, d, leap| gps_time::utc_to_gps(days_from_civil(y, m, d), 43_200.0, leap).unwrap();
+        let l = parse("u.pos", &pos("2014/03/15"), None).unwrap();
+        assert_eq!(l.epochs[0].gps_time, gps(2014, 3, 15, 16));
+        assert!(l.report.warnings.is_empty());
+        let l = parse("u.pos", &pos("2014/03/15"), Some(18)).unwrap();
+        assert_eq!(l.epochs[0].gps_time, gps(2014, 3, 15, 18));
+        let l = parse("u.pos", &pos("2040/05/01"), None).unwrap();
+        assert_eq!(l.epochs[0].gps_time, gps(2040, 5, 1, 18));
+        assert!(l.report.warnings[0].starts_with("u.pos:2: date 2040-05-01"));
+        // GPST needs no leap seconds, whatever the date.
+        let g = pos("2040/05/01").replace("UTC ", "GPST");
+        let l = parse("g.pos", &g, None).unwrap();
+        assert_eq!(l.epochs[0].gps_time, gps(2040, 5, 1, 0));
+        assert!(l.report.warnings.is_empty());
     }
 
     #[test]
@@ -272,7 +307,7 @@ mod tests {
              2300 0.5 49.2 16.6 300 1 12\n\
              2300 3.0 49.2 16.6 300 4\n"
         );
-        let l = parse("b.pos", &t, 18).unwrap();
+        let l = parse("b.pos", &t, Some(18)).unwrap();
         assert_eq!(l.epochs.len(), 2);
         assert_eq!(l.epochs[1].sigma_north_east_up, None);
         assert_eq!(l.epochs[1].fix, FixQuality::Dgps);
@@ -292,14 +327,18 @@ mod tests {
             "{:?}",
             l.report.problems
         );
-        let e = parse("b.pos", "%  GPST  x-ecef(m) y-ecef(m) z-ecef(m) Q\n", 18)
-            .unwrap_err()
-            .to_string();
+        let e = parse(
+            "b.pos",
+            "%  GPST  x-ecef(m) y-ecef(m) z-ecef(m) Q\n",
+            Some(18),
+        )
+        .unwrap_err()
+        .to_string();
         assert!(
             e.starts_with("b.pos:1:") && e.contains("out-solformat=llh"),
             "{e}"
         );
-        let e = parse("b.pos", &format!("{HEADER}garbage\n"), 18)
+        let e = parse("b.pos", &format!("{HEADER}garbage\n"), Some(18))
             .unwrap_err()
             .to_string();
         assert!(
