@@ -575,3 +575,73 @@ fn validate_an_ensemble_of_runs_from_a_list_and_from_repeated_options() {
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("bad.txt:1"));
 }
+
+/// The reference's noise: a reference four times noisier than `--reference-sigma` says is
+/// named, its scatter recorded in `[fit]`; stated right, no warning; `validate` gives its verdict.
+#[test]
+fn reference_noise_is_checked_against_its_scatter() {
+    let d = scratch("cli_reference_noise");
+    let (sm, rf, cal) = (d.join("s.csv"), d.join("r.csv"), d.join("c.toml"));
+    let o = odoctl(&[
+        "simulate",
+        "--samples",
+        s(&sm),
+        "--reference",
+        s(&rf),
+        "--rtk-sigma",
+        "0.032",
+        "--length",
+        "40",
+        "--seed",
+        "9",
+    ]);
+    assert!(o.status.success());
+    let calibrate = |sigma: &str| {
+        odoctl(&[
+            "calibrate",
+            "--samples",
+            s(&sm),
+            "--reference",
+            s(&rf),
+            "--reference-sigma",
+            sigma,
+            "-o",
+            s(&cal),
+        ])
+    };
+    let o = calibrate("0.008");
+    let out = success_stdout(&o);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("warning: the reference scatters"), "{err}");
+    assert!(
+        out.contains("inside sigma_h widened by the reference noise"),
+        "{out}"
+    );
+    assert!(
+        out.contains("heading change since the start inside sigma_heading widened"),
+        "{out}"
+    );
+    let text = read(&cal);
+    let fit: toml::Table = text.parse().unwrap();
+    let scatter = fit["fit"]["reference_sigma_scatter"].as_float().unwrap();
+    assert!((scatter / 0.032 - 1.0).abs() < 0.1, "{scatter}");
+    assert_eq!(fit["fit"]["reference_sigma_stated"].as_float(), Some(0.008));
+    let o = calibrate("0.032");
+    success_stdout(&o);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!err.contains("scatters"), "{err}");
+    let o = odoctl(&[
+        "validate",
+        "--samples",
+        s(&sm),
+        "--reference",
+        s(&rf),
+        "--config",
+        s(&cal),
+        "--reference-sigma",
+        "0.032",
+    ]);
+    let out = success_stdout(&o);
+    assert!(out.contains("reference noise: stated 0.0320 m"), "{out}");
+    assert!(out.lines().any(|l| l.starts_with("verdict: ")), "{out}");
+}

@@ -42,6 +42,9 @@ pub struct Evaluation {
     pub heading_change_err: Vec<Option<f64>>,
     /// Number of reference headings averaged at the stretch's start.
     pub start_headings: Vec<usize>,
+    /// The reference epoch's own horizontal RMS sigma `hypot(sigma_east, sigma_north)` (m),
+    /// where its log gives one (GST, `.pos` `sdn`/`sde`, a `sigma_h` column).
+    pub reference_sigma_h: Vec<Option<f64>>,
 }
 
 impl Evaluation {
@@ -60,6 +63,7 @@ impl Evaluation {
             sigma_heading,
             heading_change_err,
             start_headings,
+            reference_sigma_h,
         } = self;
         k.clear();
         t.clear();
@@ -73,6 +77,7 @@ impl Evaluation {
         sigma_heading.clear();
         heading_change_err.clear();
         start_headings.clear();
+        reference_sigma_h.clear();
     }
 
     /// Reserves room for `n` more rows in every column.
@@ -89,6 +94,7 @@ impl Evaluation {
         self.sigma_heading.reserve(n);
         self.heading_change_err.reserve(n);
         self.start_headings.reserve(n);
+        self.reference_sigma_h.reserve(n);
     }
 
     /// Moves the rows of `other` to the end of `self`.
@@ -106,6 +112,7 @@ impl Evaluation {
             sigma_heading,
             heading_change_err,
             start_headings,
+            reference_sigma_h,
         } = other;
         self.k.append(k);
         self.t.append(t);
@@ -119,6 +126,7 @@ impl Evaluation {
         self.sigma_heading.append(sigma_heading);
         self.heading_change_err.append(heading_change_err);
         self.start_headings.append(start_headings);
+        self.reference_sigma_h.append(reference_sigma_h);
     }
 
     /// Appends the evaluation of matches `a+1..=b` from a restart at `a` (see
@@ -193,6 +201,7 @@ impl Evaluation {
         self.heading_err
             .push(r.heading.map(|h| wrap_angle(heading - h)));
         self.sigma_heading.push(sigma_heading);
+        self.reference_sigma_h.push(r.sigma_h);
     }
 
     /// The heading errors and sigmas where the reference has a heading.

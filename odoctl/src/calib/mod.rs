@@ -45,7 +45,7 @@
 //! - [`geometry`]: `subtrajectory.rs`, `refinement.rs`, `paper.rs`, `covariance.rs`,
 //!   `turning.rs`, `wheel_harmonics.rs`;
 //! - [`uncertainty`]: `coefficients.rs`, `likelihood.rs`, `coverage.rs`, `restarts.rs`,
-//!   `delta_diff.rs`;
+//!   `delta_diff.rs`, `reference_noise.rs`;
 //! - [`studies`]: `stability.rs`, `ensemble.rs`;
 //! - `calibration.rs`: all of it in memory ([`calibrate`]).
 //!
@@ -86,3 +86,4 @@ pub use studies::stability::{
 };
 pub use uncertainty::coefficients::{DeltaMode, DiffFit, UncertaintyCriterion, UncertaintyFit};
 pub use uncertainty::coverage::{heading_coverage, heading_points, ONE_SIGMA_COVERAGE};
+pub use uncertainty::reference_noise::{NoiseCheck, ReferenceNoise};

@@ -35,7 +35,10 @@ pub struct CalibrateArgs {
     /// Sub-trajectory length for the uncertainty fit (m of reference path; 0 = whole run).
     #[arg(long, default_value_t = 10.0, allow_negative_numbers = true, value_parser = v::window)]
     pub delta_window: f64,
-    /// Horizontal RMS noise of the reference (m), added to sigma_h in the coverage criterion.
+    /// Horizontal RMS noise of one reference epoch (m): `hypot(sigma_east, sigma_north)`, each
+    /// axis carrying 1/sqrt(2) of it. Epochs whose log gives its own sigmas (GST, `.pos`
+    /// `sdn`/`sde`, a `sigma_h` column) use those instead. The filter's likelihood and the
+    /// coverage criteria take it as the reference's noise.
     #[arg(long, default_value_t = 0.008, allow_negative_numbers = true, value_parser = v::sigma_m)]
     pub reference_sigma: f64,
     /// How the left and right uncertainty coefficients relate.
@@ -49,8 +52,9 @@ pub struct CalibrateArgs {
     /// 1-sigma heading band covers 68.27 % of the heading errors, and delta refitted after it.
     #[arg(long)]
     pub no_fit_delta_diff: bool,
-    /// Reference heading noise (degrees, 1 sigma), added to sigma_heading in the `delta_diff`
-    /// criterion; the default is `simulate --heading-sigma-deg`'s (a BD982-like dual antenna).
+    /// Noise of one reference heading (degrees, 1 sigma), in the filter's likelihood and added
+    /// to sigma_heading in the `delta_diff` criterion; the default is `simulate
+    /// --heading-sigma-deg`'s (a BD982-like dual antenna).
     #[arg(long, default_value_t = 0.5, allow_negative_numbers = true, value_parser = v::sigma_deg)]
     pub reference_heading_sigma_deg: f64,
     /// Which uncertainty models' coefficients to fit: both (`all`, the default), one, or the

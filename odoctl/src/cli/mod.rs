@@ -246,12 +246,13 @@ pub struct ValidateArgs {
     /// `uncertainty_model` (`config`), one, or `all` to compare their coverage.
     #[arg(long, value_enum, default_value_t = Models::Config)]
     pub models: Models,
-    /// Horizontal RMS noise of the reference (m): also reported is the coverage of the
-    /// bands widened by it, `sqrt((k sigma_h)^2 + (k sigma_ref)^2)`, as the calibration's
-    /// criterion uses.
+    /// Horizontal RMS noise of one reference epoch (m): `hypot(sigma_east, sigma_north)`, each
+    /// axis carrying 1/sqrt(2) of it; epochs whose log gives its own sigmas use those. Also
+    /// reported is the coverage of the bands widened by it, `k sqrt(sigma_h^2 +
+    /// sigma_ref^2)`, as the calibration's criterion uses.
     #[arg(long, default_value_t = 0.008, allow_negative_numbers = true, value_parser = v::sigma_m)]
     pub reference_sigma: f64,
-    /// Heading noise of the reference (degrees, 1 sigma): also reported is the coverage of
+    /// Noise of one reference heading (degrees, 1 sigma): also reported is the coverage of
     /// the heading bands widened by it, as `calibrate`'s `delta_diff` criterion uses.
     #[arg(long, default_value_t = 0.5, allow_negative_numbers = true, value_parser = v::sigma_deg)]
     pub reference_heading_sigma_deg: f64,

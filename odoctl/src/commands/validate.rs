@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use anyhow::{bail, Result};
 use odo_unit::odometry::{ChassisParams, UncertaintyModel};
 
-use crate::calib::{self, Run};
+use crate::calib::{self, ReferenceNoise, Run};
 use crate::cli::ValidateArgs;
 use crate::config::{self as cfg};
 use crate::csvio;
@@ -34,34 +34,6 @@ pub fn run(a: &ValidateArgs) -> Result<ExitCode> {
         )?;
     }
     validate(a)
-}
-
-/// The noise of the reference that widens the predicted bands (as the calibration's criteria
-/// do).
-#[derive(Debug, Clone, Copy)]
-struct ReferenceNoise {
-    /// Horizontal RMS noise (m).
-    horizontal: f64,
-    /// Heading noise (rad).
-    heading: f64,
-}
-
-impl ReferenceNoise {
-    /// Share of horizontal errors inside `k` sigma_h widened by the reference noise.
-    fn horizontal_coverage(&self, e: &calib::Evaluation, k: f64) -> f64 {
-        let s: Vec<f64> = e.sigma_h[1..]
-            .iter()
-            .map(|s| (s * s + self.horizontal * self.horizontal).sqrt())
-            .collect();
-        coverage(&e.horizontal[1..], &s, k)
-    }
-
-    /// Share of errors of the heading change since the start (what sigma_heading, zero at the
-    /// start, predicts) inside `k` sigma_heading widened by the reference heading noise; the
-    /// start excluded.
-    fn heading_coverage(&self, e: &calib::Evaluation, k: f64) -> f64 {
-        calib::heading_coverage(e, self.heading, k, 1)
-    }
 }
 
 /// One run evaluated with the parameters: printed, and written as asked.
@@ -139,13 +111,74 @@ fn print_summary(
         100.0 * noise.horizontal_coverage(ev, 3.0)
     );
     let heading_deg = noise.heading.to_degrees();
-    if calib::heading_points(ev, 1) > 0 {
+    let heading = (calib::heading_points(ev, 1) > 0).then(|| {
+        (
+            noise.heading_coverage(ev, 1.0),
+            noise.heading_coverage(ev, 3.0),
+        )
+    });
+    if let Some((c1, c3)) = heading {
         crate::outln!(
             "  heading change since the start vs sigma_heading, the reference heading noise ({heading_deg} deg) added: {:.1} % in 1 sigma, {:.1} % in 3 sigma",
-            100.0 * noise.heading_coverage(ev, 1.0),
-            100.0 * noise.heading_coverage(ev, 3.0)
+            100.0 * c1,
+            100.0 * c3
         );
     }
+    let check = noise.check(ev);
+    crate::outln!("  {}", check.describe());
+    for w in check.warnings() {
+        eprintln!("warning: {w}");
+    }
+    let horizontal = (
+        noise.horizontal_coverage(ev, 1.0),
+        noise.horizontal_coverage(ev, 3.0),
+    );
+    crate::outln!("{}", band_verdict(horizontal, heading));
+}
+
+/// Below this 1-sigma coverage (or [`NARROW_3`] in 3 sigma) a run's bands are too narrow,
+/// above [`WIDE_1`] too wide: lenient bounds, since one run's errors are correlated along it
+/// and its coverage varies from run to run around the nominal 68.3 %.
+const NARROW_1: f64 = 0.45;
+/// See [`NARROW_1`].
+const NARROW_3: f64 = 0.95;
+/// See [`NARROW_1`].
+const WIDE_1: f64 = 0.92;
+
+/// The plain verdict on a run's widened coverages (1 and 3 sigma; heading where it has one)
+/// and what to do about it.
+fn band_verdict(horizontal: (f64, f64), heading: Option<(f64, f64)>) -> String {
+    let judge = |what: &str, (c1, c3): (f64, f64)| -> Option<String> {
+        if c1 < NARROW_1 || c3 < NARROW_3 {
+            Some(format!(
+                "the {what} errors fall outside their bands more often than they should ({:.1} % inside 1 sigma where 68.3 % is nominal and {:.0} % is the least one run is expected to show; {:.1} % inside 3 sigma where 99.7 % is nominal): the unit's sigmas are too small for this run",
+                100.0 * c1,
+                100.0 * NARROW_1,
+                100.0 * c3
+            ))
+        } else if c1 > WIDE_1 {
+            Some(format!(
+                "the {what} bands are wider than this run's errors need ({:.1} % inside 1 sigma where 68.3 % is nominal)",
+                100.0 * c1
+            ))
+        } else {
+            None
+        }
+    };
+    let found: Vec<String> = [
+        judge("horizontal", horizontal),
+        heading.and_then(|h| judge("heading", h)),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+    if found.is_empty() {
+        return "verdict: the errors fall inside their bands as often as they should".to_string();
+    }
+    format!(
+        "verdict: {}. What to do: check the reference noise line above; if it is right, recalibrate on a longer drive that includes this run's kind of path (turns, speed, floor)",
+        found.join("; ")
+    )
 }
 
 /// The coverage of each model on the run, on stdout; their sigma_h for the figure.
@@ -307,4 +340,35 @@ pub fn validation_report(ev: &calib::Evaluation) -> String {
         sh.last().copied().unwrap_or(f64::NAN)
     );
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn verdict_boundaries() {
+        let ok = "verdict: the errors fall inside their bands as often as they should";
+        // (horizontal, heading) -> narrow?, wide?
+        type Row = ((f64, f64), Option<(f64, f64)>, bool, bool);
+        let table: [Row; 8] = [
+            ((0.68, 0.997), None, false, false),
+            ((NARROW_1, NARROW_3), None, false, false),
+            ((NARROW_1 - 1e-9, 1.0), None, true, false),
+            ((0.68, NARROW_3 - 1e-9), None, true, false),
+            ((WIDE_1, 1.0), None, false, false),
+            ((WIDE_1 + 1e-9, 1.0), None, false, true),
+            ((0.68, 0.997), Some((0.30, 0.90)), true, false),
+            ((0.68, 0.997), Some((f64::NAN, f64::NAN)), false, false),
+        ];
+        for (horizontal, heading, narrow, wide) in table {
+            let v = band_verdict(horizontal, heading);
+            assert_eq!(v.contains("more often than they should"), narrow, "{v}");
+            assert_eq!(v.contains("wider than"), wide, "{v}");
+            assert_eq!(v == ok, !narrow && !wide, "{v}");
+            if narrow {
+                assert!(v.contains("What to do"), "{v}");
+            }
+        }
+    }
 }

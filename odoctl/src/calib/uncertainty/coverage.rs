@@ -19,16 +19,27 @@ use super::restarts::Restarts;
 /// Nominal coverage of a 1-sigma band of a normal distribution.
 pub const ONE_SIGMA_COVERAGE: f64 = 0.682_689_492;
 
-/// Coverage of the horizontal `k`-sigma band widened by the reference noise:
-/// the fraction of points with `e <= k sqrt(sigma_h^2 + ref_sigma^2)`.
-pub fn horizontal_coverage(ev: &Evaluation, ref_sigma: f64, k: f64) -> f64 {
-    let inside = ev
-        .horizontal
-        .iter()
-        .zip(&ev.sigma_h)
-        .filter(|(e, s)| **e <= k * s.hypot(ref_sigma))
+/// Coverage of the horizontal `k`-sigma band widened by the reference noise, over the points
+/// `from..`: the fraction with `e <= k sqrt(sigma_h^2 + sigma_ref^2)`, `sigma_ref` the epoch's
+/// own horizontal RMS sigma where its log gives one, else `ref_sigma` (m, horizontal RMS).
+pub fn horizontal_coverage(ev: &Evaluation, ref_sigma: f64, k: f64, from: usize) -> f64 {
+    let points = ev.horizontal.len().saturating_sub(from);
+    let inside = (from..ev.horizontal.len())
+        .filter(|&i| {
+            ev.horizontal[i] <= k * ev.sigma_h[i].hypot(reference_sigma_at(ev, i, ref_sigma))
+        })
         .count();
-    inside as f64 / ev.horizontal.len().max(1) as f64
+    inside as f64 / points.max(1) as f64
+}
+
+/// The reference's horizontal RMS noise (m) at point `i`: the epoch's own sigma, else
+/// `ref_sigma`.
+pub fn reference_sigma_at(ev: &Evaluation, i: usize, ref_sigma: f64) -> f64 {
+    ev.reference_sigma_h
+        .get(i)
+        .copied()
+        .flatten()
+        .unwrap_or(ref_sigma)
 }
 
 /// Coverage of the heading-change `k`-sigma band widened by the reference heading noise, over
@@ -198,12 +209,12 @@ pub(crate) fn fit_coefficient(
         restarts
             .memo_where(family)
             .iter()
-            .map(|(p, ev)| (coefficient(p), horizontal_coverage(ev, ref_sigma, 1.0)))
+            .map(|(p, ev)| (coefficient(p), horizontal_coverage(ev, ref_sigma, 1.0, 0)))
             .collect::<Vec<_>>(),
     );
     let real = |v: f64| -> Result<f64> {
         let ev = restarts.horizontal_memo(run, &at(v))?;
-        let c = horizontal_coverage(&ev, ref_sigma, 1.0);
+        let c = horizontal_coverage(&ev, ref_sigma, 1.0, 0);
         facts.borrow_mut().push((v, c));
         Ok(c)
     };
@@ -249,8 +260,8 @@ pub(crate) fn fit_coefficient(
         keys,
         windows: restarts.windows.len(),
         points: ev.horizontal.len(),
-        coverage1: horizontal_coverage(&ev, ref_sigma, 1.0),
-        coverage3: horizontal_coverage(&ev, ref_sigma, 3.0),
+        coverage1: horizontal_coverage(&ev, ref_sigma, 1.0, 0),
+        coverage3: horizontal_coverage(&ev, ref_sigma, 3.0, 0),
         warning,
         diff: None,
         criterion: UncertaintyCriterion::Coverage,
@@ -287,7 +298,7 @@ fn known_coverage(facts: &[(f64, f64)], v: f64) -> Option<f64> {
 /// `exponent`.
 fn predict_threshold(
     e: &[f64],
-    ref_sigma: f64,
+    ref_sigma: (&[Option<f64>], f64),
     a: (f64, &[f64]),
     b: Option<(f64, &[f64])>,
     exponent: f64,
@@ -311,7 +322,8 @@ fn predict_threshold(
     let (la, sa) = (a.0.ln(), a.1);
     let mut t: Vec<f64> = (0..n)
         .map(|i| {
-            let target2 = e[i] * e[i] - ref_sigma * ref_sigma;
+            let r = ref_sigma.0.get(i).copied().flatten().unwrap_or(ref_sigma.1);
+            let target2 = e[i] * e[i] - r * r;
             if target2 <= 0.0 {
                 return 0.0;
             }
@@ -393,7 +405,7 @@ fn bracket_threshold(
             .map(|(pb, eb)| (coefficient(pb), eb.sigma_h.as_slice()));
         let Some(pred) = predict_threshold(
             &ea.horizontal,
-            ref_sigma,
+            (&ea.reference_sigma_h, ref_sigma),
             (coefficient(pa), &ea.sigma_h),
             b,
             exponent,
@@ -477,7 +489,7 @@ mod tests {
                         |v| {
                             let p = set_coefficient(&g, DeltaMode::Equal, &g, v);
                             restarts.evaluate_into(&run, &p, &mut ev)?;
-                            Ok(horizontal_coverage(&ev, 0.008, 1.0))
+                            Ok(horizontal_coverage(&ev, 0.008, 1.0, 0))
                         },
                         &ProgressBar::hidden(),
                     )

@@ -125,8 +125,8 @@ pub fn fit_delta_diff(
             )?;
             fit.params = with(&base, dd);
             let ev = restarts.evaluate_memo(run, &fit.params)?;
-            fit.coverage1 = horizontal_coverage(&ev, o.ref_sigma, 1.0);
-            fit.coverage3 = horizontal_coverage(&ev, o.ref_sigma, 3.0);
+            fit.coverage1 = horizontal_coverage(&ev, o.ref_sigma, 1.0, 0);
+            fit.coverage3 = horizontal_coverage(&ev, o.ref_sigma, 3.0, 0);
             warning = Some(match w2 {
                 Some(w2) => w2,
                 None => format!(

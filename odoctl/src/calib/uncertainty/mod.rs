@@ -18,9 +18,12 @@
 //! - `coverage.rs`: the coverage criterion.
 //! - `restarts.rs`: the restarted sub-trajectories the coverage fits share.
 //! - `delta_diff.rs`: `delta_diff` by the heading-change coverage.
+//! - `reference_noise.rs`: the reference's noise as stated and as the data show it, and the
+//!   bands widened by it that `calibrate` and `validate` report.
 
 pub mod coefficients;
 pub mod coverage;
 pub mod delta_diff;
 pub mod likelihood;
+pub mod reference_noise;
 pub mod restarts;

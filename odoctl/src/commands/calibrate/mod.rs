@@ -35,11 +35,19 @@ pub struct ErrorSummary {
     pub coverage1: f64,
     /// Share of horizontal errors inside 3 sigma_h.
     pub coverage3: f64,
+    /// Shares of horizontal errors inside 1 and 3 sigma_h widened by the reference noise:
+    /// what the bands promise to measured errors.
+    pub widened: (f64, f64),
+    /// Shares of errors of the heading change since the start inside 1 and 3 sigma_heading
+    /// widened by the reference heading noise, where the reference has headings.
+    pub heading_change: Option<(f64, f64)>,
+    /// The reference's stated noise beside its scatter.
+    pub noise: calib::NoiseCheck,
 }
 
 impl ErrorSummary {
-    /// The summary of a calibration's evaluation.
-    pub fn of(c: &Calibration) -> Self {
+    /// The summary of a calibration's evaluation, the bands widened by `noise`.
+    pub fn of(c: &Calibration, noise: &calib::ReferenceNoise) -> Self {
         let ev = &c.evaluation;
         let (he, hs) = ev.heading_pairs();
         Self {
@@ -48,6 +56,17 @@ impl ErrorSummary {
             heading_pairs: (he, hs),
             coverage1: coverage(&ev.horizontal[1..], &ev.sigma_h[1..], 1.0),
             coverage3: coverage(&ev.horizontal[1..], &ev.sigma_h[1..], 3.0),
+            widened: (
+                noise.horizontal_coverage(ev, 1.0),
+                noise.horizontal_coverage(ev, 3.0),
+            ),
+            heading_change: (calib::heading_points(ev, 1) > 0).then(|| {
+                (
+                    noise.heading_coverage(ev, 1.0),
+                    noise.heading_coverage(ev, 3.0),
+                )
+            }),
+            noise: noise.check(ev),
         }
     }
 }
@@ -71,7 +90,11 @@ pub fn run(a: &CalibrateArgs) -> Result<ExitCode> {
     let opts = &options::calibration_options(a)?;
     let c = calib::calibrate(&samples, &reference, (&names.0, &names.1), &initial, opts)?;
     timer.lap("calibration");
-    let errors = ErrorSummary::of(&c);
+    let noise = calib::ReferenceNoise {
+        horizontal: opts.reference_sigma,
+        heading: opts.reference_heading_sigma,
+    };
+    let errors = ErrorSummary::of(&c, &noise);
     report::print(&c, &initial, opts, &errors);
     write::write_result(a, &c, opts, &errors)?;
     timer.lap("report");

@@ -322,23 +322,36 @@ fn print_errors(c: &Calibration, e: &ErrorSummary) {
         );
     }
     crate::outln!(
-        "horizontal error: mean {:.4} m, rms {:.4} m, p95 {:.4} m, max {:.4} m; within 1 sigma {:.1} %, 3 sigma {:.1} %",
+        "horizontal error: mean {:.4} m, rms {:.4} m, p95 {:.4} m, max {:.4} m; inside sigma_h widened by the reference noise: 1 sigma {:.1} %, 3 sigma {:.1} % (sigma_h alone: {:.1} %, {:.1} %)",
         h.mean,
         h.rms,
         h.p95,
         h.max,
+        100.0 * e.widened.0,
+        100.0 * e.widened.1,
         100.0 * cov1,
         100.0 * cov3
     );
     if !he.is_empty() {
         crate::outln!(
-            "heading error: mean |e| {:.3} deg, rms {:.3} deg, max {:.3} deg; within 1 sigma {:.1} %, 3 sigma {:.1} %",
+            "heading error: mean |e| {:.3} deg, rms {:.3} deg, max {:.3} deg; sigma_heading alone covers 1 sigma {:.1} %, 3 sigma {:.1} % of it (it predicts the change since the start, not the start heading's error)",
             head.mean.to_degrees(),
             head.rms.to_degrees(),
             head.max.to_degrees(),
             100.0 * coverage(he, hs, 1.0),
             100.0 * coverage(he, hs, 3.0)
         );
+    }
+    if let Some((c1, c3)) = e.heading_change {
+        crate::outln!(
+            "heading change since the start inside sigma_heading widened by the reference heading noise: 1 sigma {:.1} %, 3 sigma {:.1} %",
+            100.0 * c1,
+            100.0 * c3
+        );
+    }
+    crate::outln!("{}", e.noise.describe());
+    for w in e.noise.warnings() {
+        eprintln!("warning: {w}");
     }
 }
 

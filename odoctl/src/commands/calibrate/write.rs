@@ -190,10 +190,26 @@ fn error_fit(c: &Calibration, e: &ErrorSummary) -> Vec<(&'static str, FitValue)>
         ("horizontal_error_max", FitValue::Num(h.max)),
         ("coverage_1sigma", FitValue::Num(cov1)),
         ("coverage_3sigma", FitValue::Num(cov3)),
+        ("coverage_1sigma_widened", FitValue::Num(e.widened.0)),
+        ("coverage_3sigma_widened", FitValue::Num(e.widened.1)),
+        (
+            "reference_sigma_stated",
+            FitValue::Num(e.noise.stated_horizontal),
+        ),
     ];
+    if let Some(s) = e.noise.scatter_horizontal {
+        fit.push(("reference_sigma_scatter", FitValue::Num(s)));
+    }
     if !he.is_empty() {
         fit.push(("heading_error_rms", FitValue::Num(head.rms)));
         fit.push(("heading_error_max", FitValue::Num(head.max)));
+    }
+    if let Some((c1, c3)) = e.heading_change {
+        fit.push(("heading_change_coverage_1sigma_widened", FitValue::Num(c1)));
+        fit.push(("heading_change_coverage_3sigma_widened", FitValue::Num(c3)));
+    }
+    if let Some(a) = e.noise.scatter_heading {
+        fit.push(("reference_heading_sigma_scatter", FitValue::Num(a)));
     }
     fit
 }
