@@ -273,7 +273,7 @@ pub(crate) fn fit_coefficient(
 /// non-decreasing coverage: the one at `v` itself, else one `>= ONE_SIGMA_COVERAGE` at or
 /// below `v`, else one below it at or above `v` (the caller only compares it with
 /// [`ONE_SIGMA_COVERAGE`]); `None` when they do not decide.
-fn known_coverage(facts: &[(f64, f64)], v: f64) -> Option<f64> {
+pub(crate) fn known_coverage(facts: &[(f64, f64)], v: f64) -> Option<f64> {
     if let Some(&(_, c)) = facts.iter().find(|(u, _)| *u == v) {
         return Some(c);
     }
@@ -304,21 +304,10 @@ fn predict_threshold(
     exponent: f64,
 ) -> Option<f64> {
     let n = e.len();
-    if n == 0 || a.0 <= 0.0 {
+    if a.0 <= 0.0 {
         return None;
     }
-    let mut need = ONE_SIGMA_COVERAGE * n as f64;
-    need = need.ceil().min(n as f64);
-    let mut k = need as usize;
-    while k > 0 && (k - 1) as f64 / n as f64 >= ONE_SIGMA_COVERAGE {
-        k -= 1;
-    }
-    while k <= n && (k as f64 / n as f64) < ONE_SIGMA_COVERAGE {
-        k += 1;
-    }
-    if k == 0 || k > n {
-        return None;
-    }
+    let k = covering_rank(n)?;
     let (la, sa) = (a.0.ln(), a.1);
     let mut t: Vec<f64> = (0..n)
         .map(|i| {
@@ -343,6 +332,12 @@ fn predict_threshold(
         .collect();
     let (_, &mut th, _) = t.select_nth_unstable_by(k - 1, f64::total_cmp);
     (th.is_finite() && th > 0.0).then_some(th)
+}
+
+/// The fewest points `k` of `n` whose share `k / n` reaches [`ONE_SIGMA_COVERAGE`]: the rank of
+/// the per-point threshold that decides the criterion; `None` for no points.
+pub(crate) fn covering_rank(n: usize) -> Option<usize> {
+    (1..=n).find(|&k| k as f64 / n as f64 >= ONE_SIGMA_COVERAGE)
 }
 
 /// Brackets the threshold of the coverage criterion before the bisection: evaluations
