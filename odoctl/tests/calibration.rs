@@ -5,7 +5,7 @@ mod common;
 use std::time::Instant;
 
 use indicatif::ProgressBar;
-use odo_unit::odometry::{ChassisParams, Pose};
+use odo_unit::odometry::{ChassisParams, Pose, UncertaintyModel};
 use odoctl::calib::{self, CalibrationOptions, Run, UncertaintyCriterion, WindowStart};
 use odoctl::csvio::match_times;
 use odoctl::simulate::PathKind;
@@ -263,4 +263,44 @@ fn stability_study_reports_every_window() {
         .filter(|v| (v[0] - t.left_diameter).abs() < 3e-3 && (v[1] - t.right_diameter).abs() < 3e-3)
         .count();
     assert!(good * 4 >= n8 * 3, "{good} of {n8}");
+}
+
+/// kappa's own standard error (`ln_se`, from the likelihood's curvature) is honest: over 16
+/// simulated 70 m drives the fitted `ln kappa` falls about that far from the simulated slip's
+/// long-range variance rate (`2 slip^2 slip_corr`, 2e-7 m^2/m for the defaults).
+#[test]
+fn kappa_standard_error_matches_its_spread_over_drives() {
+    let truth_kappa: f64 = 2.0 * 0.001f64.powi(2) * 0.1;
+    let z: Vec<f64> = (10..26)
+        .map(|seed| {
+            let sim = common::sim(PathKind::Estimation, 70.0, seed);
+            let c = calib::calibrate(
+                &sim.samples,
+                &sim.reference,
+                ("s", "r"),
+                &ChassisParams::DESIGNED,
+                &CalibrationOptions {
+                    models: vec![UncertaintyModel::Covariance],
+                    ..CalibrationOptions::default()
+                },
+            )
+            .unwrap();
+            let u = c
+                .uncertainty
+                .iter()
+                .find(|u| u.criterion == UncertaintyCriterion::Likelihood)
+                .unwrap();
+            let se = u.ln_se.expect("a likelihood fit has a standard error");
+            assert!(se > 0.1 && se < 0.5, "seed {seed}: ln se {se}");
+            (f64::from(u.params.kappa_left).ln() - truth_kappa.ln()) / se
+        })
+        .collect();
+    let n = z.len() as f64;
+    let mean = z.iter().sum::<f64>() / n;
+    let sd = (z.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    eprintln!("kappa z-scores: mean {mean:.2}, sd {sd:.2}: {z:.2?}");
+    // 16 drives: the sd of z within about 2.5 of its standard error (0.18) of 1, the mean
+    // within about 3 of its standard error (0.25) of 0.
+    assert!(sd > 0.55 && sd < 1.5, "sd {sd}");
+    assert!(mean.abs() < 0.75, "mean {mean}");
 }

@@ -53,6 +53,10 @@ pub struct UncertaintyFit {
     /// Heading 1- and 3-sigma coverage of the fit's points (likelihood criterion, reference
     /// with a heading).
     pub heading_coverage: Option<(f64, f64)>,
+    /// Standard error of `ln` of the fitted coefficient, from the curvature of the negative
+    /// log-likelihood (likelihood criterion): the coefficient is known within a factor of
+    /// `exp(ln_se)` (1 sigma).
+    pub ln_se: Option<f64>,
 }
 
 /// `base` with the fitted coefficient `v` of its uncertainty model: `delta_left` or

@@ -266,6 +266,7 @@ pub(crate) fn fit_coefficient(
         diff: None,
         criterion: UncertaintyCriterion::Coverage,
         heading_coverage: None,
+        ln_se: None,
     })
 }
 

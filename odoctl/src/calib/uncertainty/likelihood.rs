@@ -35,6 +35,7 @@ pub fn fit_kappa_filter(
     // `|s_1 - s_2|` as `Turning::corr`); 0 when the white form won.
     params.kappa_diff_corr = turning.corr as f32;
     let score = innovations.score_with(kappa, corr, turning);
+    let ln_se = ln_standard_error(|k| innovations.score_with(k, corr, turning).nll, kappa);
     let warning = if kappa <= lo * 1.01 {
         Some(
             "the errors are explained by the reference noise alone: kappa is not identifiable"
@@ -58,7 +59,53 @@ pub fn fit_kappa_filter(
             diff: None,
             criterion: UncertaintyCriterion::Likelihood,
             heading_coverage: (!score.heading.0.is_nan()).then_some(score.heading),
+            ln_se,
         },
         corr,
     )
+}
+
+/// Step in `ln kappa` of the curvature's finite difference.
+const LN_STEP: f64 = 0.3;
+
+/// The standard error of `ln x` at the likelihood's maximum `x`, `nll` the negative
+/// log-likelihood: `1 / sqrt` of its second derivative in `ln x` (a central difference
+/// [`LN_STEP`] either side); `None` where it is not positive (a maximum at a bound).
+pub fn ln_standard_error(nll: impl Fn(f64) -> f64, x: f64) -> Option<f64> {
+    let l = x.ln();
+    let f = |v: f64| nll(v.exp());
+    let curvature = (f(l + LN_STEP) - 2.0 * f(l) + f(l - LN_STEP)) / (LN_STEP * LN_STEP);
+    (curvature.is_finite() && curvature > 0.0).then(|| curvature.sqrt().recip())
+}
+
+/// Path length (m) that would measure the coefficient within a factor `exp(target)`, from a
+/// run of `length` m that measured it within `exp(ln_se)`: the standard error falls as one
+/// over the square root of the observations, one per metre of path.
+pub fn length_for(ln_se: f64, length: f64, target: f64) -> f64 {
+    length * (ln_se / target).powi(2)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn standard_error_of_a_normal_likelihood_in_ln_scale() {
+        // nll = (ln x - ln 2)^2 / (2 s^2): ln x ~ N(ln 2, s^2).
+        for s in [0.05, 0.2, 1.0] {
+            let nll = |x: f64| (x.ln() - 2f64.ln()).powi(2) / (2.0 * s * s);
+            let se = ln_standard_error(nll, 2.0).unwrap();
+            assert!((se / s - 1.0).abs() < 1e-9, "{se} vs {s}");
+        }
+        // A maximum at a bound (nll still falling): none.
+        assert_eq!(ln_standard_error(|x: f64| -x.ln(), 1.0), None);
+        assert_eq!(ln_standard_error(|_| f64::NAN, 1.0), None);
+    }
+
+    #[test]
+    fn length_scales_with_the_square_of_the_error() {
+        assert_eq!(length_for(0.4, 70.0, 0.2), 280.0);
+        assert_eq!(length_for(0.2, 70.0, 0.2), 70.0);
+        assert!((length_for(0.1, 70.0, 0.2) - 17.5).abs() < 1e-12);
+    }
 }

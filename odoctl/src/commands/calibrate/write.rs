@@ -254,6 +254,9 @@ fn model_fit(c: &Calibration, opts: &CalibrationOptions) -> Vec<(String, FitValu
             format!("{name}_coverage_3sigma"),
             FitValue::Num(u.coverage3),
         ));
+        if let Some(se) = u.ln_se {
+            per_model.push((format!("{name}_ln_se"), FitValue::Num(se)));
+        }
     }
     let diff = c.uncertainty.iter().find_map(|u| u.diff.as_ref());
     if let Some(d) = diff {
