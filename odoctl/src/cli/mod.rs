@@ -10,11 +10,13 @@ use odo_unit::odometry::UncertaintyModel;
 mod calibrate;
 mod reference;
 mod simulate;
+mod trajectory;
 pub mod values;
 
 pub use calibrate::{CalibrateArgs, GeometryArgs};
 pub use reference::{PosTimeArg, ReceiverArgs, ReferenceArgs};
 pub use simulate::SimulateArgs;
+pub use trajectory::TrajectoryArgs;
 
 use values as v;
 

@@ -67,5 +67,14 @@ pub fn reference_options(args: &ReferenceArgs) -> Result<ReferenceOptions> {
             None => OriginChoice::OpeningStandstill,
         },
         leap_seconds: args.leap_seconds,
+        mcap: crate::reference::mcap_pose::McapSelect {
+            topic: args.reference_topic.clone(),
+            frames: args
+                .reference_frames
+                .as_deref()
+                .map(crate::reference::mcap_pose::parse_frames)
+                .transpose()?,
+        },
+        time_offset: args.time_offset,
     })
 }
