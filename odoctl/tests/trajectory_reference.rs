@@ -82,9 +82,10 @@ fn simulate(dir: &std::path::Path, seed: u64, length: &str, extra: &[&str]) -> S
         &frame,
         "--marker-yaw-deg",
         &yaw,
-        "--trajectory-time-offset",
-        &offset,
     ];
+    if !extra.contains(&"--trajectory-time-offset") {
+        args.extend(["--trajectory-time-offset", &offset]);
+    }
     let (samples, reference, tum) = (s("run.csv"), s("ref.csv"), s("run.tum"));
     args[8] = &samples;
     args[10] = &reference;
@@ -147,7 +148,14 @@ fn clock_mismatch_and_bad_topics_are_errors_naming_the_file() {
     };
     let (tum, mcap) = (s("run.tum"), s("run.mcap"));
     let (tum, mcap): (&'static str, &'static str) = (tum.leak(), mcap.leak());
-    let e = run(with(&["--reference", tum]));
+    let e = run(with(&[
+        "--reference",
+        tum,
+        "--time-offset",
+        "5",
+        "--clock-ppm",
+        "0",
+    ]));
     assert!(
         e.contains("run.tum: the trajectory does not overlap") && e.contains("--time-offset"),
         "{e}"
@@ -159,6 +167,61 @@ fn clock_mismatch_and_bad_topics_are_errors_naming_the_file() {
     let e = run(with(&["--reference", mcap, "--reference-topic", "/tf"]));
     assert!(e.contains("--reference-frames"), "{e}");
     assert!(!d.join("x.toml").exists());
+}
+
+/// The clock line of `calibrate`'s stdout: (offset, its se, ppm, its se).
+fn clock_line(stdout: &str) -> [f64; 4] {
+    let line = stdout
+        .lines()
+        .find(|l| l.contains("samples' t = stamp"))
+        .unwrap_or_else(|| panic!("no clock line in {stdout}"));
+    let nums: Vec<f64> = line
+        .split("samples' t = stamp")
+        .nth(1)
+        .unwrap()
+        .split(|c: char| c.is_whitespace() || c == '(' || c == ')')
+        .filter_map(|w| w.parse::<f64>().ok())
+        .collect();
+    [nums[0], nums[1], nums[2], nums[3]]
+}
+
+#[test]
+fn clock_offset_and_rate_estimated_within_their_standard_errors() {
+    let (mut zo, mut zr) = (0.0f64, 0.0f64);
+    for seed in 1..=5u64 {
+        let d = common::scratch(&format!("trajectory_clock{seed}"));
+        let s = |n: &str| d.join(n).to_str().unwrap().to_string();
+        let offset = -1.7e9 - seed as f64 * 12.345 - 0.0037;
+        let ppm = seed as f64 * 17.0 - 50.0;
+        let (o, r) = (offset.to_string(), ppm.to_string());
+        let clock = ["--trajectory-time-offset", &o, "--trajectory-clock-ppm", &r];
+        simulate(&d, seed, "150", &clock);
+        let out = s("out.toml");
+        let stdout = common::success_stdout(&common::odoctl(&[
+            "calibrate",
+            "--samples",
+            &s("run.csv"),
+            "--reference",
+            &s("run.tum"),
+            "--out",
+            &out,
+            "--no-delta",
+            "--fit-antenna",
+        ]));
+        let [eo, so, er, sr] = clock_line(&stdout);
+        eprintln!(
+            "seed {seed}: offset error {:+.3} ms (se {:.3}), rate error {:+.1} ppm (se {:.1})",
+            (eo - offset) * 1e3,
+            so * 1e3,
+            er - ppm,
+            sr
+        );
+        assert!(so > 0.0 && so < 0.005 && sr > 0.0, "seed {seed}: {stdout}");
+        zo = zo.max(((eo - offset) / so).abs());
+        zr = zr.max(((er - ppm) / sr).abs());
+    }
+    eprintln!("largest |error| / se: offset {zo:.2}, rate {zr:.2}");
+    assert!(zo <= 3.0 && zr <= 3.0, "{zo} {zr}");
 }
 
 /// Whether python3 with `mcap` and `mcap-ros2-support` can run; panics when it cannot and CI

@@ -34,9 +34,14 @@ pub struct ReferenceArgs {
     #[arg(long, value_name = "PARENT,CHILD")]
     pub reference_frames: Option<String>,
     /// Clock offset of a trajectory reference (TUM, MCAP): the samples' t minus the
-    /// reference's stamp at the same instant (s).
+    /// reference's stamp at the same instant, at the middle of the stamps (s); estimated from
+    /// the turning when absent.
     #[arg(long, value_name = "SECONDS", allow_negative_numbers = true, value_parser = v::time_offset)]
     pub time_offset: Option<f64>,
+    /// Clock rate of a trajectory reference: d(samples' t)/d(stamp) - 1 (ppm); estimated from
+    /// the turning when absent.
+    #[arg(long, value_name = "PPM", allow_negative_numbers = true, value_parser = v::clock_ppm)]
+    pub clock_ppm: Option<f64>,
 }
 
 /// Receiver logs of a simulated run (`simulate`).

@@ -38,7 +38,12 @@ pub struct TrajectoryArgs {
     /// Noise of the trajectory's yaw (degrees).
     #[arg(long, default_value_t = 0.1, allow_negative_numbers = true, value_parser = v::sigma_deg)]
     pub trajectory_yaw_sigma_deg: f64,
-    /// The samples' t minus the trajectory's stamp (s): what `calibrate --time-offset` takes.
+    /// The samples' t minus the trajectory's stamp at the middle of the stamps (s): what
+    /// `calibrate --time-offset` takes.
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true, value_parser = v::time_offset)]
     pub trajectory_time_offset: f64,
+    /// d(samples' t)/d(stamp) - 1 of the trajectory's clock (ppm): what `calibrate --clock-ppm`
+    /// takes.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true, value_parser = v::clock_ppm)]
+    pub trajectory_clock_ppm: f64,
 }

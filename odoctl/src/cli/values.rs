@@ -128,6 +128,11 @@ pub fn angle_deg(text: &str) -> Result<f64, String> {
     real(text, -360.0, 360.0, false, "deg")
 }
 
+/// A clock rate error, [-10000, 10000] ppm.
+pub fn clock_ppm(text: &str) -> Result<f64, String> {
+    real(text, -1e4, 1e4, false, "ppm")
+}
+
 /// A clock offset, [-1e10, 1e10] s (Unix time on a clock counting from zero).
 pub fn time_offset(text: &str) -> Result<f64, String> {
     real(text, -1e10, 1e10, false, "s")

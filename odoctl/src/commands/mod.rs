@@ -76,5 +76,6 @@ pub fn reference_options(args: &ReferenceArgs) -> Result<ReferenceOptions> {
                 .transpose()?,
         },
         time_offset: args.time_offset,
+        clock_ppm: args.clock_ppm,
     })
 }

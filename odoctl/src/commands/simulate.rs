@@ -276,6 +276,7 @@ fn write_trajectory(a: &TrajectoryArgs, run: &SimRun, marker: (f64, f64), seed: 
         sigma: a.trajectory_sigma,
         yaw_sigma: a.trajectory_yaw_sigma_deg.to_radians(),
         time_offset: a.trajectory_time_offset,
+        clock_ppm: a.trajectory_clock_ppm,
         seed,
     };
     let times: Vec<f64> = run.samples.iter().map(|s| s.t).collect();
@@ -292,13 +293,14 @@ fn write_trajectory(a: &TrajectoryArgs, run: &SimRun, marker: (f64, f64), seed: 
             .with_context(|| format!("{}: cannot write", p.display()))?;
     }
     crate::outln!(
-        "trajectory reference: {} poses, marker {:.3} m forward, {:.3} m left, yaw {:+.2} deg; frame {}; samples' t - stamp = {} s",
+        "trajectory reference: {} poses, marker {:.3} m forward, {:.3} m left, yaw {:+.2} deg; frame {}; samples' t - stamp = {} s (middle), {} ppm",
         poses.len(),
         marker.0,
         marker.1,
         a.marker_yaw_deg,
         a.trajectory_frame,
-        a.trajectory_time_offset
+        a.trajectory_time_offset,
+        a.trajectory_clock_ppm
     );
     Ok(())
 }

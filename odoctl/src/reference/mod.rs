@@ -10,6 +10,7 @@
 //! time base (GPS time of week, as `record` writes it), refusing a log that does not overlap
 //! the samples.
 
+pub mod clock;
 pub mod geodetic;
 pub mod gps_time;
 pub mod matched;
@@ -327,6 +328,9 @@ pub struct ReferenceOptions {
     /// For a trajectory reference (TUM, MCAP): samples' `t` = reference stamp + this (s);
     /// `None`: see [`Reference::points_for`].
     pub time_offset: Option<f64>,
+    /// For a trajectory reference: the rate of the samples' clock against the stamps, less 1
+    /// (ppm); `None`: estimated.
+    pub clock_ppm: Option<f64>,
 }
 
 impl Default for ReferenceOptions {
@@ -338,6 +342,7 @@ impl Default for ReferenceOptions {
             leap_seconds: None,
             mcap: mcap_pose::McapSelect::default(),
             time_offset: None,
+            clock_ppm: None,
         }
     }
 }
@@ -436,6 +441,10 @@ pub struct Reference {
     pub report: UseReport,
     /// For a trajectory: samples' `t` = stamp + this (s) when given (`--time-offset`).
     pub time_offset: Option<f64>,
+    /// For a trajectory: the clock rate (ppm) when given (`--clock-ppm`).
+    pub clock_ppm: Option<f64>,
+    /// For a trajectory: each epoch's yaw (rad, counter-clockwise, unwrapped), as read.
+    pub yaw: Vec<f64>,
 }
 
 /// Reads a reference file of any format.
@@ -523,6 +532,8 @@ impl Reference {
             origin_epochs: 0,
             leap_seconds: gps_time::DEFAULT_LEAP_SECONDS,
             time_offset: None,
+            clock_ppm: None,
+            yaw: Vec::new(),
         }
     }
 
@@ -538,6 +549,14 @@ impl Reference {
         o: &ReferenceOptions,
     ) -> Self {
         let mut epochs = trajectory::epochs(poses);
+        let mut yaw: Vec<f64> = Vec::with_capacity(poses.len());
+        for p in poses {
+            let y = trajectory::yaw(p.orientation).unwrap_or(0.0);
+            yaw.push(match yaw.last() {
+                Some(prev) => prev + trajectory::wrap(y - prev),
+                None => y,
+            });
+        }
         match trajectory::marker_yaw_offset(&epochs) {
             Some((offset, n)) => {
                 for e in &mut epochs {
@@ -580,6 +599,8 @@ impl Reference {
             origin_epochs: 0,
             leap_seconds,
             time_offset: o.time_offset,
+            clock_ppm: o.clock_ppm,
+            yaw,
         }
     }
 
@@ -647,6 +668,8 @@ impl Reference {
             leap_seconds,
             report,
             time_offset: None,
+            clock_ppm: None,
+            yaw: Vec::new(),
         })
     }
 
@@ -738,6 +761,63 @@ impl Reference {
         )
     }
 
+    /// A trajectory's clock against the samples' and a line saying how it was found: both
+    /// given (`--time-offset` checked by [`Reference::trajectory_offset`], `--clock-ppm` or 0
+    /// with it); else estimated ([`clock::estimate`]), fixing what is given.
+    pub fn clock(&self, samples: &[Sample], span: (f64, f64)) -> Result<(clock::ClockFit, String)> {
+        let s_mid = 0.5 * (self.span().0 + self.span().1);
+        if let (Some(_), Some(ppm)) = (self.time_offset, self.clock_ppm) {
+            let offset = self.trajectory_offset(span)?;
+            let fit = clock::ClockFit {
+                offset,
+                offset_se: 0.0,
+                ppm,
+                ppm_se: 0.0,
+                s_mid,
+                coarse: None,
+                points: 0,
+                windows: 0,
+                straights: 0,
+            };
+            let how = format!(
+                "clock (given): samples' t = stamp {offset:+.6} s {ppm:+.3} ppm x (stamp - {s_mid:.3} s)"
+            );
+            return Ok((fit, how));
+        }
+        let poses: Vec<clock::StampedYaw> = self
+            .epochs
+            .iter()
+            .zip(&self.yaw)
+            .map(|(e, &yaw)| clock::StampedYaw {
+                s: e.t,
+                x: e.x,
+                y: e.y,
+                yaw,
+            })
+            .collect();
+        let fixed = clock::ClockFixed {
+            offset: self.time_offset,
+            ppm: self.clock_ppm,
+        };
+        let fit = clock::estimate(samples, &poses, fixed)
+            .map_err(|e| anyhow!("{}: clock: {e}", self.file))?;
+        let how = format!(
+            "clock (estimated from the turning and the straights, {} poses in {} windows, {} straight{}): \
+             samples' t = stamp {:+.6} s (se {:.6} s) {:+.3} ppm (se {:.3} ppm) x (stamp - {:.3} s)",
+            fit.points,
+            fit.windows,
+            fit.straights,
+            fit.coarse
+                .map_or(String::new(), |c| format!(", coarse offset {c:+.3} s")),
+            fit.offset,
+            fit.offset_se,
+            fit.ppm,
+            fit.ppm_se,
+            fit.s_mid
+        );
+        Ok((fit, how))
+    }
+
     /// The reference rows for these samples: a trajectory (TUM, MCAP) put on the samples'
     /// clock ([`Reference::trajectory_offset`]) and interpolated at their instants
     /// ([`trajectory::resample`]), with a line saying what was matched; any other reference
@@ -750,12 +830,12 @@ impl Reference {
         if self.time != TimeScale::Trajectory {
             return Ok((self.ref_points(span)?, None));
         }
-        let offset = self.trajectory_offset(span)?;
+        let (clock, how) = self.clock(samples, span)?;
         let times: Vec<f64> = samples.iter().map(|s| s.t).collect();
-        let (points, r) = trajectory::resample(&self.epochs, |t| t + offset, &times);
+        let (points, r) = trajectory::resample(&self.epochs, |s| clock.map(s), &times);
         let line = format!(
-            "clock: samples' t = stamp {offset:+.6} s; {} reference points interpolated at the \
-             {} sample instants inside the trajectory; {} instants in {} gaps left out",
+            "{how}\n  {} reference points interpolated at the {} sample instants inside the \
+             trajectory; {} instants in {} gaps left out",
             points.len(),
             r.inside,
             r.in_gaps,

@@ -23,8 +23,11 @@ pub struct TrajectorySim {
     pub sigma: f64,
     /// Noise of the yaw (rad).
     pub yaw_sigma: f64,
-    /// Samples' `t` minus the stamp (s): what `calibrate --time-offset` takes.
+    /// Samples' `t` minus the stamp at the middle of the stamps (s): what `calibrate
+    /// --time-offset` takes.
     pub time_offset: f64,
+    /// d(samples' t)/d(stamp) - 1 (ppm): what `calibrate --clock-ppm` takes.
+    pub clock_ppm: f64,
     /// Seed of the noise.
     pub seed: u64,
 }
@@ -40,9 +43,14 @@ pub fn trajectory_poses(
     let (fx, fy, rot) = sim.frame;
     let (s, c) = rot.sin_cos();
     let axis = sim.sigma / std::f64::consts::SQRT_2;
+    // Samples' t = s + offset + r (s - s_mid), s_mid the middle of the stamps.
+    let every = sim.every.max(1);
+    let last = (times.len().max(1) - 1) / every * every;
+    let (d, r) = (sim.time_offset, sim.clock_ppm * 1e-6);
+    let s_mid = 0.5 * (times.first().unwrap_or(&0.0) + times.get(last).unwrap_or(&0.0)) - d;
     let mut out = Vec::new();
     for (k, (t, &(x, y, h))) in times.iter().zip(truth).enumerate() {
-        if k % sim.every.max(1) != 0 {
+        if k % every != 0 {
             continue;
         }
         let (mx, my) = antenna_position(x, y, h, sim.marker.0, sim.marker.1);
@@ -51,7 +59,7 @@ pub fn trajectory_poses(
         let yaw = wrap(std::f64::consts::FRAC_PI_2 - h + rot + sim.marker_yaw)
             + sim.yaw_sigma * rng.normal();
         out.push(TrajectoryPose {
-            t: t - sim.time_offset,
+            t: (t - d + r * s_mid) / (1.0 + r),
             position: [c * mx - s * my + fx, s * mx + c * my + fy, 0.0],
             orientation: [0.0, 0.0, (yaw / 2.0).sin(), (yaw / 2.0).cos()],
             line: out.len() + 1,
@@ -75,6 +83,7 @@ mod tests {
             sigma: 0.0,
             yaw_sigma: 0.0,
             time_offset: 10.0,
+            clock_ppm: 0.0,
             seed: 1,
         };
         // Heading 0: facing +y; the marker 0.5 m ahead at (1, 2.5); turned 90 deg ccw: (-2.5, 1).
