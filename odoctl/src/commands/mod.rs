@@ -21,6 +21,7 @@ pub mod monitor;
 pub mod record;
 pub mod replay;
 pub mod simulate;
+pub mod umbmark;
 pub mod validate;
 pub mod validate_ensemble;
 
