@@ -78,13 +78,17 @@ fn simulate(dir: &std::path::Path, seed: u64, length: &str, extra: &[&str]) -> S
         "",
         "--antenna",
         "0.25,-0.08",
-        "--trajectory-frame",
-        &frame,
         "--marker-yaw-deg",
         &yaw,
     ];
-    if !extra.contains(&"--trajectory-time-offset") {
-        args.extend(["--trajectory-time-offset", &offset]);
+    // The seed's frame and clock unless `extra` gives them.
+    for (option, value) in [
+        ("--trajectory-frame", &frame),
+        ("--trajectory-time-offset", &offset),
+    ] {
+        if !extra.contains(&option) {
+            args.extend([option, value.as_str()]);
+        }
     }
     let (samples, reference, tum) = (s("run.csv"), s("ref.csv"), s("run.tum"));
     args[8] = &samples;
@@ -284,4 +288,39 @@ fn mcap_written_by_mcap_ros2_support_reads_as_the_tum_file() {
             );
         }
     }
+}
+
+#[test]
+fn validate_reads_a_trajectory_in_another_frame_on_another_clock() {
+    let d = common::scratch("trajectory_validate");
+    let s = |n: &str| d.join(n).to_str().unwrap().to_string();
+    let offset = simulate(&d, 3, "100", &[]);
+    let (est, _) = calibrate(
+        &s("run.csv"),
+        &s("run.tum"),
+        &s("cal.toml"),
+        &["--time-offset", &offset],
+    );
+    assert!((est[3] - 0.25).abs() < 0.02, "{est:?}");
+    let v = common::scratch("trajectory_validate_run");
+    let sv = |n: &str| v.join(n).to_str().unwrap().to_string();
+    simulate(
+        &v,
+        7,
+        "60",
+        &["--path", "validation", "--trajectory-frame", "-1,5,-120"],
+    );
+    let stdout = common::success_stdout(&common::odoctl(&[
+        "validate",
+        "--samples",
+        &sv("run.csv"),
+        "--reference",
+        &sv("run.tum"),
+        "--config",
+        &s("cal.toml"),
+    ]));
+    assert!(
+        stdout.contains("clock (estimated") && stdout.contains("horizontal error"),
+        "{stdout}"
+    );
 }
