@@ -164,6 +164,11 @@ fn clock_mismatch_and_bad_topics_are_errors_naming_the_file() {
         e.contains("run.tum: the trajectory does not overlap") && e.contains("--time-offset"),
         "{e}"
     );
+    let e = run(with(&["--reference", tum, "--time-offset", "5"]));
+    assert!(
+        e.contains("run.tum: the trajectory does not overlap"),
+        "{e}"
+    );
     let e = run(with(&["--reference", mcap]));
     assert!(e.contains("--reference-topic"), "{e}");
     let e = run(with(&["--reference", mcap, "--reference-topic", "/none"]));

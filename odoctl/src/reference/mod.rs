@@ -784,6 +784,10 @@ impl Reference {
             );
             return Ok((fit, how));
         }
+        if self.time_offset.is_some() {
+            // A given offset must put the trajectory over the samples.
+            self.trajectory_offset(span)?;
+        }
         let poses: Vec<clock::StampedYaw> = self
             .epochs
             .iter()
