@@ -8,7 +8,8 @@
 //! slip's drift. So:
 //!
 //! 1. **coarse** ([`coarse_offset`]): the normalised cross-correlation of the two yaw rates
-//!    (counts `n_1 - n_2` and the trajectory's unwrapped yaw, both on a grid of 0.05 s) over
+//!    (counts `n_1 - n_2` and the trajectory's unwrapped yaw, both on a grid of [`GRID`] s,
+//!    or of a 40,000th of the longer span when that is coarser) over
 //!    every lag at which they overlap by at least half the shorter; the largest |correlation|,
 //!    refined by a parabola through its neighbours;
 //! 2. **fit** ([`fit`]): least squares of the yaw at each pose against `c_w + a U(t) + b S(t)`,
@@ -18,9 +19,9 @@
 //!    against `d_w + k S(t)` (the marker moves with the chassis there), each kind weighted by
 //!    its residuals' RMS; over `(a, b, k, offset, rate)` by Gauss-Newton with the windows'
 //!    constants eliminated; standard errors by the delete-one-window jackknife (the windows'
-//!    errors are independent of each other's, not the poses'). The turning gives the offset
-//!    to the yaw noise over the yaw rate; the straights give it to the position noise over the
-//!    speed, which for motion capture is far smaller.
+//!    errors are independent of each other's, not the poses'). A time shift of a constant
+//!    rate is a constant, which the windows' constants absorb: the offset is seen where the
+//!    yaw rate (or the speed on a straight) changes within a window.
 
 use anyhow::{bail, Result};
 
