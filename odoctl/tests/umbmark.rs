@@ -12,8 +12,9 @@ use std::io::Write as _;
 use odoctl::csvio;
 use odoctl::simulate::{default_truth, simulate, Rng, Segment, SimOptions, SimSettings};
 
-/// Writes a run of `segments` and returns its true end (forward, left) from the start.
-fn run(dir: &std::path::Path, name: &str, segments: Vec<Segment>, seed: u64) -> (f64, f64) {
+/// Writes a run of `segments` and returns its true end (forward, left, heading change
+/// counter-clockwise) from the start.
+fn run(dir: &std::path::Path, name: &str, segments: Vec<Segment>, seed: u64) -> (f64, f64, f64) {
     let mut plan = Vec::new();
     plan.extend(segments);
     let sim = simulate(&SimOptions {
@@ -28,8 +29,8 @@ fn run(dir: &std::path::Path, name: &str, segments: Vec<Segment>, seed: u64) -> 
     let mut w = std::io::BufWriter::new(std::fs::File::create(dir.join(name)).unwrap());
     csvio::write_samples(&mut w, &sim.samples, csvio::SamplesLayout::Counts).unwrap();
     w.flush().unwrap();
-    let (x, y, _) = *sim.truth.last().unwrap();
-    (y, -x)
+    let (x, y, h) = *sim.truth.last().unwrap();
+    (y, -x, -odoctl::stats::wrap_angle(h))
 }
 
 fn square(turn: f64) -> Vec<Segment> {
@@ -43,12 +44,18 @@ fn square_test(seed: u64, extra_run: Option<&str>) -> std::path::PathBuf {
     let d = common::scratch(&format!("umbmark{seed}"));
     let mut rng = Rng::new(seed ^ 0xAB);
     let sigma = 0.002;
-    let mut toml = format!("side = 4.0\nsigma = {sigma}\n");
-    let mut entry = |name: &str, dir: &str, (f, l): (f64, f64), rng: &mut Rng| {
+    let heading_sigma = 0.5f64;
+    let mut toml = format!("side = 4.0\nsigma = {sigma}\nheading_sigma_deg = {heading_sigma}\n");
+    // The squares' end headings measured too, the straight's not.
+    let mut entry = |name: &str, dir: &str, (f, l, h): (f64, f64, f64), rng: &mut Rng| {
         let (f, l) = (f + sigma * rng.normal(), l + sigma * rng.normal());
         toml.push_str(&format!(
             "\n[[run]]\nsamples = \"{name}\"\ndirection = \"{dir}\"\nforward = {f}\nleft = {l}\n"
         ));
+        if dir != "straight" {
+            let h = h.to_degrees() + heading_sigma * rng.normal();
+            toml.push_str(&format!("heading_deg = {h}\n"));
+        }
     };
     for k in 0..5u64 {
         let cw = run(&d, &format!("cw{k}.csv"), square(FRAC_PI_2), seed * 100 + k);
