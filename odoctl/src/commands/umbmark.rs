@@ -6,8 +6,10 @@
 //! relative to the start pose: `forward` (m, along the start heading), `left` (m) and
 //! optionally `heading_deg` (end heading less start heading, degrees counter-clockwise, near 0
 //! after a full square). The fit integrates every run with the core integrator from the start
-//! pose and minimises the sum of the squared differences over their measurement errors, over
-//! both diameters and the track width (Gauss-Newton, central-difference Jacobian).
+//! pose and minimises the sum of the squared differences whitened by each run's covariance
+//! (the measurement errors plus the end covariance of white wheel slip, its kappa chosen so
+//! that chi-square equals its degrees of freedom), over both diameters and the track width
+//! (Gauss-Newton, central-difference Jacobian).
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
