@@ -10,11 +10,15 @@ use odo_unit::odometry::UncertaintyModel;
 mod calibrate;
 mod reference;
 mod simulate;
+mod trajectory;
+mod umbmark;
 pub mod values;
 
 pub use calibrate::{CalibrateArgs, GeometryArgs};
 pub use reference::{PosTimeArg, ReceiverArgs, ReferenceArgs};
 pub use simulate::SimulateArgs;
+pub use trajectory::TrajectoryArgs;
+pub use umbmark::UmbmarkArgs;
 
 use values as v;
 
@@ -70,6 +74,8 @@ pub enum Cmd {
     Simulate(SimulateArgs),
     /// Publish the live pose on ROS 2 (/odom, /tf, /diagnostics) over DDS (docs/ROS.md).
     Bridge(BridgeArgs),
+    /// Fit the diameters and track width to square runs and a straight measured on the floor.
+    Umbmark(UmbmarkArgs),
 }
 
 /// `odoctl monitor`.

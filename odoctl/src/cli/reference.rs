@@ -26,6 +26,22 @@ pub struct ReferenceArgs {
     /// epoch's from its date by the built-in leap-second table (18 since 2017-01-01).
     #[arg(long, allow_negative_numbers = true, value_parser = v::leap_seconds)]
     pub leap_seconds: Option<i32>,
+    /// Topic of an MCAP reference (PoseStamped, Odometry or TFMessage); by default its only
+    /// PoseStamped or Odometry topic.
+    #[arg(long, value_name = "TOPIC")]
+    pub reference_topic: Option<String>,
+    /// Parent and child frame of the transforms of a TFMessage topic, `PARENT,CHILD`.
+    #[arg(long, value_name = "PARENT,CHILD")]
+    pub reference_frames: Option<String>,
+    /// Clock offset of a trajectory reference (TUM, MCAP): the samples' t minus the
+    /// reference's stamp at the same instant, at the middle of the stamps (s); estimated from
+    /// the turning when absent.
+    #[arg(long, value_name = "SECONDS", allow_negative_numbers = true, value_parser = v::time_offset)]
+    pub time_offset: Option<f64>,
+    /// Clock rate of a trajectory reference: d(samples' t)/d(stamp) - 1 (ppm); estimated from
+    /// the turning when absent.
+    #[arg(long, value_name = "PPM", allow_negative_numbers = true, value_parser = v::clock_ppm)]
+    pub clock_ppm: Option<f64>,
 }
 
 /// Receiver logs of a simulated run (`simulate`).

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use clap::Args;
 
 use super::values as v;
-use super::ReceiverArgs;
+use super::{ReceiverArgs, TrajectoryArgs};
 use crate::simulate::PathKind;
 
 /// `odoctl simulate`.
@@ -76,4 +76,7 @@ pub struct SimulateArgs {
     /// The receiver logs to write beside the CSVs.
     #[command(flatten)]
     pub receiver: ReceiverArgs,
+    /// The trajectory references to write beside the CSVs.
+    #[command(flatten)]
+    pub trajectory: TrajectoryArgs,
 }

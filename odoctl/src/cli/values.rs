@@ -123,6 +123,21 @@ pub fn leap_seconds(text: &str) -> Result<i32, String> {
     integer(text, 0, 100)
 }
 
+/// An angle, [-360, 360] degrees.
+pub fn angle_deg(text: &str) -> Result<f64, String> {
+    real(text, -360.0, 360.0, false, "deg")
+}
+
+/// A clock rate error, [-10000, 10000] ppm.
+pub fn clock_ppm(text: &str) -> Result<f64, String> {
+    real(text, -1e4, 1e4, false, "ppm")
+}
+
+/// A clock offset, [-1e10, 1e10] s (Unix time on a clock counting from zero).
+pub fn time_offset(text: &str) -> Result<f64, String> {
+    real(text, -1e10, 1e10, false, "s")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -21,6 +21,7 @@ pub mod monitor;
 pub mod record;
 pub mod replay;
 pub mod simulate;
+pub mod umbmark;
 pub mod validate;
 pub mod validate_ensemble;
 
@@ -67,5 +68,15 @@ pub fn reference_options(args: &ReferenceArgs) -> Result<ReferenceOptions> {
             None => OriginChoice::OpeningStandstill,
         },
         leap_seconds: args.leap_seconds,
+        mcap: crate::reference::mcap_pose::McapSelect {
+            topic: args.reference_topic.clone(),
+            frames: args
+                .reference_frames
+                .as_deref()
+                .map(crate::reference::mcap_pose::parse_frames)
+                .transpose()?,
+        },
+        time_offset: args.time_offset,
+        clock_ppm: args.clock_ppm,
     })
 }

@@ -7,12 +7,14 @@ use std::process::ExitCode;
 use anyhow::{bail, Context, Result};
 use odo_unit::odometry::ChassisParams;
 
-use crate::cli::{PosTimeArg, ReceiverArgs, SimulateArgs};
+use crate::cli::{PosTimeArg, ReceiverArgs, SimulateArgs, TrajectoryArgs};
 use crate::config::{self as cfg};
 use crate::csvio;
 use crate::reference::geodetic::{parse_origin, Geodetic};
 use crate::reference::simulated::{self, PosTime, ReceiverSim};
+use crate::reference::simulated_trajectory::{trajectory_poses, TrajectorySim};
 use crate::reference::{antenna_position, gps_time, parse_antenna, FixQuality};
+use crate::reference::{mcap_pose, tum};
 use crate::simulate::{self, default_truth, SimRun, SimSettings};
 
 use super::create;
@@ -30,6 +32,7 @@ pub fn run(a: &SimulateArgs) -> Result<ExitCode> {
     let mut sim = simulate::simulate_path(a.path, a.length, truth, run);
     prepare(logs, &mut sim, &receiver);
     write_logs(logs, &sim, &receiver)?;
+    write_trajectory(&a.trajectory, &sim, receiver.antenna, run.seed)?;
     let mut w = create(&a.samples)?;
     csvio::write_samples(&mut w, &sim.samples, csvio::SamplesLayout::Counts)?;
     w.flush()?;
@@ -242,6 +245,62 @@ fn write_logs(logs: &ReceiverArgs, run: &SimRun, sim: &ReceiverSim) -> Result<()
         sim.antenna.1,
         sim.origin,
         gps_time::describe(sim.gps_start, leap)
+    );
+    Ok(())
+}
+
+/// Writes the trajectory references (`--tum`, `--mcap-reference`) of a prepared run, the
+/// marker at `marker` (forward, left; m).
+fn write_trajectory(a: &TrajectoryArgs, run: &SimRun, marker: (f64, f64), seed: u64) -> Result<()> {
+    if a.tum.is_none() && a.mcap_reference.is_none() {
+        return Ok(());
+    }
+    let frame: Vec<f64> = a
+        .trajectory_frame
+        .split(',')
+        .map(|v| v.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .ok()
+        .filter(|v: &Vec<f64>| v.len() == 3 && v.iter().all(|x| x.is_finite() && x.abs() < 1e6))
+        .with_context(|| {
+            format!(
+                "--trajectory-frame `{}`: expected X,Y,DEG",
+                a.trajectory_frame
+            )
+        })?;
+    let sim = TrajectorySim {
+        frame: (frame[0], frame[1], frame[2].to_radians()),
+        marker,
+        marker_yaw: a.marker_yaw_deg.to_radians(),
+        every: a.trajectory_every as usize,
+        sigma: a.trajectory_sigma,
+        yaw_sigma: a.trajectory_yaw_sigma_deg.to_radians(),
+        time_offset: a.trajectory_time_offset,
+        clock_ppm: a.trajectory_clock_ppm,
+        seed,
+    };
+    let times: Vec<f64> = run.samples.iter().map(|s| s.t).collect();
+    let poses = trajectory_poses(&times, &run.truth, &sim);
+    if let Some(p) = &a.tum {
+        let mut w = create(p)?;
+        tum::write(&mut w, &poses)?;
+        w.flush()?;
+    }
+    if let Some(p) = &a.mcap_reference {
+        let f =
+            std::fs::File::create(p).with_context(|| format!("{}: cannot create", p.display()))?;
+        mcap_pose::write(std::io::BufWriter::new(f), &poses, "world", "marker")
+            .with_context(|| format!("{}: cannot write", p.display()))?;
+    }
+    crate::outln!(
+        "trajectory reference: {} poses, marker {:.3} m forward, {:.3} m left, yaw {:+.2} deg; frame {}; samples' t - stamp = {} s (middle), {} ppm",
+        poses.len(),
+        marker.0,
+        marker.1,
+        a.marker_yaw_deg,
+        a.trajectory_frame,
+        a.trajectory_time_offset,
+        a.trajectory_clock_ppm
     );
     Ok(())
 }

@@ -10,20 +10,15 @@ use super::{load, Reference, ReferenceOptions, TimeScale};
 use crate::csvio::{self, RefPoint, Sample};
 
 /// The reference rows for these samples: a CSV as it is; a receiver log aligned to the
-/// samples' time (refused when they do not overlap), with a summary of what was used on
-/// stdout.
+/// samples' time (refused when they do not overlap); a trajectory interpolated at the sample
+/// instants ([`Reference::points_for`]); with a summary of what was used on stdout.
 pub fn reference_for_samples(r: &Reference, samples: &[Sample]) -> Result<Vec<RefPoint>> {
-    let points = r.ref_points(time_span(samples))?;
+    let (points, matching) = r.points_for(samples)?;
     print_summary(r);
+    if let Some(m) = matching {
+        crate::outln!("  {m}");
+    }
     Ok(points)
-}
-
-/// The first and last sample's time (s), NaN when there is none.
-fn time_span(samples: &[Sample]) -> (f64, f64) {
-    (
-        samples.first().map_or(f64::NAN, |s| s.t),
-        samples.last().map_or(f64::NAN, |s| s.t),
-    )
 }
 
 /// What of a receiver log was used, on stdout (nothing for a REFERENCE CSV).
@@ -43,6 +38,14 @@ fn print_summary(r: &Reference) {
                 "  the log's own sigmas: median horizontal {s:.4} m (compare --reference-sigma)"
             );
         }
+    }
+    if r.time == TimeScale::Trajectory {
+        crate::outln!(
+            "reference {} ({}): {}; x, y in its own frame (m)",
+            r.file,
+            r.format,
+            r.report
+        );
     }
 }
 
@@ -79,7 +82,7 @@ pub fn read_matched_run(
     let source = load(reference_path, options)?;
     let reference = match summary {
         ReferenceSummary::Print => reference_for_samples(&source, &samples)?,
-        ReferenceSummary::Quiet => source.ref_points(time_span(&samples))?,
+        ReferenceSummary::Quiet => source.points_for(&samples)?.0,
     };
     let matches = csvio::match_or_fail(
         &samples,

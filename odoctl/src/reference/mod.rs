@@ -10,12 +10,17 @@
 //! time base (GPS time of week, as `record` writes it), refusing a log that does not overlap
 //! the samples.
 
+pub mod clock;
 pub mod geodetic;
 pub mod gps_time;
 pub mod matched;
+pub mod mcap_pose;
 pub mod nmea;
 pub mod rtklib;
 pub mod simulated;
+pub mod simulated_trajectory;
+pub mod trajectory;
+pub mod tum;
 
 use std::collections::BTreeMap;
 use std::fmt;
@@ -23,7 +28,7 @@ use std::path::Path;
 
 use anyhow::{anyhow, bail, Context, Result};
 
-use crate::csvio::{self, RefPoint};
+use crate::csvio::{self, RefPoint, Sample};
 use geodetic::{Geodetic, LocalFrame};
 
 /// The kind of a reference file.
@@ -35,6 +40,10 @@ pub enum Format {
     Nmea,
     /// RTKLIB `.pos` solution (latitude/longitude/height).
     Rtklib,
+    /// TUM trajectory (`timestamp tx ty tz qx qy qz qw`) of a marker in a local frame.
+    Tum,
+    /// ROS 2 MCAP recording with a PoseStamped, Odometry or TFMessage topic.
+    Mcap,
 }
 
 impl fmt::Display for Format {
@@ -43,6 +52,8 @@ impl fmt::Display for Format {
             Self::Csv => "REFERENCE CSV",
             Self::Nmea => "NMEA 0183",
             Self::Rtklib => "RTKLIB .pos",
+            Self::Tum => "TUM trajectory",
+            Self::Mcap => "MCAP",
         })
     }
 }
@@ -50,15 +61,19 @@ impl fmt::Display for Format {
 /// Recognises the format from the first 50 non-blank lines: a `$` sentence with a `*hh`
 /// checksum is NMEA (binary data before it, as in a receiver's mixed log, is passed over,
 /// even when it starts with `%`); a `%` header of text or a data row starting `yyyy/mm/dd`
-/// or `week tow` with at least 14 columns is RTKLIB; anything else is taken as CSV (whose
-/// own parser then names what is wrong).
+/// or `week tow` with at least 14 columns is RTKLIB; a line of exactly 8 numbers separated by
+/// white space is TUM (`#` lines passed over); anything else is taken as CSV (whose own parser
+/// then names what is wrong). MCAP is recognised by its magic bytes ([`detect_bytes`]).
 pub fn detect(text: &str) -> Format {
     for line in text
         .lines()
         .map(str::trim)
-        .filter(|l| !l.is_empty())
+        .filter(|l| !l.is_empty() && !l.starts_with('#'))
         .take(50)
     {
+        if tum::is_pose_line(line) {
+            return Format::Tum;
+        }
         if is_rtklib_header(line) {
             return Format::Rtklib;
         }
@@ -83,6 +98,15 @@ pub fn detect(text: &str) -> Format {
         }
     }
     Format::Csv
+}
+
+/// [`detect`], and MCAP when the content starts with the MCAP magic.
+pub fn detect_bytes(bytes: &[u8], text: &str) -> Format {
+    if bytes.starts_with(mcap_pose::MAGIC) {
+        Format::Mcap
+    } else {
+        detect(text)
+    }
 }
 
 /// An RTKLIB header line: `%`, then nothing or a space and printable ASCII (`% program :
@@ -288,7 +312,7 @@ pub enum OriginChoice {
 pub const STANDSTILL_RADIUS: f64 = 0.04;
 
 /// Options of reading a reference file.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct ReferenceOptions {
     /// The format, or `None` to recognise it from the content.
     pub format: Option<Format>,
@@ -299,6 +323,14 @@ pub struct ReferenceOptions {
     /// GPS - UTC (s) for NMEA logs (UTC times) and RTKLIB files written in UTC; `None`: by
     /// each epoch's date ([`gps_time::leap_seconds_on`]).
     pub leap_seconds: Option<i32>,
+    /// The topic (and TF frames) of an MCAP reference.
+    pub mcap: mcap_pose::McapSelect,
+    /// For a trajectory reference (TUM, MCAP): samples' `t` = reference stamp + this (s);
+    /// `None`: see [`Reference::points_for`].
+    pub time_offset: Option<f64>,
+    /// For a trajectory reference: the rate of the samples' clock against the stamps, less 1
+    /// (ppm); `None`: estimated.
+    pub clock_ppm: Option<f64>,
 }
 
 impl Default for ReferenceOptions {
@@ -308,6 +340,9 @@ impl Default for ReferenceOptions {
             min_fix: MinFix::Fixed,
             origin: OriginChoice::OpeningStandstill,
             leap_seconds: None,
+            mcap: mcap_pose::McapSelect::default(),
+            time_offset: None,
+            clock_ppm: None,
         }
     }
 }
@@ -319,6 +354,9 @@ pub enum TimeScale {
     Gps,
     /// The samples' own time base (a REFERENCE CSV: matched as it is).
     Samples,
+    /// The stamps of a trajectory reference (TUM, MCAP) on its own clock, interpolated at the
+    /// sample instants ([`Reference::points_for`]).
+    Trajectory,
 }
 
 /// One used reference epoch in the local plane.
@@ -353,6 +391,8 @@ pub struct UseReport {
     pub below_min_fix: BTreeMap<FixQuality, usize>,
     /// The parser's report (empty for a CSV).
     pub read: ReadReport,
+    /// What else was found or done, one line each (a trajectory's topic, its marker's yaw).
+    pub notes: Vec<String>,
 }
 
 impl fmt::Display for UseReport {
@@ -372,6 +412,9 @@ impl fmt::Display for UseReport {
         }
         if self.read != ReadReport::default() {
             write!(f, "\n  {}", self.read)?;
+        }
+        for n in &self.notes {
+            write!(f, "\n  {n}")?;
         }
         Ok(())
     }
@@ -396,6 +439,12 @@ pub struct Reference {
     pub leap_seconds: i32,
     /// What was used and left out.
     pub report: UseReport,
+    /// For a trajectory: samples' `t` = stamp + this (s) when given (`--time-offset`).
+    pub time_offset: Option<f64>,
+    /// For a trajectory: the clock rate (ppm) when given (`--clock-ppm`).
+    pub clock_ppm: Option<f64>,
+    /// For a trajectory: each epoch's yaw (rad, counter-clockwise, unwrapped), as read.
+    pub yaw: Vec<f64>,
 }
 
 /// Reads a reference file of any format.
@@ -416,7 +465,7 @@ pub fn parse(file: &str, bytes: &[u8], o: &ReferenceOptions) -> Result<Reference
         Ok(t) => std::borrow::Cow::Borrowed(t),
         Err(_) => String::from_utf8_lossy(bytes),
     };
-    let format = o.format.unwrap_or_else(|| detect(&text));
+    let format = o.format.unwrap_or_else(|| detect_bytes(bytes, &text));
     match format {
         Format::Csv => {
             let rows = csvio::parse_reference(file, &text)?;
@@ -429,6 +478,26 @@ pub fn parse(file: &str, bytes: &[u8], o: &ReferenceOptions) -> Result<Reference
         Format::Rtklib => {
             let log = rtklib::parse(file, &text, o.leap_seconds)?;
             Reference::from_log(file, format, log, o)
+        }
+        Format::Tum => {
+            let poses = tum::parse(file, &text)?;
+            Ok(Reference::from_trajectory(
+                file,
+                format,
+                &poses,
+                Vec::new(),
+                o,
+            ))
+        }
+        Format::Mcap => {
+            let (poses, note) = mcap_pose::parse(file, bytes, &o.mcap)?;
+            Ok(Reference::from_trajectory(
+                file,
+                format,
+                &poses,
+                vec![note],
+                o,
+            ))
         }
     }
 }
@@ -462,6 +531,76 @@ impl Reference {
             origin: None,
             origin_epochs: 0,
             leap_seconds: gps_time::DEFAULT_LEAP_SECONDS,
+            time_offset: None,
+            clock_ppm: None,
+            yaw: Vec::new(),
+        }
+    }
+
+    /// A trajectory's poses (TUM, MCAP), in its own frame and on its own clock: the marker's
+    /// headings turned by its yaw offset from the chassis axis
+    /// ([`trajectory::marker_yaw_offset`]), or left out when too few straights show it;
+    /// `notes` are what the reader found, to which this adds the yaw's.
+    pub fn from_trajectory(
+        file: &str,
+        format: Format,
+        poses: &[trajectory::TrajectoryPose],
+        mut notes: Vec<String>,
+        o: &ReferenceOptions,
+    ) -> Self {
+        let mut epochs = trajectory::epochs(poses);
+        let mut yaw: Vec<f64> = Vec::with_capacity(poses.len());
+        for p in poses {
+            let y = trajectory::yaw(p.orientation).unwrap_or(0.0);
+            yaw.push(match yaw.last() {
+                Some(prev) => prev + trajectory::wrap(y - prev),
+                None => y,
+            });
+        }
+        match trajectory::marker_yaw_offset(&epochs) {
+            Some((offset, n)) => {
+                for e in &mut epochs {
+                    e.heading = e.heading.map(|h| trajectory::wrap(h + offset));
+                }
+                notes.push(format!(
+                    "headings: the marker's yaw, turned by {:+.3} deg to the direction of travel on {n} straight chords of {} m",
+                    offset.to_degrees(),
+                    trajectory::YAW_CHORD
+                ));
+            }
+            None => {
+                for e in &mut epochs {
+                    e.heading = None;
+                }
+                notes.push(format!(
+                    "headings not used: fewer than {} straight chords of {} m to align the marker's yaw with the chassis axis",
+                    trajectory::YAW_MIN_CHORDS,
+                    trajectory::YAW_CHORD
+                ));
+            }
+        }
+        let leap_seconds = o.leap_seconds.unwrap_or_else(|| {
+            gps_time::leap_seconds_at_gps(
+                epochs[0].t - UNIX_TO_GPS + f64::from(gps_time::DEFAULT_LEAP_SECONDS),
+            )
+        });
+        Self {
+            file: file.to_string(),
+            format,
+            time: TimeScale::Trajectory,
+            report: UseReport {
+                epochs: epochs.len(),
+                used: epochs.len(),
+                notes,
+                ..UseReport::default()
+            },
+            epochs,
+            origin: None,
+            origin_epochs: 0,
+            leap_seconds,
+            time_offset: o.time_offset,
+            clock_ppm: o.clock_ppm,
+            yaw,
         }
     }
 
@@ -528,6 +667,9 @@ impl Reference {
             origin_epochs,
             leap_seconds,
             report,
+            time_offset: None,
+            clock_ppm: None,
+            yaw: Vec::new(),
         })
     }
 
@@ -556,6 +698,156 @@ impl Reference {
         )
     }
 
+    /// The GPS time (s) to subtract from a receiver log's epochs (GPS times `first` .. `last`)
+    /// to put them on the samples' time base ([`Reference::ref_points`]).
+    fn gps_shift(&self, first: f64, last: f64, samples: (f64, f64)) -> Result<f64> {
+        let shift = if samples.0 >= gps_time::WEEK {
+            0.0
+        } else {
+            // The week whose time of week puts the log over the samples.
+            let (w, _) = gps_time::week_tow(first);
+            [w, w + 1, w - 1]
+                .into_iter()
+                .map(|w| w as f64 * gps_time::WEEK)
+                .find(|s| first - s <= samples.1 && last - s >= samples.0)
+                .unwrap_or(w as f64 * gps_time::WEEK)
+        };
+        if !(first - shift <= samples.1 && last - shift >= samples.0) {
+            bail!(
+                "{}: the reference does not overlap the samples in time: reference {} .. {}, \
+                 samples t = {:.3} .. {:.3} s (GPS time of week, or GPS seconds) \
+                 (leap seconds {}: --leap-seconds)",
+                self.file,
+                gps_time::describe(first, self.leap_seconds),
+                gps_time::describe(last, self.leap_seconds),
+                samples.0,
+                samples.1,
+                self.leap_seconds
+            );
+        }
+        Ok(shift)
+    }
+
+    /// A trajectory's clock offset (s; samples' `t` = stamp + offset), given the samples'
+    /// first and last time: `--time-offset` when given; else 0 when the stamps overlap the
+    /// samples as they are; else, for stamps that read as Unix time (beyond 1e8 s), UTC made
+    /// GPS (with the leap seconds) and put on the samples' time base as a receiver log is.
+    /// Fails, naming both ranges, when they still do not overlap.
+    pub fn trajectory_offset(&self, samples: (f64, f64)) -> Result<f64> {
+        let (first, last) = self.span();
+        let overlaps = |o: f64| first + o <= samples.1 && last + o >= samples.0;
+        if let Some(o) = self.time_offset {
+            if overlaps(o) {
+                return Ok(o);
+            }
+        } else if overlaps(0.0) {
+            return Ok(0.0);
+        } else if first > 1e8 {
+            let g = f64::from(self.leap_seconds) - UNIX_TO_GPS;
+            if let Ok(shift) = self.gps_shift(first + g, last + g, samples) {
+                return Ok(g - shift);
+            }
+        }
+        bail!(
+            "{}: the trajectory does not overlap the samples in time: stamps {:.3} .. {:.3} s{}, \
+             samples t = {:.3} .. {:.3} s; give the samples' t minus the stamp as --time-offset",
+            self.file,
+            first,
+            last,
+            self.time_offset
+                .map_or(String::new(), |o| format!(" (+ --time-offset {o})")),
+            samples.0,
+            samples.1
+        )
+    }
+
+    /// A trajectory's clock against the samples' and a line saying how it was found: both
+    /// given (`--time-offset` checked by [`Reference::trajectory_offset`], `--clock-ppm` or 0
+    /// with it); else estimated ([`clock::estimate`]), fixing what is given.
+    pub fn clock(&self, samples: &[Sample], span: (f64, f64)) -> Result<(clock::ClockFit, String)> {
+        let s_mid = 0.5 * (self.span().0 + self.span().1);
+        if let (Some(_), Some(ppm)) = (self.time_offset, self.clock_ppm) {
+            let offset = self.trajectory_offset(span)?;
+            let fit = clock::ClockFit {
+                offset,
+                offset_se: 0.0,
+                ppm,
+                ppm_se: 0.0,
+                s_mid,
+                coarse: None,
+                points: 0,
+                windows: 0,
+                straights: 0,
+            };
+            let how = format!(
+                "clock (given): samples' t = stamp {offset:+.6} s {ppm:+.3} ppm x (stamp - {s_mid:.3} s)"
+            );
+            return Ok((fit, how));
+        }
+        if self.time_offset.is_some() {
+            // A given offset must put the trajectory over the samples.
+            self.trajectory_offset(span)?;
+        }
+        let poses: Vec<clock::StampedYaw> = self
+            .epochs
+            .iter()
+            .zip(&self.yaw)
+            .map(|(e, &yaw)| clock::StampedYaw {
+                s: e.t,
+                x: e.x,
+                y: e.y,
+                yaw,
+            })
+            .collect();
+        let fixed = clock::ClockFixed {
+            offset: self.time_offset,
+            ppm: self.clock_ppm,
+        };
+        let fit = clock::estimate(samples, &poses, fixed)
+            .map_err(|e| anyhow!("{}: clock: {e}", self.file))?;
+        let how = format!(
+            "clock (estimated from the turning and the straights, {} poses in {} windows, {} straight{}): \
+             samples' t = stamp {:+.6} s (se {:.6} s) {:+.3} ppm (se {:.3} ppm) x (stamp - {:.3} s)",
+            fit.points,
+            fit.windows,
+            fit.straights,
+            fit.coarse
+                .map_or(String::new(), |c| format!(", coarse offset {c:+.3} s")),
+            fit.offset,
+            fit.offset_se,
+            fit.ppm,
+            fit.ppm_se,
+            fit.s_mid
+        );
+        Ok((fit, how))
+    }
+
+    /// The reference rows for these samples: a trajectory (TUM, MCAP) put on the samples'
+    /// clock ([`Reference::trajectory_offset`]) and interpolated at their instants
+    /// ([`trajectory::resample`]), with a line saying what was matched; any other reference
+    /// as [`Reference::ref_points`] gives it, with no line.
+    pub fn points_for(&self, samples: &[Sample]) -> Result<(Vec<RefPoint>, Option<String>)> {
+        let span = (
+            samples.first().map_or(f64::NAN, |s| s.t),
+            samples.last().map_or(f64::NAN, |s| s.t),
+        );
+        if self.time != TimeScale::Trajectory {
+            return Ok((self.ref_points(span)?, None));
+        }
+        let (clock, how) = self.clock(samples, span)?;
+        let times: Vec<f64> = samples.iter().map(|s| s.t).collect();
+        let (points, r) = trajectory::resample(&self.epochs, |s| clock.map(s), &times);
+        let line = format!(
+            "{how}\n  {} reference points interpolated at the {} sample instants inside the \
+             trajectory; {} instants in {} gaps left out",
+            points.len(),
+            r.inside,
+            r.in_gaps,
+            r.gaps
+        );
+        Ok((points, Some(line)))
+    }
+
     /// The epochs as the calibration's reference rows, on the samples' time base, given the
     /// samples' first and last time (s). A CSV passes as it is. For a receiver log the samples'
     /// `t` is GPS time of week (as `record` writes it) or, when it starts beyond a week, GPS
@@ -563,36 +855,11 @@ impl Reference {
     /// 604,800 s. Fails,
     /// naming both ranges, when the log and the samples do not overlap in time.
     pub fn ref_points(&self, samples: (f64, f64)) -> Result<Vec<RefPoint>> {
+        let (first, last) = self.span();
         let shift = match self.time {
             TimeScale::Samples => 0.0,
-            TimeScale::Gps => {
-                let (first, last) = self.span();
-                let shift = if samples.0 >= gps_time::WEEK {
-                    0.0
-                } else {
-                    // The week whose time of week puts the log over the samples.
-                    let (w, _) = gps_time::week_tow(first);
-                    [w, w + 1, w - 1]
-                        .into_iter()
-                        .map(|w| w as f64 * gps_time::WEEK)
-                        .find(|s| first - s <= samples.1 && last - s >= samples.0)
-                        .unwrap_or(w as f64 * gps_time::WEEK)
-                };
-                if !(first - shift <= samples.1 && last - shift >= samples.0) {
-                    bail!(
-                        "{}: the reference does not overlap the samples in time: reference {} .. {}, \
-                         samples t = {:.3} .. {:.3} s (GPS time of week, or GPS seconds) \
-                         (leap seconds {}: --leap-seconds)",
-                        self.file,
-                        gps_time::describe(first, self.leap_seconds),
-                        gps_time::describe(last, self.leap_seconds),
-                        samples.0,
-                        samples.1,
-                        self.leap_seconds
-                    );
-                }
-                shift
-            }
+            TimeScale::Gps => self.gps_shift(first, last, samples)?,
+            TimeScale::Trajectory => -self.trajectory_offset(samples)?,
         };
         Ok(self
             .epochs
@@ -610,6 +877,9 @@ impl Reference {
             .collect())
     }
 }
+
+/// Unix time minus GPS time (s) without the leap seconds: 1980-01-06 in Unix seconds.
+pub const UNIX_TO_GPS: f64 = 315_964_800.0;
 
 /// The origin and how many epochs it averages (0 when given).
 fn choose_origin(used: &[Epoch], choice: OriginChoice) -> (Geodetic, usize) {
@@ -690,6 +960,12 @@ mod tests {
             ),
             ("# comment\nt,x,y\n0,0,0\n", Format::Csv),
             ("t,x,y,heading\n", Format::Csv),
+            (
+                "# timestamp tx ty tz qx qy qz qw\n1.5 1 2 3 0 0 0 1\n",
+                Format::Tum,
+            ),
+            ("1700000000.1\t1 2 3 0 0 0.1 0.99\n", Format::Tum),
+            ("1 2 3 4 5 6 7\n", Format::Csv),
             ("", Format::Csv),
         ];
         for (text, f) in table {
@@ -787,7 +1063,7 @@ mod tests {
         let float = ReferenceOptions {
             min_fix: MinFix::Float,
             origin: OriginChoice::FirstEpoch,
-            ..o
+            ..o.clone()
         };
         let r = Reference::from_log("r.nmea", Format::Nmea, log.clone(), &float).unwrap();
         assert_eq!((r.report.used, r.origin_epochs), (5, 1));

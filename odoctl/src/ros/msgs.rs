@@ -273,6 +273,8 @@ pub enum MsgType {
     DiagnosticArray,
     /// `nav_msgs/msg/Path`.
     Path,
+    /// `geometry_msgs/msg/PoseStamped`.
+    PoseStamped,
 }
 
 impl MsgType {
@@ -283,6 +285,7 @@ impl MsgType {
             Self::TfMessage => "tf2_msgs/msg/TFMessage",
             Self::DiagnosticArray => "diagnostic_msgs/msg/DiagnosticArray",
             Self::Path => "nav_msgs/msg/Path",
+            Self::PoseStamped => "geometry_msgs/msg/PoseStamped",
         }
     }
 
@@ -326,6 +329,11 @@ impl MsgType {
                 d.push(("geometry_msgs/PoseStamped", POSE_STAMPED));
                 d.extend(pose);
                 schema(PATH, &d)
+            }
+            Self::PoseStamped => {
+                let mut d = header.to_vec();
+                d.extend(pose);
+                schema(POSE_STAMPED, &d)
             }
         }
     }
