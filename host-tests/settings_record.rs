@@ -33,13 +33,13 @@ fn serialisation_round_trip_and_checksum() {
     assert_eq!(Settings::from_bytes(&b).unwrap(), s);
     assert!(
         Settings::from_bytes(&b[..116]).is_err(),
-        "version 4 needs 148 bytes"
+        "version 5 needs 156 bytes"
     );
     assert!(
-        Settings::from_bytes(&b[..144]).is_err(),
-        "version 4 needs 148 bytes"
+        Settings::from_bytes(&b[..148]).is_err(),
+        "version 5 needs 156 bytes"
     );
-    assert!(Settings::from_bytes_version(5, &b).is_err());
+    assert!(Settings::from_bytes_version(6, &b).is_err());
     assert!(Settings::from_bytes_version(0, &b).is_err());
 }
 
@@ -86,28 +86,28 @@ fn v3_record(settings: &Settings, generation: u32) -> Vec<u8> {
 }
 
 #[test]
-fn record_layout_of_format_version_4() {
+fn record_layout_of_format_version_5() {
     let r = encode_record(&variant(4), 9);
-    assert_eq!(RECORD_LEN, 164);
+    assert_eq!(RECORD_LEN, 172);
     assert_eq!(r.len(), RECORD_LEN);
     assert_eq!(RECORD_LEN % WORD, 0);
-    assert_eq!(&r[4..8], &[4, 0, 148, 0]);
-    assert_eq!(&r[12..160], &variant(4).to_bytes());
-    assert_eq!(&r[160..164], &crc32(&r[..160]).to_le_bytes());
+    assert_eq!(&r[4..8], &[5, 0, 156, 0]);
+    assert_eq!(&r[12..168], &variant(4).to_bytes());
+    assert_eq!(&r[168..172], &crc32(&r[..168]).to_le_bytes());
     // The v1 record is the same bytes up to the payload's end, but its own header and CRC.
     let old = v1_record(&variant(4), 9);
     assert_eq!(&old[12..124], &r[12..124]);
 }
 
 /// An old record at the start of `f`, of generation `generation`, loads as `expect`; the next
-/// save of `new` writes version 4 after it (payload 148) with the next generation and wins;
+/// save of `new` writes version 5 after it (payload 156) with the next generation and wins;
 /// with that record damaged the old one is the fallback again; no used word is programmed.
 fn assert_upgrades(f: &mut SimFlash, generation: u32, expect: Settings, new: &Settings) {
     assert_eq!(load(f), (expect, SettingsSource::Flash, generation));
     let mut store = SettingsStore::new(&mut *f);
     assert_eq!(store.save(new).unwrap(), generation + 1);
     assert_eq!(load(f), (*new, SettingsSource::Flash, generation + 1));
-    assert_eq!(&f.mem[0][SLOT_LEN + 4..SLOT_LEN + 8], &[4, 0, 148, 0]);
+    assert_eq!(&f.mem[0][SLOT_LEN + 4..SLOT_LEN + 8], &[5, 0, 156, 0]);
     f.mem[0][SLOT_LEN + 20] ^= 0x10;
     assert_eq!(load(f), (expect, SettingsSource::Flash, generation));
     assert_eq!(f.violations, 0);

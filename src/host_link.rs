@@ -56,3 +56,13 @@ pub fn send_blocking(link: &mut impl Mutex<T = Link>, msg: &Message) {
         cortex_m::asm::nop();
     }
 }
+
+/// Queues a MAVLink frame whole if it fits with `reserve` bytes to spare; false when it did
+/// not fit (nothing queued). Only the processing task sends MAVLink frames.
+pub fn send_mavlink(link: &mut impl Mutex<T = Link>, frame: &[u8], reserve: usize) -> bool {
+    let queued = link.lock(|l| l.queue_raw(frame, reserve));
+    if queued {
+        rtic::pend(Interrupt::USART2);
+    }
+    queued
+}

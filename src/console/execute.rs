@@ -52,6 +52,12 @@ impl Reply {
 
     /// A reply `error: <what>` (cut with `...` if longer than [`MAX_REPLY`]).
     pub fn error(what: impl core::fmt::Display) -> Self {
+        Self::error_args(format_args!("{what}"))
+    }
+
+    /// [`Reply::error`] of formatted text (one copy for every caller).
+    #[inline(never)]
+    fn error_args(what: core::fmt::Arguments<'_>) -> Self {
         let mut r = Self {
             ok: false,
             text: String::new(),
@@ -181,38 +187,7 @@ fn help() -> Reply {
     }
     for k in Key::ALL {
         let info = k.info();
-        r.push_line(format_args!(
-            "  {} {} {}",
-            info.name,
-            info.unit,
-            RangeText(info.kind)
-        ));
+        r.push_line(format_args!("  {} {} {}", info.name, info.unit, info.kind));
     }
     r
-}
-
-/// Displays the accepted values of a key kind.
-struct RangeText(crate::settings::Kind);
-
-impl core::fmt::Display for RangeText {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        use crate::settings::{Kind, Value};
-        match self.0 {
-            Kind::F64 { min, max } => write!(f, "{}..={}", Value::F64(min), Value::F64(max)),
-            Kind::F32 { min, max } => write!(f, "{}..={}", Value::F32(min), Value::F32(max)),
-            Kind::U32 { min, max } => write!(f, "{min}..={max}"),
-            Kind::U32Set(set) => {
-                for (i, v) in set.iter().enumerate() {
-                    write!(f, "{}{v}", if i == 0 { "" } else { "|" })?;
-                }
-                Ok(())
-            }
-            Kind::Word(words) => {
-                for (i, w) in words.iter().enumerate() {
-                    write!(f, "{}{w}", if i == 0 { "" } else { "|" })?;
-                }
-                Ok(())
-            }
-        }
-    }
 }

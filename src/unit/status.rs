@@ -2,6 +2,7 @@
 
 use super::{Live, RxErrors};
 use crate::console::Reply;
+use crate::mavlink::RxCounts;
 use crate::protocol::ResetCause;
 use crate::settings::SettingsSource;
 use crate::timing::{ClockSource, SyncState};
@@ -25,6 +26,7 @@ pub(crate) struct StatusInputs<'a> {
     pub host: &'a RxErrors,
     pub gnss: &'a RxErrors,
     pub board: &'a BoardReport,
+    pub mavlink_rx: RxCounts,
     pub timer_hz: u32,
     pub source: SettingsSource,
     pub dirty: bool,
@@ -83,6 +85,10 @@ pub(crate) fn write(reply: &mut Reply, s: &StatusInputs<'_>) {
             e.lost, e.overruns, e.framing, e.noise, e.parity
         ));
     }
+    reply.push_line(format_args!(
+        "host_rx_mavlink_ignored = {}, host_rx_mavlink1_ignored = {}",
+        s.mavlink_rx.v2, s.mavlink_rx.v1
+    ));
     for (name, w, m, lost) in [
         (
             "left",
