@@ -1,5 +1,6 @@
 //! Frames from the tasks to the host link: encoded outside the lock, queued whole.
 
+use odo_unit::mavlink::FrameBuf;
 use odo_unit::protocol::{self, Message, Queued, TxLink};
 use rtic::Mutex;
 use stm32f4xx_hal::pac::Interrupt;
@@ -57,10 +58,21 @@ pub fn send_blocking(link: &mut impl Mutex<T = Link>, msg: &Message) {
     }
 }
 
-/// Queues a MAVLink frame whole if it fits with `reserve` bytes to spare; false when it did
-/// not fit (nothing queued). Only the processing task sends MAVLink frames.
-pub fn send_mavlink(link: &mut impl Mutex<T = Link>, frame: &[u8], reserve: usize) -> bool {
-    let queued = link.lock(|l| l.queue_raw(frame, reserve));
+/// Queues the MAVLink frame of `n` bytes in `frame` and a `0x00` after it (the delimiter
+/// of our frames: a reader of our frames resynchronises before the next reply), whole if it
+/// fits with `reserve` bytes to spare; false when it did not fit (nothing queued). Only the
+/// processing task sends MAVLink frames.
+pub fn send_mavlink(
+    link: &mut impl Mutex<T = Link>,
+    frame: &mut FrameBuf,
+    n: usize,
+    reserve: usize,
+) -> bool {
+    let Some(bytes) = frame.get_mut(..=n) else {
+        return false;
+    };
+    bytes[n] = 0;
+    let queued = link.lock(|l| l.queue_raw(bytes, reserve));
     if queued {
         rtic::pend(Interrupt::USART2);
     }

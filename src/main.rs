@@ -48,7 +48,7 @@ mod app {
     };
     use crate::host_link::{queue_now, send, send_blocking, send_mavlink, Link, RECORD_RESERVE};
     use heapless::spsc::{Consumer, Producer, Queue};
-    use odo_unit::mavlink::{Ids, MavlinkOut, MAX_FRAME_LEN};
+    use odo_unit::mavlink::{FrameBuf, Ids, MavlinkOut};
     use odo_unit::protocol::{CommandReply, Message};
     use odo_unit::settings::store::SettingsStore;
     use odo_unit::settings::Output;
@@ -341,11 +341,11 @@ mod app {
             let mavlink = p.settings().output == Output::Mavlink;
             let ids = Ids::of(p.settings());
             let mav = &mut *cx.local.mav;
-            let mut frame = [0u8; MAX_FRAME_LEN];
+            let mut frame: FrameBuf = [0; core::mem::size_of::<FrameBuf>()];
             if p.heartbeat_due() {
                 let sent = if mavlink {
                     let n = mav.heartbeat(ids, &mut frame);
-                    send_mavlink(&mut cx.shared.link, &frame[..n], RECORD_RESERVE)
+                    send_mavlink(&mut cx.shared.link, &mut frame, n, RECORD_RESERVE)
                 } else {
                     let inputs = HeartbeatInputs {
                         store: cx.shared.store_state.lock(|s| *s),
@@ -365,7 +365,7 @@ mod app {
                 let sent = if mavlink {
                     let (chassis, resets) = (p.settings().chassis, p.pose_resets());
                     let n = mav.odometry(record, &chassis, resets, ids, &mut frame);
-                    let sent = send_mavlink(&mut cx.shared.link, &frame[..n], RECORD_RESERVE);
+                    let sent = send_mavlink(&mut cx.shared.link, &mut frame, n, RECORD_RESERVE);
                     mav.sent(sent);
                     sent
                 } else {

@@ -13,6 +13,10 @@ pub const HEADER_LEN: usize = 9;
 /// Longest frame the unit sends: an untruncated `ODOMETRY`, 1 + 9 + 233 + 2 = 245 bytes.
 pub const MAX_FRAME_LEN: usize = 1 + HEADER_LEN + super::odometry::ODOMETRY_LEN + 2;
 
+/// A buffer for one frame and the `0x00` the firmware sends after it (the delimiter of our
+/// own frames: a reader of our frames resynchronises before the next reply).
+pub type FrameBuf = [u8; MAX_FRAME_LEN + 1];
+
 /// A message's id and `CRC_EXTRA` (from the dialect's definition of its fields).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct MessageId {
@@ -52,7 +56,7 @@ pub fn encode_frame(
     msg: &MessageId,
     payload: &[u8],
     header: FrameHeader,
-    out: &mut [u8; MAX_FRAME_LEN],
+    out: &mut FrameBuf,
 ) -> usize {
     let keep = payload.iter().rposition(|b| *b != 0).map_or(1, |i| i + 1);
     let len = keep.min(payload.len()).min(MAX_FRAME_LEN - HEADER_LEN - 3);
@@ -87,7 +91,7 @@ mod tests {
 
     #[test]
     fn all_zero_payload_keeps_one_byte() {
-        let mut out = [0u8; MAX_FRAME_LEN];
+        let mut out = [0u8; MAX_FRAME_LEN + 1];
         let msg = MessageId {
             id: 0,
             crc_extra: 50,

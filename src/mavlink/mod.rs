@@ -14,7 +14,7 @@ pub mod frame;
 pub mod odometry;
 pub mod rx;
 
-pub use frame::{encode_frame, FrameHeader, MAX_FRAME_LEN};
+pub use frame::{encode_frame, FrameBuf, FrameHeader, MAX_FRAME_LEN};
 pub use odometry::{Heartbeat, Odometry, Twist};
 pub use rx::{MavlinkRx, RxCounts};
 
@@ -84,7 +84,7 @@ impl MavlinkOut {
         params: &ChassisParams,
         pose_resets: u32,
         ids: Ids,
-        out: &mut [u8; MAX_FRAME_LEN],
+        out: &mut FrameBuf,
     ) -> usize {
         if pose_resets != self.resets_seen {
             self.resets_seen = pose_resets;
@@ -103,7 +103,7 @@ impl MavlinkOut {
     }
 
     /// `HEARTBEAT` as a frame in `out` (bytes used).
-    pub fn heartbeat(&self, ids: Ids, out: &mut [u8; MAX_FRAME_LEN]) -> usize {
+    pub fn heartbeat(&self, ids: Ids, out: &mut FrameBuf) -> usize {
         let payload = Heartbeat::UNIT.payload();
         encode_frame(&odometry::HEARTBEAT_ID, &payload, self.header(ids), out)
     }

@@ -132,24 +132,30 @@ pub struct Odometry {
 
 impl Odometry {
     /// `record` in MAVLink terms, with the `twist` since the previous record (none for the
-    /// first: velocity and its covariance NaN, "unknown") and the reset counter.
+    /// first: zero velocity with an unknown covariance, NaN first element) and the reset
+    /// counter.
     pub fn from_record(record: &PoseRecord, twist: Option<&Twist>, reset_counter: u8) -> Self {
         let mut pose_covariance = [0.0f32; 21];
         pose_covariance[upper(0, 0)] = record.sigma_y * record.sigma_y;
         pose_covariance[upper(0, 1)] = record.cov_xy;
         pose_covariance[upper(1, 1)] = record.sigma_x * record.sigma_x;
         pose_covariance[upper(5, 5)] = record.sigma_heading * record.sigma_heading;
-        let mut velocity_covariance = [f32::NAN; 21];
-        let (mut velocity, mut rates) = ([f32::NAN; 3], [f32::NAN; 3]);
-        if let Some(t) = twist {
-            velocity = [t.vx, 0.0, 0.0];
-            rates = [0.0, 0.0, t.yawspeed];
-            velocity_covariance = [0.0; 21];
-            velocity_covariance[upper(0, 0)] = t.var_vx;
-            velocity_covariance[upper(1, 1)] = t.var_vx;
-            velocity_covariance[upper(0, 5)] = t.cov;
-            velocity_covariance[upper(5, 5)] = t.var_yaw;
-        }
+        // No interval yet (the first record): zero velocity, its covariance unknown (NaN as
+        // the first element, as the message defines).
+        let t = twist.copied().unwrap_or(Twist {
+            vx: 0.0,
+            yawspeed: 0.0,
+            var_vx: f32::NAN,
+            var_yaw: 0.0,
+            cov: 0.0,
+        });
+        let velocity = [t.vx, 0.0, 0.0];
+        let rates = [0.0, 0.0, t.yawspeed];
+        let mut velocity_covariance = [0.0f32; 21];
+        velocity_covariance[upper(0, 0)] = t.var_vx;
+        velocity_covariance[upper(1, 1)] = t.var_vx;
+        velocity_covariance[upper(0, 5)] = t.cov;
+        velocity_covariance[upper(5, 5)] = t.var_yaw;
         let f = record.flags;
         let quality = if f.left.fault || f.right.fault {
             QUALITY_FAILED

@@ -33,12 +33,13 @@ pub const BAUD_RATES: [u32; 8] = [
 /// stop bit), used to check that the output rate fits the baud rate.
 pub const POSE_FRAME_BITS: u32 = 1140;
 
-/// Bits on the wire of the longest `ODOMETRY` frame (245 bytes, MAVLink 2 framing, 10 bits
-/// per byte), used to check that the output rate fits the baud rate in `output = mavlink`.
-pub const MAVLINK_FRAME_BITS: u32 = 2450;
+/// Bits on the wire of the longest `ODOMETRY` frame (245 bytes with MAVLink 2 framing, and
+/// the `0x00` after it: 246 bytes, 10 bits per byte), used to check that the output rate
+/// fits the baud rate in `output = mavlink`.
+pub const MAVLINK_FRAME_BITS: u32 = 2460;
 
-/// Bits on the wire of the `HEARTBEAT` frame sent once a second (21 bytes).
-pub const MAVLINK_HEARTBEAT_BITS: u32 = 210;
+/// Bits on the wire of the `HEARTBEAT` frame sent once a second (21 bytes and the `0x00`).
+pub const MAVLINK_HEARTBEAT_BITS: u32 = 220;
 
 /// What the host link streams (`output`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]

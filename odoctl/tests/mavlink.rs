@@ -1,0 +1,225 @@
+//! MAVLink output read by pymavlink (ArduPilot's MAVLink library, from the registry;
+//! tests/mavlink/read_mavlink.py): the core encoder's frames as the firmware sends them
+//! (each followed by 0x00) for simulated records with a pose reset, and `odoctl bridge
+//! --mavlink udpout:...` against the fake unit. Every frame's CRC and sequence, the
+//! HEARTBEAT, and every ODOMETRY field against our own records. Skipped with a message when
+//! python3 or `pymavlink` is missing, unless `ODO_PY_REQUIRED=1` (CI).
+
+mod common;
+
+use std::fmt::Write as FmtWrite;
+use std::io::{BufRead, BufReader, Write as IoWrite};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+
+use common::scratch;
+use odo_unit::odometry::ChassisParams;
+use odo_unit::protocol::PoseRecord;
+use odoctl::mavlink::{Converter, Target};
+use odoctl::simulate::PathKind;
+
+fn pymavlink_ready() -> bool {
+    let ok = Command::new("python3")
+        .args(["-c", "import pymavlink.dialects.v20.common"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !ok {
+        assert!(
+            std::env::var("ODO_PY_REQUIRED").as_deref() != Ok("1"),
+            "ODO_PY_REQUIRED=1 but python3 with the `pymavlink` package is missing"
+        );
+        let _ = writeln!(
+            std::io::stderr(),
+            "mavlink: skipped: python3 with `pymavlink` not found (python3 -m pip install pymavlink)"
+        );
+    }
+    ok
+}
+
+fn script() -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/mavlink/read_mavlink.py")
+}
+
+/// The records as the reader's CSV.
+fn expect_csv(records: &[PoseRecord], path: &Path) {
+    let mut e = String::from(
+        "t_us,x,y,heading,sigma_x,sigma_y,sigma_heading,cov_xy,gamma_left,gamma_right\n",
+    );
+    for r in records {
+        let _ = writeln!(
+            e,
+            "{},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{},{}",
+            r.mcu_time_us,
+            r.x,
+            r.y,
+            r.heading,
+            r.sigma_x,
+            r.sigma_y,
+            r.sigma_heading,
+            r.cov_xy,
+            r.gamma_left,
+            r.gamma_right
+        );
+    }
+    std::fs::write(path, e).unwrap();
+}
+
+/// `--params` of the reader: the paper model's constants of `p`.
+fn params_args(p: &ChassisParams) -> Vec<String> {
+    [
+        p.left_diameter,
+        p.right_diameter,
+        p.track_width,
+        f64::from(p.ticks_per_rev),
+        f64::from(p.delta_left),
+        f64::from(p.delta_right),
+        f64::from(p.delta_diff),
+    ]
+    .iter()
+    .map(|v| format!("{v:?}"))
+    .collect()
+}
+
+fn run_reader(args: &[String]) -> String {
+    let o = Command::new("python3")
+        .arg(script())
+        .args(args)
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(
+        o.status.success(),
+        "{out}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    out
+}
+
+#[test]
+fn encoder_frames_with_a_pose_reset_read_by_pymavlink() {
+    if !pymavlink_ready() {
+        return;
+    }
+    let p = ChassisParams::DESIGNED;
+    let sim = common::sim(PathKind::Validation, 10.0, 31);
+    // A reset to pose 0 at sample 200: the records start again with zero sigmas, the counts
+    // and times go on.
+    let mut records = common::records(&p, &sim.samples[..200]);
+    records.extend(common::records(&p, &sim.samples[200..400]));
+    let mut conv = Converter::new(
+        p,
+        odo_unit::mavlink::Ids {
+            sysid: 1,
+            compid: 197,
+        },
+    );
+    let mut wire = Vec::new();
+    for (i, r) in records.iter().enumerate() {
+        if i % 50 == 0 {
+            wire.extend(conv.heartbeat());
+            wire.push(0);
+        }
+        wire.extend(conv.odometry(r));
+        wire.push(0);
+    }
+    let dir = scratch("mavlink_encoder");
+    let (raw, expect) = (dir.join("link.bin"), dir.join("expect.csv"));
+    std::fs::write(&raw, &wire).unwrap();
+    expect_csv(&records, &expect);
+    let t = |r: &PoseRecord| r.mcu_time_us as f64 * 1e-6;
+    let rate = (records.len() - 1) as f64 / (t(&records[records.len() - 1]) - t(&records[0]));
+    let mut args: Vec<String> = ["--file", raw.to_str().unwrap()]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+    args.extend(["--expect".into(), expect.to_str().unwrap().into()]);
+    args.push("--params".into());
+    args.extend(params_args(&p));
+    args.extend(["--rate".into(), format!("{rate}")]);
+    args.extend(["--resets".into(), "1".into()]);
+    args.extend(["--reset-pose", "0", "0", "0"].map(String::from));
+    let out = run_reader(&args);
+    assert!(
+        out.contains("read_mavlink: ok 400 ODOMETRY (400 matched"),
+        "{out}"
+    );
+    eprintln!("{}", out.trim());
+}
+
+#[test]
+fn bridge_sends_odometry_over_udp_to_pymavlink() {
+    if !pymavlink_ready() {
+        return;
+    }
+    let sim = common::sim(PathKind::Validation, 10.0, 12);
+    let samples: Vec<_> = sim.samples[..300].to_vec();
+    // The fake unit integrates with its defaults, the designed parameters.
+    let p = ChassisParams::DESIGNED;
+    let records = common::records(&p, &samples);
+    let dir = scratch("mavlink_bridge");
+    let expect = dir.join("expect.csv");
+    expect_csv(&records, &expect);
+    let port = std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let mut args: Vec<String> = vec!["--udp".into(), port.to_string()];
+    args.extend(["--expect".into(), expect.to_str().unwrap().into()]);
+    args.push("--params".into());
+    args.extend(params_args(&p));
+    args.extend(["--count", "150", "--timeout", "40"].map(String::from));
+    let mut reader: Child = Command::new("python3")
+        .arg(script())
+        .args(&args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(reader.stdout.as_mut().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    assert_eq!(line.trim(), "ready", "reader did not start");
+    let (unit_port, unit) = common::fake_unit(samples, std::time::Duration::from_millis(20));
+    let o = Command::new(common::bin())
+        .args(["bridge", "--port", &format!("tcp:127.0.0.1:{unit_port}")])
+        .args(["--mavlink", &format!("udpout:127.0.0.1:{port}")])
+        .args(["--count", "200"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("200 ODOMETRY"), "{err}");
+    unit.join().unwrap();
+    let o = reader.wait_with_output().unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{out}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(out.contains("read_mavlink: ok"), "{out}");
+    eprintln!("{}", out.trim());
+}
+
+#[test]
+fn targets_parse_or_say_why_not() {
+    assert_eq!(
+        Target::parse("udpout:127.0.0.1:14550").unwrap(),
+        Target::UdpOut("127.0.0.1:14550".into())
+    );
+    assert_eq!(
+        Target::parse("serial:/dev/ttyS1:57600").unwrap(),
+        Target::Serial("/dev/ttyS1".into(), 57600)
+    );
+    for bad in [
+        "udpout:host",
+        "udpout::1",
+        "serial:/dev/x:fast",
+        "tcp:1:2",
+        "udpout:h:99999",
+    ] {
+        assert!(Target::parse(bad).is_err(), "{bad}");
+    }
+}
