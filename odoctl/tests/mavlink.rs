@@ -223,3 +223,100 @@ fn targets_parse_or_say_why_not() {
         assert!(Target::parse(bad).is_err(), "{bad}");
     }
 }
+
+#[allow(dead_code)]
+#[path = "../../host-tests/support/qemu.rs"]
+mod qemu_support;
+
+/// Waits until the link has received `more` bytes beyond what it holds now.
+fn wait_for_bytes(link: &qemu_support::UnitLink, more: usize, limit: std::time::Duration) {
+    let start = std::time::Instant::now();
+    let from = link.raw.lock().unwrap().len();
+    while link.raw.lock().unwrap().len() < from + more {
+        assert!(start.elapsed() < limit, "QEMU sent too little MAVLink");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+}
+
+#[test]
+fn qemu_mavlink_output_read_by_pymavlink() {
+    if !pymavlink_ready() {
+        return;
+    }
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let Some(qemu) = qemu_support::boot(&repo, "qemu_mavlink_output_read_by_pymavlink") else {
+        return;
+    };
+    let limit = std::time::Duration::from_secs(120);
+    let mut link = qemu_support::UnitLink::connect(qemu.port, limit);
+    while link.records.len() < 3 {
+        link.next_frame();
+    }
+    // 50 Hz, every second sample: 25 ODOMETRY frames a second, 61,720 bit/s of 115,200.
+    let from = link.raw.lock().unwrap().len();
+    let (ok, text) = link.command("set output mavlink output_divider 2");
+    assert!(ok, "{text}");
+    // About 3 s, then a reset (its reply, one of our frames, lands among the MAVLink frames
+    // and may cost a flight controller's parser the frame after it), then about 2 s more.
+    wait_for_bytes(&link, 75 * 246, limit);
+    let (ok, text) = link.command("reset_pose 1 2 0.5");
+    assert!(ok, "{text}");
+    wait_for_bytes(&link, 50 * 246, limit);
+    // MAVLink bytes end where the next command is sent.
+    let to = link.raw.lock().unwrap().len();
+    // A flight controller's bytes: its HEARTBEAT (MAVLink 2), a signed MAVLink 2 frame and a
+    // MAVLink 1 HEARTBEAT are skipped and counted; the console answers the line after them.
+    link.send_bytes(&flight_controller_bytes());
+    let (ok, text) = link.command("status");
+    assert!(ok, "{text}");
+    assert!(
+        text.contains("host_rx_mavlink_ignored = 2, host_rx_mavlink1_ignored = 1"),
+        "{text}"
+    );
+    let (ok, text) = link.command("set output frames");
+    assert!(ok, "{text}");
+    let dir = scratch("mavlink_qemu");
+    let raw = dir.join("link.bin");
+    std::fs::write(&raw, &link.raw.lock().unwrap()[from..to]).unwrap();
+    let mut args: Vec<String> = ["--file", raw.to_str().unwrap(), "--rate", "25"]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+    args.extend(["--resets", "1", "--reset-pose", "1", "2", "0.5"].map(String::from));
+    args.extend(["--allow-gaps", "2"].map(String::from));
+    let out = run_reader(&args);
+    assert!(out.contains("read_mavlink: ok"), "{out}");
+    eprintln!("{}", out.trim());
+    // Records again after `output frames`.
+    let n = link.records.len();
+    while link.records.len() < n + 3 {
+        link.next_frame();
+    }
+}
+
+/// A flight controller's HEARTBEAT (system 1, component 1) in MAVLink 2, a signed MAVLink 2
+/// frame (13 signature bytes) and a MAVLink 1 HEARTBEAT.
+fn flight_controller_bytes() -> Vec<u8> {
+    let mut out = Vec::new();
+    let mut buf = [0u8; odo_unit::mavlink::MAX_FRAME_LEN + 1];
+    let hb = [0, 0, 0, 0, 2, 3, 81, 4, 3];
+    let header = odo_unit::mavlink::FrameHeader {
+        seq: 7,
+        sysid: 1,
+        compid: 1,
+    };
+    let id = odo_unit::mavlink::frame::MessageId {
+        id: 0,
+        crc_extra: 50,
+    };
+    let n = odo_unit::mavlink::encode_frame(&id, &hb, header, &mut buf);
+    out.extend_from_slice(&buf[..n]);
+    let n = odo_unit::mavlink::encode_frame(&id, &hb, header, &mut buf);
+    buf[2] = 0x01; // signed: the CRC no longer matches; the unit skips it by its length
+    out.extend_from_slice(&buf[..n]);
+    out.extend_from_slice(&[0x5A; 13]);
+    out.extend_from_slice(&[0xFE, 9, 8, 1, 1, 0]);
+    out.extend_from_slice(&hb);
+    out.extend_from_slice(&[0x12, 0x34]);
+    out
+}

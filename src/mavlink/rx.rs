@@ -82,3 +82,31 @@ impl MavlinkRx {
         false
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Feeds `bytes`; returns the text bytes that came through.
+    fn text(rx: &mut MavlinkRx, bytes: &[u8]) -> Vec<u8> {
+        bytes.iter().copied().filter(|b| rx.text(*b)).collect()
+    }
+
+    #[test]
+    fn frames_of_both_versions_are_skipped_whole_and_counted() {
+        let mut rx = MavlinkRx::new();
+        // MAVLink 2, 3-byte payload: 10 + 3 + 2 bytes.
+        let mut v2 = vec![0xFD, 3, 0, 0, 1, 1, 1, 0, 0, 0, b'a', b'b', b'c', 9, 9];
+        v2.extend_from_slice(b"get\n");
+        assert_eq!(text(&mut rx, &v2), b"get\n");
+        // Signed: 13 more bytes.
+        let mut signed = vec![0xFD, 1, 1, 0, 1, 1, 1, 0, 0, 0, 0, 9, 9];
+        signed.extend_from_slice(&[b'x'; 13]);
+        signed.push(b'k');
+        assert_eq!(text(&mut rx, &signed), b"k");
+        // MAVLink 1, 2-byte payload: 6 + 2 + 2 bytes.
+        let v1 = [0xFE, 2, 0, 1, 1, 0, b'p', b'q', 9, 9, b'z'];
+        assert_eq!(text(&mut rx, &v1), b"z");
+        assert_eq!(rx.counts(), RxCounts { v2: 2, v1: 1 });
+    }
+}

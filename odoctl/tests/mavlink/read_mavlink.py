@@ -9,7 +9,7 @@ Options:
   --params D_L D_R W TICKS DELTA_L DELTA_R DELTA_DIFF   the paper model, for vx and yawspeed
   --count N        ODOMETRY frames to read (udp)
   --timeout S      seconds (udp)
-  --rate HZ        expected ODOMETRY frames per second of time_usec
+  --rate HZ        expected ODOMETRY frames per second of time_usec (from the 2nd HEARTBEAT)
   --resets N       the last reset_counter; every step lands on a record with zero sigmas
   --reset-pose X Y HEADING   after the last step, the pose is this reset pose (ours)
   --allow-gaps N   sequence gaps allowed (frames lost to our reply frames in the stream)
@@ -197,6 +197,11 @@ def main():
     t = [o.time_usec for o in odo]
     if any(b <= a for a, b in zip(t, t[1:])):
         fail("time_usec not increasing")
+    # The rate from the second HEARTBEAT on: a new output_divider applies from the next
+    # whole second (the first HEARTBEAT of a stream may come before it).
+    beats = [i for i, m in enumerate(good) if m.get_type() == "HEARTBEAT"]
+    if args.rate is not None and len(beats) >= 2:
+        t = [m.time_usec for m in good[beats[1]:] if m.get_type() == "ODOMETRY"]
     span = (t[-1] - t[0]) * 1e-6
     rate = (len(t) - 1) / span if span > 0 else 0
     if args.rate is not None:
