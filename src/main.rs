@@ -363,8 +363,13 @@ mod app {
             }
             if let Some(record) = record {
                 let sent = if mavlink {
-                    let (chassis, resets) = (p.settings().chassis, p.pose_resets());
-                    let n = mav.odometry(record, &chassis, resets, ids, &mut frame);
+                    let n = mav.odometry(
+                        record,
+                        &p.settings().chassis,
+                        p.pose_resets(),
+                        ids,
+                        &mut frame,
+                    );
                     let sent = send_mavlink(&mut cx.shared.link, &mut frame, n, RECORD_RESERVE);
                     mav.sent(sent);
                     sent

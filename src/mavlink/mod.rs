@@ -15,7 +15,7 @@ pub mod odometry;
 pub mod rx;
 
 pub use frame::{encode_frame, FrameBuf, FrameHeader, MAX_FRAME_LEN};
-pub use odometry::{Heartbeat, Odometry, Twist};
+pub use odometry::{write_odometry, Heartbeat, Twist};
 pub use rx::{MavlinkRx, RxCounts};
 
 use crate::odometry::ChassisParams;
@@ -96,9 +96,8 @@ impl MavlinkOut {
             Twist::from_counts(params, now.0.wrapping_sub(l), now.1.wrapping_sub(r), dt_us)
         });
         self.prev = Some(now);
-        let msg = Odometry::from_record(record, twist.as_ref(), self.reset_counter);
         let mut payload = [0u8; odometry::ODOMETRY_LEN];
-        msg.write_payload(&mut payload);
+        write_odometry(record, twist.as_ref(), self.reset_counter, &mut payload);
         encode_frame(&odometry::ODOMETRY_ID, &payload, self.header(ids), out)
     }
 

@@ -7,6 +7,7 @@
 //! body -> local `q = (cos(alpha/2), 0, 0, sin(alpha/2))`, `w >= 0`.
 
 use super::frame::MessageId;
+use crate::odometry::integrator::radians_to_binary;
 use crate::odometry::trig::{q30_to_f32, sin_cos};
 use crate::odometry::{ChassisParams, UncertaintyModel};
 use crate::protocol::PoseRecord;
@@ -101,107 +102,77 @@ pub const fn upper(row: usize, col: usize) -> usize {
     row * 6 - row * (row.saturating_sub(1)) / 2 + col - row
 }
 
-/// The `ODOMETRY` fields.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Odometry {
-    /// Timestamp, microseconds (ours: the MCU time of the sample, since start).
-    pub time_usec: u64,
-    /// Pose frame (`MAV_FRAME`).
-    pub frame_id: u8,
-    /// Velocity frame (`MAV_FRAME`).
-    pub child_frame_id: u8,
-    /// Position x, y, z in `frame_id`, metres.
-    pub position: [f32; 3],
-    /// Quaternion w, x, y, z: rotation body -> `frame_id`.
-    pub q: [f32; 4],
-    /// Velocity vx, vy, vz in `child_frame_id`, m/s.
-    pub velocity: [f32; 3],
-    /// Roll, pitch and yaw rate, rad/s.
-    pub rates: [f32; 3],
-    /// Upper triangle of the 6x6 covariance of (x, y, z, roll, pitch, yaw).
-    pub pose_covariance: [f32; 21],
-    /// Upper triangle of the 6x6 covariance of (vx, vy, vz, roll, pitch, yaw rate).
-    pub velocity_covariance: [f32; 21],
-    /// Steps at every pose reset.
-    pub reset_counter: u8,
-    /// `MAV_ESTIMATOR_TYPE`.
-    pub estimator_type: u8,
-    /// -1 failed, 0 unknown, 1 worst .. 100 best.
-    pub quality: i8,
+/// Byte offsets of the `ODOMETRY` fields in the payload (wire order: fields by size,
+/// extensions last): time_usec (u64), x, y, z, q[4], vx, vy, vz, rollspeed, pitchspeed,
+/// yawspeed, pose_covariance[21], velocity_covariance[21] (f32), frame_id, child_frame_id,
+/// then the extensions reset_counter, estimator_type (u8) and quality (i8).
+mod at {
+    pub const X: usize = 8;
+    pub const Q: usize = 20;
+    pub const VX: usize = 36;
+    pub const YAWSPEED: usize = 56;
+    pub const POSE_COVARIANCE: usize = 60;
+    pub const VELOCITY_COVARIANCE: usize = 144;
+    pub const FRAME_ID: usize = 228;
 }
 
-impl Odometry {
-    /// `record` in MAVLink terms, with the `twist` since the previous record (none for the
-    /// first: zero velocity with an unknown covariance, NaN first element) and the reset
-    /// counter.
-    pub fn from_record(record: &PoseRecord, twist: Option<&Twist>, reset_counter: u8) -> Self {
-        let mut pose_covariance = [0.0f32; 21];
-        pose_covariance[upper(0, 0)] = record.sigma_y * record.sigma_y;
-        pose_covariance[upper(0, 1)] = record.cov_xy;
-        pose_covariance[upper(1, 1)] = record.sigma_x * record.sigma_x;
-        pose_covariance[upper(5, 5)] = record.sigma_heading * record.sigma_heading;
-        // No interval yet (the first record): zero velocity, its covariance unknown (NaN as
-        // the first element, as the message defines).
-        let t = twist.copied().unwrap_or(Twist {
-            vx: 0.0,
-            yawspeed: 0.0,
-            var_vx: f32::NAN,
-            var_yaw: 0.0,
-            cov: 0.0,
-        });
-        let velocity = [t.vx, 0.0, 0.0];
-        let rates = [0.0, 0.0, t.yawspeed];
-        let mut velocity_covariance = [0.0f32; 21];
-        velocity_covariance[upper(0, 0)] = t.var_vx;
-        velocity_covariance[upper(1, 1)] = t.var_vx;
-        velocity_covariance[upper(0, 5)] = t.cov;
-        velocity_covariance[upper(5, 5)] = t.var_yaw;
-        let f = record.flags;
-        let quality = if f.left.fault || f.right.fault {
-            QUALITY_FAILED
-        } else if f.left.index_mismatch || f.right.index_mismatch {
-            QUALITY_INDEX_MISMATCH
-        } else {
-            QUALITY_GOOD
-        };
-        Self {
-            time_usec: record.mcu_time_us,
-            frame_id: MAV_FRAME_LOCAL_FRD,
-            child_frame_id: MAV_FRAME_BODY_FRD,
-            position: [record.y as f32, record.x as f32, 0.0],
-            q: quaternion_of_heading(record.heading),
-            velocity,
-            rates,
-            pose_covariance,
-            velocity_covariance,
-            reset_counter,
-            estimator_type: ESTIMATOR_TYPE,
-            quality,
-        }
+/// `quality` of `record`: [`QUALITY_FAILED`] with an encoder fault, [`QUALITY_INDEX_MISMATCH`]
+/// with an index count mismatch, else [`QUALITY_GOOD`].
+pub fn quality(record: &PoseRecord) -> i8 {
+    let f = record.flags;
+    if f.left.fault || f.right.fault {
+        QUALITY_FAILED
+    } else if f.left.index_mismatch || f.right.index_mismatch {
+        QUALITY_INDEX_MISMATCH
+    } else {
+        QUALITY_GOOD
     }
+}
 
-    /// The payload in wire order (fields by size, extensions last), untruncated.
-    pub fn write_payload(&self, out: &mut [u8; ODOMETRY_LEN]) {
-        out[..8].copy_from_slice(&self.time_usec.to_le_bytes());
-        let mut at = 8;
-        for part in [
-            &self.position[..],
-            &self.q,
-            &self.velocity,
-            &self.rates,
-            &self.pose_covariance,
-            &self.velocity_covariance,
-        ] {
-            at = put_f32s(out, at, part);
+/// The `ODOMETRY` payload (untruncated) of `record`, with the `twist` since the previous
+/// record and the reset counter. Time: the MCU time of the sample. Pose in
+/// `MAV_FRAME_LOCAL_FRD`: x = our y (north), y = our x (east), z = 0, `q` of the heading.
+/// Pose covariance (upper triangle over x, y, z, roll, pitch, yaw): var(north) = sigma_y^2,
+/// cov(north, east) = cov_xy, var(east) = sigma_x^2, var(yaw) = sigma_heading^2, all else 0
+/// (z, roll and pitch are not estimated: see docs/MAVLINK.md for why 0, not NaN). Velocity in
+/// `MAV_FRAME_BODY_FRD`: vx forward, vy = vz = 0, yawspeed, roll and pitch rates 0; its
+/// covariance var(vx) = var(vy), cov(vx, yawspeed), var(yawspeed). Without a twist (the
+/// first record) the velocity is 0 and its covariance unknown (NaN first element).
+pub fn write_odometry(
+    record: &PoseRecord,
+    twist: Option<&Twist>,
+    reset_counter: u8,
+    out: &mut [u8; ODOMETRY_LEN],
+) {
+    *out = [0; ODOMETRY_LEN];
+    out[..8].copy_from_slice(&record.mcu_time_us.to_le_bytes());
+    put_f32s(out, at::X, &[record.y as f32, record.x as f32]);
+    put_f32s(out, at::Q, &quaternion_of_heading(record.heading));
+    let pose = at::POSE_COVARIANCE;
+    let (sx, sy, sh) = (record.sigma_x, record.sigma_y, record.sigma_heading);
+    put_f32s(out, pose, &[sy * sy, record.cov_xy]);
+    put_f32s(out, pose + 4 * upper(1, 1), &[sx * sx]);
+    put_f32s(out, pose + 4 * upper(5, 5), &[sh * sh]);
+    let vel = at::VELOCITY_COVARIANCE;
+    match twist {
+        Some(t) => {
+            put_f32s(out, at::VX, &[t.vx]);
+            put_f32s(out, at::YAWSPEED, &[t.yawspeed]);
+            put_f32s(out, vel, &[t.var_vx]);
+            put_f32s(out, vel + 4 * upper(0, 5), &[t.cov, t.var_vx]);
+            put_f32s(out, vel + 4 * upper(5, 5), &[t.var_yaw]);
         }
-        out[228..].copy_from_slice(&[
-            self.frame_id,
-            self.child_frame_id,
-            self.reset_counter,
-            self.estimator_type,
-            self.quality as u8,
-        ]);
+        None => {
+            put_f32s(out, vel, &[f32::NAN]);
+        }
     }
+    out[at::FRAME_ID..].copy_from_slice(&[
+        MAV_FRAME_LOCAL_FRD,
+        MAV_FRAME_BODY_FRD,
+        reset_counter,
+        ESTIMATOR_TYPE,
+        quality(record) as u8,
+    ]);
 }
 
 /// Writes `values` little-endian at `at` in `out`; returns the end.
@@ -218,14 +189,9 @@ fn put_f32s(out: &mut [u8], at: usize, values: &[f32]) -> usize {
 
 /// `q = (cos(alpha/2), 0, 0, sin(alpha/2))` of heading `alpha` (rad, any turn), `w >= 0`.
 pub fn quaternion_of_heading(alpha: f64) -> [f32; 4] {
-    // Half the heading as a fraction of a turn in [0, 1), then as a binary angle (2^64 a
-    // turn) for the fixed-point sine and cosine.
-    let turns = alpha * (0.5 / core::f64::consts::TAU);
-    let mut frac = turns - (turns as i64) as f64;
-    if frac < 0.0 {
-        frac += 1.0;
-    }
-    let (s, c) = sin_cos((frac * 18_446_744_073_709_551_616.0) as u64);
+    // Half the heading as a binary angle (2^64 a turn): half a turn per whole turn.
+    let (turns, frac) = radians_to_binary(alpha);
+    let (s, c) = sin_cos(((turns as u64) << 63) | (frac >> 1));
     let sign = if c < 0 { -1.0 } else { 1.0 };
     [sign * q30_to_f32(c), 0.0, 0.0, sign * q30_to_f32(s)]
 }

@@ -587,8 +587,9 @@ fn metres_to_position(v: f64) -> i64 {
     }
 }
 
-/// Radians to (whole turns, binary fraction of a turn), clamped to +-[`MAX_HEADING`].
-fn radians_to_binary(heading: f64) -> (i64, u64) {
+/// Radians to (whole turns, binary fraction of a turn: 2^64 a turn), clamped to
+/// +-[`MAX_HEADING`]; NaN and infinities give (0, 0).
+pub fn radians_to_binary(heading: f64) -> (i64, u64) {
     if !heading.is_finite() {
         return (0, 0);
     }
