@@ -3,6 +3,7 @@
 
 use super::parse::{parse, Command, CommandError};
 use super::MAX_REPLY;
+use crate::bytes::Text;
 use crate::settings::{Key, SetManyError, Settings};
 use core::fmt::Write;
 use heapless::String;
@@ -116,10 +117,10 @@ pub fn execute(line: &str, settings: &mut Settings) -> (Reply, Action) {
         Command::Get(key) => {
             let mut r = Reply::ok();
             match key {
-                Some(k) => r.push_line(format_args!("{} = {}", k.name(), settings.get(k))),
+                Some(k) => r.push_line(format_args!("{} = {}", Text(k.name()), settings.get(k))),
                 None => {
                     for k in Key::ALL {
-                        r.push_line(format_args!("{} = {}", k.name(), settings.get(k)));
+                        r.push_line(format_args!("{} = {}", Text(k.name()), settings.get(k)));
                     }
                 }
             }
@@ -146,7 +147,7 @@ pub fn execute(line: &str, settings: &mut Settings) -> (Reply, Action) {
                 Ok(()) => {
                     let mut r = Reply::ok();
                     for (k, _) in &pairs {
-                        r.push_line(format_args!("{} = {}", k.name(), settings.get(*k)));
+                        r.push_line(format_args!("{} = {}", Text(k.name()), settings.get(*k)));
                     }
                     // Bitwise (the stored record): `set left_cos1 -0` changes the bytes and
                     // the checksum though -0.0 == 0.0.
@@ -183,11 +184,16 @@ fn help() -> Reply {
         "  reset_pose [X Y HEADING]       metres, metres, radians (default 0 0 0)",
         "keys (unit, range):",
     ] {
-        r.push_line(format_args!("{line}"));
+        r.push_line(format_args!("{}", Text(line)));
     }
     for k in Key::ALL {
         let info = k.info();
-        r.push_line(format_args!("  {} {} {}", info.name, info.unit, info.kind));
+        r.push_line(format_args!(
+            "  {} {} {}",
+            Text(info.name),
+            Text(info.unit),
+            info.kind
+        ));
     }
     r
 }

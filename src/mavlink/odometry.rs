@@ -66,12 +66,15 @@ impl Twist {
             return None;
         }
         let dt = dt_us as f32 * 1e-6;
+        // Through i32, which the FPU converts (i64 needs library code): a record interval's
+        // counts are within `MAX_COUNTS_PER_SAMPLE` x `output_divider`, far inside i32.
+        let counts = |d: i64| d as i32 as f32;
         let per_tick = core::f32::consts::PI / p.ticks_per_rev as f32;
         let q = [
             p.left_diameter as f32 * per_tick,
             p.right_diameter as f32 * per_tick,
         ];
-        let n = [d_left as f32, d_right as f32];
+        let n = [counts(d_left), counts(d_right)];
         let s = [n[0] * q[0], n[1] * q[1]];
         let (var, var_e) = match p.uncertainty_model {
             UncertaintyModel::Paper => {
@@ -129,7 +132,7 @@ pub fn quality(record: &PoseRecord) -> i8 {
     }
 }
 
-/// The `ODOMETRY` payload (untruncated) of `record`, with the `twist` since the previous
+/// The `ODOMETRY` payload (untruncated, into a zeroed `out`) of `record`, with the `twist` since the previous
 /// record and the reset counter. Time: the MCU time of the sample. Pose in
 /// `MAV_FRAME_LOCAL_FRD`: x = our y (north), y = our x (east), z = 0, `q` of the heading.
 /// Pose covariance (upper triangle over x, y, z, roll, pitch, yaw): var(north) = sigma_y^2,
@@ -144,7 +147,6 @@ pub fn write_odometry(
     reset_counter: u8,
     out: &mut [u8; ODOMETRY_LEN],
 ) {
-    *out = [0; ODOMETRY_LEN];
     out[..8].copy_from_slice(&record.mcu_time_us.to_le_bytes());
     put_f32s(out, at::X, &[record.y as f32, record.x as f32]);
     put_f32s(out, at::Q, &quaternion_of_heading(record.heading));

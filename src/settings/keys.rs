@@ -66,13 +66,15 @@ impl fmt::Display for Kind {
             Kind::U32 { min, max } => write!(f, "{min}..={max}"),
             Kind::U32Set(set) => {
                 for (i, v) in set.iter().enumerate() {
-                    write!(f, "{}{v}", if i == 0 { "" } else { "|" })?;
+                    f.write_str(if i == 0 { "" } else { "|" })?;
+                    write!(f, "{v}")?;
                 }
                 Ok(())
             }
             Kind::Word(words) => {
                 for (i, w) in words.iter().enumerate() {
-                    write!(f, "{}{w}", if i == 0 { "" } else { "|" })?;
+                    f.write_str(if i == 0 { "" } else { "|" })?;
+                    f.write_str(w)?;
                 }
                 Ok(())
             }

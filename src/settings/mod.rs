@@ -11,6 +11,7 @@ pub mod keys;
 pub mod record;
 pub mod store;
 
+use crate::bytes::Text;
 use crate::crc::crc32;
 use crate::decimal::{self, DecimalError, Shortest};
 use crate::odometry::integrator::MAX_STEP_COUNTS;
@@ -306,7 +307,7 @@ impl Settings {
     /// Writes `key = value` lines for every key into `out`.
     pub fn write_all(&self, out: &mut impl Write) -> fmt::Result {
         for key in Key::ALL {
-            writeln!(out, "{} = {}", key.name(), self.get(key))?;
+            writeln!(out, "{} = {}", Text(key.name()), self.get(key))?;
         }
         Ok(())
     }
@@ -423,7 +424,8 @@ impl fmt::Display for SettingError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         // Errors about one key start with its name.
         if let Some(k) = self.key() {
-            write!(f, "{}: ", k.name())?;
+            f.write_str(k.name())?;
+            f.write_str(": ")?;
         }
         match *self {
             Self::BadNumber(_) => f.write_str("bad number"),
@@ -474,7 +476,7 @@ pub enum SetManyError<'a> {
 impl fmt::Display for SetManyError<'_> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            Self::UnknownKey(k) => write!(f, "unknown key '{k}'"),
+            Self::UnknownKey(k) => write!(f, "unknown key '{}'", Text(k)),
             Self::Value(e) => e.fmt(f),
         }
     }

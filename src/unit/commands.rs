@@ -194,10 +194,10 @@ impl<F: StallingFlash> Commands<F> {
     /// `version`: the reply lines, and the device information frame for the unit with
     /// unique ID `uid`, last started by `reset_cause`.
     pub fn version(&self, reply: &mut Reply, uid: [u8; 12], reset_cause: ResetCause) -> DeviceInfo {
-        reply.push_line(format_args!(
-            "firmware = odo-unit {}",
+        reply.push_line(format_args!(concat!(
+            "firmware = odo-unit ",
             env!("CARGO_PKG_VERSION")
-        ));
+        )));
         reply.push_line(format_args!("protocol = {PROTOCOL_VERSION}"));
         self.device_info(uid, reset_cause)
     }
