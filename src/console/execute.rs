@@ -90,11 +90,16 @@ impl Reply {
 struct Truncating<'a, const N: usize>(&'a mut String<N>);
 
 impl<const N: usize> Write for Truncating<'_, N> {
+    /// Appends what fits of `s`, whole characters only; an error when not all did.
     fn write_str(&mut self, s: &str) -> core::fmt::Result {
-        for c in s.chars() {
-            self.0.push(c).map_err(|_| core::fmt::Error)?;
+        let mut end = s.len().min(N - self.0.len());
+        while !s.is_char_boundary(end) {
+            end -= 1;
         }
-        Ok(())
+        match s.get(..end).map(|head| self.0.push_str(head)) {
+            Some(Ok(())) if end == s.len() => Ok(()),
+            _ => Err(core::fmt::Error),
+        }
     }
 }
 
