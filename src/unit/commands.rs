@@ -198,7 +198,7 @@ impl<F: StallingFlash> Commands<F> {
             "firmware = odo-unit ",
             env!("CARGO_PKG_VERSION")
         )));
-        reply.push_line(format_args!("protocol = {PROTOCOL_VERSION}"));
+        reply.push_line(format_args!("protocol = {}", u32::from(PROTOCOL_VERSION)));
         self.device_info(uid, reset_cause)
     }
 
