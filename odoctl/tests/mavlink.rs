@@ -43,12 +43,12 @@ fn script() -> std::path::PathBuf {
 /// The records as the reader's CSV.
 fn expect_csv(records: &[PoseRecord], path: &Path) {
     let mut e = String::from(
-        "t_us,x,y,heading,sigma_x,sigma_y,sigma_heading,cov_xy,gamma_left,gamma_right\n",
+        "t_us,x,y,heading,sigma_x,sigma_y,sigma_heading,cov_xy,gamma_left,gamma_right,fault,mismatch\n",
     );
     for r in records {
         let _ = writeln!(
             e,
-            "{},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{},{}",
+            "{},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{},{},{},{}",
             r.mcu_time_us,
             r.x,
             r.y,
@@ -58,7 +58,9 @@ fn expect_csv(records: &[PoseRecord], path: &Path) {
             r.sigma_heading,
             r.cov_xy,
             r.gamma_left,
-            r.gamma_right
+            r.gamma_right,
+            u8::from(r.flags.left.fault || r.flags.right.fault),
+            u8::from(r.flags.left.index_mismatch || r.flags.right.index_mismatch)
         );
     }
     std::fs::write(path, e).unwrap();
@@ -106,6 +108,11 @@ fn encoder_frames_with_a_pose_reset_read_by_pymavlink() {
     // and times go on.
     let mut records = common::records(&p, &sim.samples[..200]);
     records.extend(common::records(&p, &sim.samples[200..400]));
+    // An encoder fault and an index count mismatch, as the status word reports them.
+    records[100].flags.left.fault = true;
+    records[101].flags.right.index_mismatch = true;
+    records[102].flags.right.fault = true;
+    records[102].flags.left.index_mismatch = true;
     let mut conv = Converter::new(
         p,
         odo_unit::mavlink::Ids {
@@ -138,6 +145,7 @@ fn encoder_frames_with_a_pose_reset_read_by_pymavlink() {
     args.extend(["--rate".into(), format!("{rate}")]);
     args.extend(["--resets".into(), "1".into()]);
     args.extend(["--reset-pose", "0", "0", "0"].map(String::from));
+    args.extend(["--qualities", "100", "50", "-1"].map(String::from));
     let out = run_reader(&args);
     assert!(
         out.contains("read_mavlink: ok 400 ODOMETRY (400 matched"),
@@ -256,6 +264,11 @@ fn qemu_mavlink_output_read_by_pymavlink() {
     let from = link.raw.lock().unwrap().len();
     let (ok, text) = link.command("set output mavlink output_divider 2");
     assert!(ok, "{text}");
+    // A flight controller flooding the unit: 300 HEARTBEATs at once (6,300 bytes, more than
+    // the receive queue holds) while the ODOMETRY stream runs; the rate and sequence checks
+    // below cover this stretch.
+    // The first frame of `flight_controller_bytes`: a 21-byte HEARTBEAT.
+    link.send_bytes(&flight_controller_bytes()[..21].repeat(300));
     // About 3 s, then a reset (its reply, one of our frames, lands among the MAVLink frames
     // and may cost a flight controller's parser the frame after it), then about 2 s more.
     wait_for_bytes(&link, 75 * 246, limit);
@@ -270,9 +283,14 @@ fn qemu_mavlink_output_read_by_pymavlink() {
     let (ok, text) = link.command("status");
     assert!(ok, "{text}");
     assert!(
-        text.contains("host_rx_mavlink_ignored = 2, host_rx_mavlink1_ignored = 1"),
+        text.contains("host_rx_mavlink_ignored = 302, host_rx_mavlink1_ignored = 1"),
         "{text}"
     );
+    assert!(
+        text.contains("samples_lost = 0, merged_samples = 0"),
+        "{text}"
+    );
+    assert!(text.contains("records_dropped = 0"), "{text}");
     let (ok, text) = link.command("set output frames");
     assert!(ok, "{text}");
     let dir = scratch("mavlink_qemu");
@@ -284,6 +302,9 @@ fn qemu_mavlink_output_read_by_pymavlink() {
         .collect();
     args.extend(["--resets", "1", "--reset-pose", "1", "2", "0.5"].map(String::from));
     args.extend(["--allow-gaps", "2"].map(String::from));
+    // The simulated drive flags a right index mismatch and raises the right fault line once a
+    // lap (src/board/qemu/drive.rs): quality 50 and -1 besides 100.
+    args.extend(["--qualities", "100", "50", "-1"].map(String::from));
     let out = run_reader(&args);
     assert!(out.contains("read_mavlink: ok"), "{out}");
     eprintln!("{}", out.trim());

@@ -5,7 +5,8 @@ sequence number, the HEARTBEAT, and the ODOMETRY fields, against our own records
 
 Input: `--udp PORT` (listens on 127.0.0.1) or `--file PATH` (raw bytes of a link).
 Options:
-  --expect CSV     records: t_us,x,y,heading,sigma_x,sigma_y,sigma_heading,cov_xy,gamma_left,gamma_right
+  --expect CSV     records: t_us,x,y,heading,sigma_x,sigma_y,sigma_heading,cov_xy,gamma_left,
+                   gamma_right,fault,mismatch (quality -1 with a fault, 50 with a mismatch)
   --params D_L D_R W TICKS DELTA_L DELTA_R DELTA_DIFF   the paper model, for vx and yawspeed
   --count N        ODOMETRY frames to read (udp)
   --timeout S      seconds (udp)
@@ -13,6 +14,7 @@ Options:
   --resets N       the last reset_counter; every step lands on a record with zero sigmas
   --reset-pose X Y HEADING   after the last step, the pose is this reset pose (ours)
   --allow-gaps N   sequence gaps allowed (frames lost to our reply frames in the stream)
+  --qualities Q..  the quality values allowed (default 100: no fault, no index mismatch)
 Prints `read_mavlink: ok ...` or exits 1 with the first failure."""
 import argparse
 import math
@@ -104,11 +106,11 @@ def check_heartbeats(hb, odo):
     return len(hb)
 
 
-def check_odometry_static(o):
+def check_odometry_static(o, qualities):
     if (o.frame_id, o.child_frame_id, o.estimator_type) != (20, 12, 0):
         fail(f"frame ids / estimator {(o.frame_id, o.child_frame_id, o.estimator_type)}")
-    if o.quality != 100:
-        fail(f"quality {o.quality}")
+    if o.quality not in qualities:
+        fail(f"quality {o.quality}, expected one of {qualities}")
     if o.z != 0 or o.q[1] != 0 or o.q[2] != 0 or o.vy != 0 or o.vz != 0:
         fail("z, q x/y, vy, vz must be 0")
     close(sum(c * c for c in o.q), 1.0, 1e-5, "|q|")
@@ -129,6 +131,10 @@ def check_against_records(odo, rows, params):
         if r is None:
             fail(f"no record at time_usec {o.time_usec}")
         matched += 1
+        if "fault" in r:
+            expect = -1 if r["fault"] else 50 if r["mismatch"] else 100
+            if o.quality != expect:
+                fail(f"quality {o.quality} at {o.time_usec}, expected {expect}")
         close(o.x, f32(r["y"]), 0, "x (north) = our y")
         close(o.y, f32(r["x"]), 0, "y (east) = our x")
         for a, b in zip(o.q, quaternion(r["heading"])):
@@ -174,6 +180,7 @@ def main():
     p.add_argument("--resets", type=int)
     p.add_argument("--reset-pose", type=float, nargs=3)
     p.add_argument("--allow-gaps", type=int, default=0)
+    p.add_argument("--qualities", type=int, nargs="+", default=[100])
     args = p.parse_args()
     good, gaps, bad = check_stream(frames_from(args), args.allow_gaps)
     odo = [m for m in good if m.get_type() == "ODOMETRY"]
@@ -187,7 +194,7 @@ def main():
         if (m.get_srcSystem(), m.get_srcComponent()) != (1, 197):
             fail(f"ids {(m.get_srcSystem(), m.get_srcComponent())}")
     for o in odo:
-        check_odometry_static(o)
+        check_odometry_static(o, args.qualities)
     n_hb = check_heartbeats(hb, odo)
     matched = 0
     if args.expect:
