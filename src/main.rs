@@ -374,6 +374,7 @@ mod app {
                     mav.sent(sent);
                     sent
                 } else {
+                    mav.restart();
                     send(&mut cx.shared.link, &Message::Pose(*record), RECORD_RESERVE)
                 };
                 p.sent(sent);

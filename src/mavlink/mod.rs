@@ -62,6 +62,12 @@ impl MavlinkOut {
         }
     }
 
+    /// Forgets the previous record (the output switched away from MAVLink): the next
+    /// `ODOMETRY` has no velocity interval, as the first after start.
+    pub fn restart(&mut self) {
+        self.prev = None;
+    }
+
     /// Sequence number of the next frame.
     pub fn next_seq(&self) -> u8 {
         self.seq
