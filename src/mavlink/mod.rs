@@ -22,6 +22,11 @@ use crate::odometry::ChassisParams;
 use crate::protocol::PoseRecord;
 use crate::settings::Settings;
 
+// The settings' baud check counts the frames as sent: 10 bits a byte, with the 0x00 after
+// each (`HEARTBEAT`: 10 + 9 + 2 bytes).
+const _: () = assert!(crate::settings::MAVLINK_FRAME_BITS == (MAX_FRAME_LEN as u32 + 1) * 10);
+const _: () = assert!(crate::settings::MAVLINK_HEARTBEAT_BITS == (10 + 9 + 2 + 1) * 10);
+
 /// System and component id of the unit's frames.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Ids {
