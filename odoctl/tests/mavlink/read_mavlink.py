@@ -13,6 +13,9 @@ Options:
   --rate HZ        expected ODOMETRY frames per second of time_usec (from the 2nd HEARTBEAT)
   --resets N       the last reset_counter; every step lands on a record with zero sigmas
   --reset-pose X Y HEADING   after the last step, the pose is this reset pose (ours)
+  --reset-tolerance M  0 (default): exactly, with zero covariance (the step's record is the
+                   reset sample's); else within M metres and M radians (the reset fell on a
+                   sample that output_divider skipped: the step's record is a later one)
   --allow-gaps N   sequence gaps allowed (frames lost to our reply frames in the stream)
   --qualities Q..  the quality values allowed (default 100: no fault, no index mismatch)
 Prints `read_mavlink: ok ...` or exits 1 with the first failure."""
@@ -179,6 +182,7 @@ def main():
     p.add_argument("--rate", type=float)
     p.add_argument("--resets", type=int)
     p.add_argument("--reset-pose", type=float, nargs=3)
+    p.add_argument("--reset-tolerance", type=float, default=0.0)
     p.add_argument("--allow-gaps", type=int, default=0)
     p.add_argument("--qualities", type=int, nargs="+", default=[100])
     args = p.parse_args()
@@ -221,14 +225,20 @@ def main():
             if b.reset_counter != a.reset_counter:
                 if b.reset_counter != (a.reset_counter + 1) % 256:
                     fail("reset_counter must step by one")
-                if any(b.pose_covariance[i] != 0 for i in (0, 1, 6, 20)):
+                tol = args.reset_tolerance
+                if tol == 0 and any(b.pose_covariance[i] != 0 for i in (0, 1, 6, 20)):
                     fail("a reset_counter step on a pose with non-zero covariance")
                 if args.reset_pose and b.reset_counter == args.resets:
                     x, y, h = args.reset_pose
-                    close(b.x, f32(y), 1e-6, "reset pose north")
-                    close(b.y, f32(x), 1e-6, "reset pose east")
-                    for a2, b2 in zip(b.q, quaternion(h)):
-                        close(a2, b2, 1e-6, "reset pose q")
+                    if tol == 0:
+                        close(b.x, f32(y), 1e-6, "reset pose north")
+                        close(b.y, f32(x), 1e-6, "reset pose east")
+                        for a2, b2 in zip(b.q, quaternion(h)):
+                            close(a2, b2, 1e-6, "reset pose q")
+                    elif math.hypot(b.x - y, b.y - x) > tol or abs(
+                        2 * math.atan2(b.q[3], b.q[0]) - math.remainder(h, 2 * math.pi)
+                    ) > tol:
+                        fail(f"reset pose {(b.x, b.y, b.q)} not within {tol} of {(y, x, h)}")
     print(
         f"read_mavlink: ok {len(odo)} ODOMETRY ({matched} matched to records, {rate:.2f}/s), "
         f"{n_hb} HEARTBEAT, {gaps} sequence gaps, {bad} bad data, "
