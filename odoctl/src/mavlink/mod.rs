@@ -92,15 +92,18 @@ impl Write for Datagrams {
     }
 }
 
-/// Records to frames: the core's encoder, with the pose resets found in the records (the
-/// three sigmas zero after a record with a non-zero one: the unit restarted its uncertainty
-/// at a `reset_pose`).
+/// Records to frames: the core's encoder, with the pose resets found in the records. A
+/// reset restarts the unit's uncertainty at 0, while between resets `sigma_heading` grows
+/// with every step (the covariance model's geometry and slip terms can shrink it, but only
+/// gradually); so a record whose `sigma_heading` is below half the previous record's, or
+/// whose three sigmas are zero after a record with a non-zero one, is the first after a reset
+/// (the reset's own sample, or a later one when `output_divider` skipped it).
 pub struct Converter {
     out: MavlinkOut,
     params: ChassisParams,
     ids: Ids,
     resets: u32,
-    last_had_sigma: bool,
+    last: Option<(bool, f32)>,
 }
 
 impl Converter {
@@ -111,17 +114,19 @@ impl Converter {
             params,
             ids,
             resets: 0,
-            last_had_sigma: false,
+            last: None,
         }
     }
 
     /// The `ODOMETRY` frame of `r`.
     pub fn odometry(&mut self, r: &PoseRecord) -> Vec<u8> {
         let zero = r.sigma_x == 0.0 && r.sigma_y == 0.0 && r.sigma_heading == 0.0;
-        if zero && self.last_had_sigma {
-            self.resets += 1;
+        if let Some((had_sigma, heading)) = self.last {
+            if (zero && had_sigma) || r.sigma_heading < 0.5 * heading {
+                self.resets += 1;
+            }
         }
-        self.last_had_sigma = !zero;
+        self.last = Some((!zero, r.sigma_heading));
         let mut buf: FrameBuf = [0; MAX_FRAME_LEN + 1];
         let n = self
             .out
