@@ -100,7 +100,7 @@ fn command_table() {
         (
             "set baud 184467440737095516160",
             false,
-            "error: baud: out of range, one of 9600 19200",
+            "error: baud: out of range, 9600|19200",
         ),
         ("set rate 1e3", false, "error: rate: bad number; nothing changed"),
         ("set rate 99999999999999999999x", false, "rate: bad number"),

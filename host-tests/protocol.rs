@@ -803,7 +803,7 @@ fn doc_counts_are_the_code_constants() {
         format!("log of {SLOT_LEN}-byte slots"),
         format!("one {RECORD_LEN}-byte record"),
         format!("the {}-byte serialised", Settings::SERIALIZED_LEN),
-        format!("version 4: {} bytes", Settings::SERIALIZED_LEN),
+        format!("version 5: {} bytes", Settings::SERIALIZED_LEN),
     ] {
         assert!(doc.contains(&phrase), "PROTOCOL.md lacks {phrase:?}");
     }

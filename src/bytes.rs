@@ -1,4 +1,16 @@
-//! Little-endian field writer and reader over caller buffers (crate-internal).
+//! Little-endian field writer and reader over caller buffers, and [`Text`] (crate-internal).
+
+/// A `&str` as a format argument, written as it is: `{}` of a plain `&str` links core's
+/// `Formatter::pad` (width and precision handling, about 500 bytes of flash) that the
+/// firmware never uses.
+#[derive(Clone, Copy)]
+pub(crate) struct Text<'a>(pub(crate) &'a str);
+
+impl core::fmt::Display for Text<'_> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.0)
+    }
+}
 
 /// The buffer ended before the field.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -524,11 +524,12 @@ fn write_bits(bits: u64, f: &Format, out: &mut dyn fmt::Write) -> fmt::Result {
     let digits = d.digits();
     let len = digits.len() as i32;
     let k = d.k;
+    // The digits are ASCII: written as one str (`write_char` would encode each as UTF-8).
     let put = |out: &mut dyn fmt::Write, ds: &[u8]| -> fmt::Result {
-        ds.iter().try_for_each(|&c| out.write_char(c as char))
+        out.write_str(core::str::from_utf8(ds).map_err(|_| fmt::Error)?)
     };
     let zeros = |out: &mut dyn fmt::Write, n: i32| -> fmt::Result {
-        (0..n).try_for_each(|_| out.write_char('0'))
+        (0..n).try_for_each(|_| out.write_str("0"))
     };
     // Plain decimal at any magnitude (|k| <= 324 zeros at most).
     if mag == 0 {

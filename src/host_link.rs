@@ -1,5 +1,6 @@
 //! Frames from the tasks to the host link: encoded outside the lock, queued whole.
 
+use odo_unit::mavlink::FrameBuf;
 use odo_unit::protocol::{self, Message, Queued, TxLink};
 use rtic::Mutex;
 use stm32f4xx_hal::pac::Interrupt;
@@ -55,4 +56,25 @@ pub fn send_blocking(link: &mut impl Mutex<T = Link>, msg: &Message) {
     while !send(link, msg, 0) {
         cortex_m::asm::nop();
     }
+}
+
+/// Queues the MAVLink frame of `n` bytes in `frame` and a `0x00` after it (the delimiter
+/// of our frames: a reader of our frames resynchronises before the next reply), whole if it
+/// fits with `reserve` bytes to spare; false when it did not fit (nothing queued). Only the
+/// processing task sends MAVLink frames.
+pub fn send_mavlink(
+    link: &mut impl Mutex<T = Link>,
+    frame: &mut FrameBuf,
+    n: usize,
+    reserve: usize,
+) -> bool {
+    let Some(bytes) = frame.get_mut(..=n) else {
+        return false;
+    };
+    bytes[n] = 0;
+    let queued = link.lock(|l| l.queue_raw(bytes, reserve));
+    if queued {
+        rtic::pend(Interrupt::USART2);
+    }
+    queued
 }

@@ -20,6 +20,7 @@ pub(crate) mod bytes;
 pub mod console;
 pub mod crc;
 pub mod decimal;
+pub mod mavlink;
 pub mod odometry;
 pub mod protocol;
 pub mod settings;

@@ -46,10 +46,12 @@ mod app {
         serial::{GnssUart, HostUart, RxErrors},
         Acquisition, GnssRx, Led,
     };
-    use crate::host_link::{queue_now, send, send_blocking, Link, RECORD_RESERVE};
+    use crate::host_link::{queue_now, send, send_blocking, send_mavlink, Link, RECORD_RESERVE};
     use heapless::spsc::{Consumer, Producer, Queue};
+    use odo_unit::mavlink::{FrameBuf, Ids, MavlinkOut};
     use odo_unit::protocol::{CommandReply, Message};
     use odo_unit::settings::store::SettingsStore;
+    use odo_unit::settings::Output;
     use odo_unit::timing::{DisciplineConfig, SyncState};
     use odo_unit::unit::{
         self, Commands, Effect, HeartbeatInputs, IndexCapture, Live, PpsLatch, Processor,
@@ -304,7 +306,10 @@ mod app {
     #[task(
         binds = SPI2,
         priority = 2,
-        local = [samples_out, index_out, gnss_out, processor, led, watchdog],
+        local = [
+            samples_out, index_out, gnss_out, processor, led, watchdog,
+            mav: MavlinkOut = MavlinkOut::new(),
+        ],
         shared = [link, requests, live, host_errors, gnss_errors, store_state]
     )]
     fn process(mut cx: process::Context) {
@@ -332,18 +337,46 @@ mod app {
             cx.local.led.set(raw.state == SyncState::Locked);
             // The second's Status before its first record (it announces a rate switch);
             // without room, tried again with the next sample.
+            // `output = mavlink`: HEARTBEAT and ODOMETRY instead of Status and the record.
+            let mavlink = p.settings().output == Output::Mavlink;
+            let ids = Ids::of(p.settings());
+            let mav = &mut *cx.local.mav;
+            let mut frame: FrameBuf = [0; core::mem::size_of::<FrameBuf>()];
             if p.heartbeat_due() {
-                let inputs = HeartbeatInputs {
-                    store: cx.shared.store_state.lock(|s| *s),
-                    host: cx.shared.host_errors.lock(|e| *e),
-                    gnss: cx.shared.gnss_errors.lock(|e| *e),
-                    reset_cause: board::reset_cause(),
+                let sent = if mavlink {
+                    let n = mav.heartbeat(ids, &mut frame);
+                    send_mavlink(&mut cx.shared.link, &mut frame, n, RECORD_RESERVE)
+                } else {
+                    let inputs = HeartbeatInputs {
+                        store: cx.shared.store_state.lock(|s| *s),
+                        host: cx.shared.host_errors.lock(|e| *e),
+                        gnss: cx.shared.gnss_errors.lock(|e| *e),
+                        reset_cause: board::reset_cause(),
+                    };
+                    let status = Message::Status(p.heartbeat(&raw, &inputs));
+                    send(&mut cx.shared.link, &status, RECORD_RESERVE)
                 };
-                let status = Message::Status(p.heartbeat(&raw, &inputs));
-                p.status_sent(send(&mut cx.shared.link, &status, RECORD_RESERVE));
+                if mavlink {
+                    mav.sent(sent);
+                }
+                p.status_sent(sent);
             }
             if let Some(record) = record {
-                let sent = send(&mut cx.shared.link, &Message::Pose(*record), RECORD_RESERVE);
+                let sent = if mavlink {
+                    let n = mav.odometry(
+                        record,
+                        &p.settings().chassis,
+                        p.pose_resets(),
+                        ids,
+                        &mut frame,
+                    );
+                    let sent = send_mavlink(&mut cx.shared.link, &mut frame, n, RECORD_RESERVE);
+                    mav.sent(sent);
+                    sent
+                } else {
+                    mav.restart();
+                    send(&mut cx.shared.link, &Message::Pose(*record), RECORD_RESERVE)
+                };
                 p.sent(sent);
             }
             let spent = board::cycles().wrapping_sub(start);

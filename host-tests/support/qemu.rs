@@ -112,6 +112,8 @@ pub struct UnitLink {
     pub device_info: usize,
     /// Every frame, in order.
     pub frames: Vec<odo_unit::protocol::Frame>,
+    /// Every byte received, in order (frames of other protocols included).
+    pub raw: std::sync::Arc<std::sync::Mutex<Vec<u8>>>,
 }
 
 impl UnitLink {
@@ -132,6 +134,8 @@ impl UnitLink {
         };
         let (tx, rx) = std::sync::mpsc::channel();
         let mut reader = stream.try_clone().expect("clone socket");
+        let raw = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let tap = std::sync::Arc::clone(&raw);
         std::thread::spawn(move || {
             let mut decoder = odo_unit::protocol::FrameDecoder::new();
             let mut buf = [0u8; 4096];
@@ -140,6 +144,9 @@ impl UnitLink {
                 if n == 0 {
                     let _ = tx.send(Event::Closed(decoder.stats()));
                     return;
+                }
+                if let Ok(mut t) = tap.lock() {
+                    t.extend_from_slice(&buf[..n]);
                 }
                 for &b in &buf[..n] {
                     if let Some(Ok(frame)) = decoder.push(b) {
@@ -159,6 +166,7 @@ impl UnitLink {
             seqs: Vec::new(),
             device_info: 0,
             frames: Vec::new(),
+            raw,
         }
     }
 
@@ -185,6 +193,12 @@ impl UnitLink {
             Err(RecvTimeoutError::Timeout) => panic!("no frame before the deadline"),
             Err(RecvTimeoutError::Disconnected) => panic!("reader thread ended"),
         }
+    }
+
+    /// Sends raw bytes (no reply awaited).
+    pub fn send_bytes(&mut self, bytes: &[u8]) {
+        use std::io::Write;
+        self.stream.write_all(bytes).expect("send bytes");
     }
 
     /// Sends a command line; returns (ok, text) of its reply, all chunks joined.

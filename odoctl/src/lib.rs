@@ -24,6 +24,7 @@ pub mod commands;
 pub mod config;
 pub mod csvio;
 pub mod link;
+pub mod mavlink;
 pub mod memory;
 pub mod optim;
 pub mod plots;

@@ -79,10 +79,15 @@ fn every_key_changed(rng: &mut Rng) -> Settings {
     }
     s.mode = SyncMode::Pps;
     s.rate = [100, 125, 200, 250, 400, 500, 1000][(rng.next() % 7) as usize];
-    s.output_divider = 2 + (rng.next() % 9_999) as u32;
+    // At least 3: at 1000 Hz the MAVLink output carries at most 374 frames a second at
+    // 921,600 baud.
+    s.output_divider = 3 + (rng.next() % 9_998) as u32;
     s.time_tag_pps = TimeTagPps::Next;
     s.baud = 921_600;
     s.max_wheel_speed = rng.f32_bits_to(20.0, false).max(0.01);
+    s.output = odo_unit::settings::Output::Mavlink;
+    s.mavlink_sysid = 2 + (rng.next() % 254) as u32;
+    s.mavlink_compid = 1 + (rng.next() % 196) as u32;
     s.validate().expect("valid test settings");
     s
 }
@@ -227,7 +232,7 @@ fn push_refuses_bad_files() {
     );
     assert!(
         e.to_string()
-            .starts_with("u.toml:2: baud: out of range, one of 9600"),
+            .starts_with("u.toml:2: baud: out of range, 9600|19200"),
         "{e}"
     );
     let e = config::push_lines_of("u.toml", "mode = \"gnss\"\n").unwrap_err();

@@ -170,41 +170,123 @@ pub struct Pins {
 }
 
 /// Configures the pins of the table above (alternate functions, pulls). Pins
-/// that only carry a peripheral function are dropped: their configuration stays in the
-/// GPIO registers.
+/// that only carry a peripheral function are set in the GPIO registers directly (the HAL's
+/// typestate conversions cost flash for nothing kept); the LED and the fault lines stay HAL
+/// pins.
 pub fn pins(
     gpioa: pac::GPIOA,
-    gpiob: pac::GPIOB,
+    // Taken, so that nothing else owns port B; its registers are written below.
+    _gpiob: pac::GPIOB,
     gpioc: pac::GPIOC,
     rcc: &mut stm32f4xx_hal::rcc::Rcc,
 ) -> Pins {
     use stm32f4xx_hal::gpio::GpioExt;
+    use stm32f4xx_hal::rcc::{Enable, Reset};
     let a = gpioa.split(rcc);
-    let b = gpiob.split(rcc);
     let c = gpioc.split(rcc);
-    // Left encoder on TIM2 (AF1); PA15/PB3 leave their JTAG function (SWD stays usable).
-    let _ = a.pa15.into_input().into_alternate::<1>();
-    let _ = b.pb3.into_input().into_alternate::<1>();
-    // Right encoder on TIM3 (AF2).
-    let _ = a.pa6.into_alternate::<2>();
-    let _ = a.pa7.into_alternate::<2>();
-    // PPS on TIM5 CH1 (AF2), pulled down so that an unplugged receiver reads as no edges.
-    let _ = a.pa0.into_alternate::<2>().internal_pull_down(true);
-    // Index lines on TIM2 CH3 (PB10, AF1) and TIM3 CH4 (PB1, AF2), pulled up (open-collector
-    // or line-driver outputs both work).
-    let _ = b.pb10.into_alternate::<1>().internal_pull_up(true);
-    let _ = b.pb1.into_alternate::<2>().internal_pull_up(true);
-    // USART1 RX (GNSS), pulled up: an unplugged receiver (or its RS-232 transceiver
-    // without power) reads as an idle line, not noise. USART2 TX/RX (host), AF7.
-    let _ = a.pa10.into_alternate::<7>().internal_pull_up(true);
-    let _ = a.pa2.into_alternate::<7>();
-    let _ = a.pa3.into_alternate::<7>();
+    // Port B as `split` leaves a port: clock on, registers at their reset values.
+    pac::GPIOB::enable(rcc);
+    pac::GPIOB::reset(rcc);
+    // Note(unsafe): port A's registers, whose pins PA0, PA2, PA3, PA6, PA7, PA10 and PA15 no
+    // HAL pin owns (dropped by `split`'s caller); only their fields are changed.
+    let pa = unsafe { &*pac::GPIOA::ptr() };
+    // Port A: PA0 TIM5 CH1 (AF2, PPS, pulled down so that an unplugged receiver reads as no
+    // edges); PA2, PA3 USART2 TX/RX (AF7, host); PA6, PA7 TIM3 CH1/CH2 (AF2, right
+    // encoder); PA10 USART1 RX (AF7, GNSS, pulled up: an unplugged receiver, or its RS-232
+    // transceiver without power, reads as an idle line, not noise); PA15 TIM2 CH1 (AF1,
+    // left encoder; it leaves its JTAG function, SWD stays usable; its reset pull-up stays).
+    apply(pa, &PORT_A);
+    // Note(unsafe): port B's registers as port A's block: the PAC gives each port its own
+    // type for its reset values, the register layout is the same (RM0368 sec. 8.4.11).
+    let pb = unsafe { &*(pac::GPIOB::ptr() as *const pac::gpioa::RegisterBlock) };
+    apply(pb, &PORT_B);
     Pins {
         led: Led(a.pa5.into_push_pull_output()),
         faults: FaultLines {
             left: c.pc2.into_pull_up_input(),
             right: c.pc3.into_pull_up_input(),
         },
+    }
+}
+
+/// GPIOx_PUPDR: pull-up.
+const PULL_UP: u32 = 0b01;
+/// GPIOx_PUPDR: pull-down.
+const PULL_DOWN: u32 = 0b10;
+
+/// Port A: PA0 TIM5 CH1 (AF2, PPS, pulled down so that an unplugged receiver reads as no
+/// edges); PA2, PA3 USART2 TX/RX (AF7, host); PA6, PA7 TIM3 CH1/CH2 (AF2, right encoder);
+/// PA10 USART1 RX (AF7, GNSS, pulled up: an unplugged receiver, or its RS-232 transceiver
+/// without power, reads as an idle line, not noise); PA15 TIM2 CH1 (AF1, left encoder; it
+/// leaves its JTAG function, SWD stays usable; its reset pull-up stays).
+const PORT_A: PortConfig = PortConfig::new(
+    &[(0, 2), (2, 7), (3, 7), (6, 2), (7, 2), (10, 7), (15, 1)],
+    &[(0, PULL_DOWN), (10, PULL_UP)],
+);
+
+/// Port B: PB1 TIM3 CH4 (AF2, right index) and PB10 TIM2 CH3 (AF1, left index), pulled up
+/// (open-collector or line-driver outputs both work); PB3 TIM2 CH2 (AF1, left encoder).
+const PORT_B: PortConfig =
+    PortConfig::new(&[(1, 2), (3, 1), (10, 1)], &[(1, PULL_UP), (10, PULL_UP)]);
+
+/// Register fields of a port's alternate-function pins: values and masks of AFRL/AFRH,
+/// MODER and PUPDR (RM0368 sec. 8.4).
+struct PortConfig {
+    afr: [u32; 2],
+    afr_mask: [u32; 2],
+    moder: u32,
+    moder_mask: u32,
+    pupdr: u32,
+    pupdr_mask: u32,
+}
+
+impl PortConfig {
+    /// The `(pin, alternate function)` pins in alternate-function mode (MODER 0b10) and
+    /// the `(pin, PUPDR value)` pulls.
+    const fn new(afs: &[(u32, u32)], pulls: &[(u32, u32)]) -> Self {
+        let mut c = Self {
+            afr: [0; 2],
+            afr_mask: [0; 2],
+            moder: 0,
+            moder_mask: 0,
+            pupdr: 0,
+            pupdr_mask: 0,
+        };
+        let mut i = 0;
+        while i < afs.len() {
+            let (pin, af) = afs[i];
+            let (reg, shift) = ((pin / 8) as usize, (pin % 8) * 4);
+            c.afr[reg] |= af << shift;
+            c.afr_mask[reg] |= 0xF << shift;
+            c.moder |= 0b10 << (2 * pin);
+            c.moder_mask |= 0b11 << (2 * pin);
+            i += 1;
+        }
+        let mut i = 0;
+        while i < pulls.len() {
+            let (pin, pull) = pulls[i];
+            c.pupdr |= pull << (2 * pin);
+            c.pupdr_mask |= 0b11 << (2 * pin);
+            i += 1;
+        }
+        c
+    }
+}
+
+/// Writes `c` into a port: AFRL/AFRH first, then MODER, as the HAL does, then PUPDR; the
+/// other pins' fields are kept.
+fn apply(port: &pac::gpioa::RegisterBlock, c: &PortConfig) {
+    // Note(unsafe): read-modify-write of whole GPIO registers; every field written holds a
+    // valid value (AF 0-15, MODER 0b10, PUPDR 0b01 or 0b10).
+    unsafe {
+        port.afrl()
+            .modify(|r, w| w.bits(r.bits() & !c.afr_mask[0] | c.afr[0]));
+        port.afrh()
+            .modify(|r, w| w.bits(r.bits() & !c.afr_mask[1] | c.afr[1]));
+        port.moder()
+            .modify(|r, w| w.bits(r.bits() & !c.moder_mask | c.moder));
+        port.pupdr()
+            .modify(|r, w| w.bits(r.bits() & !c.pupdr_mask | c.pupdr));
     }
 }
 

@@ -3,6 +3,7 @@
 
 use super::parse::{parse, Command, CommandError};
 use super::MAX_REPLY;
+use crate::bytes::Text;
 use crate::settings::{Key, SetManyError, Settings};
 use core::fmt::Write;
 use heapless::String;
@@ -52,6 +53,12 @@ impl Reply {
 
     /// A reply `error: <what>` (cut with `...` if longer than [`MAX_REPLY`]).
     pub fn error(what: impl core::fmt::Display) -> Self {
+        Self::error_args(format_args!("{what}"))
+    }
+
+    /// [`Reply::error`] of formatted text (one copy for every caller).
+    #[inline(never)]
+    fn error_args(what: core::fmt::Arguments<'_>) -> Self {
         let mut r = Self {
             ok: false,
             text: String::new(),
@@ -83,11 +90,16 @@ impl Reply {
 struct Truncating<'a, const N: usize>(&'a mut String<N>);
 
 impl<const N: usize> Write for Truncating<'_, N> {
+    /// Appends what fits of `s`, whole characters only; an error when not all did.
     fn write_str(&mut self, s: &str) -> core::fmt::Result {
-        for c in s.chars() {
-            self.0.push(c).map_err(|_| core::fmt::Error)?;
+        let mut end = s.len().min(N - self.0.len());
+        while !s.is_char_boundary(end) {
+            end -= 1;
         }
-        Ok(())
+        match s.get(..end).map(|head| self.0.push_str(head)) {
+            Some(Ok(())) if end == s.len() => Ok(()),
+            _ => Err(core::fmt::Error),
+        }
     }
 }
 
@@ -110,10 +122,10 @@ pub fn execute(line: &str, settings: &mut Settings) -> (Reply, Action) {
         Command::Get(key) => {
             let mut r = Reply::ok();
             match key {
-                Some(k) => r.push_line(format_args!("{} = {}", k.name(), settings.get(k))),
+                Some(k) => r.push_line(format_args!("{} = {}", Text(k.name()), settings.get(k))),
                 None => {
                     for k in Key::ALL {
-                        r.push_line(format_args!("{} = {}", k.name(), settings.get(k)));
+                        r.push_line(format_args!("{} = {}", Text(k.name()), settings.get(k)));
                     }
                 }
             }
@@ -140,7 +152,7 @@ pub fn execute(line: &str, settings: &mut Settings) -> (Reply, Action) {
                 Ok(()) => {
                     let mut r = Reply::ok();
                     for (k, _) in &pairs {
-                        r.push_line(format_args!("{} = {}", k.name(), settings.get(*k)));
+                        r.push_line(format_args!("{} = {}", Text(k.name()), settings.get(*k)));
                     }
                     // Bitwise (the stored record): `set left_cos1 -0` changes the bytes and
                     // the checksum though -0.0 == 0.0.
@@ -177,42 +189,16 @@ fn help() -> Reply {
         "  reset_pose [X Y HEADING]       metres, metres, radians (default 0 0 0)",
         "keys (unit, range):",
     ] {
-        r.push_line(format_args!("{line}"));
+        r.push_line(format_args!("{}", Text(line)));
     }
     for k in Key::ALL {
         let info = k.info();
         r.push_line(format_args!(
             "  {} {} {}",
-            info.name,
-            info.unit,
-            RangeText(info.kind)
+            Text(info.name),
+            Text(info.unit),
+            info.kind
         ));
     }
     r
-}
-
-/// Displays the accepted values of a key kind.
-struct RangeText(crate::settings::Kind);
-
-impl core::fmt::Display for RangeText {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        use crate::settings::{Kind, Value};
-        match self.0 {
-            Kind::F64 { min, max } => write!(f, "{}..={}", Value::F64(min), Value::F64(max)),
-            Kind::F32 { min, max } => write!(f, "{}..={}", Value::F32(min), Value::F32(max)),
-            Kind::U32 { min, max } => write!(f, "{min}..={max}"),
-            Kind::U32Set(set) => {
-                for (i, v) in set.iter().enumerate() {
-                    write!(f, "{}{v}", if i == 0 { "" } else { "|" })?;
-                }
-                Ok(())
-            }
-            Kind::Word(words) => {
-                for (i, w) in words.iter().enumerate() {
-                    write!(f, "{}{w}", if i == 0 { "" } else { "|" })?;
-                }
-                Ok(())
-            }
-        }
-    }
 }

@@ -2,6 +2,7 @@
 
 use super::LineError;
 use super::{MAX_SET_PAIRS, MAX_WORDS};
+use crate::bytes::Text;
 use crate::odometry::{Pose, PoseRangeError};
 use crate::settings::{Key, SettingError};
 use heapless::Vec;
@@ -65,13 +66,20 @@ impl core::fmt::Display for CommandError<'_> {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
             Self::Line(e) => e.fmt(f),
-            Self::UnknownCommand(c) => write!(f, "unknown command '{c}' (try help)"),
-            Self::UnknownKey(k) => write!(f, "unknown key '{k}' (try help)"),
-            Self::MissingArgument(u) => write!(f, "missing argument, usage: {u}"),
-            Self::MissingValue(k) => write!(f, "missing value for '{k}', usage: {USAGE_SET}"),
-            Self::TooManyArguments(u) => write!(f, "too many arguments, usage: {u}"),
-            Self::BadNumber(w) => write!(f, "bad number '{w}'"),
-            Self::NotFinite(w) => write!(f, "NaN/inf not allowed: '{w}'"),
+            Self::UnknownCommand(c) => write!(f, "unknown command '{}' (try help)", Text(c)),
+            Self::UnknownKey(k) => write!(f, "unknown key '{}' (try help)", Text(k)),
+            Self::MissingArgument(u) => write!(f, "missing argument, usage: {}", Text(u)),
+            Self::MissingValue(k) => {
+                write!(
+                    f,
+                    "missing value for '{}', usage: {}",
+                    Text(k),
+                    Text(USAGE_SET)
+                )
+            }
+            Self::TooManyArguments(u) => write!(f, "too many arguments, usage: {}", Text(u)),
+            Self::BadNumber(w) => write!(f, "bad number '{}'", Text(w)),
+            Self::NotFinite(w) => write!(f, "NaN/inf not allowed: '{}'", Text(w)),
             Self::Setting(e) => e.fmt(f),
             Self::PoseRange(e) => write!(f, "reset_pose: {e}; pose unchanged"),
         }

@@ -39,6 +39,7 @@ use super::uncertainty::{
     CovarianceUncertainty, PaperUncertainty, StepGeometry, StepJacobian, UncertaintyCoefficients,
 };
 use super::wheel::{WheelModel, DISTANCE_SCALE};
+use crate::bytes::Text;
 
 /// Largest increment count of one wheel in one sample that is integrated (2^18).
 pub const MAX_STEP_COUNTS: u64 = 1 << 18;
@@ -104,18 +105,19 @@ impl core::fmt::Display for PoseRangeError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
             // The limits are whole numbers, written as integers: formatting an f64 would link
-            // core's float formatting (about 12 KiB of flash).
+            // core's float formatting (about 12 KiB of flash); as u64, whose formatting the
+            // firmware links anyway.
             Self::X | Self::Y => write!(
                 f,
                 "{} must be within -{}..={} m",
-                if *self == Self::X { "x" } else { "y" },
-                MAX_POSITION as i64,
-                MAX_POSITION as i64
+                Text(if *self == Self::X { "x" } else { "y" }),
+                MAX_POSITION as u64,
+                MAX_POSITION as u64
             ),
             Self::Heading => write!(
                 f,
                 "heading must be within -{}..={} rad",
-                MAX_HEADING as i64, MAX_HEADING as i64
+                MAX_HEADING as u64, MAX_HEADING as u64
             ),
         }
     }
@@ -587,8 +589,9 @@ fn metres_to_position(v: f64) -> i64 {
     }
 }
 
-/// Radians to (whole turns, binary fraction of a turn), clamped to +-[`MAX_HEADING`].
-fn radians_to_binary(heading: f64) -> (i64, u64) {
+/// Radians to (whole turns, binary fraction of a turn: 2^64 a turn), clamped to
+/// +-[`MAX_HEADING`]; NaN and infinities give (0, 0).
+pub fn radians_to_binary(heading: f64) -> (i64, u64) {
     if !heading.is_finite() {
         return (0, 0);
     }

@@ -1,6 +1,8 @@
 //! Chassis and encoder parameters, under the names shared by the firmware commands, the
 //! settings store, the CSV/TOML files and the host tool.
 
+use crate::bytes::Text;
+
 /// Number of Fourier harmonics of each wheel's per-angle radius function (eqs 3-5).
 pub const WHEEL_HARMONICS: usize = 3;
 
@@ -348,11 +350,12 @@ pub enum ParamError {
 impl core::fmt::Display for ParamError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
-            Self::NotFinite(k) => write!(f, "{k}: not a finite number"),
-            Self::OutOfRange(k) => write!(f, "{k}: out of range"),
+            Self::NotFinite(k) => write!(f, "{}: not a finite number", Text(k)),
+            Self::OutOfRange(k) => write!(f, "{}: out of range", Text(k)),
             Self::Inconsistent(k) => write!(
                 f,
-                "{k}: the three correlations do not form a valid correlation matrix"
+                "{}: the three correlations do not form a valid correlation matrix",
+                Text(k)
             ),
         }
     }

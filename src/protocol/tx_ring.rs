@@ -120,4 +120,10 @@ impl<const N: usize> TxLink<N> {
             Queued::NoRoom
         }
     }
+
+    /// Queues `frame`, a frame of another protocol (MAVLink) that has no sequence number of
+    /// ours, whole if it fits with `reserve` bytes to spare; false when it did not fit.
+    pub fn queue_raw(&mut self, frame: &[u8], reserve: usize) -> bool {
+        self.ring.push_frame(frame, reserve)
+    }
 }

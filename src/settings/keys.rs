@@ -7,7 +7,7 @@
 //! below (a new record offset means a new format version, [`super::SETTINGS_FORMAT_VERSION`]),
 //! plus its row in `docs/PROTOCOL.md` (a test checks the docs name every key).
 
-use super::{Settings, BAUD_RATES, MAX_RATE_HZ};
+use super::{Output, Settings, BAUD_RATES, MAX_RATE_HZ};
 use crate::decimal;
 use crate::odometry::{ChassisParams, GeometryUncertainty, UncertaintyModel};
 use crate::timing::{SyncMode, TimeTagPps};
@@ -52,6 +52,32 @@ impl Kind {
             Kind::F64 { .. } => 8,
             Kind::F32 { .. } | Kind::U32 { .. } | Kind::U32Set(_) => 4,
             Kind::Word(_) => 1,
+        }
+    }
+}
+
+impl fmt::Display for Kind {
+    /// The accepted values: `min..=max`, or the set or words separated by `|` (the text of
+    /// `help` and of an out-of-range error).
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            Kind::F64 { min, max } => write!(f, "{}..={}", Value::F64(min), Value::F64(max)),
+            Kind::F32 { min, max } => write!(f, "{}..={}", Value::F32(min), Value::F32(max)),
+            Kind::U32 { min, max } => write!(f, "{min}..={max}"),
+            Kind::U32Set(set) => {
+                for (i, v) in set.iter().enumerate() {
+                    f.write_str(if i == 0 { "" } else { "|" })?;
+                    write!(f, "{v}")?;
+                }
+                Ok(())
+            }
+            Kind::Word(words) => {
+                for (i, w) in words.iter().enumerate() {
+                    f.write_str(if i == 0 { "" } else { "|" })?;
+                    f.write_str(w)?;
+                }
+                Ok(())
+            }
         }
     }
 }
@@ -152,6 +178,11 @@ impl Choice for UncertaintyModel {
 impl Choice for SyncMode {
     const VARIANTS: &'static [Self] = &[Self::Pps, Self::Free];
     const WORDS: &'static [&'static str] = &["pps", "free"];
+}
+
+impl Choice for Output {
+    const VARIANTS: &'static [Self] = &[Self::Frames, Self::Mavlink];
+    const WORDS: &'static [&'static str] = &["frames", "mavlink"];
 }
 
 impl Choice for TimeTagPps {
@@ -557,6 +588,25 @@ key_table! {
         },
         default: Settings::DEFAULT_MAX_WHEEL_SPEED,
         field: [max_wheel_speed], record: 112 since 2, group: Unit,
+    }
+    /// `output`: what the host link streams: `frames` (pose records and Status, docs/PROTOCOL.md)
+    /// or `mavlink` (MAVLink 2 `ODOMETRY` and `HEARTBEAT` for a flight controller,
+    /// docs/MAVLINK.md); replies to commands are frames either way.
+    Output {
+        name: "output", unit: "", kind: Kind::Word(Output::WORDS), default: Output::Frames,
+        field: [output], record: 99 since 5, group: Unit,
+    }
+    /// `mavlink_sysid`: MAVLink system id of the unit's frames (the vehicle's, as the flight
+    /// controller's `SYSID_THISMAV` / `MAV_SYS_ID`).
+    MavlinkSysid {
+        name: "mavlink_sysid", unit: "", kind: Kind::U32 { min: 1, max: 255 }, default: 1,
+        field: [mavlink_sysid], record: 148 since 5, group: Unit,
+    }
+    /// `mavlink_compid`: MAVLink component id of the unit's frames (197,
+    /// `MAV_COMP_ID_VISUAL_INERTIAL_ODOMETRY`, by default).
+    MavlinkCompid {
+        name: "mavlink_compid", unit: "", kind: Kind::U32 { min: 1, max: 255 }, default: 197,
+        field: [mavlink_compid], record: 152 since 5, group: Unit,
     }
 }
 

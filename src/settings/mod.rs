@@ -11,6 +11,7 @@ pub mod keys;
 pub mod record;
 pub mod store;
 
+use crate::bytes::Text;
 use crate::crc::crc32;
 use crate::decimal::{self, DecimalError, Shortest};
 use crate::odometry::integrator::MAX_STEP_COUNTS;
@@ -32,6 +33,24 @@ pub const BAUD_RATES: [u32; 8] = [
 /// Bits on the wire of one pose record frame (114 bytes, 10 bits per byte with start and
 /// stop bit), used to check that the output rate fits the baud rate.
 pub const POSE_FRAME_BITS: u32 = 1140;
+
+/// Bits on the wire of the longest `ODOMETRY` frame (245 bytes with MAVLink 2 framing, and
+/// the `0x00` after it: 246 bytes, 10 bits per byte), used to check that the output rate
+/// fits the baud rate in `output = mavlink`.
+pub const MAVLINK_FRAME_BITS: u32 = 2460;
+
+/// Bits on the wire of the `HEARTBEAT` frame sent once a second (21 bytes and the `0x00`).
+pub const MAVLINK_HEARTBEAT_BITS: u32 = 220;
+
+/// What the host link streams (`output`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Output {
+    /// Our frames: pose records and Status (docs/PROTOCOL.md).
+    #[default]
+    Frames,
+    /// MAVLink 2: `ODOMETRY` per record, `HEARTBEAT` per second (docs/MAVLINK.md).
+    Mavlink,
+}
 
 /// Highest accepted `rate`, Hz: what the processing task sustains with a wide margin.
 ///
@@ -138,6 +157,12 @@ pub struct Settings {
     /// (0.01..=20). Bounds the increments per sample ([`Settings::max_counts_per_sample`])
     /// and the time the counters may go unread ([`Settings::max_unread_interval`]).
     pub max_wheel_speed: f32,
+    /// `output`: what the host link streams.
+    pub output: Output,
+    /// `mavlink_sysid`: MAVLink system id (1..=255).
+    pub mavlink_sysid: u32,
+    /// `mavlink_compid`: MAVLink component id (1..=255).
+    pub mavlink_compid: u32,
 }
 
 impl Settings {
@@ -167,6 +192,9 @@ impl Settings {
         time_tag_pps: TimeTagPps::Previous,
         baud: 0,
         max_wheel_speed: 0.0,
+        output: Output::Frames,
+        mavlink_sysid: 0,
+        mavlink_compid: 0,
     };
 
     /// Default `max_wheel_speed`, m/s; also what a stored record of format version 1
@@ -226,8 +254,14 @@ impl Settings {
         if self.mode == SyncMode::Pps && 1_000_000 % self.rate != 0 {
             return Err(SettingError::PpsRate);
         }
-        let records_per_s = self.rate.div_ceil(self.output_divider);
-        if records_per_s as u64 * POSE_FRAME_BITS as u64 > self.baud as u64 {
+        let records_per_s = u64::from(self.rate.div_ceil(self.output_divider));
+        let bits = match self.output {
+            Output::Frames => records_per_s * u64::from(POSE_FRAME_BITS),
+            Output::Mavlink => {
+                records_per_s * u64::from(MAVLINK_FRAME_BITS) + u64::from(MAVLINK_HEARTBEAT_BITS)
+            }
+        };
+        if bits > u64::from(self.baud) {
             return Err(SettingError::RecordsOverBaud);
         }
         let counts = self.max_counts_per_sample();
@@ -273,7 +307,7 @@ impl Settings {
     /// Writes `key = value` lines for every key into `out`.
     pub fn write_all(&self, out: &mut impl Write) -> fmt::Result {
         for key in Key::ALL {
-            writeln!(out, "{} = {}", key.name(), self.get(key))?;
+            writeln!(out, "{} = {}", Text(key.name()), self.get(key))?;
         }
         Ok(())
     }
@@ -294,7 +328,7 @@ impl Default for Settings {
 /// The keys that [`Settings::validate`] checks against each other (chassis relations, pps
 /// rate, records per baud, the counts rule), in table order: a host sending many keys puts
 /// these in one atomic `set` so that no intermediate combination is refused.
-pub const RELATED_KEYS: [Key; 9] = [
+pub const RELATED_KEYS: [Key; 10] = [
     Key::LeftDiameter,
     Key::RightDiameter,
     Key::TrackWidth,
@@ -304,6 +338,7 @@ pub const RELATED_KEYS: [Key; 9] = [
     Key::OutputDivider,
     Key::Baud,
     Key::MaxWheelSpeed,
+    Key::Output,
 ];
 
 /// Checks chassis parameters alone, as [`Settings::validate`] checks them: each chassis key's
@@ -389,36 +424,14 @@ impl fmt::Display for SettingError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         // Errors about one key start with its name.
         if let Some(k) = self.key() {
-            write!(f, "{}: ", k.name())?;
+            f.write_str(k.name())?;
+            f.write_str(": ")?;
         }
         match *self {
             Self::BadNumber(_) => f.write_str("bad number"),
             Self::NotFinite(_) => f.write_str("NaN/inf not allowed"),
-            Self::OutOfRange(k) => {
-                f.write_str("out of range, ")?;
-                match *k.kind() {
-                    Kind::F64 { min, max } => write!(f, "{}..={}", Value::F64(min), Value::F64(max)),
-                    Kind::F32 { min, max } => write!(f, "{}..={}", Value::F32(min), Value::F32(max)),
-                    Kind::U32 { min, max } => write!(f, "{min}..={max}"),
-                    Kind::U32Set(set) => {
-                        f.write_str("one of")?;
-                        for v in set {
-                            write!(f, " {v}")?;
-                        }
-                        Ok(())
-                    }
-                    Kind::Word(_) => f.write_str("see help"),
-                }
-            }
-            Self::BadChoice(k) => {
-                f.write_str("expected")?;
-                if let Kind::Word(words) = *k.kind() {
-                    for (i, w) in words.iter().enumerate() {
-                        write!(f, "{}{w}", if i == 0 { " " } else { "|" })?;
-                    }
-                }
-                Ok(())
-            }
+            Self::OutOfRange(k) => write!(f, "out of range, {}", k.kind()),
+            Self::BadChoice(k) => write!(f, "expected {}", k.kind()),
             Self::Chassis(_) => write!(
                 f,
                 "does not fit the other chassis keys (one increment must stay within {} m and {} rad)",
@@ -463,7 +476,7 @@ pub enum SetManyError<'a> {
 impl fmt::Display for SetManyError<'_> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            Self::UnknownKey(k) => write!(f, "unknown key '{k}'"),
+            Self::UnknownKey(k) => write!(f, "unknown key '{}'", Text(k)),
             Self::Value(e) => e.fmt(f),
         }
     }

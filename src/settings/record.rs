@@ -1,6 +1,6 @@
 //! The serialised settings (the payload of a flash record, `docs/PROTOCOL.md` section 5),
 //! derived from the key table: each key at its [`RecordField`] offset in its [`Kind`]'s
-//! little-endian encoding; byte 99 is reserved (0).
+//! little-endian encoding (byte 99, reserved and 0 before version 5, holds `output`).
 
 use super::keys::{Kind, RecordField, Value, KEY_TABLE};
 use super::{Key, SettingError, Settings};
@@ -8,8 +8,9 @@ use super::{Key, SettingError, Settings};
 /// Version of the serialised settings layout ([`Settings::to_bytes`]). Version 2 appended
 /// `max_wheel_speed` to version 1, version 3 the geometry's standard errors and correlations
 /// (`left_diameter_se`.. `right_track_correlation`) and `kappa_diff`, version 4
-/// `kappa_diff_corr`; [`Settings::from_bytes_version`] reads all four.
-pub const SETTINGS_FORMAT_VERSION: u16 = 4;
+/// `kappa_diff_corr`, version 5 `output` (in the reserved byte 99), `mavlink_sysid` and
+/// `mavlink_compid`; [`Settings::from_bytes_version`] reads all five.
+pub const SETTINGS_FORMAT_VERSION: u16 = 5;
 
 /// Length of the payload of format `version`: the end of its last key, bytes.
 pub const fn serialized_len(version: u16) -> usize {
@@ -47,8 +48,8 @@ const fn no_overlap() -> bool {
 const _: () = assert!(no_overlap(), "two keys share bytes of the settings record");
 
 impl Settings {
-    /// Length of the serialised form of format version [`SETTINGS_FORMAT_VERSION`] (4),
-    /// bytes: 148 (from the key table).
+    /// Length of the serialised form of format version [`SETTINGS_FORMAT_VERSION`] (5),
+    /// bytes: 156 (from the key table).
     pub const SERIALIZED_LEN: usize = serialized_len(SETTINGS_FORMAT_VERSION);
 
     /// Length of the serialised form of format version 1, bytes: 112, the version 2 layout
@@ -58,6 +59,10 @@ impl Settings {
     /// Length of the serialised form of format version 2, bytes: 116, the version 3 layout
     /// without the geometry's standard errors and correlations and `kappa_diff`.
     pub const SERIALIZED_LEN_V2: usize = serialized_len(2);
+
+    /// Length of the serialised form of format version 4, bytes: 148, the version 5 layout
+    /// without `mavlink_sysid` and `mavlink_compid` (and 0, `frames`, in byte 99).
+    pub const SERIALIZED_LEN_V4: usize = serialized_len(4);
 
     /// Length of the serialised form of format version 3, bytes: 144, the version 4 layout
     /// without `kappa_diff_corr`.
@@ -103,8 +108,9 @@ impl Settings {
         Self::from_bytes_version(SETTINGS_FORMAT_VERSION, bytes)
     }
 
-    /// Parses the serialised form of format `version` and validates it: version 4
-    /// ([`Self::SERIALIZED_LEN`] bytes), 3 ([`Self::SERIALIZED_LEN_V3`] bytes, before
+    /// Parses the serialised form of format `version` and validates it: version 5
+    /// ([`Self::SERIALIZED_LEN`] bytes), 4 ([`Self::SERIALIZED_LEN_V4`] bytes, before the
+    /// MAVLink keys), 3 ([`Self::SERIALIZED_LEN_V3`] bytes, before
     /// `kappa_diff_corr`), 2 ([`Self::SERIALIZED_LEN_V2`] bytes, before the geometry's
     /// standard errors) or 1 ([`Self::SERIALIZED_LEN_V1`] bytes, before `max_wheel_speed`); a
     /// key newer than the record takes its default. Too few bytes, a bad code, an unknown

@@ -3,6 +3,7 @@
 
 use super::discipline_config;
 use crate::console::{self, Action, LineAssembler, Reply};
+use crate::mavlink::MavlinkRx;
 use crate::odometry::Pose;
 use crate::protocol::{DeviceInfo, ResetCause, PROTOCOL_VERSION};
 use crate::settings::store::{Flash, SettingsStore};
@@ -47,6 +48,8 @@ pub enum Effect {
 
 /// State of the command task.
 pub struct Commands<F> {
+    /// MAVLink frames received (a flight controller's) are skipped before the assembler.
+    mavlink_rx: MavlinkRx,
     assembler: LineAssembler,
     settings: Settings,
     store: SettingsStore<F>,
@@ -74,6 +77,7 @@ impl<F: StallingFlash> Commands<F> {
             SettingsSource::Defaults => Settings::DEFAULT,
         };
         Self {
+            mavlink_rx: MavlinkRx::new(),
             assembler: LineAssembler::new(),
             settings,
             store,
@@ -123,7 +127,8 @@ impl<F: StallingFlash> Commands<F> {
 
     /// One byte from the host: at the end of a line, its reply and effect. `clock` says
     /// which clock runs now; `moving` whether the wheels turned within the last second
-    /// (asked only for a `save` that would erase a sector).
+    /// (asked only for a `save` that would erase a sector). Bytes of MAVLink frames are
+    /// skipped and counted ([`MavlinkRx`]).
     #[inline(never)]
     pub fn on_byte(
         &mut self,
@@ -131,6 +136,9 @@ impl<F: StallingFlash> Commands<F> {
         clock: impl FnOnce() -> ClockSource,
         moving: impl FnOnce() -> bool,
     ) -> Option<(Reply, Effect)> {
+        if !self.mavlink_rx.text(byte) {
+            return None;
+        }
         let (reply, action) = match self.assembler.push(byte)? {
             Ok(line) => console::execute(line, &mut self.settings),
             Err(e) => (Reply::error(e), Action::None),
@@ -186,11 +194,11 @@ impl<F: StallingFlash> Commands<F> {
     /// `version`: the reply lines, and the device information frame for the unit with
     /// unique ID `uid`, last started by `reset_cause`.
     pub fn version(&self, reply: &mut Reply, uid: [u8; 12], reset_cause: ResetCause) -> DeviceInfo {
-        reply.push_line(format_args!(
-            "firmware = odo-unit {}",
+        reply.push_line(format_args!(concat!(
+            "firmware = odo-unit ",
             env!("CARGO_PKG_VERSION")
-        ));
-        reply.push_line(format_args!("protocol = {PROTOCOL_VERSION}"));
+        )));
+        reply.push_line(format_args!("protocol = {}", u32::from(PROTOCOL_VERSION)));
         self.device_info(uid, reset_cause)
     }
 
@@ -226,6 +234,7 @@ impl<F: StallingFlash> Commands<F> {
                 host,
                 gnss,
                 board,
+                mavlink_rx: self.mavlink_rx.counts(),
                 timer_hz: self.timer_hz,
                 source: self.source,
                 dirty: self.dirty(),

@@ -170,6 +170,8 @@ pub struct Processor {
     /// the sample sequence at which they last moved beyond it.
     rest_counts: Option<WheelCounts>,
     last_motion: u32,
+    /// Pose resets applied since start (wrapping).
+    pose_resets: u32,
 }
 
 impl Processor {
@@ -217,7 +219,18 @@ impl Processor {
             pps_overcaptures: 0,
             rest_counts: None,
             last_motion: 0,
+            pose_resets: 0,
         }
+    }
+
+    /// The settings in use.
+    pub fn settings(&self) -> &Settings {
+        &self.settings
+    }
+
+    /// Pose resets (`reset_pose`) applied since start, wrapping.
+    pub fn pose_resets(&self) -> u32 {
+        self.pose_resets
     }
 
     /// An index pulse of `wheel` (0 left, 1 right) latched by its timer.
@@ -326,6 +339,7 @@ impl Processor {
                 if let Some(pose) = self.reset.take() {
                     integrator.rebase_counts(counts);
                     integrator.reset_pose(pose);
+                    self.pose_resets = self.pose_resets.wrapping_add(1);
                     log.event(Event::PoseReset);
                 } else {
                     step = integrator.step(counts, refs);

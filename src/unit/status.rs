@@ -1,7 +1,9 @@
 //! The text of the `status` command.
 
 use super::{Live, RxErrors};
+use crate::bytes::Text;
 use crate::console::Reply;
+use crate::mavlink::RxCounts;
 use crate::protocol::ResetCause;
 use crate::settings::SettingsSource;
 use crate::timing::{ClockSource, SyncState};
@@ -25,6 +27,7 @@ pub(crate) struct StatusInputs<'a> {
     pub host: &'a RxErrors,
     pub gnss: &'a RxErrors,
     pub board: &'a BoardReport,
+    pub mavlink_rx: RxCounts,
     pub timer_hz: u32,
     pub source: SettingsSource,
     pub dirty: bool,
@@ -38,15 +41,18 @@ pub(crate) fn write(reply: &mut Reply, s: &StatusInputs<'_>) {
         SyncState::Locked => "locked",
         SyncState::Holdover => "holdover",
     };
-    let on = |b: bool| if b { "yes" } else { "no" };
+    let on = |b: bool| Text(if b { "yes" } else { "no" });
     let clock = match s.board.clock {
         ClockSource::Hse => "hse",
         ClockSource::Hsi => "hsi",
         ClockSource::HsiFallback => "hsi-fallback (HSE failed)",
     };
-    reply.push_line(format_args!("clock = {clock}"));
-    reply.push_line(format_args!("reset_cause = {}", s.board.reset_cause.name()));
-    reply.push_line(format_args!("sync = {sync}"));
+    reply.push_line(format_args!("clock = {}", Text(clock)));
+    reply.push_line(format_args!(
+        "reset_cause = {}",
+        Text(s.board.reset_cause.name())
+    ));
+    reply.push_line(format_args!("sync = {}", Text(sync)));
     reply.push_line(format_args!("time_valid = {}", on(live.flags.time_valid)));
     reply.push_line(format_args!("samples = {}", live.samples));
     reply.push_line(format_args!("mcu_time_us = {}", live.mcu_time_us));
@@ -77,21 +83,25 @@ pub(crate) fn write(reply: &mut Reply, s: &StatusInputs<'_>) {
         "nmea_time_messages = {}, nmea_errors = {}",
         live.time_messages, live.nmea_errors
     ));
-    for (name, e) in [("gnss", s.gnss), ("host", s.host)] {
+    for (name, e) in [(Text("gnss"), s.gnss), (Text("host"), s.host)] {
         reply.push_line(format_args!(
             "{name}_rx_lost = {}, {name}_rx_overruns = {}, {name}_rx_framing = {}, {name}_rx_noise = {}, {name}_rx_parity = {}",
             e.lost, e.overruns, e.framing, e.noise, e.parity
         ));
     }
+    reply.push_line(format_args!(
+        "host_rx_mavlink_ignored = {}, host_rx_mavlink1_ignored = {}",
+        s.mavlink_rx.v2, s.mavlink_rx.v1
+    ));
     for (name, w, m, lost) in [
         (
-            "left",
+            Text("left"),
             live.flags.left,
             live.index_mismatches[0],
             live.index_lost[0],
         ),
         (
-            "right",
+            Text("right"),
             live.flags.right,
             live.index_mismatches[1],
             live.index_lost[1],
@@ -103,7 +113,7 @@ pub(crate) fn write(reply: &mut Reply, s: &StatusInputs<'_>) {
             on(w.index_seen)
         ));
     }
-    let unit = s.board.cycles_unit;
+    let unit = Text(s.board.cycles_unit);
     reply.push_line(format_args!(
         "sample_isr_max = {} {unit}, process_max = {} {unit}",
         live.isr_cycles_max, live.process_cycles_max
@@ -119,7 +129,8 @@ pub(crate) fn write(reply: &mut Reply, s: &StatusInputs<'_>) {
         SettingsSource::Defaults => "defaults",
     };
     reply.push_line(format_args!(
-        "settings = {source}, unsaved_changes = {}",
+        "settings = {}, unsaved_changes = {}",
+        Text(source),
         on(s.dirty)
     ));
 }

@@ -293,6 +293,10 @@ pub struct BridgeArgs {
     /// Publish nothing over DDS (Foxglove only).
     #[arg(long, requires = "foxglove")]
     pub no_dds: bool,
+    /// Send MAVLink 2 ODOMETRY and HEARTBEAT instead (udpout:HOST:PORT or serial:PATH:BAUD),
+    /// for a flight controller (docs/MAVLINK.md).
+    #[arg(long, value_name = "TARGET", conflicts_with_all = ["foxglove", "no_dds"])]
+    pub mavlink: Option<String>,
 }
 
 /// One uncertainty model.

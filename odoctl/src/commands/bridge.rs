@@ -15,6 +15,9 @@ pub fn run(a: &BridgeArgs) -> Result<ExitCode> {
         Duration::try_from_secs_f64(v)
             .map_err(|_| anyhow::anyhow!("--{what} {v}: not a duration in seconds"))
     };
+    if let Some(target) = &a.mavlink {
+        return crate::mavlink::bridge(a, target);
+    }
     bridge::run(&BridgeOptions {
         port: a.port.port.clone(),
         baud: a.port.baud,
