@@ -72,12 +72,21 @@ fn bridge_publishes_the_units_records_to_an_independent_dds_subscriber() {
     // The fake unit integrates with its defaults, the designed parameters.
     let records = common::records(&ChassisParams::DESIGNED, &samples);
     let dir = scratch("ros_bridge");
-    let mut e = String::from("x,y,heading,sigma_x,sigma_y,sigma_heading,cov_xy\n");
+    let mut e =
+        String::from("x,y,heading,sigma_x,sigma_y,sigma_heading,cov_xy,gamma_left,gamma_right\n");
     for r in &records {
         let _ = writeln!(
             e,
-            "{:?},{:?},{:?},{:?},{:?},{:?},{:?}",
-            r.x, r.y, r.heading, r.sigma_x, r.sigma_y, r.sigma_heading, r.cov_xy
+            "{:?},{:?},{:?},{:?},{:?},{:?},{:?},{},{}",
+            r.x,
+            r.y,
+            r.heading,
+            r.sigma_x,
+            r.sigma_y,
+            r.sigma_heading,
+            r.cov_xy,
+            r.gamma_left,
+            r.gamma_right
         );
     }
     let expect = dir.join("expect.csv");

@@ -9,11 +9,13 @@ use odo_unit::odometry::UncertaintyModel;
 
 mod calibrate;
 mod reference;
+mod ros;
 mod simulate;
 pub mod values;
 
 pub use calibrate::{CalibrateArgs, GeometryArgs};
 pub use reference::{PosTimeArg, ReceiverArgs, ReferenceArgs};
+pub use ros::RosNameArgs;
 pub use simulate::SimulateArgs;
 
 use values as v;
@@ -119,6 +121,9 @@ pub struct RecordArgs {
     /// The unit's parameters, for the twist of `--mcap`.
     #[command(flatten)]
     pub params: ParamArgs,
+    /// Frames, topics and joints of `--mcap`.
+    #[command(flatten)]
+    pub ros: RosNameArgs,
 }
 
 /// `odoctl decode`.
@@ -210,6 +215,9 @@ pub struct ReplayArgs {
     /// file (docs/ROS.md).
     #[arg(long)]
     pub mcap: Option<PathBuf>,
+    /// Frames, topics and joints of `--mcap`.
+    #[command(flatten)]
+    pub ros: RosNameArgs,
 }
 
 /// `odoctl validate`.
@@ -286,6 +294,12 @@ pub struct BridgeArgs {
     /// Publish nothing over DDS (Foxglove only).
     #[arg(long, requires = "foxglove")]
     pub no_dds: bool,
+    /// Frames, topics, joints and TF.
+    #[command(flatten)]
+    pub ros: RosNameArgs,
+    /// ROS 2 node name.
+    #[arg(long, default_value = "odoctl_bridge")]
+    pub node_name: String,
 }
 
 /// One uncertainty model.

@@ -25,6 +25,7 @@ use ros2_client::{
 use super::conventions::{BaseTwist, PoseCovariance};
 use super::foxglove::{parse_address, FoxgloveServer};
 use super::msgs::{self, level};
+use super::names::RosNames;
 use super::stamps::gps_to_unix_nanos;
 use super::stream::{Messages, OdomSample, OdomStream};
 use crate::link::{self, Session};
@@ -50,6 +51,8 @@ pub struct BridgeOptions {
     pub foxglove: Option<String>,
     /// Publish over DDS (ROS 2).
     pub dds: bool,
+    /// Node, topic, frame and joint names; TF on or off.
+    pub names: RosNames,
 }
 
 /// What a bridge run did.
@@ -119,7 +122,8 @@ impl LiveStamps {
 
 struct Publishers {
     odom: ros2_client::Publisher<msgs::Odometry>,
-    tf: ros2_client::Publisher<msgs::TfMessage>,
+    tf: Option<ros2_client::Publisher<msgs::TfMessage>>,
+    joints: ros2_client::Publisher<msgs::JointState>,
     diagnostics: ros2_client::Publisher<msgs::DiagnosticArray>,
 }
 
@@ -127,46 +131,45 @@ fn dds<E: std::fmt::Debug>(what: &'static str) -> impl Fn(E) -> anyhow::Error {
     move |e| anyhow!("DDS: {what}: {e:?}")
 }
 
+/// The QoS of a topic (docs/ROS.md, *QoS*): reliable, volatile, keep last `depth`.
+fn qos(depth: usize) -> QosProfile {
+    QosProfile::publisher_default()
+        .reliability_reliable(WhenFull::DEFAULT)
+        .durability(Durability::Volatile)
+        .history(History::KeepLast { depth })
+}
+
+/// A publisher of `T` (`pkg/msg/Type`) on the fully qualified `topic`.
+fn publisher<T: serde::Serialize>(
+    node: &mut Node,
+    topic: &str,
+    (pkg, ty): (&str, &str),
+    depth: usize,
+) -> Result<ros2_client::Publisher<T>> {
+    let (ns, base) = RosNames::split(topic);
+    let name = Name::new(ns, base).map_err(|e| anyhow!("DDS: topic name {topic}: {e:?}"))?;
+    let t = node
+        .create_topic(&name, MessageTypeName::new(pkg, ty), &qos(depth))
+        .map_err(|e| anyhow!("DDS: topic {topic}: {e:?}"))?;
+    node.create_publisher(&t, None)
+        .map_err(|e| anyhow!("DDS: publisher {topic}: {e:?}"))
+}
+
 impl Publishers {
-    fn new(node: &mut Node) -> Result<Self> {
-        let qos = |depth| {
-            QosProfile::publisher_default()
-                .reliability_reliable(WhenFull::DEFAULT)
-                .durability(Durability::Volatile)
-                .history(History::KeepLast { depth })
-        };
-        let name = |n: &str| Name::new("/", n).map_err(dds("topic name"));
-        let odom = node
-            .create_topic(
-                &name("odom")?,
-                MessageTypeName::new("nav_msgs", "Odometry"),
-                &qos(10),
-            )
-            .map_err(dds("topic /odom"))?;
-        let tf = node
-            .create_topic(
-                &name("tf")?,
-                MessageTypeName::new("tf2_msgs", "TFMessage"),
-                &qos(100),
-            )
-            .map_err(dds("topic /tf"))?;
-        let diagnostics = node
-            .create_topic(
-                &name("diagnostics")?,
-                MessageTypeName::new("diagnostic_msgs", "DiagnosticArray"),
-                &qos(10),
-            )
-            .map_err(dds("topic /diagnostics"))?;
+    fn new(node: &mut Node, names: &RosNames) -> Result<Self> {
         Ok(Self {
-            odom: node
-                .create_publisher(&odom, None)
-                .map_err(dds("publisher /odom"))?,
-            tf: node
-                .create_publisher(&tf, None)
-                .map_err(dds("publisher /tf"))?,
-            diagnostics: node
-                .create_publisher(&diagnostics, None)
-                .map_err(dds("publisher /diagnostics"))?,
+            odom: publisher(node, &names.odom, ("nav_msgs", "Odometry"), 10)?,
+            tf: match &names.tf {
+                Some(t) => Some(publisher(node, t, ("tf2_msgs", "TFMessage"), 100)?),
+                None => None,
+            },
+            joints: publisher(node, &names.joint_states, ("sensor_msgs", "JointState"), 10)?,
+            diagnostics: publisher(
+                node,
+                &names.diagnostics,
+                ("diagnostic_msgs", "DiagnosticArray"),
+                10,
+            )?,
         })
     }
 
@@ -177,10 +180,11 @@ impl Publishers {
     }
 }
 
-fn parse_rate(text: &str) -> Option<f64> {
+/// The value of `key` in a `get` reply (`key = value` lines).
+fn parse_value(text: &str, key: &str) -> Option<f64> {
     text.lines().find_map(|l| {
         let (k, v) = l.split_once('=')?;
-        (k.trim() == "rate").then(|| v.trim().parse().ok())?
+        (k.trim() == key).then(|| v.trim().parse().ok())?
     })
 }
 
@@ -199,8 +203,13 @@ impl Outlets {
             if let Some(d) = m.diagnostics {
                 p.status(d)?;
             }
-            p.odom.publish(m.odom).map_err(dds("write /odom"))?;
-            p.tf.publish(m.tf).map_err(dds("write /tf"))?;
+            p.odom.publish(m.odom).map_err(dds("write odom"))?;
+            if let (Some(t), Some(tf)) = (&p.tf, m.tf) {
+                t.publish(tf).map_err(dds("write tf"))?;
+            }
+            if let Some(j) = m.joints {
+                p.joints.publish(j).map_err(dds("write joint_states"))?;
+            }
         }
         Ok(())
     }
@@ -259,36 +268,42 @@ pub fn run(o: &BridgeOptions) -> Result<ExitCode> {
         let domain = ros_domain()?;
         let context = Context::with_options(ContextOptions::new().domain_id(domain))
             .map_err(dds("context"))?;
+        let n = &o.names;
         let mut node = context
             .new_node(
-                NodeName::new("/", "odoctl_bridge").map_err(dds("node name"))?,
+                NodeName::new(&n.namespace, &n.node).map_err(dds("node name"))?,
                 NodeOptions::new(),
             )
             .map_err(dds("node"))?;
-        outlets.dds = Some(Publishers::new(&mut node)?);
+        outlets.dds = Some(Publishers::new(&mut node, n)?);
         _node = Some(node);
         eprintln!(
-            "bridge: publishing /odom, /tf, /diagnostics from {} (ROS 2 domain {domain})",
+            "bridge: node {}{}{} publishing {} from {} (ROS 2 domain {domain})",
+            n.namespace,
+            if n.namespace == "/" { "" } else { "/" },
+            n.node,
+            topic_list(n, false),
             o.port
         );
     }
     if let Some((host, port)) = foxglove {
-        let f = FoxgloveServer::start(&host, port)?;
+        let f = FoxgloveServer::start(&host, port, &o.names)?;
         let shown = if host.contains(':') {
             format!("[{host}]")
         } else {
             host.clone()
         };
         eprintln!(
-            "bridge: Foxglove WebSocket server on ws://{shown}:{} (/odom, /tf, /diagnostics, /odom/path, /odom/ellipse) from {}",
+            "bridge: Foxglove WebSocket server on ws://{shown}:{} ({}) from {}",
             f.port(),
+            topic_list(&o.names, true),
             o.port
         );
         outlets.foxglove = Some(f);
     }
     let end = o.duration.map(|d| Instant::now() + d);
     let mut st = State {
-        stream: OdomStream::new(None),
+        stream: OdomStream::new(None).with_names(o.names.clone()),
         counts: BridgeCounts::default(),
         stamps: LiveStamps {
             rate: None,
@@ -324,6 +339,17 @@ pub fn run(o: &BridgeOptions) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// The topics published, for the start message; with the Foxglove-only ones when `foxglove`.
+fn topic_list(n: &RosNames, foxglove: bool) -> String {
+    let mut t = vec![n.odom.as_str()];
+    t.extend(n.tf.as_deref());
+    t.extend([n.joint_states.as_str(), n.diagnostics.as_str()]);
+    if foxglove {
+        t.extend([n.path.as_str(), n.ellipse.as_str()]);
+    }
+    t.join(", ")
+}
+
 fn link_values(c: &BridgeCounts) -> Vec<(String, String)> {
     vec![
         ("published".into(), c.published.to_string()),
@@ -344,11 +370,17 @@ fn serve(
     st: &mut State,
     end: Option<Instant>,
 ) -> Result<Ended> {
-    st.stamps.rate = match s.command("get rate", o.retry.max(Duration::from_secs(1))) {
-        Ok((true, text)) => parse_rate(&text),
-        Ok(_) => None,
+    // One `get` (every key): the sample rate for the stamps, and the increments per turn the
+    // unit works with for the joint angles (else the given parameters').
+    let settings = match s.command("get", o.retry.max(Duration::from_secs(1))) {
+        Ok((true, text)) => text,
+        Ok(_) => String::new(),
         Err(e) => return Ok(Ended::Lost(format!("link: {e:#}"))),
     };
+    st.stamps.rate = parse_value(&settings, "rate");
+    let ticks = parse_value(&settings, "ticks_per_rev").map(|t| t as u32);
+    st.stream
+        .set_ticks_per_rev(Some(ticks.unwrap_or(o.params.ticks_per_rev)));
     let mut stale = false;
     loop {
         let now = Instant::now();
@@ -429,6 +461,7 @@ fn serve(
             sequence: Some(u64::from(r.sequence)),
             overrange: false,
             reset: zero && was_moving,
+            counts: Some((r.gamma_left, r.gamma_right)),
         };
         st.stream.set_extra(link_values(&st.counts));
         let m = match st.stream.next(&sample) {
@@ -480,9 +513,13 @@ mod tests {
 
     #[test]
     fn rate_reply() {
-        assert_eq!(parse_rate("rate = 50\n"), Some(50.0));
-        assert_eq!(parse_rate("x = 1\nrate=100"), Some(100.0));
-        assert_eq!(parse_rate("rates = 5"), None);
+        assert_eq!(parse_value("rate = 50\n", "rate"), Some(50.0));
+        assert_eq!(parse_value("x = 1\nrate=100", "rate"), Some(100.0));
+        assert_eq!(parse_value("rates = 5", "rate"), None);
+        assert_eq!(
+            parse_value("ticks_per_rev = 20000", "ticks_per_rev"),
+            Some(20000.0)
+        );
     }
 
     #[test]

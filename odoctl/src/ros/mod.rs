@@ -7,6 +7,7 @@ pub mod diff_drive;
 pub mod export;
 pub mod foxglove;
 pub mod msgs;
+pub mod names;
 pub mod recording;
 pub mod stamps;
 pub mod stream;

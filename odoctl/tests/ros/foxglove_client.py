@@ -91,6 +91,7 @@ async def main():
             "/tf": ("cdr", "tf2_msgs/msg/TFMessage", "ros2msg"),
             "/diagnostics": ("cdr", "diagnostic_msgs/msg/DiagnosticArray", "ros2msg"),
             "/odom/path": ("cdr", "nav_msgs/msg/Path", "ros2msg"),
+            "/joint_states": ("cdr", "sensor_msgs/msg/JointState", "ros2msg"),
             "/odom/ellipse": ("json", "foxglove.SceneUpdate", "jsonschema")}
     decoders = {}
     for topic, (enc, name, senc) in want.items():
@@ -187,12 +188,21 @@ async def main():
             fail(f"yaw {yaw} for heading {r['heading']}")
         c = o.pose.covariance
         sx, sy, cxy = r["sigma_x"], r["sigma_y"], r["cov_xy"]
-        if c[0] != sx * sx or c[7] != sy * sy or c[1] != cxy or c[6] != cxy:
+        # Variances at least the published floor, 1e-10 (docs/ROS.md).
+        if c[0] != max(sx * sx, 1e-10) or c[7] != max(sy * sy, 1e-10) or c[1] != cxy or c[6] != cxy:
             fail(f"covariance {c[0]}, {c[7]}, {c[1]} for sigmas {sx}, {sy} and cov_xy {cxy}")
     gaps = sum(1 for i0, i1 in zip(idx, idx[1:]) if i1 != i0 + 1)
 
     # /tf: the /odom pose.
     by_stamp = {lt: o for lt, o in odom}
+    # /joint_states: both wheels, at the stamps of /odom.
+    for lt, j in got["/joint_states"]:
+        if list(j.name) != ["left_wheel_joint", "right_wheel_joint"] or len(j.position) != 2:
+            fail(f"/joint_states {list(j.name)} {list(j.position)}")
+        if lt not in by_stamp:
+            fail(f"/joint_states at {lt}: no /odom there")
+    if len(got["/joint_states"]) < len(odom) // 2:
+        fail(f"{len(got['/joint_states'])} /joint_states for {len(odom)} /odom")
     for lt, tf in got["/tf"]:
         t = tf.transforms[0]
         o = by_stamp.get(lt)
@@ -243,7 +253,8 @@ async def main():
         r = next((r for r in recs if r["x"] == pos["x"] and r["y"] == pos["y"]), None)
         if r is None:
             fail("ellipse centre is none of the records")
-        sxx, syy, sxy = r["sigma_x"] ** 2, r["sigma_y"] ** 2, r["cov_xy"]
+        # The published covariance: variances at least the floor, 1e-10.
+        sxx, syy, sxy = max(r["sigma_x"] ** 2, 1e-10), max(r["sigma_y"] ** 2, 1e-10), r["cov_xy"]
         det = sxx * syy - sxy * sxy
         if det <= 1e-30:
             continue
@@ -264,6 +275,9 @@ async def main():
 
     # /diagnostics and server status.
     diags = [(d.status[0].level, d.status[0].message) for _, d in got["/diagnostics"]]
+    for s in statuses:
+        if s.get("op") == "status" and not s.get("id", "").endswith(": link"):
+            fail(f"a server status of the link not under the link's id: {s}")
     for want_msg in a.expect_status:
         if not any(l == 2 and want_msg in m for l, m in diags):
             fail(f"no /diagnostics ERROR with `{want_msg}`: {diags}")
