@@ -34,8 +34,17 @@ fn cyclonedds_ready() -> bool {
 
 /// Starts the subscriber on `domain` and waits until its readers exist.
 fn subscriber(domain: u16, args: &[&str]) -> Child {
+    subscriber_with(domain, args, None)
+}
+
+/// The subscriber with the Cyclone DDS configuration `config` (`CYCLONEDDS_URI`).
+fn subscriber_with(domain: u16, args: &[&str], config: Option<&str>) -> Child {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/ros/dds_subscriber.py");
-    let mut child = Command::new("python3")
+    let mut cmd = Command::new("python3");
+    if let Some(c) = config {
+        cmd.env("CYCLONEDDS_URI", c);
+    }
+    let mut child = cmd
         .arg(script)
         .args(args)
         .env("ROS_DOMAIN_ID", domain.to_string())
@@ -60,6 +69,92 @@ fn finish(child: Child) -> String {
         String::from_utf8_lossy(&o.stderr)
     );
     out
+}
+
+/// The unit's records of `samples` as the subscriber's `--expect` CSV in `dir`.
+fn expect_csv(dir: &Path, samples: &[odoctl::csvio::Sample]) -> std::path::PathBuf {
+    // The fake unit integrates with its defaults, the designed parameters.
+    let records = common::records(&ChassisParams::DESIGNED, samples);
+    let mut e =
+        String::from("x,y,heading,sigma_x,sigma_y,sigma_heading,cov_xy,gamma_left,gamma_right\n");
+    for r in &records {
+        let _ = writeln!(
+            e,
+            "{:?},{:?},{:?},{:?},{:?},{:?},{:?},{},{}",
+            r.x,
+            r.y,
+            r.heading,
+            r.sigma_x,
+            r.sigma_y,
+            r.sigma_heading,
+            r.cov_xy,
+            r.gamma_left,
+            r.gamma_right
+        );
+    }
+    let expect = dir.join("expect.csv");
+    std::fs::write(&expect, e).unwrap();
+    expect
+}
+
+/// The Cyclone DDS configuration rmw_cyclonedds (Jazzy) makes for
+/// `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`: no multicast, participant indices, the
+/// well-known ports of localhost as peers.
+const CYCLONE_LOCALHOST: &str = "<CycloneDDS><Domain><General><AllowMulticast>false</AllowMulticast></General><Discovery><ParticipantIndex>auto</ParticipantIndex><MaxAutoParticipantIndex>32</MaxAutoParticipantIndex><Peers><Peer address=\"localhost\"/></Peers></Discovery></Domain></CycloneDDS>";
+
+/// Runs the bridge against a fake unit with the environment `env` and checks 80 records at a
+/// subscriber configured by `config`.
+fn discovered_with(domain: u16, config: &str, env: &[(&str, &str)]) {
+    let sim = common::sim(PathKind::Validation, 10.0, 13);
+    let samples: Vec<_> = sim.samples[..300].to_vec();
+    let dir = scratch(&format!("ros_bridge_discovery_{domain}"));
+    let expect = expect_csv(&dir, &samples);
+    let args = [
+        "--expect",
+        expect.to_str().unwrap(),
+        "--count",
+        "80",
+        "--timeout",
+        "25",
+    ];
+    let sub = subscriber_with(domain, &args, Some(config));
+    let (port, unit) = common::fake_unit(samples, std::time::Duration::from_millis(20));
+    let o = Command::new(common::bin())
+        .args(["bridge", "--port", &format!("tcp:127.0.0.1:{port}")])
+        .args(["--count", "250"])
+        .env("ROS_DOMAIN_ID", domain.to_string())
+        .envs(env.iter().copied())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("discovery Localhost"), "{err}");
+    unit.join().unwrap();
+    let out = finish(sub);
+    assert!(out.contains("dds_subscriber: ok"), "{out}");
+    eprintln!("{env:?}: {}", out.trim());
+}
+
+#[test]
+fn localhost_range_reaches_cyclone_configured_as_rmw_cyclonedds_configures_it() {
+    if !cyclonedds_ready() {
+        return;
+    }
+    discovered_with(
+        71,
+        CYCLONE_LOCALHOST,
+        &[("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")],
+    );
+    // Humble's variable means the same range.
+    discovered_with(72, CYCLONE_LOCALHOST, &[("ROS_LOCALHOST_ONLY", "1")]);
+    // OFF: nobody could discover the bridge; without --foxglove it has nothing to do.
+    let o = Command::new(common::bin())
+        .args(["bridge", "--port", "tcp:127.0.0.1:1", "--duration", "1"])
+        .env("ROS_AUTOMATIC_DISCOVERY_RANGE", "OFF")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("OFF"), "{err}");
 }
 
 #[test]

@@ -17,15 +17,16 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use anyhow::{anyhow, Result};
 use odo_unit::protocol::{Message, PoseRecord};
+use ros2_client::dds::rustdds::{DomainParticipantBuilder, RTPSEntity};
 use ros2_client::qos::{Durability, History, WhenFull};
-use ros2_client::{
-    Context, ContextOptions, MessageTypeName, Name, Node, NodeName, NodeOptions, QosProfile,
-};
+use ros2_client::{Context, MessageTypeName, Name, Node, NodeName, NodeOptions, QosProfile};
 
 use super::conventions::{BaseTwist, PoseCovariance};
+use super::discovery::{Discovery, Range};
 use super::foxglove::{parse_address, FoxgloveServer};
 use super::msgs::{self, level};
 use super::names::RosNames;
+use super::spdp_relay::{self, RelaySocket, SpdpRelay};
 use super::stamps::gps_to_unix_nanos;
 use super::stream::{Messages, OdomSample, OdomStream};
 use crate::link::{self, Session};
@@ -242,16 +243,53 @@ struct State {
     last: Option<(PoseRecord, u64, Instant)>,
 }
 
-fn ros_domain() -> Result<u16> {
-    match std::env::var("ROS_DOMAIN_ID") {
-        Ok(v) if !v.trim().is_empty() => v
-            .trim()
-            .parse::<u16>()
-            .ok()
-            .filter(|d| *d <= 232)
-            .ok_or_else(|| anyhow!("ROS_DOMAIN_ID `{v}` is not a domain (0..=232)")),
-        _ => Ok(0),
+/// The addresses of `ROS_STATIC_PEERS` (host names resolved).
+fn peer_addresses(peers: &[String]) -> Result<Vec<std::net::IpAddr>> {
+    use std::net::ToSocketAddrs;
+    let mut out = Vec::new();
+    for p in peers {
+        let addrs = (p.as_str(), 0)
+            .to_socket_addrs()
+            .map_err(|e| anyhow!("ROS_STATIC_PEERS: `{p}`: not an address ({e})"))?;
+        out.extend(addrs.map(|a| a.ip()));
     }
+    Ok(out)
+}
+
+/// The DDS context for the discovery settings `d` (with the relay that carries its
+/// announcements to unicast peers, kept alive beside it), `None` with the range `OFF` (no
+/// other process could discover the bridge). `LOCALHOST`: RustDDS's multicast and advertised
+/// locators on 127.0.0.1 only, announcements to the well-known ports on 127.0.0.1 and, by the
+/// relay, to those of the local addresses other participants announce from; `SUBNET`:
+/// multicast as well, and the static peers by the relay; `SYSTEM_DEFAULT`: RustDDS's defaults.
+fn dds_context(d: &Discovery) -> Result<Option<(Context, Option<SpdpRelay>)>> {
+    for w in &d.warnings {
+        eprintln!("bridge: warning: {w}");
+    }
+    let builder = DomainParticipantBuilder::new(d.domain);
+    let (builder, relay) = match d.range {
+        Range::Off => return Ok(None),
+        Range::Localhost => (
+            builder
+                .with_only_networks([std::net::Ipv4Addr::LOCALHOST])
+                .same_host_loopback(true),
+            true,
+        ),
+        Range::Subnet => (builder, !d.static_peers.is_empty()),
+        Range::SystemDefault => (builder, false),
+    };
+    let mut peers = peer_addresses(&d.static_peers)?;
+    if d.range == Range::Localhost {
+        // As Cyclone DDS adds itself to its peers: this host's other addresses.
+        peers.extend(spdp_relay::host_addresses());
+    }
+    let socket = relay.then(|| RelaySocket::bind(d.domain)).transpose()?;
+    let participant = builder.build().map_err(dds("participant"))?;
+    let mut prefix = [0u8; 12];
+    prefix.copy_from_slice(&participant.guid().to_bytes()[..12]);
+    let relay = socket.map(|s| s.start(prefix, peers)).transpose()?;
+    let context = Context::from_domain_participant(participant).map_err(dds("context"))?;
+    Ok(Some((context, relay)))
 }
 
 /// `odoctl bridge`.
@@ -264,10 +302,23 @@ pub fn run(o: &BridgeOptions) -> Result<ExitCode> {
     let foxglove = o.foxglove.as_deref().map(parse_address).transpose()?;
     // Kept alive while publishing.
     let mut _node = None;
-    if o.dds {
-        let domain = ros_domain()?;
-        let context = Context::with_options(ContextOptions::new().domain_id(domain))
-            .map_err(dds("context"))?;
+    let discovery = Discovery::from_env(|k| std::env::var(k).ok())?;
+    let context = if o.dds {
+        dds_context(&discovery)?
+    } else {
+        None
+    };
+    if o.dds && context.is_none() {
+        if foxglove.is_none() {
+            anyhow::bail!("ROS_AUTOMATIC_DISCOVERY_RANGE=OFF: no other process can discover the bridge, and there is no --foxglove: nothing to publish");
+        }
+        eprintln!("bridge: ROS_AUTOMATIC_DISCOVERY_RANGE=OFF: nothing published over DDS");
+    }
+    // Kept alive while publishing.
+    let mut _relay = None;
+    if let Some((context, relay)) = context {
+        _relay = relay;
+        let domain = discovery.domain;
         let n = &o.names;
         let mut node = context
             .new_node(
@@ -278,12 +329,13 @@ pub fn run(o: &BridgeOptions) -> Result<ExitCode> {
         outlets.dds = Some(Publishers::new(&mut node, n)?);
         _node = Some(node);
         eprintln!(
-            "bridge: node {}{}{} publishing {} from {} (ROS 2 domain {domain})",
+            "bridge: node {}{}{} publishing {} from {} (ROS 2 domain {domain}, discovery {:?})",
             n.namespace,
             if n.namespace == "/" { "" } else { "/" },
             n.node,
             topic_list(n, false),
-            o.port
+            o.port,
+            discovery.range
         );
     }
     if let Some((host, port)) = foxglove {

@@ -4,11 +4,13 @@
 pub mod bridge;
 pub mod conventions;
 pub mod diff_drive;
+pub mod discovery;
 pub mod export;
 pub mod foxglove;
 pub mod msgs;
 pub mod names;
 pub mod recording;
+pub mod spdp_relay;
 pub mod stamps;
 pub mod stream;
 pub mod tracks;
