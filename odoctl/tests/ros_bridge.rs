@@ -253,3 +253,88 @@ fn bridge_without_a_unit_reports_the_lost_link_and_publishes_no_pose() {
         .unwrap();
     assert!(!o.status.success());
 }
+
+/// Runs `reset_client.py` against the service of namespace `ns` on `domain`.
+fn reset_call(domain: u16, ns: &str) -> String {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/ros/reset_client.py");
+    let o = Command::new("python3")
+        .arg(script)
+        .args(["--ns", ns, "--timeout", "15"])
+        .env("ROS_DOMAIN_ID", domain.to_string())
+        .output()
+        .expect("python3 runs");
+    let out = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(
+        o.status.success(),
+        "{out}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    out
+}
+
+#[test]
+fn two_namespaced_bridges_on_one_domain_and_the_reset_service() {
+    if !cyclonedds_ready() {
+        return;
+    }
+    let domain = 74;
+    let dir = scratch("ros_bridge_two");
+    let one: Vec<_> = common::sim(PathKind::Validation, 10.0, 14).samples[..400].to_vec();
+    let two: Vec<_> = common::sim(PathKind::Validation, 10.0, 15).samples[..400].to_vec();
+    // robot2's subscriber checks every /robot2/odom against robot2's unit: a message of
+    // robot1 there (whose unit is reset meanwhile) would match none of its records.
+    let expect = expect_csv(&dir, &two);
+    let sub = subscriber(
+        domain,
+        &[
+            "--expect",
+            expect.to_str().unwrap(),
+            "--count",
+            "150",
+            "--timeout",
+            "25",
+            "--ns",
+            "robot2",
+            "--frame-prefix",
+            "robot2/",
+        ],
+    );
+    let bridge = |port: u16, ns: &str| {
+        Command::new(common::bin())
+            .args(["bridge", "--port", &format!("tcp:127.0.0.1:{port}")])
+            .args(["--count", "300", "--namespace", ns])
+            .args(["--frame-prefix", &format!("{ns}/")])
+            .env("ROS_DOMAIN_ID", domain.to_string())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    let (p1, u1) = common::fake_unit(one, std::time::Duration::from_millis(20));
+    let (p2, u2) = common::fake_unit(two, std::time::Duration::from_millis(20));
+    let b1 = bridge(p1, "robot1");
+    let b2 = bridge(p2, "robot2");
+    // The service of robot1, called as ROS 2 (rmw_cyclonedds) calls it.
+    let call = reset_call(domain, "robot1");
+    assert!(call.contains("success=True"), "{call}");
+    let wait = |b: Child| {
+        let o = b.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert!(o.status.success(), "{err}");
+        err
+    };
+    let e1 = wait(b1);
+    let e2 = wait(b2);
+    u1.join().unwrap();
+    u2.join().unwrap();
+    assert!(
+        e1.contains("1 reset_pose requests answered, 1 pose resets absorbed"),
+        "{e1}"
+    );
+    assert!(
+        e2.contains("0 reset_pose requests answered, 0 pose resets absorbed"),
+        "{e2}"
+    );
+    let out = finish(sub);
+    assert!(out.contains("dds_subscriber: ok"), "{out}");
+    eprintln!("{}\n{}", call.trim(), out.trim());
+}

@@ -26,6 +26,7 @@ use super::discovery::{Discovery, Range};
 use super::foxglove::{parse_address, FoxgloveServer};
 use super::msgs::{self, level};
 use super::names::RosNames;
+use super::reset_service::ResetService;
 use super::spdp_relay::{self, RelaySocket, SpdpRelay};
 use super::stamps::gps_to_unix_nanos;
 use super::stream::{Messages, OdomSample, OdomStream};
@@ -241,6 +242,10 @@ struct State {
     stamps: LiveStamps,
     /// The last published record, its stamp and when it arrived.
     last: Option<(PoseRecord, u64, Instant)>,
+    /// The `reset_pose` service (DDS only).
+    reset: Option<ResetService>,
+    /// The unit confirmed a `reset_pose` of the service: its next record carries the reset.
+    reset_confirmed: bool,
 }
 
 /// The addresses of `ROS_STATIC_PEERS` (host names resolved).
@@ -316,6 +321,7 @@ pub fn run(o: &BridgeOptions) -> Result<ExitCode> {
     }
     // Kept alive while publishing.
     let mut _relay = None;
+    let mut reset = None;
     if let Some((context, relay)) = context {
         _relay = relay;
         let domain = discovery.domain;
@@ -327,6 +333,7 @@ pub fn run(o: &BridgeOptions) -> Result<ExitCode> {
             )
             .map_err(dds("node"))?;
         outlets.dds = Some(Publishers::new(&mut node, n)?);
+        reset = Some(ResetService::new(&mut node, n)?);
         _node = Some(node);
         eprintln!(
             "bridge: node {}{}{} publishing {} from {} (ROS 2 domain {domain}, discovery {:?})",
@@ -362,6 +369,8 @@ pub fn run(o: &BridgeOptions) -> Result<ExitCode> {
             origin: None,
         },
         last: None,
+        reset,
+        reset_confirmed: false,
     };
     loop {
         if end.is_some_and(|e| Instant::now() >= e) {
@@ -377,6 +386,9 @@ pub fn run(o: &BridgeOptions) -> Result<ExitCode> {
                 st.counts.link_losses += 1;
                 st.stream.set_extra(link_values(&st.counts));
                 let msg = format!("{why}; reconnecting every {:.1} s", o.retry.as_secs_f64());
+                if let Some(r) = &mut st.reset {
+                    r.fail_all(&format!("no link to the unit: {why}"));
+                }
                 eprintln!("bridge: {msg}");
                 outlets.status(st.stream.status(host_now_ns(), level::ERROR, &msg)?)?;
                 std::thread::sleep(o.retry);
@@ -388,6 +400,13 @@ pub fn run(o: &BridgeOptions) -> Result<ExitCode> {
         "bridge: {} records published, {} repeated records dropped, {} stale records dropped, {} link losses",
         c.published, c.repeated, c.stale, c.link_losses
     );
+    if let Some(r) = &st.reset {
+        eprintln!(
+            "bridge: {} reset_pose requests answered, {} pose resets absorbed (odom kept continuous)",
+            r.answered(),
+            st.stream.counts().resets
+        );
+    }
     Ok(ExitCode::SUCCESS)
 }
 
@@ -409,6 +428,22 @@ fn link_values(c: &BridgeCounts) -> Vec<(String, String)> {
         ("stale_records_dropped".into(), c.stale.to_string()),
         ("link_losses".into(), c.link_losses.to_string()),
     ]
+}
+
+/// The `reset_pose` service's turn: a new request sends `reset_pose` to the unit (answered
+/// when its reply arrives); one without a reply in time is answered as failed.
+fn serve_reset(s: &mut Session, st: &mut State) -> Result<()> {
+    let Some(rs) = &mut st.reset else {
+        return Ok(());
+    };
+    rs.expire();
+    if rs.poll() {
+        if let Err(e) = s.send_line("reset_pose") {
+            rs.fail_all(&format!("{e:#}"));
+            return Err(e);
+        }
+    }
+    Ok(())
 }
 
 /// Margin on the unit's clock for telling a restarted unit from an old record.
@@ -439,6 +474,9 @@ fn serve(
         if end.is_some_and(|e| now >= e) {
             return Ok(Ended::Done);
         }
+        if let Err(e) = serve_reset(s, st) {
+            return Ok(Ended::Lost(format!("link lost: {e:#}")));
+        }
         let wait = now + o.retry;
         let deadline = end.map_or(wait, |e| e.min(wait));
         let frame = match s.next_frame(Some(deadline)) {
@@ -448,6 +486,12 @@ fn serve(
         let r = match frame {
             Some(f) => match f.message {
                 Message::Pose(r) => r,
+                Message::Reply(r) => {
+                    if let Some(rs) = &mut st.reset {
+                        st.reset_confirmed |= rs.reply(r.ok, &r.text, r.more);
+                    }
+                    continue;
+                }
                 _ => continue,
             },
             None if s.closed() => return Ok(Ended::Lost("link lost: the unit closed it".into())),
@@ -512,7 +556,9 @@ fn serve(
             flags: Some(r.flags.to_bits()),
             sequence: Some(u64::from(r.sequence)),
             overrange: false,
-            reset: zero && was_moving,
+            // A reset: the one the service asked (the record after the unit's `ok`), or
+            // sigmas back to zero (a `reset_pose` from elsewhere, a reboot).
+            reset: std::mem::take(&mut st.reset_confirmed) || (zero && was_moving),
             counts: Some((r.gamma_left, r.gamma_right)),
         };
         st.stream.set_extra(link_values(&st.counts));

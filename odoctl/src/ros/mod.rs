@@ -10,6 +10,7 @@ pub mod foxglove;
 pub mod msgs;
 pub mod names;
 pub mod recording;
+pub mod reset_service;
 pub mod spdp_relay;
 pub mod stamps;
 pub mod stream;
