@@ -62,6 +62,8 @@ async def main():
     ap.add_argument("--timeout", type=float, default=30)
     ap.add_argument("--until-records", type=int, default=0,
                     help="stop once the record with this index was received")
+    ap.add_argument("--expect-unit-status", action="append", default=[],
+                    help="a server status with this text under the unit's id")
     ap.add_argument("--expect-status", action="append", default=[],
                     help="a /diagnostics ERROR whose message contains this")
     a = ap.parse_args()
@@ -275,9 +277,17 @@ async def main():
 
     # /diagnostics and server status.
     diags = [(d.status[0].level, d.status[0].message) for _, d in got["/diagnostics"]]
+    # Server statuses: the unit's faults under the unit's id, the link's under the link's.
     for s in statuses:
-        if s.get("op") == "status" and not s.get("id", "").endswith(": link"):
-            fail(f"a server status of the link not under the link's id: {s}")
+        if s.get("op") != "status":
+            continue
+        unit = "encoder fault" in s.get("message", "")
+        if not s.get("id", "").endswith(": odometry unit" if unit else ": link"):
+            fail(f"a server status under the wrong id: {s}")
+    for want_msg in a.expect_unit_status:
+        if not any(s.get("op") == "status" and want_msg in s.get("message", "")
+                   and s.get("id") == "odoctl_bridge: odometry unit" for s in statuses):
+            fail(f"no server status of the unit with `{want_msg}`: {statuses}")
     for want_msg in a.expect_status:
         if not any(l == 2 and want_msg in m for l, m in diags):
             fail(f"no /diagnostics ERROR with `{want_msg}`: {diags}")
