@@ -1,16 +1,19 @@
-//! `odoctl bridge --port P`: the unit's live pose records as ROS 2 `/odom`, `/tf` and
-//! `/diagnostics` over DDS (the `ros2-client` crate on RustDDS: no ROS installation), with the
-//! conversions of docs/ROS.md (the same [`OdomStream`] as the recordings).
+//! `odoctl bridge --port P`: the unit's live pose records as ROS 2 `/odom`, `/tf`,
+//! `/joint_states` and `/diagnostics` over DDS (the `ros2-client` crate on RustDDS: no ROS
+//! installation), with the conversions of docs/ROS.md (the same [`OdomStream`] as the
+//! recordings) and the names of [`RosNames`]; a `reset_pose` service
+//! ([`super::reset_service`]); discovery as the `ROS_...` variables ask
+//! ([`super::discovery`], [`super::spdp_relay`]).
 //!
-//! QoS: reliable, volatile, keep last 10 on `/odom` and `/diagnostics`, keep last 100 on
-//! `/tf`: what robot_localization, rviz and tf2 listeners subscribe with by default (a
-//! reliable writer serves reliable and best-effort readers). A record is published once:
-//! a repeated sequence number is dropped and counted, and a lost link is reported on
-//! `/diagnostics` (ERROR) and reconnected; while no record arrives the status turns STALE and
-//! no pose is published. Across reconnections the stamps stay on the unit's clock, and a
-//! record at or before the last published one (sent again) is dropped as stale. With
-//! `--foxglove` the same messages, the path so far and the 1-sigma ellipse go to a Foxglove
-//! WebSocket server ([`super::foxglove`]).
+//! QoS: reliable, volatile, keep last 10 (100 on `/tf`): what robot_localization, rviz and
+//! tf2 listeners subscribe with by default (a reliable writer serves reliable and best-effort
+//! readers). A record is published once: a repeated sequence number is dropped and counted,
+//! and a lost link is reported on `/diagnostics` (ERROR, the link's status) and reconnected;
+//! while no record arrives the status turns STALE and no pose is published. Across
+//! reconnections the stamps stay on the unit's clock, and a record at or before the last
+//! published one (sent again) is dropped as stale. With `--foxglove` the same messages, the
+//! path so far and the 1-sigma ellipse go to a Foxglove WebSocket server
+//! ([`super::foxglove`]).
 
 use std::process::ExitCode;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
