@@ -103,8 +103,8 @@ fn expect_csv(dir: &Path, samples: &[odoctl::csvio::Sample]) -> std::path::PathB
 const CYCLONE_LOCALHOST: &str = "<CycloneDDS><Domain><General><AllowMulticast>false</AllowMulticast></General><Discovery><ParticipantIndex>auto</ParticipantIndex><MaxAutoParticipantIndex>32</MaxAutoParticipantIndex><Peers><Peer address=\"localhost\"/></Peers></Discovery></Domain></CycloneDDS>";
 
 /// Runs the bridge against a fake unit with the environment `env` and checks 80 records at a
-/// subscriber configured by `config`.
-fn discovered_with(domain: u16, config: &str, env: &[(&str, &str)]) {
+/// subscriber configured by `config`; the bridge must report the discovery range `range`.
+fn discovered_with(domain: u16, config: &str, env: &[(&str, &str)], range: &str) {
     let sim = common::sim(PathKind::Validation, 10.0, 13);
     let samples: Vec<_> = sim.samples[..300].to_vec();
     let dir = scratch(&format!("ros_bridge_discovery_{domain}"));
@@ -128,7 +128,7 @@ fn discovered_with(domain: u16, config: &str, env: &[(&str, &str)]) {
         .unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
-    assert!(err.contains("discovery Localhost"), "{err}");
+    assert!(err.contains(&format!("discovery {range}")), "{err}");
     unit.join().unwrap();
     let out = finish(sub);
     assert!(out.contains("dds_subscriber: ok"), "{out}");
@@ -144,9 +144,15 @@ fn localhost_range_reaches_cyclone_configured_as_rmw_cyclonedds_configures_it() 
         71,
         CYCLONE_LOCALHOST,
         &[("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")],
+        "Localhost",
     );
     // Humble's variable means the same range.
-    discovered_with(72, CYCLONE_LOCALHOST, &[("ROS_LOCALHOST_ONLY", "1")]);
+    discovered_with(
+        72,
+        CYCLONE_LOCALHOST,
+        &[("ROS_LOCALHOST_ONLY", "1")],
+        "Localhost",
+    );
     // OFF: nobody could discover the bridge; without --foxglove it has nothing to do.
     let o = Command::new(common::bin())
         .args(["bridge", "--port", "tcp:127.0.0.1:1", "--duration", "1"])
@@ -337,4 +343,29 @@ fn two_namespaced_bridges_on_one_domain_and_the_reset_service() {
     let out = finish(sub);
     assert!(out.contains("dds_subscriber: ok"), "{out}");
     eprintln!("{}\n{}", call.trim(), out.trim());
+}
+
+#[test]
+fn static_peers_reach_a_subscriber_that_knows_only_unicast_peers() {
+    if !cyclonedds_ready() {
+        return;
+    }
+    // This host's address on its network, as another machine would know it.
+    let Some(ip) = netdev::get_interfaces()
+        .into_iter()
+        .filter(|i| i.is_up() && !i.is_loopback())
+        .find_map(|i| i.ipv4.first().map(|n| n.addr().to_string()))
+    else {
+        let _ = writeln!(
+            std::io::stderr(),
+            "static peers: skipped: no network address"
+        );
+        return;
+    };
+    // A subscriber without multicast whose only peer is that address (rmw_cyclonedds's
+    // SUBNET range with ROS_STATIC_PEERS, multicast unavailable as between most hosts).
+    let config = format!(
+        "<CycloneDDS><Domain><General><AllowMulticast>false</AllowMulticast></General><Discovery><ParticipantIndex>auto</ParticipantIndex><MaxAutoParticipantIndex>32</MaxAutoParticipantIndex><Peers><Peer address=\"{ip}\"/></Peers></Discovery></Domain></CycloneDDS>"
+    );
+    discovered_with(73, &config, &[("ROS_STATIC_PEERS", ip.as_str())], "Subnet");
 }
