@@ -291,7 +291,14 @@ fn dds_context(d: &Discovery) -> Result<Option<(Context, Option<SpdpRelay>)>> {
         // As Cyclone DDS adds itself to its peers: this host's other addresses.
         peers.extend(spdp_relay::host_addresses());
     }
-    let socket = relay.then(|| RelaySocket::bind(d.domain)).transpose()?;
+    // Without the relay the bridge still publishes; only unicast-only peers miss it.
+    let socket = relay
+        .then(|| RelaySocket::bind(d.domain))
+        .transpose()
+        .unwrap_or_else(|e| {
+            eprintln!("bridge: warning: {e:#}; peers that discover by unicast only (ROS_STATIC_PEERS, Cyclone DDS with LOCALHOST) will not find the bridge");
+            None
+        });
     let participant = builder.build().map_err(dds("participant"))?;
     let mut prefix = [0u8; 12];
     prefix.copy_from_slice(&participant.guid().to_bytes()[..12]);
