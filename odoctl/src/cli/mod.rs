@@ -70,7 +70,8 @@ pub enum Cmd {
     Validate(ValidateArgs),
     /// Write a synthetic run (SAMPLES and REFERENCE CSVs) with known true parameters.
     Simulate(SimulateArgs),
-    /// Publish the live pose on ROS 2 (/odom, /tf, /joint_states, /diagnostics, a reset_pose service) over DDS (docs/ROS.md).
+    /// Publish the live pose on ROS 2 (/odom, /tf, /joint_states, /diagnostics, a reset_pose
+    /// service) over DDS (docs/ROS.md).
     Bridge(BridgeArgs),
 }
 
