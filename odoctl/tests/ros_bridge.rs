@@ -305,6 +305,22 @@ fn two_namespaced_bridges_on_one_domain_and_the_reset_service() {
             "robot2/",
         ],
     );
+    // robot1's odom stays continuous across the reset the service asks.
+    let sub1 = subscriber(
+        domain,
+        &[
+            "--max-step",
+            "0.05",
+            "--count",
+            "250",
+            "--timeout",
+            "25",
+            "--ns",
+            "robot1",
+            "--frame-prefix",
+            "robot1/",
+        ],
+    );
     let bridge = |port: u16, ns: &str| {
         Command::new(common::bin())
             .args(["bridge", "--port", &format!("tcp:127.0.0.1:{port}")])
@@ -342,7 +358,9 @@ fn two_namespaced_bridges_on_one_domain_and_the_reset_service() {
     );
     let out = finish(sub);
     assert!(out.contains("dds_subscriber: ok"), "{out}");
-    eprintln!("{}\n{}", call.trim(), out.trim());
+    let out1 = finish(sub1);
+    assert!(out1.contains("1 reset WARNs"), "{out1}");
+    eprintln!("{}\n{}\n{}", call.trim(), out.trim(), out1.trim());
 }
 
 #[test]

@@ -171,6 +171,8 @@ def main():
     ap.add_argument("--expect-error")
     ap.add_argument("--count", type=int, default=50)
     ap.add_argument("--timeout", type=float, default=30)
+    ap.add_argument("--max-step", type=float, default=None,
+                    help="instead of --expect: /odom positions at most this far (m) apart in a row")
     ap.add_argument("--ns", default="")
     ap.add_argument("--frame-prefix", default="")
     ap.add_argument("--no-tf", action="store_true")
@@ -198,6 +200,8 @@ def main():
         diags += diag_r.take(100)
         if o.expect and len(odom) >= o.count and (o.no_tf or len(tf) >= o.count) and len(joints) >= o.count:
             break
+        if o.max_step and len(odom) >= o.count:
+            break
         if o.expect_error and any(s.level == 2 and o.expect_error in s.message for d in diags for s in d.status):
             break
         time.sleep(0.02)
@@ -208,6 +212,21 @@ def main():
         check(any(s.level == 2 and o.expect_error in s.message for d in diags for s in d.status),
               f"no ERROR status with {o.expect_error!r}: {msgs}")
         print(f"dds_subscriber: ok: {len(diags)} /diagnostics, ERROR {o.expect_error!r}")
+        return
+
+    if o.max_step:
+        # odom is continuous (REP-105): no jump between consecutive messages, whatever the
+        # unit did (a reset_pose).
+        check(len(odom) >= o.count, f"{len(odom)} /odom messages, expected at least {o.count}")
+        steps = [math.hypot(b.pose.pose.position.x - a.pose.pose.position.x,
+                            b.pose.pose.position.y - a.pose.pose.position.y)
+                 for a, b in zip(odom, odom[1:])]
+        check(all(m.header.frame_id == odom_frame and m.child_frame_id == base_frame for m in odom),
+              "/odom frames")
+        check(max(steps) <= o.max_step, f"/odom jumps by {max(steps)} m")
+        resets = [s.message for d in diags for s in d.status if "reset_pose" in s.message]
+        print(f"dds_subscriber: ok: {len(odom)} /{rel}odom continuous (largest step {max(steps):.4f} m), "
+              f"{len(resets)} reset WARNs", flush=True)
         return
 
     with open(o.expect, newline="") as f:
