@@ -116,13 +116,29 @@ fn bridge_serves_the_pose_path_and_ellipse_to_a_foxglove_protocol_client() {
         return;
     }
     let sim = common::sim(PathKind::Validation, 10.0, 21);
-    let samples: Vec<_> = sim.samples[..500].to_vec();
+    let mut samples: Vec<_> = sim.samples[..500].to_vec();
+    // From record 150 on the unit reports a left encoder fault: a server status under the
+    // unit's id, not the link's.
+    for s in &mut samples[150..] {
+        s.flags = Some(1 << 3);
+    }
     let records = common::records(&ChassisParams::DESIGNED, &samples);
     let dir = scratch("ros_foxglove");
     let expect = expect_csv(&dir, &records);
     let (port, unit) = common::fake_unit(samples, Duration::from_millis(20));
     let (mut b, ws_port, _) = bridge(&["--port", &format!("tcp:127.0.0.1:{port}")]);
-    let out = client(ws_port, &expect, &["--min-odom", "200", "--timeout", "40"]);
+    let out = client(
+        ws_port,
+        &expect,
+        &[
+            "--min-odom",
+            "200",
+            "--timeout",
+            "40",
+            "--expect-unit-status",
+            "left encoder fault",
+        ],
+    );
     b.kill().unwrap();
     b.wait().unwrap();
     let _ = unit.join();

@@ -80,7 +80,8 @@ fn expectations(p: &ChassisParams, samples: &Path) -> String {
     out
 }
 
-fn read_back(dir: &Path, name: &str, stamps: &str, fault_at: Option<usize>) {
+/// Reads `name.mcap` back; `names` are read_mcap.py's name options (`--ns`, ...).
+fn read_back(dir: &Path, name: &str, stamps: &str, fault_at: Option<usize>, names: &[&str]) {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/ros/read_mcap.py");
     let f = |x: &str| dir.join(format!("{name}{x}")).display().to_string();
     let mut cmd = Command::new("python3");
@@ -101,6 +102,7 @@ fn read_back(dir: &Path, name: &str, stamps: &str, fault_at: Option<usize>) {
     if let Some(k) = fault_at {
         cmd.args(["--fault-at", &k.to_string()]);
     }
+    cmd.args(names);
     let o = cmd.output().expect("python3 runs");
     let out = String::from_utf8_lossy(&o.stdout);
     let err = String::from_utf8_lossy(&o.stderr);
@@ -110,23 +112,26 @@ fn read_back(dir: &Path, name: &str, stamps: &str, fault_at: Option<usize>) {
 }
 
 /// Replays `name_samples.csv` with `name.toml` through the CLI into `name.mcap` and
-/// `name_replay.csv`, and writes the expectations.
-fn replay_to_mcap(dir: &Path, name: &str, p: &ChassisParams) {
+/// `name_replay.csv` (with the name options `names`), and writes the expectations.
+fn replay_to_mcap(dir: &Path, name: &str, p: &ChassisParams, names: &[&str]) {
     let f = |x: &str| dir.join(format!("{name}{x}"));
     std::fs::write(f(".toml"), params_toml(p)).unwrap();
-    let o = odoctl(&[
-        "replay",
-        f("_samples.csv").to_str().unwrap(),
-        "--config",
-        f(".toml").to_str().unwrap(),
-        "--out",
-        f("_replay.csv").to_str().unwrap(),
-        "--mcap",
-        f(".mcap").to_str().unwrap(),
-    ]);
+    let mut args = vec![
+        "replay".to_string(),
+        f("_samples.csv").display().to_string(),
+        "--config".into(),
+        f(".toml").display().to_string(),
+        "--out".into(),
+        f("_replay.csv").display().to_string(),
+        "--mcap".into(),
+        f(".mcap").display().to_string(),
+    ];
+    args.extend(names.iter().map(|s| s.to_string()));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let o = odoctl(&args);
     success_stdout(&o);
     assert!(
-        String::from_utf8_lossy(&o.stderr).contains("/odom and /tf"),
+        String::from_utf8_lossy(&o.stderr).contains("/odom"),
         "{}",
         String::from_utf8_lossy(&o.stderr)
     );
@@ -158,9 +163,9 @@ fn paper_model_simulated_run_read_back_independently() {
     p.delta_left = 3.0e-6;
     p.delta_right = 2.0e-6;
     p.delta_diff = 1.0e-6;
-    replay_to_mcap(&dir, "paper", &p);
+    replay_to_mcap(&dir, "paper", &p, &[]);
     if python_ready() {
-        read_back(&dir, "paper", "samples_t", None);
+        read_back(&dir, "paper", "samples_t", None, &[]);
     }
 }
 
@@ -191,7 +196,19 @@ fn covariance_model_recording_with_time_tags_and_a_fault_read_back_independently
     p.uncertainty_model = odo_unit::odometry::UncertaintyModel::Covariance;
     p.kappa_left = 2.0e-6;
     p.kappa_right = 1.0e-6;
-    replay_to_mcap(&dir, "cov", &p);
+    // A second robot's names: namespace, frame prefix, its own joints, no TF.
+    let names = [
+        "--namespace",
+        "robot2",
+        "--frame-prefix",
+        "robot2/",
+        "--left-wheel-joint",
+        "wheel_l",
+        "--right-wheel-joint",
+        "wheel_r",
+        "--no-tf",
+    ];
+    replay_to_mcap(&dir, "cov", &p, &names);
     // The position-heading terms are carried (non-zero) by this model.
     let e = std::fs::read_to_string(dir.join("cov_expect.csv")).unwrap();
     let last: Vec<f64> = e
@@ -203,7 +220,16 @@ fn covariance_model_recording_with_time_tags_and_a_fault_read_back_independently
         .collect();
     assert!(last[2] != 0.0 && last[3] != 0.0, "{last:?}");
     if python_ready() {
-        read_back(&dir, "cov", "utc", Some(fault_at));
+        let back = [
+            "--ns",
+            "robot2",
+            "--frame-prefix",
+            "robot2/",
+            "--joints",
+            "wheel_l,wheel_r",
+            "--no-tf",
+        ];
+        read_back(&dir, "cov", "utc", Some(fault_at), &back);
     }
 }
 
@@ -266,7 +292,7 @@ fn record_mcap_from_a_unit_on_tcp_read_back_independently() {
     }
     std::fs::write(f("_expect.csv"), e).unwrap();
     if python_ready() {
-        read_back(&dir, "rec", "mcu_time", None);
+        read_back(&dir, "rec", "mcu_time", None, &[]);
     }
 }
 

@@ -9,6 +9,7 @@ use odo_unit::odometry::UncertaintyModel;
 
 mod calibrate;
 mod reference;
+mod ros;
 mod simulate;
 mod trajectory;
 mod umbmark;
@@ -16,6 +17,7 @@ pub mod values;
 
 pub use calibrate::{CalibrateArgs, GeometryArgs};
 pub use reference::{PosTimeArg, ReceiverArgs, ReferenceArgs};
+pub use ros::RosNameArgs;
 pub use simulate::SimulateArgs;
 pub use trajectory::TrajectoryArgs;
 pub use umbmark::UmbmarkArgs;
@@ -72,7 +74,8 @@ pub enum Cmd {
     Validate(ValidateArgs),
     /// Write a synthetic run (SAMPLES and REFERENCE CSVs) with known true parameters.
     Simulate(SimulateArgs),
-    /// Publish the live pose on ROS 2 (/odom, /tf, /diagnostics) over DDS (docs/ROS.md).
+    /// Publish the live pose on ROS 2 (/odom, /tf, /joint_states, /diagnostics, a reset_pose
+    /// service) over DDS (docs/ROS.md).
     Bridge(BridgeArgs),
     /// Fit the diameters and track width to square runs and a straight measured on the floor.
     Umbmark(UmbmarkArgs),
@@ -125,6 +128,9 @@ pub struct RecordArgs {
     /// The unit's parameters, for the twist of `--mcap`.
     #[command(flatten)]
     pub params: ParamArgs,
+    /// Frames, topics and joints of `--mcap`.
+    #[command(flatten)]
+    pub ros: RosNameArgs,
 }
 
 /// `odoctl decode`.
@@ -216,6 +222,9 @@ pub struct ReplayArgs {
     /// file (docs/ROS.md).
     #[arg(long)]
     pub mcap: Option<PathBuf>,
+    /// Frames, topics and joints of `--mcap`.
+    #[command(flatten)]
+    pub ros: RosNameArgs,
 }
 
 /// `odoctl validate`.
@@ -297,6 +306,12 @@ pub struct BridgeArgs {
     /// for a flight controller (docs/MAVLINK.md).
     #[arg(long, value_name = "TARGET", conflicts_with_all = ["foxglove", "no_dds"])]
     pub mavlink: Option<String>,
+    /// Frames, topics, joints and TF.
+    #[command(flatten)]
+    pub ros: RosNameArgs,
+    /// ROS 2 node name.
+    #[arg(long, default_value = "odoctl_bridge")]
+    pub node_name: String,
 }
 
 /// One uncertainty model.

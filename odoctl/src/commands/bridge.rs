@@ -8,6 +8,7 @@ use anyhow::Result;
 
 use crate::cli::BridgeArgs;
 use crate::ros::bridge::{self, BridgeOptions};
+use crate::ros::names::RosNames;
 
 /// `odoctl bridge`.
 pub fn run(a: &BridgeArgs) -> Result<ExitCode> {
@@ -27,5 +28,6 @@ pub fn run(a: &BridgeArgs) -> Result<ExitCode> {
         retry: secs("retry", a.retry)?,
         foxglove: a.foxglove.clone(),
         dds: !a.no_dds,
+        names: RosNames::resolve(&a.ros.options(&a.node_name))?,
     })
 }

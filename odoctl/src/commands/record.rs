@@ -13,6 +13,8 @@ use crate::link::{describe, health, open, SegmentWriter, Session, REPLY_TIMEOUT}
 
 /// `odoctl record`: the recording, then its MCAP export when `--mcap` is given.
 pub fn run(a: &RecordArgs) -> Result<ExitCode> {
+    // A bad name is refused before recording.
+    let names = crate::ros::names::RosNames::resolve(&a.ros.options("odoctl"))?;
     let code = record(
         &a.port.port,
         a.port.baud,
@@ -23,7 +25,8 @@ pub fn run(a: &RecordArgs) -> Result<ExitCode> {
         a.reset_pose,
     )?;
     if let Some(m) = &a.mcap {
-        crate::ros::export::record_hook(m, &a.out, a.params.config.as_deref(), &a.params.sets)?;
+        let params = (a.params.config.as_deref(), a.params.sets.as_slice());
+        crate::ros::export::record_hook(m, &a.out, params, names)?;
     }
     Ok(code)
 }

@@ -20,7 +20,8 @@ pub fn run(a: &ReplayArgs) -> Result<ExitCode> {
     let (config, sets) = (a.params.config.as_deref(), &a.params.sets);
     let start = (a.x, a.y, a.heading);
     if let Some(m) = &a.mcap {
-        crate::ros::export::replay_hook(m, &a.samples, config, sets, start)?;
+        let names = crate::ros::names::RosNames::resolve(&a.ros.options("odoctl"))?;
+        crate::ros::export::replay_hook(m, &a.samples, config, sets, start, names)?;
     }
     replay(&a.samples, config, sets, start, a.check, a.out.as_deref())
 }

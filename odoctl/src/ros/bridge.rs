@@ -1,30 +1,36 @@
-//! `odoctl bridge --port P`: the unit's live pose records as ROS 2 `/odom`, `/tf` and
-//! `/diagnostics` over DDS (the `ros2-client` crate on RustDDS: no ROS installation), with the
-//! conversions of docs/ROS.md (the same [`OdomStream`] as the recordings).
+//! `odoctl bridge --port P`: the unit's live pose records as ROS 2 `/odom`, `/tf`,
+//! `/joint_states` and `/diagnostics` over DDS (the `ros2-client` crate on RustDDS: no ROS
+//! installation), with the conversions of docs/ROS.md (the same [`OdomStream`] as the
+//! recordings) and the names of [`RosNames`]; a `reset_pose` service
+//! ([`super::reset_service`]); discovery as the `ROS_...` variables ask
+//! ([`super::discovery`], [`super::spdp_relay`]).
 //!
-//! QoS: reliable, volatile, keep last 10 on `/odom` and `/diagnostics`, keep last 100 on
-//! `/tf`: what robot_localization, rviz and tf2 listeners subscribe with by default (a
-//! reliable writer serves reliable and best-effort readers). A record is published once:
-//! a repeated sequence number is dropped and counted, and a lost link is reported on
-//! `/diagnostics` (ERROR) and reconnected; while no record arrives the status turns STALE and
-//! no pose is published. Across reconnections the stamps stay on the unit's clock, and a
-//! record at or before the last published one (sent again) is dropped as stale. With
-//! `--foxglove` the same messages, the path so far and the 1-sigma ellipse go to a Foxglove
-//! WebSocket server ([`super::foxglove`]).
+//! QoS: reliable, volatile, keep last 10 (100 on `/tf`): what robot_localization, rviz and
+//! tf2 listeners subscribe with by default (a reliable writer serves reliable and best-effort
+//! readers). A record is published once: a repeated sequence number is dropped and counted,
+//! and a lost link is reported on `/diagnostics` (ERROR, the link's status) and reconnected;
+//! while no record arrives the status turns STALE and no pose is published. Across
+//! reconnections the stamps stay on the unit's clock, and a record at or before the last
+//! published one (sent again) is dropped as stale. With `--foxglove` the same messages, the
+//! path so far and the 1-sigma ellipse go to a Foxglove WebSocket server
+//! ([`super::foxglove`]).
 
 use std::process::ExitCode;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use anyhow::{anyhow, Result};
 use odo_unit::protocol::{Message, PoseRecord};
+use ros2_client::dds::rustdds::{DomainParticipantBuilder, RTPSEntity};
 use ros2_client::qos::{Durability, History, WhenFull};
-use ros2_client::{
-    Context, ContextOptions, MessageTypeName, Name, Node, NodeName, NodeOptions, QosProfile,
-};
+use ros2_client::{Context, MessageTypeName, Name, Node, NodeName, NodeOptions, QosProfile};
 
 use super::conventions::{BaseTwist, PoseCovariance};
+use super::discovery::{Discovery, Range};
 use super::foxglove::{parse_address, FoxgloveServer};
 use super::msgs::{self, level};
+use super::names::RosNames;
+use super::reset_service::ResetService;
+use super::spdp_relay::{self, RelaySocket, SpdpRelay};
 use super::stamps::gps_to_unix_nanos;
 use super::stream::{Messages, OdomSample, OdomStream};
 use crate::link::{self, Session};
@@ -50,6 +56,8 @@ pub struct BridgeOptions {
     pub foxglove: Option<String>,
     /// Publish over DDS (ROS 2).
     pub dds: bool,
+    /// Node, topic, frame and joint names; TF on or off.
+    pub names: RosNames,
 }
 
 /// What a bridge run did.
@@ -119,7 +127,8 @@ impl LiveStamps {
 
 struct Publishers {
     odom: ros2_client::Publisher<msgs::Odometry>,
-    tf: ros2_client::Publisher<msgs::TfMessage>,
+    tf: Option<ros2_client::Publisher<msgs::TfMessage>>,
+    joints: ros2_client::Publisher<msgs::JointState>,
     diagnostics: ros2_client::Publisher<msgs::DiagnosticArray>,
 }
 
@@ -127,46 +136,45 @@ fn dds<E: std::fmt::Debug>(what: &'static str) -> impl Fn(E) -> anyhow::Error {
     move |e| anyhow!("DDS: {what}: {e:?}")
 }
 
+/// The QoS of a topic (docs/ROS.md, *QoS*): reliable, volatile, keep last `depth`.
+fn qos(depth: usize) -> QosProfile {
+    QosProfile::publisher_default()
+        .reliability_reliable(WhenFull::DEFAULT)
+        .durability(Durability::Volatile)
+        .history(History::KeepLast { depth })
+}
+
+/// A publisher of `T` (`pkg/msg/Type`) on the fully qualified `topic`.
+fn publisher<T: serde::Serialize>(
+    node: &mut Node,
+    topic: &str,
+    (pkg, ty): (&str, &str),
+    depth: usize,
+) -> Result<ros2_client::Publisher<T>> {
+    let (ns, base) = RosNames::split(topic);
+    let name = Name::new(ns, base).map_err(|e| anyhow!("DDS: topic name {topic}: {e:?}"))?;
+    let t = node
+        .create_topic(&name, MessageTypeName::new(pkg, ty), &qos(depth))
+        .map_err(|e| anyhow!("DDS: topic {topic}: {e:?}"))?;
+    node.create_publisher(&t, None)
+        .map_err(|e| anyhow!("DDS: publisher {topic}: {e:?}"))
+}
+
 impl Publishers {
-    fn new(node: &mut Node) -> Result<Self> {
-        let qos = |depth| {
-            QosProfile::publisher_default()
-                .reliability_reliable(WhenFull::DEFAULT)
-                .durability(Durability::Volatile)
-                .history(History::KeepLast { depth })
-        };
-        let name = |n: &str| Name::new("/", n).map_err(dds("topic name"));
-        let odom = node
-            .create_topic(
-                &name("odom")?,
-                MessageTypeName::new("nav_msgs", "Odometry"),
-                &qos(10),
-            )
-            .map_err(dds("topic /odom"))?;
-        let tf = node
-            .create_topic(
-                &name("tf")?,
-                MessageTypeName::new("tf2_msgs", "TFMessage"),
-                &qos(100),
-            )
-            .map_err(dds("topic /tf"))?;
-        let diagnostics = node
-            .create_topic(
-                &name("diagnostics")?,
-                MessageTypeName::new("diagnostic_msgs", "DiagnosticArray"),
-                &qos(10),
-            )
-            .map_err(dds("topic /diagnostics"))?;
+    fn new(node: &mut Node, names: &RosNames) -> Result<Self> {
         Ok(Self {
-            odom: node
-                .create_publisher(&odom, None)
-                .map_err(dds("publisher /odom"))?,
-            tf: node
-                .create_publisher(&tf, None)
-                .map_err(dds("publisher /tf"))?,
-            diagnostics: node
-                .create_publisher(&diagnostics, None)
-                .map_err(dds("publisher /diagnostics"))?,
+            odom: publisher(node, &names.odom, ("nav_msgs", "Odometry"), 10)?,
+            tf: match &names.tf {
+                Some(t) => Some(publisher(node, t, ("tf2_msgs", "TFMessage"), 100)?),
+                None => None,
+            },
+            joints: publisher(node, &names.joint_states, ("sensor_msgs", "JointState"), 10)?,
+            diagnostics: publisher(
+                node,
+                &names.diagnostics,
+                ("diagnostic_msgs", "DiagnosticArray"),
+                10,
+            )?,
         })
     }
 
@@ -177,10 +185,11 @@ impl Publishers {
     }
 }
 
-fn parse_rate(text: &str) -> Option<f64> {
+/// The value of `key` in a `get` reply (`key = value` lines).
+fn parse_value(text: &str, key: &str) -> Option<f64> {
     text.lines().find_map(|l| {
         let (k, v) = l.split_once('=')?;
-        (k.trim() == "rate").then(|| v.trim().parse().ok())?
+        (k.trim() == key).then(|| v.trim().parse().ok())?
     })
 }
 
@@ -199,8 +208,13 @@ impl Outlets {
             if let Some(d) = m.diagnostics {
                 p.status(d)?;
             }
-            p.odom.publish(m.odom).map_err(dds("write /odom"))?;
-            p.tf.publish(m.tf).map_err(dds("write /tf"))?;
+            p.odom.publish(m.odom).map_err(dds("write odom"))?;
+            if let (Some(t), Some(tf)) = (&p.tf, m.tf) {
+                t.publish(tf).map_err(dds("write tf"))?;
+            }
+            if let Some(j) = m.joints {
+                p.joints.publish(j).map_err(dds("write joint_states"))?;
+            }
         }
         Ok(())
     }
@@ -231,18 +245,66 @@ struct State {
     stamps: LiveStamps,
     /// The last published record, its stamp and when it arrived.
     last: Option<(PoseRecord, u64, Instant)>,
+    /// The `reset_pose` service (DDS only).
+    reset: Option<ResetService>,
+    /// The unit confirmed a `reset_pose` of the service: its next record carries the reset.
+    reset_confirmed: bool,
 }
 
-fn ros_domain() -> Result<u16> {
-    match std::env::var("ROS_DOMAIN_ID") {
-        Ok(v) if !v.trim().is_empty() => v
-            .trim()
-            .parse::<u16>()
-            .ok()
-            .filter(|d| *d <= 232)
-            .ok_or_else(|| anyhow!("ROS_DOMAIN_ID `{v}` is not a domain (0..=232)")),
-        _ => Ok(0),
+/// The addresses of `ROS_STATIC_PEERS` (host names resolved).
+fn peer_addresses(peers: &[String]) -> Result<Vec<std::net::IpAddr>> {
+    use std::net::ToSocketAddrs;
+    let mut out = Vec::new();
+    for p in peers {
+        let addrs = (p.as_str(), 0)
+            .to_socket_addrs()
+            .map_err(|e| anyhow!("ROS_STATIC_PEERS: `{p}`: not an address ({e})"))?;
+        out.extend(addrs.map(|a| a.ip()));
     }
+    Ok(out)
+}
+
+/// The DDS context for the discovery settings `d` (with the relay that carries its
+/// announcements to unicast peers, kept alive beside it), `None` with the range `OFF` (no
+/// other process could discover the bridge). `LOCALHOST`: RustDDS's multicast and advertised
+/// locators on 127.0.0.1 only, announcements to the well-known ports on 127.0.0.1 and, by the
+/// relay, to those of the local addresses other participants announce from; `SUBNET`:
+/// multicast as well, and the static peers by the relay; `SYSTEM_DEFAULT`: RustDDS's defaults.
+fn dds_context(d: &Discovery) -> Result<Option<(Context, Option<SpdpRelay>)>> {
+    for w in &d.warnings {
+        eprintln!("bridge: warning: {w}");
+    }
+    let builder = DomainParticipantBuilder::new(d.domain);
+    let (builder, relay) = match d.range {
+        Range::Off => return Ok(None),
+        Range::Localhost => (
+            builder
+                .with_only_networks([std::net::Ipv4Addr::LOCALHOST])
+                .same_host_loopback(true),
+            true,
+        ),
+        Range::Subnet => (builder, !d.static_peers.is_empty()),
+        Range::SystemDefault => (builder, false),
+    };
+    let mut peers = peer_addresses(&d.static_peers)?;
+    if d.range == Range::Localhost {
+        // As Cyclone DDS adds itself to its peers: this host's other addresses.
+        peers.extend(spdp_relay::host_addresses());
+    }
+    // Without the relay the bridge still publishes; only unicast-only peers miss it.
+    let socket = relay
+        .then(|| RelaySocket::bind(d.domain))
+        .transpose()
+        .unwrap_or_else(|e| {
+            eprintln!("bridge: warning: {e:#}; peers that discover by unicast only (ROS_STATIC_PEERS, Cyclone DDS with LOCALHOST) will not find the bridge");
+            None
+        });
+    let participant = builder.build().map_err(dds("participant"))?;
+    let mut prefix = [0u8; 12];
+    prefix.copy_from_slice(&participant.guid().to_bytes()[..12]);
+    let relay = socket.map(|s| s.start(prefix, peers)).transpose()?;
+    let context = Context::from_domain_participant(participant).map_err(dds("context"))?;
+    Ok(Some((context, relay)))
 }
 
 /// `odoctl bridge`.
@@ -255,46 +317,70 @@ pub fn run(o: &BridgeOptions) -> Result<ExitCode> {
     let foxglove = o.foxglove.as_deref().map(parse_address).transpose()?;
     // Kept alive while publishing.
     let mut _node = None;
-    if o.dds {
-        let domain = ros_domain()?;
-        let context = Context::with_options(ContextOptions::new().domain_id(domain))
-            .map_err(dds("context"))?;
+    let discovery = Discovery::from_env(|k| std::env::var(k).ok())?;
+    let context = if o.dds {
+        dds_context(&discovery)?
+    } else {
+        None
+    };
+    if o.dds && context.is_none() {
+        if foxglove.is_none() {
+            anyhow::bail!("ROS_AUTOMATIC_DISCOVERY_RANGE=OFF: no other process can discover the bridge, and there is no --foxglove: nothing to publish");
+        }
+        eprintln!("bridge: ROS_AUTOMATIC_DISCOVERY_RANGE=OFF: nothing published over DDS");
+    }
+    // Kept alive while publishing.
+    let mut _relay = None;
+    let mut reset = None;
+    if let Some((context, relay)) = context {
+        _relay = relay;
+        let domain = discovery.domain;
+        let n = &o.names;
         let mut node = context
             .new_node(
-                NodeName::new("/", "odoctl_bridge").map_err(dds("node name"))?,
+                NodeName::new(&n.namespace, &n.node).map_err(dds("node name"))?,
                 NodeOptions::new(),
             )
             .map_err(dds("node"))?;
-        outlets.dds = Some(Publishers::new(&mut node)?);
+        outlets.dds = Some(Publishers::new(&mut node, n)?);
+        reset = Some(ResetService::new(&mut node, n)?);
         _node = Some(node);
         eprintln!(
-            "bridge: publishing /odom, /tf, /diagnostics from {} (ROS 2 domain {domain})",
-            o.port
+            "bridge: node {}{}{} publishing {} from {} (ROS 2 domain {domain}, discovery {:?})",
+            n.namespace,
+            if n.namespace == "/" { "" } else { "/" },
+            n.node,
+            topic_list(n, false),
+            o.port,
+            discovery.range
         );
     }
     if let Some((host, port)) = foxglove {
-        let f = FoxgloveServer::start(&host, port)?;
+        let f = FoxgloveServer::start(&host, port, &o.names)?;
         let shown = if host.contains(':') {
             format!("[{host}]")
         } else {
             host.clone()
         };
         eprintln!(
-            "bridge: Foxglove WebSocket server on ws://{shown}:{} (/odom, /tf, /diagnostics, /odom/path, /odom/ellipse) from {}",
+            "bridge: Foxglove WebSocket server on ws://{shown}:{} ({}) from {}",
             f.port(),
+            topic_list(&o.names, true),
             o.port
         );
         outlets.foxglove = Some(f);
     }
     let end = o.duration.map(|d| Instant::now() + d);
     let mut st = State {
-        stream: OdomStream::new(None),
+        stream: OdomStream::new(None).with_names(o.names.clone()),
         counts: BridgeCounts::default(),
         stamps: LiveStamps {
             rate: None,
             origin: None,
         },
         last: None,
+        reset,
+        reset_confirmed: false,
     };
     loop {
         if end.is_some_and(|e| Instant::now() >= e) {
@@ -310,6 +396,9 @@ pub fn run(o: &BridgeOptions) -> Result<ExitCode> {
                 st.counts.link_losses += 1;
                 st.stream.set_extra(link_values(&st.counts));
                 let msg = format!("{why}; reconnecting every {:.1} s", o.retry.as_secs_f64());
+                if let Some(r) = &mut st.reset {
+                    r.fail_all(&format!("no link to the unit: {why}"));
+                }
                 eprintln!("bridge: {msg}");
                 outlets.status(st.stream.status(host_now_ns(), level::ERROR, &msg)?)?;
                 std::thread::sleep(o.retry);
@@ -321,7 +410,25 @@ pub fn run(o: &BridgeOptions) -> Result<ExitCode> {
         "bridge: {} records published, {} repeated records dropped, {} stale records dropped, {} link losses",
         c.published, c.repeated, c.stale, c.link_losses
     );
+    if let Some(r) = &st.reset {
+        eprintln!(
+            "bridge: {} reset_pose requests answered, {} pose resets absorbed (odom kept continuous)",
+            r.answered(),
+            st.stream.counts().resets
+        );
+    }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The topics published, for the start message; with the Foxglove-only ones when `foxglove`.
+fn topic_list(n: &RosNames, foxglove: bool) -> String {
+    let mut t = vec![n.odom.as_str()];
+    t.extend(n.tf.as_deref());
+    t.extend([n.joint_states.as_str(), n.diagnostics.as_str()]);
+    if foxglove {
+        t.extend([n.path.as_str(), n.ellipse.as_str()]);
+    }
+    t.join(", ")
 }
 
 fn link_values(c: &BridgeCounts) -> Vec<(String, String)> {
@@ -331,6 +438,22 @@ fn link_values(c: &BridgeCounts) -> Vec<(String, String)> {
         ("stale_records_dropped".into(), c.stale.to_string()),
         ("link_losses".into(), c.link_losses.to_string()),
     ]
+}
+
+/// The `reset_pose` service's turn: a new request sends `reset_pose` to the unit (answered
+/// when its reply arrives); one without a reply in time is answered as failed.
+fn serve_reset(s: &mut Session, st: &mut State) -> Result<()> {
+    let Some(rs) = &mut st.reset else {
+        return Ok(());
+    };
+    rs.expire();
+    if rs.poll() {
+        if let Err(e) = s.send_line("reset_pose") {
+            rs.fail_all(&format!("{e:#}"));
+            return Err(e);
+        }
+    }
+    Ok(())
 }
 
 /// Margin on the unit's clock for telling a restarted unit from an old record.
@@ -344,16 +467,25 @@ fn serve(
     st: &mut State,
     end: Option<Instant>,
 ) -> Result<Ended> {
-    st.stamps.rate = match s.command("get rate", o.retry.max(Duration::from_secs(1))) {
-        Ok((true, text)) => parse_rate(&text),
-        Ok(_) => None,
+    // One `get` (every key): the sample rate for the stamps, and the increments per turn the
+    // unit works with for the joint angles (else the given parameters').
+    let settings = match s.command("get", o.retry.max(Duration::from_secs(1))) {
+        Ok((true, text)) => text,
+        Ok(_) => String::new(),
         Err(e) => return Ok(Ended::Lost(format!("link: {e:#}"))),
     };
+    st.stamps.rate = parse_value(&settings, "rate");
+    let ticks = parse_value(&settings, "ticks_per_rev").map(|t| t as u32);
+    st.stream
+        .set_ticks_per_rev(Some(ticks.unwrap_or(o.params.ticks_per_rev)));
     let mut stale = false;
     loop {
         let now = Instant::now();
         if end.is_some_and(|e| now >= e) {
             return Ok(Ended::Done);
+        }
+        if let Err(e) = serve_reset(s, st) {
+            return Ok(Ended::Lost(format!("link lost: {e:#}")));
         }
         let wait = now + o.retry;
         let deadline = end.map_or(wait, |e| e.min(wait));
@@ -364,6 +496,12 @@ fn serve(
         let r = match frame {
             Some(f) => match f.message {
                 Message::Pose(r) => r,
+                Message::Reply(r) => {
+                    if let Some(rs) = &mut st.reset {
+                        st.reset_confirmed |= rs.reply(r.ok, &r.text, r.more);
+                    }
+                    continue;
+                }
                 _ => continue,
             },
             None if s.closed() => return Ok(Ended::Lost("link lost: the unit closed it".into())),
@@ -428,7 +566,10 @@ fn serve(
             flags: Some(r.flags.to_bits()),
             sequence: Some(u64::from(r.sequence)),
             overrange: false,
-            reset: zero && was_moving,
+            // A reset: the one the service asked (the record after the unit's `ok`), or
+            // sigmas back to zero (a `reset_pose` from elsewhere, a reboot).
+            reset: std::mem::take(&mut st.reset_confirmed) || (zero && was_moving),
+            counts: Some((r.gamma_left, r.gamma_right)),
         };
         st.stream.set_extra(link_values(&st.counts));
         let m = match st.stream.next(&sample) {
@@ -480,9 +621,13 @@ mod tests {
 
     #[test]
     fn rate_reply() {
-        assert_eq!(parse_rate("rate = 50\n"), Some(50.0));
-        assert_eq!(parse_rate("x = 1\nrate=100"), Some(100.0));
-        assert_eq!(parse_rate("rates = 5"), None);
+        assert_eq!(parse_value("rate = 50\n", "rate"), Some(50.0));
+        assert_eq!(parse_value("x = 1\nrate=100", "rate"), Some(100.0));
+        assert_eq!(parse_value("rates = 5", "rate"), None);
+        assert_eq!(
+            parse_value("ticks_per_rev = 20000", "ticks_per_rev"),
+            Some(20000.0)
+        );
     }
 
     #[test]

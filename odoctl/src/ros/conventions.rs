@@ -14,10 +14,25 @@ use odo_unit::odometry::{ChassisParams, Pose, UncertaintyModel};
 /// roll and pitch rates): large, finite, never zero (m^2, rad^2, (m/s)^2, (rad/s)^2).
 pub const UNOBSERVED_VARIANCE: f64 = 1.0e6;
 
-/// Parent frame of the pose (REP-105).
+/// The least variance published for an observed dimension (x, y, yaw; vx, vy, yaw rate):
+/// m^2, rad^2, (m/s)^2, (rad/s)^2. A variance below it (the exactly-zero pose covariance at
+/// the first record and after a reset) is published as this floor, because filters such as
+/// robot_localization warn on and mishandle zero variances. 1e-10 is a 10 um (10 urad)
+/// sigma, below the quantisation of one count of the designed chassis.
+pub const VARIANCE_FLOOR: f64 = 1.0e-10;
+
+/// Parent frame of the pose (REP-105), the default of [`super::names`].
 pub const ODOM_FRAME: &str = "odom";
-/// Frame of the chassis and of the twist (REP-105).
+/// Frame of the chassis and of the twist (REP-105), the default of [`super::names`].
 pub const BASE_FRAME: &str = "base_link";
+
+/// Raises the observed variances `[0]`, `[7]`, `[35]` to at least [`VARIANCE_FLOOR`].
+fn floored(mut c: [f64; 36]) -> Covariance6 {
+    for i in [0, 7, 35] {
+        c[i] = c[i].max(VARIANCE_FLOOR);
+    }
+    Covariance6(c)
+}
 
 /// ROS yaw (rad, counter-clockwise from +x) of our heading, wrapped to (-pi, pi].
 pub fn yaw_of_heading(heading: f64) -> f64 {
@@ -97,7 +112,7 @@ impl PoseCovariance {
 
     /// The `nav_msgs/Odometry` pose covariance: row-major 6x6 over (x, y, z, roll, pitch,
     /// yaw). `yaw = pi/2 - alpha` flips the sign of the position-yaw terms; z, roll and pitch
-    /// get [`UNOBSERVED_VARIANCE`].
+    /// get [`UNOBSERVED_VARIANCE`]; the x, y and yaw variances at least [`VARIANCE_FLOOR`].
     pub fn to_ros(&self) -> Covariance6 {
         let mut c = [0.0; 36];
         c[0] = self.xx;
@@ -112,7 +127,7 @@ impl PoseCovariance {
         c[30] = -self.xa;
         c[11] = -self.ya;
         c[31] = -self.ya;
-        Covariance6(c)
+        floored(c)
     }
 }
 
@@ -179,7 +194,8 @@ impl BaseTwist {
 
     /// The twist covariance: row-major 6x6 over (vx, vy, vz, roll rate, pitch rate, yaw
     /// rate). `vy = 0` is the differential drive's constraint, given the variance of `vx`;
-    /// vz, roll and pitch rates get [`UNOBSERVED_VARIANCE`].
+    /// vz, roll and pitch rates get [`UNOBSERVED_VARIANCE`]; the vx, vy and yaw rate
+    /// variances are at least [`VARIANCE_FLOOR`].
     pub fn covariance(&self) -> Covariance6 {
         let mut c = [0.0; 36];
         c[0] = self.var_vx;
@@ -190,7 +206,7 @@ impl BaseTwist {
         c[35] = self.var_wz;
         c[5] = self.cov_vx_wz;
         c[30] = self.cov_vx_wz;
-        Covariance6(c)
+        floored(c)
     }
 
     /// The covariance of an interval with no motion information (the first sample): every
@@ -371,6 +387,30 @@ mod tests {
                 assert!(c[r * 6 + k].is_finite());
             }
         }
+    }
+
+    #[test]
+    fn no_observed_variance_is_zero() {
+        let c = PoseCovariance::default().to_ros().0;
+        assert_eq!(
+            (c[0], c[7], c[35]),
+            (VARIANCE_FLOOR, VARIANCE_FLOOR, VARIANCE_FLOOR)
+        );
+        assert_eq!(
+            (c[1], c[5], c[11]),
+            (0.0, 0.0, 0.0),
+            "off-diagonal terms as they are"
+        );
+        let big = PoseCovariance {
+            xx: 2e-10,
+            ..Default::default()
+        };
+        assert_eq!(big.to_ros().0[0], 2e-10, "above the floor: unchanged");
+        let t = BaseTwist::default().covariance().0;
+        assert_eq!(
+            (t[0], t[7], t[35]),
+            (VARIANCE_FLOOR, VARIANCE_FLOOR, VARIANCE_FLOOR)
+        );
     }
 
     #[test]

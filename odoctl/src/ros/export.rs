@@ -5,7 +5,8 @@ use std::path::Path;
 
 use anyhow::{anyhow, Result};
 
-use super::conventions::{BaseTwist, PoseCovariance, UNOBSERVED_VARIANCE};
+use super::conventions::{BaseTwist, PoseCovariance, UNOBSERVED_VARIANCE, VARIANCE_FLOOR};
+use super::names::RosNames;
 use super::recording::{self, OdomSample, RecordingSummary};
 use super::stamps::{self, Stamps};
 use crate::config as cfg;
@@ -43,6 +44,7 @@ pub fn odom_samples(
         sequence: first.unit.and_then(|u| u.seq),
         overrange: false,
         reset: false,
+        counts: Some((first.left, first.right)),
     });
     for (i, w) in samples.windows(2).enumerate() {
         let (prev, s) = (&w[0], &w[1]);
@@ -58,6 +60,7 @@ pub fn odom_samples(
             sequence: s.unit.and_then(|u| u.seq),
             overrange: status.overrange,
             reset: false,
+            counts: Some((s.left, s.right)),
         });
     }
     Ok(out)
@@ -107,6 +110,7 @@ pub fn unit_samples(
             sequence: u.seq,
             overrange: false,
             reset: zero && prev.is_some_and(|(_, was_zero)| !was_zero),
+            counts: Some((s.left, s.right)),
         });
         prev = Some((s, zero));
     }
@@ -142,28 +146,38 @@ pub fn params_mismatch(params: &ChassisParams, samples: &[Sample]) -> Option<Str
     })
 }
 
-/// Records `odom` (with `/odom/path` at the end) into `out`.
+/// Records `odom` (with the whole path on `<odom>/path` at the end) into `out`, named by
+/// `names`; the joint states with `params.ticks_per_rev`.
 fn write(
     out: &Path,
     meta: &BTreeMap<String, String>,
     odom: &[OdomSample],
-    model: Option<odo_unit::odometry::UncertaintyModel>,
+    (params, model): (&ChassisParams, Option<odo_unit::odometry::UncertaintyModel>),
+    names: RosNames,
 ) -> Result<RecordingSummary> {
-    let mut rec = recording::create(out, meta)?;
+    let mut rec = recording::create_with(out, meta, names)?;
     if let Some(m) = model {
         rec.set_model(m);
     }
+    rec.set_ticks_per_rev(params.ticks_per_rev);
     for s in odom {
         rec.push(s)?;
     }
     let path: Vec<(u64, Pose)> = odom.iter().map(|s| (s.stamp_ns, s.pose)).collect();
-    rec.path("/odom/path", &path)?;
+    let topic = rec.names().path.clone();
+    rec.path(&topic, &path)?;
     rec.finish()
 }
 
 /// `odoctl record ... --mcap OUT`: the unit's pose records of the SAMPLES file `csv` just
-/// written (see [`unit_samples`]); `config`/`sets` are the unit's parameters for the twist.
-pub fn record_hook(out: &Path, csv: &Path, config: Option<&Path>, sets: &[String]) -> Result<()> {
+/// written (see [`unit_samples`]); `config`/`sets` are the unit's parameters for the twist
+/// and the joint states; `names` the topics and frames.
+pub fn record_hook(
+    out: &Path,
+    csv: &Path,
+    (config, sets): (Option<&Path>, &[String]),
+    names: RosNames,
+) -> Result<()> {
     let params = cfg::load(config, sets)?;
     let samples = crate::csvio::read_samples(csv)?;
     if let Some(w) = params_mismatch(&params, &samples) {
@@ -171,20 +185,24 @@ pub fn record_hook(out: &Path, csv: &Path, config: Option<&Path>, sets: &[String
     }
     let stamps = stamps::stamp(&samples);
     let odom = unit_samples(&params, &samples, &stamps)?;
-    let sum = write(
-        out,
-        &metadata(&params, &stamps, &csv.display().to_string(), "record"),
-        &odom,
-        None,
-    )?;
-    report(out, &sum);
+    let meta = metadata(
+        &params,
+        &stamps,
+        &csv.display().to_string(),
+        "record",
+        &names,
+    );
+    let tf = names.tf.is_some();
+    let sum = write(out, &meta, &odom, (&params, None), names)?;
+    report(out, &sum, tf);
     Ok(())
 }
 
-fn report(out: &Path, sum: &RecordingSummary) {
+fn report(out: &Path, sum: &RecordingSummary, tf: bool) {
     eprintln!(
-        "mcap: {} /odom and /tf, {} /diagnostics messages to {}{}{}",
+        "mcap: {} /odom{}, {} /diagnostics messages to {}{}{}",
         sum.stream.odom,
+        if tf { " and /tf" } else { " (no /tf)" },
         sum.stream.diagnostics,
         out.display(),
         if sum.stream.overrange > 0 {
@@ -212,6 +230,7 @@ pub fn metadata(
     stamps: &Stamps,
     source: &str,
     command: &str,
+    names: &RosNames,
 ) -> BTreeMap<String, String> {
     let mut m = BTreeMap::new();
     let mut put = |k: &str, v: String| {
@@ -226,9 +245,14 @@ pub fn metadata(
     put("stamps_extrapolated", stamps.extrapolated.to_string());
     put(
         "conventions",
-        "REP-103/105: frame odom, child base_link; x east, y north; yaw = pi/2 - heading; see docs/ROS.md".into(),
+        format!(
+            "REP-103/105: frame {}, child {}; x east, y north; yaw = pi/2 - heading; see docs/ROS.md",
+            names.odom_frame, names.base_frame
+        ),
     );
+    put("tf", names.tf.clone().unwrap_or_else(|| "off".into()));
     put("unobserved_variance", format!("{UNOBSERVED_VARIANCE:e}"));
+    put("variance_floor", format!("{VARIANCE_FLOOR:e}"));
     put(
         "reset_pose",
         "odom kept continuous (offset composed), WARN on /diagnostics".into(),
@@ -240,21 +264,24 @@ pub fn metadata(
 }
 
 /// `odoctl replay ... --mcap OUT`: replays `samples` (read from `source`) from `initial` and
-/// records `/odom`, `/tf`, `/diagnostics` and the whole path on `/odom/path`.
+/// records `/odom`, `/tf`, `/joint_states`, `/diagnostics` and the whole path on
+/// `/odom/path` (names from `names`).
 pub fn write_replay(
     out: &Path,
     params: &ChassisParams,
     samples: &[Sample],
-    initial: Pose,
-    source: &str,
+    (initial, source): (Pose, &str),
+    names: RosNames,
 ) -> Result<RecordingSummary> {
     let stamps = stamps::stamp(samples);
     let odom = odom_samples(params, samples, initial, &stamps)?;
+    let meta = metadata(params, &stamps, source, "replay", &names);
     write(
         out,
-        &metadata(params, &stamps, source, "replay"),
+        &meta,
         &odom,
-        Some(params.uncertainty_model),
+        (params, Some(params.uncertainty_model)),
+        names,
     )
 }
 
@@ -266,6 +293,7 @@ pub fn replay_hook(
     config: Option<&Path>,
     sets: &[String],
     start: (f64, f64, f64),
+    names: RosNames,
 ) -> Result<()> {
     let params = cfg::load(config, sets)?;
     let s = crate::csvio::read_samples(samples)?;
@@ -274,8 +302,10 @@ pub fn replay_hook(
         y: start.1,
         heading: start.2,
     };
-    let sum = write_replay(out, &params, &s, initial, &samples.display().to_string())?;
-    report(out, &sum);
+    let source = samples.display().to_string();
+    let tf = names.tf.is_some();
+    let sum = write_replay(out, &params, &s, (initial, &source), names)?;
+    report(out, &sum, tf);
     Ok(())
 }
 

@@ -9,7 +9,7 @@
 //! so far is `/odom/path` (`nav_msgs/msg/Path`, as in the recordings); the 1-sigma position
 //! ellipse is `/odom/ellipse` (`foxglove.SceneUpdate` in JSON: ROS has no ellipse message).
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::io::ErrorKind;
 use std::net::{TcpListener, TcpStream};
 use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TrySendError};
@@ -22,8 +22,8 @@ use tungstenite::handshake::server::{ErrorResponse, Request, Response};
 use tungstenite::http::{HeaderValue, StatusCode};
 use tungstenite::{Message as WsMessage, WebSocket};
 
-use super::conventions::ODOM_FRAME;
 use super::msgs::{self, MsgType};
+use super::names::RosNames;
 use super::stream::Messages;
 
 /// The subprotocols accepted, preferred first: the protocol's documented name and the name
@@ -156,6 +156,7 @@ fn time_json(ns: u64) -> Value {
 /// line loop) and a translucent disc, centred on the position, the major axis along the
 /// pose's orientation, in `odom`.
 pub fn ellipse_scene(odom: &msgs::Odometry, stamp_ns: u64) -> Value {
+    let frame = odom.header.frame_id.as_str();
     let c = &odom.pose.covariance.0;
     let e = Ellipse::from_covariance(c[0], c[7], c[1]);
     let pose = json!({
@@ -171,7 +172,7 @@ pub fn ellipse_scene(odom: &msgs::Odometry, stamp_ns: u64) -> Value {
         "deletions": [],
         "entities": [{
             "timestamp": time_json(stamp_ns),
-            "frame_id": ODOM_FRAME,
+            "frame_id": frame,
             "id": "position_1sigma",
             "lifetime": { "sec": 0, "nsec": 0 },
             "frame_locked": false,
@@ -243,7 +244,7 @@ fn scene_update_schema() -> String {
 /// One advertised channel.
 struct ChannelInfo {
     id: u32,
-    topic: &'static str,
+    topic: String,
     encoding: &'static str,
     schema_name: &'static str,
     schema: String,
@@ -255,30 +256,35 @@ const TF: u32 = 2;
 const DIAGNOSTICS: u32 = 3;
 const PATH: u32 = 4;
 const ELLIPSE: u32 = 5;
+const JOINTS: u32 = 6;
 
-fn channels() -> Vec<ChannelInfo> {
-    let ros = |id, topic, t: MsgType| ChannelInfo {
+fn channels(names: &RosNames) -> Vec<ChannelInfo> {
+    let ros = |id, topic: &str, t: MsgType| ChannelInfo {
         id,
-        topic,
+        topic: topic.into(),
         encoding: "cdr",
         schema_name: t.name(),
         schema: t.schema(),
         schema_encoding: "ros2msg",
     };
-    vec![
-        ros(ODOM, "/odom", MsgType::Odometry),
-        ros(TF, "/tf", MsgType::TfMessage),
-        ros(DIAGNOSTICS, "/diagnostics", MsgType::DiagnosticArray),
-        ros(PATH, "/odom/path", MsgType::Path),
+    let mut c = vec![ros(ODOM, &names.odom, MsgType::Odometry)];
+    if let Some(tf) = &names.tf {
+        c.push(ros(TF, tf, MsgType::TfMessage));
+    }
+    c.extend([
+        ros(DIAGNOSTICS, &names.diagnostics, MsgType::DiagnosticArray),
+        ros(PATH, &names.path, MsgType::Path),
+        ros(JOINTS, &names.joint_states, MsgType::JointState),
         ChannelInfo {
             id: ELLIPSE,
-            topic: "/odom/ellipse",
+            topic: names.ellipse.clone(),
             encoding: "json",
             schema_name: "foxglove.SceneUpdate",
             schema: scene_update_schema(),
             schema_encoding: "jsonschema",
         },
-    ]
+    ]);
+    c
 }
 
 /// What the publisher hands each client's thread.
@@ -297,8 +303,11 @@ const CLIENT_QUEUE: usize = 1024;
 struct Shared {
     clients: Vec<SyncSender<Outgoing>>,
     dropped: u64,
-    /// The link status currently shown (text of the `status` message), for new clients.
-    status: Option<Arc<String>>,
+    /// The server statuses currently shown, by id (text of the `status` message), for new
+    /// clients.
+    status: BTreeMap<String, Arc<String>>,
+    /// `serverInfo` and `advertise`, sent to each new client.
+    hello: [Arc<String>; 2],
 }
 
 /// The bridge's Foxglove WebSocket server.
@@ -361,20 +370,20 @@ fn negotiate(req: &Request, mut res: Response) -> Result<Response, ErrorResponse
     }
 }
 
-fn server_info() -> String {
+fn server_info(names: &RosNames) -> String {
     json!({
         "op": "serverInfo",
         "name": "odoctl bridge",
         "capabilities": [],
         "supportedEncodings": [],
-        "metadata": { "frame_id": ODOM_FRAME, "conventions": "REP-103/105, docs/ROS.md" },
+        "metadata": { "frame_id": names.odom_frame, "conventions": "REP-103/105, docs/ROS.md" },
         "sessionId": format!("{}", std::process::id()),
     })
     .to_string()
 }
 
-fn advertise() -> String {
-    let chans: Vec<Value> = channels()
+fn advertise(names: &RosNames) -> String {
+    let chans: Vec<Value> = channels(names)
         .into_iter()
         .map(|c| {
             json!({
@@ -394,15 +403,13 @@ fn serve_client(stream: TcpStream, shared: Arc<Mutex<Shared>>) {
         return;
     };
     let (tx, rx) = sync_channel(CLIENT_QUEUE);
-    let status = {
+    let hello: Vec<Arc<String>> = {
         let mut s = lock(&shared);
         s.clients.push(tx);
-        s.status.clone()
+        s.hello.iter().chain(s.status.values()).cloned().collect()
     };
-    let mut hello = vec![server_info(), advertise()];
-    hello.extend(status.map(|s| s.to_string()));
     for t in hello {
-        if ws.send(WsMessage::text(t)).is_err() {
+        if ws.send(WsMessage::text(t.as_str())).is_err() {
             return;
         }
     }
@@ -474,15 +481,17 @@ fn client_loop(ws: &mut WebSocket<TcpStream>, rx: &Receiver<Outgoing>) -> Result
 }
 
 impl FoxgloveServer {
-    /// Starts the server on `host:port` (port 0: any free port).
-    pub fn start(host: &str, port: u16) -> Result<Self> {
+    /// Starts the server on `host:port` (port 0: any free port), its channels named by
+    /// `names`.
+    pub fn start(host: &str, port: u16, names: &RosNames) -> Result<Self> {
         let listener = TcpListener::bind((host, port))
             .with_context(|| format!("Foxglove WebSocket server on {host}:{port}"))?;
         let port = listener.local_addr()?.port();
         let shared = Arc::new(Mutex::new(Shared {
             clients: Vec::new(),
             dropped: 0,
-            status: None,
+            status: BTreeMap::new(),
+            hello: [Arc::new(server_info(names)), Arc::new(advertise(names))],
         }));
         let accept = Arc::clone(&shared);
         std::thread::Builder::new()
@@ -535,7 +544,12 @@ impl FoxgloveServer {
     pub fn sample(&mut self, m: &Messages) -> Result<()> {
         let ns = m.odom.header.stamp.nanos();
         self.data(ODOM, ns, msgs::encode(&m.odom)?);
-        self.data(TF, ns, msgs::encode(&m.tf)?);
+        if let Some(tf) = &m.tf {
+            self.data(TF, ns, msgs::encode(tf)?);
+        }
+        if let Some(j) = &m.joints {
+            self.data(JOINTS, ns, msgs::encode(j)?);
+        }
         if let Some(d) = &m.diagnostics {
             self.status(d)?;
         }
@@ -559,38 +573,35 @@ impl FoxgloveServer {
         Ok(())
     }
 
-    /// Publishes a `/diagnostics` status; an ERROR or STALE one (the link) also as the
-    /// server's `status` (level error), which the Foxglove app lists under its problems,
-    /// removed when an OK or WARN status follows.
+    /// Publishes a `/diagnostics` array; each ERROR or STALE status in it also goes out as
+    /// a server `status` (level error) whose id is the status's name (`<node>: link` for the
+    /// link, `<node>: odometry unit` for the unit's own faults), which the Foxglove app lists
+    /// under its problems; removed when an OK or WARN status of the same name follows.
     pub fn status(&mut self, d: &msgs::DiagnosticArray) -> Result<()> {
         self.data(DIAGNOSTICS, d.header.stamp.nanos(), msgs::encode(d)?);
-        let Some(st) = d.status.first() else {
-            return Ok(());
-        };
+        let mut texts = Vec::new();
         let mut shared = lock(&self.shared);
-        let text = if st.level >= msgs::level::ERROR {
-            let t = Arc::new(
-                json!({ "op": "status", "level": 2, "message": st.message, "id": LINK_STATUS })
-                    .to_string(),
-            );
-            shared.status = Some(Arc::clone(&t));
-            Some(t)
-        } else if shared.status.take().is_some() {
-            Some(Arc::new(
-                json!({ "op": "removeStatus", "statusIds": [LINK_STATUS] }).to_string(),
-            ))
-        } else {
-            None
-        };
+        for st in &d.status {
+            if st.level >= msgs::level::ERROR {
+                let t = Arc::new(
+                    json!({ "op": "status", "level": 2, "message": st.message, "id": st.name })
+                        .to_string(),
+                );
+                shared.status.insert(st.name.clone(), Arc::clone(&t));
+                texts.push(t);
+            } else if shared.status.remove(&st.name).is_some() {
+                texts.push(Arc::new(
+                    json!({ "op": "removeStatus", "statusIds": [st.name] }).to_string(),
+                ));
+            }
+        }
         drop(shared);
-        if let Some(t) = text {
+        for t in texts {
             self.send(Outgoing::Text(t));
         }
         Ok(())
     }
 }
-
-const LINK_STATUS: &str = "odoctl-link";
 
 #[cfg(test)]
 mod tests {

@@ -223,6 +223,21 @@ pub struct Path {
     pub poses: Vec<PoseStamped>,
 }
 
+/// `sensor_msgs/msg/JointState`: one entry per joint in each non-empty array.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct JointState {
+    /// Stamp (no frame).
+    pub header: Header,
+    /// Joint names.
+    pub name: Vec<String>,
+    /// Positions, rad.
+    pub position: Vec<f64>,
+    /// Velocities, rad/s (empty when unknown).
+    pub velocity: Vec<f64>,
+    /// Efforts (empty: not measured).
+    pub effort: Vec<f64>,
+}
+
 /// CDR (XCDR1, little-endian, with the encapsulation header) of a message.
 pub fn encode<T: Serialize>(msg: &T) -> Result<Vec<u8>> {
     cdr::serialize::<_, _, cdr::CdrLe>(msg, cdr::Infinite).map_err(|e| anyhow!("CDR: {e}"))
@@ -248,6 +263,7 @@ const DIAGNOSTIC_STATUS: &str = "byte OK=0\nbyte WARN=1\nbyte ERROR=2\nbyte STAL
 const DIAGNOSTIC_ARRAY: &str = "std_msgs/Header header\nDiagnosticStatus[] status\n";
 const POSE_STAMPED: &str = "std_msgs/Header header\nPose pose\n";
 const PATH: &str = "std_msgs/Header header\ngeometry_msgs/PoseStamped[] poses\n";
+const JOINT_STATE: &str = "std_msgs/Header header\nstring[] name\nfloat64[] position\nfloat64[] velocity\nfloat64[] effort\n";
 
 /// Builds a `ros2msg` schema text: the main definition, then each dependency.
 fn schema(main: &str, deps: &[(&str, &str)]) -> String {
@@ -275,6 +291,8 @@ pub enum MsgType {
     Path,
     /// `geometry_msgs/msg/PoseStamped`.
     PoseStamped,
+    /// `sensor_msgs/msg/JointState`.
+    JointState,
 }
 
 impl MsgType {
@@ -286,6 +304,7 @@ impl MsgType {
             Self::DiagnosticArray => "diagnostic_msgs/msg/DiagnosticArray",
             Self::Path => "nav_msgs/msg/Path",
             Self::PoseStamped => "geometry_msgs/msg/PoseStamped",
+            Self::JointState => "sensor_msgs/msg/JointState",
         }
     }
 
@@ -335,6 +354,7 @@ impl MsgType {
                 d.extend(pose);
                 schema(POSE_STAMPED, &d)
             }
+            Self::JointState => schema(JOINT_STATE, &header),
         }
     }
 }
@@ -392,6 +412,7 @@ mod tests {
             MsgType::TfMessage,
             MsgType::DiagnosticArray,
             MsgType::Path,
+            MsgType::JointState,
         ] {
             let s = t.schema();
             let names: Vec<&str> = s.lines().filter_map(|l| l.strip_prefix("MSG: ")).collect();
@@ -401,6 +422,28 @@ mod tests {
             assert_eq!(sorted.len(), names.len(), "{}", t.name());
             assert!(names.contains(&"builtin_interfaces/Time"), "{}", t.name());
         }
+    }
+
+    #[test]
+    fn joint_state_layout() {
+        // Header (stamp 0, frame ""), then sequences: u32 count, elements; the float64s
+        // aligned to 8 from the payload start.
+        let j = JointState {
+            header: Header::default(),
+            name: vec!["l".into()],
+            position: vec![1.5],
+            velocity: vec![],
+            effort: vec![],
+        };
+        let b = encode(&j).unwrap();
+        // Payload offsets (+4 in `b`): stamp 0..8, frame_id "" (length 1, NUL) 8..13; name
+        // count at 16, "l" 20..26; position count at 28, its float64 at 32 (8-aligned);
+        // velocity and effort counts at 40 and 44.
+        assert_eq!(&b[20..24], &1u32.to_le_bytes());
+        assert_eq!(&b[24..30], &[2, 0, 0, 0, b'l', 0]);
+        assert_eq!(&b[32..36], &1u32.to_le_bytes());
+        assert_eq!(&b[36..44], &1.5f64.to_le_bytes());
+        assert_eq!(&b[44..], &[0, 0, 0, 0, 0, 0, 0, 0]);
     }
 
     #[test]

@@ -1,14 +1,16 @@
 //! The unit's samples as ROS 2 messages: the conversion shared by the MCAP recordings and
-//! the live bridge (`/odom`, `/tf`, `/diagnostics` on the rules of docs/ROS.md).
+//! the live bridge (`/odom`, `/tf`, `/joint_states`, `/diagnostics` on the rules of
+//! docs/ROS.md), with the frame ids and status names of [`RosNames`].
 
 use anyhow::{anyhow, Result};
 use odo_unit::protocol::StatusFlags;
 use odo_unit::timing::SyncState;
 
-use super::conventions::{
-    quaternion_of_heading, BaseTwist, ContinuousOdom, PoseCovariance, BASE_FRAME, ODOM_FRAME,
-};
+use std::f64::consts::TAU;
+
+use super::conventions::{quaternion_of_heading, BaseTwist, ContinuousOdom, PoseCovariance};
 use super::msgs::{self, level};
+use super::names::RosNames;
 use odo_unit::odometry::{Pose, UncertaintyModel};
 
 /// One sample to publish or record: the unit's pose (ours), its covariance, the interval's twist.
@@ -30,6 +32,8 @@ pub struct OdomSample {
     pub overrange: bool,
     /// The unit's pose was reset (`reset_pose`) at this sample.
     pub reset: bool,
+    /// The wheels' absolute counts (left, right; increments), when known.
+    pub counts: Option<(i64, i64)>,
 }
 
 /// What a stream of samples has published so far.
@@ -50,8 +54,10 @@ pub struct StreamCounts {
 pub struct Messages {
     /// `/odom`.
     pub odom: msgs::Odometry,
-    /// `/tf`.
-    pub tf: msgs::TfMessage,
+    /// `/tf`; `None` with `--no-tf`.
+    pub tf: Option<msgs::TfMessage>,
+    /// `/joint_states`, when the counts and the increments per turn are known.
+    pub joints: Option<msgs::JointState>,
     /// `/diagnostics`, when due.
     pub diagnostics: Option<msgs::DiagnosticArray>,
 }
@@ -66,6 +72,10 @@ pub struct OdomStream {
     counts: StreamCounts,
     model: Option<UncertaintyModel>,
     extra: Vec<(String, String)>,
+    names: RosNames,
+    ticks_per_rev: Option<u32>,
+    /// Stamp and counts of the last sample, for the wheel velocities.
+    last_counts: Option<(u64, (i64, i64))>,
 }
 
 pub(crate) fn header(stamp_ns: u64, frame: &str) -> Result<msgs::Header> {
@@ -95,6 +105,23 @@ impl OdomStream {
             model,
             ..Default::default()
         }
+    }
+
+    /// The same stream with these names (frames, status names, TF on or off).
+    pub fn with_names(mut self, names: RosNames) -> Self {
+        self.names = names;
+        self
+    }
+
+    /// The names in use.
+    pub fn names(&self) -> &RosNames {
+        &self.names
+    }
+
+    /// Increments per wheel turn (x4 decoded), for `/joint_states`; without it no joint
+    /// states are made.
+    pub fn set_ticks_per_rev(&mut self, ticks: Option<u32>) {
+        self.ticks_per_rev = ticks.filter(|t| *t > 0);
     }
 
     /// Key-values added to every status (the bridge's link counters).
@@ -143,8 +170,8 @@ impl OdomStream {
             None => (msgs::Twist::default(), BaseTwist::unknown_covariance()),
         };
         let odom = msgs::Odometry {
-            header: header(s.stamp_ns, ODOM_FRAME)?,
-            child_frame_id: BASE_FRAME.into(),
+            header: header(s.stamp_ns, &self.names.odom_frame)?,
+            child_frame_id: self.names.base_frame.clone(),
             pose: msgs::PoseWithCovariance {
                 pose: ros_pose(&pose),
                 covariance: cov.to_ros(),
@@ -154,16 +181,17 @@ impl OdomStream {
                 covariance: twist_cov,
             },
         };
-        let tf = msgs::TfMessage {
+        let tf = self.names.tf.is_some().then(|| msgs::TfMessage {
             transforms: vec![msgs::TransformStamped {
                 header: odom.header.clone(),
-                child_frame_id: BASE_FRAME.into(),
+                child_frame_id: odom.child_frame_id.clone(),
                 transform: msgs::Transform {
                     translation: odom.pose.pose.position,
                     rotation: odom.pose.pose.orientation,
                 },
             }],
-        };
+        });
+        let joints = self.joints(s)?;
         self.counts.odom += 1;
         self.counts.overrange += u64::from(s.overrange);
         self.counts.resets = self.continuity.resets();
@@ -171,8 +199,33 @@ impl OdomStream {
         Ok(Messages {
             odom,
             tf,
+            joints,
             diagnostics,
         })
+    }
+
+    /// The wheels' joint states: position `2 pi counts / ticks_per_rev` (rad), velocity the
+    /// change over the sample interval (rad/s; empty without an interval, as the twist).
+    fn joints(&mut self, s: &OdomSample) -> Result<Option<msgs::JointState>> {
+        let (Some(ticks), Some(c)) = (self.ticks_per_rev, s.counts) else {
+            return Ok(None);
+        };
+        let prev = self.last_counts.replace((s.stamp_ns, c));
+        let rad = |n: i64| TAU * n as f64 / f64::from(ticks);
+        let velocity = match prev {
+            Some((t, p)) if s.twist.is_some() && s.stamp_ns > t => {
+                let dt = (s.stamp_ns - t) as f64 * 1e-9;
+                vec![rad(c.0 - p.0) / dt, rad(c.1 - p.1) / dt]
+            }
+            _ => Vec::new(),
+        };
+        Ok(Some(msgs::JointState {
+            header: header(s.stamp_ns, "")?,
+            name: self.names.joints.to_vec(),
+            position: vec![rad(c.0), rad(c.1)],
+            velocity,
+            effort: Vec::new(),
+        }))
     }
 
     fn diagnose(
@@ -259,11 +312,18 @@ impl OdomStream {
         values.extend(self.extra.iter().cloned());
         self.counts.diagnostics += 1;
         self.last_diag = Some((s.stamp_ns, lvl, message.clone()));
-        Ok(Some(status_array(s.stamp_ns, lvl, message, values)?))
+        let name = self.names.status_name(UNIT_STATUS);
+        Ok(Some(status_array(
+            s.stamp_ns,
+            (lvl, &name, UNIT_HARDWARE),
+            message,
+            values,
+        )?))
     }
 
-    /// A status of its own (the bridge's link state): `level`, `message`, stamped `stamp_ns`.
-    /// The next sample's status follows it whatever its content.
+    /// The link's status (the bridge's, a source of its own beside the unit's): `level`,
+    /// `message`, stamped `stamp_ns`. The next sample's status follows it whatever its
+    /// content.
     pub fn status(
         &mut self,
         stamp_ns: u64,
@@ -272,13 +332,29 @@ impl OdomStream {
     ) -> Result<msgs::DiagnosticArray> {
         self.last_diag = None;
         self.counts.diagnostics += 1;
-        status_array(stamp_ns, level, message.to_string(), self.extra.clone())
+        let name = self.names.status_name(LINK_STATUS);
+        status_array(
+            stamp_ns,
+            (level, &name, LINK_HARDWARE),
+            message.to_string(),
+            self.extra.clone(),
+        )
     }
 }
 
+/// Component of the unit's status (name `<node>: odometry unit`).
+pub const UNIT_STATUS: &str = "odometry unit";
+/// Component of the bridge's link status (name `<node>: link`).
+pub const LINK_STATUS: &str = "link";
+/// `hardware_id` of the unit's status.
+const UNIT_HARDWARE: &str = "odo-unit";
+/// `hardware_id` of the link's status.
+const LINK_HARDWARE: &str = "odoctl";
+
+/// One status (level, name, hardware id) in an array.
 fn status_array(
     stamp_ns: u64,
-    level: u8,
+    (level, name, hardware_id): (u8, &str, &str),
     message: String,
     values: Vec<(String, String)>,
 ) -> Result<msgs::DiagnosticArray> {
@@ -286,9 +362,9 @@ fn status_array(
         header: header(stamp_ns, "")?,
         status: vec![msgs::DiagnosticStatus {
             level,
-            name: "odometry unit".into(),
+            name: name.into(),
             message,
-            hardware_id: "odo-unit".into(),
+            hardware_id: hardware_id.into(),
             values: values
                 .into_iter()
                 .map(|(key, value)| msgs::KeyValue { key, value })

@@ -109,6 +109,8 @@ fn record(seq: u32, s: &Sample, integ: &Integrator) -> PoseRecord {
         flags: StatusFlags {
             left: WheelStatus {
                 index_seen: s.left_index.is_some(),
+                // The sample's left encoder fault bit (PROTOCOL.md, status word bit 3).
+                fault: s.flags.is_some_and(|f| f & (1 << 3) != 0),
                 ..Default::default()
             },
             right: WheelStatus {

@@ -62,6 +62,8 @@ async def main():
     ap.add_argument("--timeout", type=float, default=30)
     ap.add_argument("--until-records", type=int, default=0,
                     help="stop once the record with this index was received")
+    ap.add_argument("--expect-unit-status", action="append", default=[],
+                    help="a server status with this text under the unit's id")
     ap.add_argument("--expect-status", action="append", default=[],
                     help="a /diagnostics ERROR whose message contains this")
     a = ap.parse_args()
@@ -91,6 +93,7 @@ async def main():
             "/tf": ("cdr", "tf2_msgs/msg/TFMessage", "ros2msg"),
             "/diagnostics": ("cdr", "diagnostic_msgs/msg/DiagnosticArray", "ros2msg"),
             "/odom/path": ("cdr", "nav_msgs/msg/Path", "ros2msg"),
+            "/joint_states": ("cdr", "sensor_msgs/msg/JointState", "ros2msg"),
             "/odom/ellipse": ("json", "foxglove.SceneUpdate", "jsonschema")}
     decoders = {}
     for topic, (enc, name, senc) in want.items():
@@ -187,12 +190,21 @@ async def main():
             fail(f"yaw {yaw} for heading {r['heading']}")
         c = o.pose.covariance
         sx, sy, cxy = r["sigma_x"], r["sigma_y"], r["cov_xy"]
-        if c[0] != sx * sx or c[7] != sy * sy or c[1] != cxy or c[6] != cxy:
+        # Variances at least the published floor, 1e-10 (docs/ROS.md).
+        if c[0] != max(sx * sx, 1e-10) or c[7] != max(sy * sy, 1e-10) or c[1] != cxy or c[6] != cxy:
             fail(f"covariance {c[0]}, {c[7]}, {c[1]} for sigmas {sx}, {sy} and cov_xy {cxy}")
     gaps = sum(1 for i0, i1 in zip(idx, idx[1:]) if i1 != i0 + 1)
 
     # /tf: the /odom pose.
     by_stamp = {lt: o for lt, o in odom}
+    # /joint_states: both wheels, at the stamps of /odom.
+    for lt, j in got["/joint_states"]:
+        if list(j.name) != ["left_wheel_joint", "right_wheel_joint"] or len(j.position) != 2:
+            fail(f"/joint_states {list(j.name)} {list(j.position)}")
+        if lt not in by_stamp:
+            fail(f"/joint_states at {lt}: no /odom there")
+    if len(got["/joint_states"]) < len(odom) // 2:
+        fail(f"{len(got['/joint_states'])} /joint_states for {len(odom)} /odom")
     for lt, tf in got["/tf"]:
         t = tf.transforms[0]
         o = by_stamp.get(lt)
@@ -243,7 +255,8 @@ async def main():
         r = next((r for r in recs if r["x"] == pos["x"] and r["y"] == pos["y"]), None)
         if r is None:
             fail("ellipse centre is none of the records")
-        sxx, syy, sxy = r["sigma_x"] ** 2, r["sigma_y"] ** 2, r["cov_xy"]
+        # The published covariance: variances at least the floor, 1e-10.
+        sxx, syy, sxy = max(r["sigma_x"] ** 2, 1e-10), max(r["sigma_y"] ** 2, 1e-10), r["cov_xy"]
         det = sxx * syy - sxy * sxy
         if det <= 1e-30:
             continue
@@ -264,6 +277,17 @@ async def main():
 
     # /diagnostics and server status.
     diags = [(d.status[0].level, d.status[0].message) for _, d in got["/diagnostics"]]
+    # Server statuses: the unit's faults under the unit's id, the link's under the link's.
+    for s in statuses:
+        if s.get("op") != "status":
+            continue
+        unit = "encoder fault" in s.get("message", "")
+        if not s.get("id", "").endswith(": odometry unit" if unit else ": link"):
+            fail(f"a server status under the wrong id: {s}")
+    for want_msg in a.expect_unit_status:
+        if not any(s.get("op") == "status" and want_msg in s.get("message", "")
+                   and s.get("id") == "odoctl_bridge: odometry unit" for s in statuses):
+            fail(f"no server status of the unit with `{want_msg}`: {statuses}")
     for want_msg in a.expect_status:
         if not any(l == 2 and want_msg in m for l, m in diags):
             fail(f"no /diagnostics ERROR with `{want_msg}`: {diags}")

@@ -12,6 +12,8 @@ here from the inputs by the rules of docs/ROS.md:
   --params    the parameter TOML of the replay (all keys explicit)
   --stamps    samples_t | utc | mcu_time: which stamps the file must carry
   --fault-at  optional sample index from which the left encoder fault flag is set
+  --ns, --frame-prefix, --no-tf, --joints LEFT,RIGHT: the names the recording was made with
+              (`--namespace`, `--frame-prefix`, `--no-tf`, `--*-wheel-joint`)
 
 Exit status 0 when everything matches; prints what was checked.
 """
@@ -28,6 +30,7 @@ from mcap_ros2.decoder import DecoderFactory
 GPS_EPOCH_UNIX = 315964800
 LEAP_2017 = 18  # GPS - UTC since 2017-01-01
 UNOBSERVED = 1.0e6
+FLOOR = 1.0e-10  # the least published variance of x, y, yaw, vx, vy, yaw rate
 
 
 def f32(text):
@@ -72,7 +75,15 @@ def main():
     for a in ("--mcap", "--samples", "--replay", "--expect", "--params", "--stamps"):
         ap.add_argument(a, required=True)
     ap.add_argument("--fault-at", type=int, default=None)
+    ap.add_argument("--ns", default="")
+    ap.add_argument("--frame-prefix", default="")
+    ap.add_argument("--no-tf", action="store_true")
+    ap.add_argument("--joints", default="left_wheel_joint,right_wheel_joint")
     o = ap.parse_args()
+    ns_ = "/" + o.ns.strip("/") if o.ns.strip("/") else ""
+    odom_topic, joint_topic = ns_ + "/odom", ns_ + "/joint_states"
+    odom_frame, base_frame = o.frame_prefix + "odom", o.frame_prefix + "base_link"
+    joint_names = o.joints.split(",")
 
     samples = read_csv(o.samples)
     replay = read_csv(o.replay)
@@ -132,11 +143,14 @@ def main():
         summary = reader.get_summary()
         topics = {c.topic: c for c in summary.channels.values()}
         want = {
-            "/odom": "nav_msgs/msg/Odometry",
-            "/tf": "tf2_msgs/msg/TFMessage",
+            odom_topic: "nav_msgs/msg/Odometry",
             "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
-            "/odom/path": "nav_msgs/msg/Path",
+            odom_topic + "/path": "nav_msgs/msg/Path",
+            joint_topic: "sensor_msgs/msg/JointState",
         }
+        if not o.no_tf:
+            want["/tf"] = "tf2_msgs/msg/TFMessage"
+        check(set(topics) == set(want), f"channels {sorted(topics)} != {sorted(want)}")
         for topic, schema in want.items():
             check(topic in topics, f"no channel {topic}")
             c = topics[topic]
@@ -148,20 +162,22 @@ def main():
         check(meta["odoctl"]["stamp_source"] == {"samples_t": "samples_t", "utc": "utc_from_gps_time_tag", "mcu_time": "mcu_time"}[o.stamps],
               f"stamp_source {meta['odoctl']['stamp_source']}")
 
-        odom, tf, diags, paths = [], [], [], []
+        odom, tf, diags, paths, joints = [], [], [], [], []
         for schema, channel, message, msg in reader.iter_decoded_messages():
-            {"/odom": odom, "/tf": tf, "/diagnostics": diags, "/odom/path": paths}[channel.topic].append((message, msg))
+            {odom_topic: odom, "/tf": tf, "/diagnostics": diags, odom_topic + "/path": paths,
+             joint_topic: joints}[channel.topic].append((message, msg))
 
     check(len(odom) == n, f"{len(odom)} /odom messages for {n} samples")
-    check(len(tf) == n, f"{len(tf)} /tf messages for {n} samples")
+    check(len(tf) == (0 if o.no_tf else n), f"{len(tf)} /tf messages for {n} samples")
+    check(len(joints) == n, f"{len(joints)} /joint_states messages for {n} samples")
     fields = 0
-    for i, ((mm, m), (tm, t)) in enumerate(zip(odom, tf)):
+    for i, (mm, m) in enumerate(odom):
         r, e = replay[i], expect[i]
         where = f"/odom #{i} (t={r['t']})"
         st = ns(m.header.stamp)
         check(abs(st - stamps[i]) <= 1, f"{where}: stamp {st} != {stamps[i]}")
-        check(mm.log_time == st and tm.log_time == st, f"{where}: log time")
-        check(m.header.frame_id == "odom" and m.child_frame_id == "base_link", f"{where}: frames")
+        check(mm.log_time == st, f"{where}: log time")
+        check(m.header.frame_id == odom_frame and m.child_frame_id == base_frame, f"{where}: frames")
         pos = m.pose.pose.position
         check(pos.x == float(r["x"]) and pos.y == float(r["y"]) and pos.z == 0.0, f"{where}: position {pos}")
         qo = m.pose.pose.orientation
@@ -171,7 +187,7 @@ def main():
         sx, sy, sh = f32(r["sigma_x"]), f32(r["sigma_y"]), f32(r["sigma_heading"])
         xy, xa, ya = f32(e["cov_xy"]), f32(e["cov_x_heading"]), f32(e["cov_y_heading"])
         cexp = [0.0] * 36
-        cexp[0], cexp[7], cexp[35] = sx * sx, sy * sy, sh * sh
+        cexp[0], cexp[7], cexp[35] = max(sx * sx, FLOOR), max(sy * sy, FLOOR), max(sh * sh, FLOOR)
         cexp[1] = cexp[6] = xy
         cexp[5] = cexp[30] = -xa
         cexp[11] = cexp[31] = -ya
@@ -189,20 +205,41 @@ def main():
             check(close(lin.x, tw["vx"], 1e-9, 1e-12), f"{where}: vx {lin.x} != {tw['vx']}")
             check(close(ang.z, tw["wz"], 1e-9, 1e-12), f"{where}: wz {ang.z} != {tw['wz']}")
             texp = [0.0] * 36
-            texp[0] = texp[7] = tw["var_vx"]
-            texp[35] = tw["var_wz"]
+            texp[0] = texp[7] = max(tw["var_vx"], FLOOR)
+            texp[35] = max(tw["var_wz"], FLOOR)
             texp[5] = texp[30] = tw["cov"]
             texp[14] = texp[21] = texp[28] = UNOBSERVED
             for k in range(36):
                 check(close(tc[k], texp[k], 1e-9, 1e-300), f"{where}: twist covariance[{k}] {tc[k]} != {texp[k]}")
-        check(len(t.transforms) == 1, f"{where}: /tf count")
-        x = t.transforms[0]
-        check(x.header.frame_id == "odom" and x.child_frame_id == "base_link", f"{where}: /tf frames")
-        check(ns(x.header.stamp) == st, f"{where}: /tf stamp")
-        tr, ro = x.transform.translation, x.transform.rotation
-        check((tr.x, tr.y, tr.z) == (pos.x, pos.y, pos.z), f"{where}: /tf translation")
-        check((ro.x, ro.y, ro.z, ro.w) == (qo.x, qo.y, qo.z, qo.w), f"{where}: /tf rotation")
-        fields += 3 + 4 + 36 + 6 + 36 + 7
+        fields += 3 + 4 + 36 + 6 + 36
+        if not o.no_tf:
+            tm, t = tf[i]
+            check(tm.log_time == st, f"{where}: /tf log time")
+            check(len(t.transforms) == 1, f"{where}: /tf count")
+            x = t.transforms[0]
+            check(x.header.frame_id == odom_frame and x.child_frame_id == base_frame, f"{where}: /tf frames")
+            check(ns(x.header.stamp) == st, f"{where}: /tf stamp")
+            tr, ro = x.transform.translation, x.transform.rotation
+            check((tr.x, tr.y, tr.z) == (pos.x, pos.y, pos.z), f"{where}: /tf translation")
+            check((ro.x, ro.y, ro.z, ro.w) == (qo.x, qo.y, qo.z, qo.w), f"{where}: /tf rotation")
+            fields += 7
+        # Joint states: 2 pi counts / ticks_per_rev (rad); velocities over the interval.
+        jm, j = joints[i]
+        check(jm.log_time == st and ns(j.header.stamp) == st, f"{where}: /joint_states stamp")
+        check(list(j.name) == joint_names, f"{where}: joint names {list(j.name)}")
+        cl, cr = int(samples[i]["left"]), int(samples[i]["right"])
+        check(list(j.position) == [2 * math.pi * cl / ticks, 2 * math.pi * cr / ticks],
+              f"{where}: joint positions {list(j.position)}")
+        check(len(j.effort) == 0, f"{where}: efforts")
+        if i == 0:
+            check(len(j.velocity) == 0, f"{where}: first joint velocities")
+        else:
+            dt = (stamps[i] - stamps[i - 1]) * 1e-9
+            pl, pr = int(samples[i - 1]["left"]), int(samples[i - 1]["right"])
+            vexp = [2 * math.pi * (cl - pl) / ticks / dt, 2 * math.pi * (cr - pr) / ticks / dt]
+            check(len(j.velocity) == 2 and all(close(a, b, 1e-9, 1e-12) for a, b in zip(j.velocity, vexp)),
+                  f"{where}: joint velocities {list(j.velocity)} != {vexp}")
+        fields += 7
 
     # Diagnostics: stamps increase, at most one second apart while the status is unchanged,
     # ERROR with the fault named from the fault sample on.
@@ -212,7 +249,8 @@ def main():
         st = ns(d.header.stamp)
         check(last is None or st >= last, "diagnostics stamps decrease")
         check(st in set(stamps), "a diagnostics stamp is no sample's stamp")
-        check(len(d.status) == 1 and d.status[0].name == "odometry unit", "diagnostics status")
+        check(len(d.status) == 1 and d.status[0].name == ns_[1:] + ("/" if ns_ else "") + "odoctl: odometry unit",
+              f"diagnostics status {[x.name for x in d.status]}")
         s = d.status[0]
         i = stamps.index(st)
         kv = {v.key: v.value for v in s.values}
@@ -239,8 +277,8 @@ def main():
               f"path pose {i}")
         check(ns(ps.header.stamp) == ns(odom[i][1].header.stamp), f"path stamp {i}")
 
-    print(f"read_mcap: ok: {n} /odom and /tf messages ({fields} fields), {len(diags)} /diagnostics, "
-          f"1 path of {n} poses; stamps {o.stamps}")
+    print(f"read_mcap: ok: {n} {odom_topic}, {len(tf)} /tf, {len(joints)} {joint_topic} messages "
+          f"({fields} fields), {len(diags)} /diagnostics, 1 path of {n} poses; stamps {o.stamps}")
 
 
 if __name__ == "__main__":
