@@ -53,9 +53,8 @@ impl fmt::Display for Format {
 /// or `week tow` with at least 14 columns is RTKLIB; anything else is taken as CSV (whose
 /// own parser then names what is wrong).
 pub fn detect(text: &str) -> Format {
-    for line in text
-        .lines()
-        .map(str::trim)
+    for line in crate::text::lines(text)
+        .map(|(_, l)| l.trim())
         .filter(|l| !l.is_empty())
         .take(50)
     {
@@ -182,9 +181,20 @@ pub struct ReadReport {
     /// Well-formed lines without what they should carry (a GGA without a position, an RMC
     /// with status V, an epoch whose time is not after the previous one...): skipped.
     pub unusable: usize,
-    /// Lines with stray bytes before the `$` (binary messages between the sentences): read
-    /// from the `$`.
+    /// Lines with stray bytes before, between or after their sentences (binary messages
+    /// between the sentences): the sentences are read, the bytes skipped.
     pub stray_bytes: usize,
+    /// Bytes skipped outside any sentence or frame (stray bytes on a line, binary data
+    /// between the frames of a binary log).
+    pub skipped_bytes: usize,
+    /// Lines that hold more than one sentence (a lost line feed): each sentence is read.
+    pub joined: usize,
+    /// NMEA talkers seen (`GN`, `GP`...; `P` + maker for proprietary sentences), by count.
+    pub talkers: BTreeMap<String, usize>,
+    /// The receiver as the log names it (u-blox MON-VER), when it does.
+    pub receiver: Option<String>,
+    /// How the reader read the log (the HDT order it detected, the heading source...).
+    pub notes: Vec<String>,
     /// The first problems (at most [`ReadReport::KEPT`]), `FILE:LINE: ...`.
     pub problems: Vec<String>,
     /// Warnings about what was read (a date past the leap-second table), `FILE:LINE: ...`.
@@ -224,9 +234,9 @@ impl ReadReport {
         *self.used.entry(kind.to_string()).or_default() += 1;
     }
 
-    /// Counts another sentence of `kind`.
+    /// Counts another sentence of `kind` (quoted as a short excerpt).
     pub fn other(&mut self, kind: &str) {
-        *self.other.entry(kind.to_string()).or_default() += 1;
+        *self.other.entry(crate::text::excerpt(kind)).or_default() += 1;
     }
 }
 
@@ -250,9 +260,26 @@ impl fmt::Display for ReadReport {
         if self.stray_bytes > 0 {
             write!(
                 f,
-                "; {} lines read from the `$` after stray bytes",
+                "; {} lines with stray bytes besides their sentences (the sentences read)",
                 self.stray_bytes
             )?;
+        }
+        if self.joined > 0 {
+            write!(
+                f,
+                "; {} lines with more than one sentence (each read)",
+                self.joined
+            )?;
+        }
+        if self.skipped_bytes > 0 {
+            write!(
+                f,
+                "; {} bytes outside any sentence or frame skipped",
+                self.skipped_bytes
+            )?;
+        }
+        for n in &self.notes {
+            write!(f, "\n    {n}")?;
         }
         for p in &self.problems {
             write!(f, "\n    {p}")?;
