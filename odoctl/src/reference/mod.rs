@@ -1,5 +1,6 @@
 //! The RTK reference of a calibration from any of the files a user has: the REFERENCE CSV in
-//! local metres ([`crate::csvio`]), the receiver's NMEA 0183 log ([`nmea`]) or an RTKLIB `.pos`
+//! local metres ([`crate::csvio`]), the receiver's NMEA 0183 log ([`nmea`]), a u-blox UBX log
+//! ([`ubx`], recognised by [`ubx::sniff`] before the text formats) or an RTKLIB `.pos`
 //! solution ([`rtklib`]), recognised from the content ([`detect`]).
 //!
 //! A receiver log gives WGS84 positions at GPS times ([`Epoch`]); [`Reference::from_log`]
@@ -16,6 +17,7 @@ pub mod matched;
 pub mod nmea;
 pub mod rtklib;
 pub mod simulated;
+pub mod ubx;
 
 use std::collections::BTreeMap;
 use std::fmt;
@@ -35,6 +37,8 @@ pub enum Format {
     Nmea,
     /// RTKLIB `.pos` solution (latitude/longitude/height).
     Rtklib,
+    /// u-blox UBX log: NAV-PVT (+ NAV-HPPOSLLH, NAV-RELPOSNED), in any mix with NMEA and RTCM 3.
+    Ubx,
 }
 
 impl fmt::Display for Format {
@@ -43,6 +47,7 @@ impl fmt::Display for Format {
             Self::Csv => "REFERENCE CSV",
             Self::Nmea => "NMEA 0183",
             Self::Rtklib => "RTKLIB .pos",
+            Self::Ubx => "u-blox UBX",
         })
     }
 }
@@ -164,7 +169,7 @@ pub struct Epoch {
     pub sigma_north_east_up: Option<[f64; 3]>,
     /// Solution quality.
     pub fix: FixQuality,
-    /// 1-based line of the position in the file.
+    /// 1-based line of the position in the file (a UBX log: the byte offset of its NAV-PVT).
     pub line: usize,
 }
 
@@ -443,7 +448,14 @@ pub fn parse(file: &str, bytes: &[u8], o: &ReferenceOptions) -> Result<Reference
         Ok(t) => std::borrow::Cow::Borrowed(t),
         Err(_) => String::from_utf8_lossy(bytes),
     };
-    let format = o.format.unwrap_or_else(|| detect(&text));
+    // A binary UBX log is recognised from its bytes first.
+    let format = o.format.unwrap_or_else(|| {
+        if ubx::sniff(bytes) {
+            Format::Ubx
+        } else {
+            detect(&text)
+        }
+    });
     match format {
         Format::Csv => {
             let rows = csvio::parse_reference(file, &text)?;
@@ -455,6 +467,10 @@ pub fn parse(file: &str, bytes: &[u8], o: &ReferenceOptions) -> Result<Reference
         }
         Format::Rtklib => {
             let log = rtklib::parse(file, &text, o.leap_seconds)?;
+            Reference::from_log(file, format, log, o)
+        }
+        Format::Ubx => {
+            let log = ubx::parse(file, bytes, o.leap_seconds)?;
             Reference::from_log(file, format, log, o)
         }
     }
