@@ -44,5 +44,6 @@ fn run(cmd: &Cmd) -> anyhow::Result<ExitCode> {
         Cmd::Validate(a) => commands::validate::run(a),
         Cmd::Simulate(a) => commands::simulate::run(a),
         Cmd::Bridge(a) => commands::bridge::run(a),
+        Cmd::Reference(a) => commands::reference::run(a),
     }
 }

@@ -13,7 +13,7 @@ mod simulate;
 pub mod values;
 
 pub use calibrate::{CalibrateArgs, GeometryArgs};
-pub use reference::{PosTimeArg, ReceiverArgs, ReferenceArgs};
+pub use reference::{PosTimeArg, ReceiverArgs, ReferenceArgs, ReferenceCmdArgs};
 pub use simulate::SimulateArgs;
 
 use values as v;
@@ -70,6 +70,8 @@ pub enum Cmd {
     Simulate(SimulateArgs),
     /// Publish the live pose on ROS 2 (/odom, /tf, /diagnostics) over DDS (docs/ROS.md).
     Bridge(BridgeArgs),
+    /// Inspect a reference (receiver log, RTKLIB solution, CSV); `--to` converts its track.
+    Reference(ReferenceCmdArgs),
 }
 
 /// `odoctl monitor`.

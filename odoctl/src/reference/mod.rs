@@ -17,6 +17,7 @@ pub mod matched;
 pub mod nmea;
 pub mod rtklib;
 pub mod simulated;
+pub mod summary;
 pub mod ubx;
 
 use std::collections::BTreeMap;
@@ -87,6 +88,16 @@ pub fn detect(text: &str) -> Format {
         }
     }
     Format::Csv
+}
+
+/// Recognises the format of a file's bytes (`text`: the same as text): a UBX log
+/// ([`ubx::sniff`]) first, then [`detect`].
+pub fn detect_format(bytes: &[u8], text: &str) -> Format {
+    if ubx::sniff(bytes) {
+        Format::Ubx
+    } else {
+        detect(text)
+    }
 }
 
 /// An RTKLIB header line: `%`, then nothing or a space and printable ASCII (`% program :
@@ -448,14 +459,7 @@ pub fn parse(file: &str, bytes: &[u8], o: &ReferenceOptions) -> Result<Reference
         Ok(t) => std::borrow::Cow::Borrowed(t),
         Err(_) => String::from_utf8_lossy(bytes),
     };
-    // A binary UBX log is recognised from its bytes first.
-    let format = o.format.unwrap_or_else(|| {
-        if ubx::sniff(bytes) {
-            Format::Ubx
-        } else {
-            detect(&text)
-        }
-    });
+    let format = o.format.unwrap_or_else(|| detect_format(bytes, &text));
     match format {
         Format::Csv => {
             let rows = csvio::parse_reference(file, &text)?;
