@@ -622,4 +622,25 @@ mod tests {
         assert_eq!(got.chassis.left_wheel.cos[0].to_bits(), (-0.0f32).to_bits());
         assert_eq!(got.chassis.ticks_per_rev, 20_000);
     }
+
+    #[test]
+    fn errors_quote_binary_files_short() {
+        let bin: String = (0..3000u32)
+            .map(|i| char::from_u32(i % 0x5f + 0x20).unwrap_or('?'))
+            .filter(|c| *c != '\n')
+            .collect();
+        let e = parse_params("b.toml", &bin, ChassisParams::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("b.toml: "), "{e}");
+        assert!(e.lines().all(|l| l.chars().count() < 120), "{e}");
+        let e = parse_params(
+            "k.toml",
+            &format!("{} = 1\n", "k".repeat(500)),
+            ChassisParams::default(),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.len() < 600 && e.contains("unknown key `kkk"), "{e}");
+    }
 }

@@ -192,7 +192,7 @@ pub struct ReadReport {
     pub used: BTreeMap<String, usize>,
     /// Well-formed sentences of kinds that carry nothing used here, by kind (`GSV`...).
     pub other: BTreeMap<String, usize>,
-    /// Corrupt lines (checksum, syntax, field out of range): skipped.
+    /// Corrupt lines or frames (checksum, syntax, field out of range, cut off): skipped.
     pub corrupt: usize,
     /// Well-formed lines without what they should carry (a GGA without a position, an RMC
     /// with status V, an epoch whose time is not after the previous one...): skipped.
@@ -266,11 +266,11 @@ impl fmt::Display for ReadReport {
         };
         write!(f, "read: {}", list(&self.used))?;
         if !self.other.is_empty() {
-            write!(f, "; other sentences skipped: {}", list(&self.other))?;
+            write!(f, "; other messages skipped: {}", list(&self.other))?;
         }
         write!(
             f,
-            "; {} corrupt and {} unusable lines skipped",
+            "; {} corrupt and {} unusable lines or frames skipped",
             self.corrupt, self.unusable
         )?;
         if self.stray_bytes > 0 {

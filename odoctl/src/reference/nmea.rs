@@ -1107,4 +1107,21 @@ mod tests {
         let l = parse("n.nmea", &noon_log(1, 2, 2026), Some(18)).unwrap();
         assert!(l.report.notes.is_empty());
     }
+
+    #[test]
+    fn published_sentences_joined_and_with_carriage_returns_only() {
+        // The Trimble GGA and GST of `published_receiver_sentences`, written as a receiver
+        // that lost a line feed and ends lines with CR only.
+        let zda = zda("172813.00", 12, 7, 2024);
+        let gga = "$GPGGA,172814.0,3723.46587704,N,12202.26957864,W,2,6,1.2,18.893,M,-25.669,M,2.0,0031*4F";
+        let gst = "$GPGST,172814.0,0.006,0.023,0.020,273.6,0.023,0.020,0.031*6A";
+        let log = format!("{zda}\r{gga}{gst}\r");
+        let l = parse("t.nmea", &log, Some(18)).unwrap();
+        assert_eq!(l.epochs.len(), 1, "{}", l.report);
+        let e = &l.epochs[0];
+        assert_eq!(e.line, 2);
+        assert!(e.sigma_north_east_up.is_some(), "{}", l.report);
+        assert_eq!((l.report.joined, l.report.corrupt), (1, 0));
+        assert_eq!(l.report.talkers["GP"], 3);
+    }
 }
