@@ -43,61 +43,83 @@ impl<'a> Iterator for Lines<'a> {
     }
 }
 
-/// At most [`EXCERPT_CHARS`] characters of `s`, printable ASCII and other printable
-/// characters as they are, control characters, U+FFFD and other non-printables as `\xNN`
-/// (their UTF-8 bytes), and `...` when cut.
+/// At most [`EXCERPT_CHARS`] characters of text quoting `s`, escapes included: printable
+/// characters as they are, `\` as `\\`, control characters and a byte-order mark as `\xNN`
+/// (their UTF-8 bytes), U+FFFD (a byte that was not UTF-8, in lossily read text) as
+/// `\u{FFFD}`; `...` follows when cut.
 pub fn excerpt(s: &str) -> String {
     excerpt_n(s, EXCERPT_CHARS)
 }
 
 /// [`excerpt`] of at most `max` characters (a library's error message that quotes input).
 pub fn excerpt_n(s: &str, max: usize) -> String {
-    let mut out = String::new();
-    for (n, c) in s.chars().enumerate() {
-        if n == max {
-            out.push_str("...");
+    let mut out = Quote::new(max);
+    for c in s.chars() {
+        if !out.push(&escaped(c)) {
             break;
         }
-        push_char(&mut out, c);
     }
-    out
+    out.text
 }
 
 /// [`excerpt`] of bytes: valid UTF-8 as text, other bytes as `\xNN`.
 pub fn excerpt_bytes(b: &[u8]) -> String {
-    let mut out = String::new();
-    let mut n = 0;
+    let mut out = Quote::new(EXCERPT_CHARS);
     for chunk in b.utf8_chunks() {
         for c in chunk.valid().chars() {
-            if n == EXCERPT_CHARS {
-                out.push_str("...");
-                return out;
+            if !out.push(&escaped(c)) {
+                return out.text;
             }
-            push_char(&mut out, c);
-            n += 1;
         }
         for byte in chunk.invalid() {
-            if n == EXCERPT_CHARS {
-                out.push_str("...");
-                return out;
+            if !out.push(&format!("\\x{byte:02X}")) {
+                return out.text;
             }
-            out.push_str(&format!("\\x{byte:02X}"));
-            n += 1;
         }
     }
-    out
+    out.text
 }
 
-fn push_char(out: &mut String, c: char) {
-    if c == '\\' {
-        out.push_str("\\\\");
-    } else if c.is_control() || c == '\u{fffd}' || c == '\u{feff}' {
-        let mut buf = [0u8; 4];
-        for b in c.encode_utf8(&mut buf).bytes() {
-            out.push_str(&format!("\\x{b:02X}"));
+/// An excerpt being built: its text and how many characters it may still take.
+struct Quote {
+    text: String,
+    left: usize,
+}
+
+impl Quote {
+    fn new(max: usize) -> Self {
+        Self {
+            text: String::new(),
+            left: max,
         }
-    } else {
-        out.push(c);
+    }
+
+    /// Appends `piece` when it fits, else `...`; false once cut.
+    fn push(&mut self, piece: &str) -> bool {
+        let n = piece.chars().count();
+        if n > self.left {
+            self.text.push_str("...");
+            self.left = 0;
+            return false;
+        }
+        self.text.push_str(piece);
+        self.left -= n;
+        true
+    }
+}
+
+fn escaped(c: char) -> String {
+    match c {
+        '\\' => "\\\\".to_string(),
+        '\u{fffd}' => "\\u{FFFD}".to_string(),
+        c if c.is_control() || c == '\u{feff}' => {
+            let mut buf = [0u8; 4];
+            c.encode_utf8(&mut buf)
+                .bytes()
+                .map(|b| format!("\\x{b:02X}"))
+                .collect()
+        }
+        c => c.to_string(),
     }
 }
 
@@ -126,13 +148,16 @@ mod tests {
     fn excerpts_are_short_and_escaped() {
         assert_eq!(excerpt("abc"), "abc");
         assert_eq!(excerpt("a\u{1}\tb\\"), "a\\x01\\x09b\\\\");
-        assert_eq!(excerpt("\u{fffd}"), "\\xEF\\xBF\\xBD");
+        assert_eq!(excerpt("\u{fffd}"), "\\u{FFFD}");
+        assert_eq!(excerpt("\u{feff}t"), "\\xEF\\xBB\\xBFt");
         let long = "x".repeat(2000);
         assert_eq!(excerpt(&long), format!("{}...", "x".repeat(EXCERPT_CHARS)));
         assert_eq!(excerpt_bytes(b"\xb5b\x01\x07ok"), "\\xB5b\\x01\\x07ok");
         let bin: Vec<u8> = (0..=255u8).cycle().take(2048).collect();
         let e = excerpt_bytes(&bin);
-        assert!(e.len() <= 4 * EXCERPT_CHARS + 3, "{e}");
+        assert!(e.chars().count() <= EXCERPT_CHARS + 3, "{e}");
+        let e = excerpt(&"\u{fffd}".repeat(100));
+        assert!(e.chars().count() <= EXCERPT_CHARS + 3, "{e}");
         assert!(e.bytes().all(|b| (b' '..=b'~').contains(&b)), "{e}");
     }
 }
