@@ -46,6 +46,23 @@ pub fn run(a: &ReferenceCmdArgs) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// The maker whose proprietary NMEA sentences start with `talker` (`P` + three letters).
+fn maker(talker: &str) -> Option<&'static str> {
+    Some(match talker {
+        "PUBX" => "u-blox (PUBX)",
+        "PTNL" => "Trimble (PTNL)",
+        "PSAT" => "Hemisphere (PSAT)",
+        "PASH" => "Ashtech format (PASH)",
+        "PSTI" => "SkyTraq (PSTI)",
+        "PMTK" => "MediaTek (PMTK)",
+        "PQTM" => "Quectel (PQTM)",
+        "PGRM" => "Garmin (PGRM)",
+        "PSRF" => "SiRF (PSRF)",
+        "PAIR" => "Airoha (PAIR)",
+        _ => return None,
+    })
+}
+
 /// A time for the summary: GPS week/TOW and UTC for a receiver log, seconds for a CSV.
 fn when(insp: &Inspection, t: f64) -> String {
     match insp.reference.time {
@@ -61,6 +78,13 @@ fn print_summary(file: &str, insp: &Inspection) {
         let r = &log.report;
         if let Some(rx) = &r.receiver {
             outln!("receiver: {rx}");
+        }
+        let makers: Vec<&str> = r.talkers.keys().filter_map(|t| maker(t)).collect();
+        if !makers.is_empty() {
+            outln!(
+                "receiver, by its proprietary sentences: {}",
+                makers.join(", ")
+            );
         }
         if !r.talkers.is_empty() {
             let t: Vec<String> = r
