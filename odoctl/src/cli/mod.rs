@@ -220,7 +220,8 @@ pub struct ValidateArgs {
     /// SAMPLES CSV; repeat with `--reference` for an ensemble of runs.
     #[arg(long, required_unless_present = "runs")]
     pub samples: Vec<PathBuf>,
-    /// Reference: REFERENCE CSV, NMEA 0183 log or RTKLIB `.pos` file (one per `--samples`).
+    /// Reference: REFERENCE CSV, NMEA 0183 log, u-blox UBX log or RTKLIB `.pos` file (one per
+    /// `--samples`).
     #[arg(long, required_unless_present = "runs")]
     pub reference: Vec<PathBuf>,
     /// A list of runs, one `SAMPLES REFERENCE` a line: the ensemble coverage by distance.
