@@ -86,7 +86,7 @@ impl fmt::Display for ConfigError {
             Self::Toml { origin, message } => write!(f, "{origin}: {message}"),
             Self::UnknownKey { origin, line, key } => {
                 at(f, origin, *line)?;
-                write!(f, "unknown key `{key}` (keys: ")?;
+                write!(f, "unknown key `{}` (keys: ", crate::text::excerpt(key))?;
                 for (i, k) in Key::ALL.iter().enumerate() {
                     write!(f, "{}{}", if i == 0 { "" } else { ", " }, k.name())?;
                 }
@@ -222,7 +222,14 @@ fn entries(origin: &str, text: &str) -> Result<Vec<Entry>, ConfigError> {
     type Table = std::collections::BTreeMap<String, toml::Spanned<toml::Value>>;
     let table: Table = toml::from_str(text).map_err(|e| ConfigError::Toml {
         origin: origin.into(),
-        message: e.to_string().trim_end().into(),
+        // The parser's message quotes the line: at most a short excerpt of it.
+        message: e
+            .to_string()
+            .trim_end()
+            .lines()
+            .map(|l| crate::text::excerpt_n(l, 80))
+            .collect::<Vec<_>>()
+            .join("\n"),
     })?;
     let mut items: Vec<(&String, &toml::Spanned<toml::Value>)> = table.iter().collect();
     items.sort_by_key(|(_, v)| v.span().start);
@@ -614,5 +621,26 @@ mod tests {
         );
         assert_eq!(got.chassis.left_wheel.cos[0].to_bits(), (-0.0f32).to_bits());
         assert_eq!(got.chassis.ticks_per_rev, 20_000);
+    }
+
+    #[test]
+    fn errors_quote_binary_files_short() {
+        let bin: String = (0..3000u32)
+            .map(|i| char::from_u32(i % 0x5f + 0x20).unwrap_or('?'))
+            .filter(|c| *c != '\n')
+            .collect();
+        let e = parse_params("b.toml", &bin, ChassisParams::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("b.toml: "), "{e}");
+        assert!(e.lines().all(|l| l.chars().count() < 120), "{e}");
+        let e = parse_params(
+            "k.toml",
+            &format!("{} = 1\n", "k".repeat(500)),
+            ChassisParams::default(),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.len() < 600 && e.contains("unknown key `kkk"), "{e}");
     }
 }

@@ -21,6 +21,8 @@ use std::path::Path;
 
 use anyhow::{anyhow, bail, Context, Result};
 
+use crate::text::{excerpt, excerpt_n};
+
 /// Samples and reference points are matched when their times differ by at most this (s).
 pub const MATCH_TOLERANCE: f64 = 1.0e-3;
 
@@ -235,8 +237,9 @@ fn split_quoted(line: &str) -> Result<Vec<String>, String> {
             while chars.next_if(blank).is_some() {}
             if let Some(c) = chars.peek().filter(|&&c| c != ',') {
                 return Err(format!(
-                    "field {}: `{c}` after its closing quote",
-                    out.len() + 1
+                    "field {}: `{}` after its closing quote",
+                    out.len() + 1,
+                    excerpt(&c.to_string())
                 ));
             }
         } else {
@@ -350,7 +353,7 @@ impl<'a> Table<'a> {
                 "{}:{}: missing column `{name}` (header has: {})",
                 self.file,
                 self.header_line,
-                self.columns.join(",")
+                excerpt_n(&self.columns.join(","), 80)
             )
         })
     }
@@ -378,10 +381,11 @@ impl Row<'_> {
         let value = self.fields[col.index];
         parse(value).map_err(|what| {
             anyhow!(
-                "{}:{}: column `{}`: `{value}` is not {what}",
+                "{}:{}: column `{}`: `{}` is not {what}",
                 self.file,
                 self.line,
-                col.name
+                col.name,
+                excerpt(value)
             )
         })
     }
@@ -848,5 +852,24 @@ mod tests {
         assert_eq!(none[0].unit.unwrap().cov_xy, 0.0);
         let e = samples_error(&(text(",sigma_xy") + ",x\n"));
         assert!(e.contains("s.csv:2") && e.contains("`sigma_xy`"), "{e}");
+    }
+
+    #[test]
+    fn errors_quote_binary_input_as_a_short_escaped_excerpt() {
+        // A binary file where a CSV is expected: a 2 kB "field" without a comma.
+        let mut text = String::from("t,x,y\n");
+        text.extend(
+            (0..2048u32)
+                .map(|i| char::from_u32(i % 0x7f + 1).unwrap_or('?'))
+                .filter(|c| !matches!(c, '\n' | '\r' | ',' | '"' | '#')),
+        );
+        text.push_str(",1,2\n");
+        let e = parse_reference("bin.csv", &text).unwrap_err().to_string();
+        assert!(e.len() < 200, "{} bytes: {e}", e.len());
+        assert!(e.starts_with("bin.csv:2: column `t`"), "{e}");
+        assert!(!e.chars().any(|c| c.is_control()), "{e}");
+        let header = "\u{1}\u{2}".repeat(1000) + "\n1,2,3\n";
+        let e = parse_reference("h.csv", &header).unwrap_err().to_string();
+        assert!(e.len() < 500 && !e.chars().any(|c| c.is_control()), "{e}");
     }
 }

@@ -33,3 +33,4 @@ pub mod replay;
 pub mod ros;
 pub mod simulate;
 pub mod stats;
+pub mod text;

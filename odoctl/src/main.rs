@@ -45,5 +45,6 @@ fn run(cmd: &Cmd) -> anyhow::Result<ExitCode> {
         Cmd::Simulate(a) => commands::simulate::run(a),
         Cmd::Bridge(a) => commands::bridge::run(a),
         Cmd::Umbmark(a) => commands::umbmark::run(a),
+        Cmd::Reference(a) => commands::reference::run(a),
     }
 }

@@ -1,5 +1,6 @@
-//! odoctl's reference readers (REFERENCE CSV, NMEA 0183 log, RTKLIB `.pos`, recognised from
-//! the content or forced) on any bytes.
+//! odoctl's reference readers (REFERENCE CSV, NMEA 0183 log, RTKLIB `.pos`, u-blox UBX, TUM
+//! trajectory, MCAP recording, recognised from the content or forced) on any bytes; a fifth of the inputs get a valid
+//! UBX NAV-PVT frame in front, so that the UBX reader meets its frames among the fuzzed bytes.
 //!
 //! Oracles: no panic; an accepted reference has finite coordinates and strictly increasing
 //! times, and every epoch passes the fix-quality filter; binary data starting with `%` before
@@ -14,11 +15,29 @@ fuzz_target!(|data: &[u8]| {
     let Some((&choice, bytes)) = data.split_first() else {
         return;
     };
-    let format = match choice % 4 {
+    let format = match choice % 7 {
         0 => None,
         1 => Some(Format::Csv),
         2 => Some(Format::Nmea),
-        _ => Some(Format::Rtklib),
+        3 => Some(Format::Rtklib),
+        4 => Some(Format::Tum),
+        5 => Some(Format::Mcap),
+        _ => Some(Format::Ubx),
+    };
+    // A valid NAV-PVT (RTK fixed, dated) in front of the bytes when the high bit says so.
+    let framed: Vec<u8>;
+    let bytes = if choice & 0x80 != 0 {
+        let mut p = [0u8; 92];
+        p[4..6].copy_from_slice(&2024u16.to_le_bytes());
+        p[6..11].copy_from_slice(&[3, 15, 11, 59, 42]);
+        p[11] = 0x07;
+        p[20] = 3;
+        p[21] = 0x83;
+        p[28..32].copy_from_slice(&492_000_000i32.to_le_bytes());
+        framed = [reference::ubx::frame(0x01, 0x07, &p), bytes.to_vec()].concat();
+        &framed[..]
+    } else {
+        bytes
     };
     let options = ReferenceOptions {
         format,

@@ -14,7 +14,8 @@ pub struct CalibrateArgs {
     /// SAMPLES CSV of the estimation run.
     #[arg(long)]
     pub samples: PathBuf,
-    /// Reference (RTK GNSS) of the same run: REFERENCE CSV, NMEA 0183 log or RTKLIB `.pos`.
+    /// Reference (RTK GNSS) of the same run: REFERENCE CSV, NMEA 0183 log, u-blox UBX log or
+    /// RTKLIB `.pos`.
     #[arg(long)]
     pub reference: PathBuf,
     /// How `--reference` is read.

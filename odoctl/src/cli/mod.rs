@@ -16,7 +16,7 @@ mod umbmark;
 pub mod values;
 
 pub use calibrate::{CalibrateArgs, GeometryArgs};
-pub use reference::{PosTimeArg, ReceiverArgs, ReferenceArgs};
+pub use reference::{PosTimeArg, ReceiverArgs, ReferenceArgs, ReferenceCmdArgs};
 pub use ros::RosNameArgs;
 pub use simulate::SimulateArgs;
 pub use trajectory::TrajectoryArgs;
@@ -79,6 +79,8 @@ pub enum Cmd {
     Bridge(BridgeArgs),
     /// Fit the diameters and track width to square runs and a straight measured on the floor.
     Umbmark(UmbmarkArgs),
+    /// Inspect a reference (receiver log, RTKLIB solution, CSV); `--to` converts its track.
+    Reference(ReferenceCmdArgs),
 }
 
 /// `odoctl monitor`.
@@ -233,7 +235,8 @@ pub struct ValidateArgs {
     /// SAMPLES CSV; repeat with `--reference` for an ensemble of runs.
     #[arg(long, required_unless_present = "runs")]
     pub samples: Vec<PathBuf>,
-    /// Reference: REFERENCE CSV, NMEA 0183 log or RTKLIB `.pos` file (one per `--samples`).
+    /// Reference: REFERENCE CSV, NMEA 0183 log, u-blox UBX log or RTKLIB `.pos` file (one per
+    /// `--samples`).
     #[arg(long, required_unless_present = "runs")]
     pub reference: Vec<PathBuf>,
     /// A list of runs, one `SAMPLES REFERENCE` a line: the ensemble coverage by distance.

@@ -1,12 +1,30 @@
 //! The options of the reference input: those `calibrate` and `validate` add to `--reference`
-//! ([`ReferenceArgs`]), and those `simulate` adds to write receiver logs ([`ReceiverArgs`]).
+//! ([`ReferenceArgs`]), those of `odoctl reference` ([`ReferenceCmdArgs`]), and those
+//! `simulate` adds to write receiver logs ([`ReceiverArgs`]).
 
 use std::path::PathBuf;
 
 use clap::Args;
 
 use super::values as v;
+use crate::reference::summary::ExportFormat;
 use crate::reference::{Format, MinFix};
+
+/// `odoctl reference`.
+#[derive(Debug, Clone, Args)]
+pub struct ReferenceCmdArgs {
+    /// The reference: REFERENCE CSV, NMEA 0183 log, u-blox UBX log or RTKLIB `.pos` file.
+    pub file: PathBuf,
+    /// How the file is read (the fix-quality filter and origin apply to `--to` and the origin).
+    #[command(flatten)]
+    pub input: ReferenceArgs,
+    /// Write the used epochs in this format (to `--output`, else stdout) instead of the summary.
+    #[arg(long, value_enum)]
+    pub to: Option<ExportFormat>,
+    /// File of `--to`.
+    #[arg(long, short, requires = "to")]
+    pub output: Option<PathBuf>,
+}
 
 /// How `--reference` is read (`calibrate`, `validate`).
 #[derive(Debug, Clone, Args)]

@@ -67,7 +67,7 @@ pub fn record(
             }
         })?;
         if !ok {
-            bail!("reset_pose: {}", text.trim());
+            bail!("reset_pose: {}", crate::text::excerpt_n(text.trim(), 80));
         }
     }
     let is_start = |r: &PoseRecord| {

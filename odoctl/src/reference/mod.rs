@@ -1,5 +1,6 @@
 //! The RTK reference of a calibration from any of the files a user has: the REFERENCE CSV in
-//! local metres ([`crate::csvio`]), the receiver's NMEA 0183 log ([`nmea`]) or an RTKLIB `.pos`
+//! local metres ([`crate::csvio`]), the receiver's NMEA 0183 log ([`nmea`]), a u-blox UBX log
+//! ([`ubx`], recognised by [`ubx::sniff`] before the text formats) or an RTKLIB `.pos`
 //! solution ([`rtklib`]), recognised from the content ([`detect`]).
 //!
 //! A receiver log gives WGS84 positions at GPS times ([`Epoch`]); [`Reference::from_log`]
@@ -19,8 +20,10 @@ pub mod nmea;
 pub mod rtklib;
 pub mod simulated;
 pub mod simulated_trajectory;
+pub mod summary;
 pub mod trajectory;
 pub mod tum;
+pub mod ubx;
 
 use std::collections::BTreeMap;
 use std::fmt;
@@ -44,6 +47,8 @@ pub enum Format {
     Tum,
     /// ROS 2 MCAP recording with a PoseStamped, Odometry or TFMessage topic.
     Mcap,
+    /// u-blox UBX log: NAV-PVT (+ NAV-HPPOSLLH, NAV-RELPOSNED), in any mix with NMEA and RTCM 3.
+    Ubx,
 }
 
 impl fmt::Display for Format {
@@ -54,6 +59,7 @@ impl fmt::Display for Format {
             Self::Rtklib => "RTKLIB .pos",
             Self::Tum => "TUM trajectory",
             Self::Mcap => "MCAP",
+            Self::Ubx => "u-blox UBX",
         })
     }
 }
@@ -63,11 +69,10 @@ impl fmt::Display for Format {
 /// even when it starts with `%`); a `%` header of text or a data row starting `yyyy/mm/dd`
 /// or `week tow` with at least 14 columns is RTKLIB; a line of exactly 8 numbers separated by
 /// white space is TUM (`#` lines passed over); anything else is taken as CSV (whose own parser
-/// then names what is wrong). MCAP is recognised by its magic bytes ([`detect_bytes`]).
+/// then names what is wrong). MCAP is recognised by its magic bytes ([`detect_format`]).
 pub fn detect(text: &str) -> Format {
-    for line in text
-        .lines()
-        .map(str::trim)
+    for line in crate::text::lines(text)
+        .map(|(_, l)| l.trim())
         .filter(|l| !l.is_empty() && !l.starts_with('#'))
         .take(50)
     {
@@ -100,10 +105,13 @@ pub fn detect(text: &str) -> Format {
     Format::Csv
 }
 
-/// [`detect`], and MCAP when the content starts with the MCAP magic.
-pub fn detect_bytes(bytes: &[u8], text: &str) -> Format {
+/// Recognises the format of a file's bytes (`text`: the same as text): MCAP by its magic,
+/// a UBX log ([`ubx::sniff`]), then [`detect`].
+pub fn detect_format(bytes: &[u8], text: &str) -> Format {
     if bytes.starts_with(mcap_pose::MAGIC) {
         Format::Mcap
+    } else if ubx::sniff(bytes) {
+        Format::Ubx
     } else {
         detect(text)
     }
@@ -189,7 +197,7 @@ pub struct Epoch {
     pub sigma_north_east_up: Option<[f64; 3]>,
     /// Solution quality.
     pub fix: FixQuality,
-    /// 1-based line of the position in the file.
+    /// 1-based line of the position in the file (a UBX log: the byte offset of its NAV-PVT).
     pub line: usize,
 }
 
@@ -201,14 +209,25 @@ pub struct ReadReport {
     pub used: BTreeMap<String, usize>,
     /// Well-formed sentences of kinds that carry nothing used here, by kind (`GSV`...).
     pub other: BTreeMap<String, usize>,
-    /// Corrupt lines (checksum, syntax, field out of range): skipped.
+    /// Corrupt lines or frames (checksum, syntax, field out of range, cut off): skipped.
     pub corrupt: usize,
     /// Well-formed lines without what they should carry (a GGA without a position, an RMC
     /// with status V, an epoch whose time is not after the previous one...): skipped.
     pub unusable: usize,
-    /// Lines with stray bytes before the `$` (binary messages between the sentences): read
-    /// from the `$`.
+    /// Lines with stray bytes before, between or after their sentences (binary messages
+    /// between the sentences): the sentences are read, the bytes skipped.
     pub stray_bytes: usize,
+    /// Bytes skipped outside any sentence or frame (stray bytes on a line, binary data
+    /// between the frames of a binary log).
+    pub skipped_bytes: usize,
+    /// Lines that hold more than one sentence (a lost line feed): each sentence is read.
+    pub joined: usize,
+    /// NMEA talkers seen (`GN`, `GP`...; `P` + maker for proprietary sentences), by count.
+    pub talkers: BTreeMap<String, usize>,
+    /// The receiver as the log names it (u-blox MON-VER), when it does.
+    pub receiver: Option<String>,
+    /// How the reader read the log (the HDT order it detected, the heading source...).
+    pub notes: Vec<String>,
     /// The first problems (at most [`ReadReport::KEPT`]), `FILE:LINE: ...`.
     pub problems: Vec<String>,
     /// Warnings about what was read (a date past the leap-second table), `FILE:LINE: ...`.
@@ -248,9 +267,9 @@ impl ReadReport {
         *self.used.entry(kind.to_string()).or_default() += 1;
     }
 
-    /// Counts another sentence of `kind`.
+    /// Counts another sentence of `kind` (quoted as a short excerpt).
     pub fn other(&mut self, kind: &str) {
-        *self.other.entry(kind.to_string()).or_default() += 1;
+        *self.other.entry(crate::text::excerpt(kind)).or_default() += 1;
     }
 }
 
@@ -264,19 +283,36 @@ impl fmt::Display for ReadReport {
         };
         write!(f, "read: {}", list(&self.used))?;
         if !self.other.is_empty() {
-            write!(f, "; other sentences skipped: {}", list(&self.other))?;
+            write!(f, "; other messages skipped: {}", list(&self.other))?;
         }
         write!(
             f,
-            "; {} corrupt and {} unusable lines skipped",
+            "; {} corrupt and {} unusable lines or frames skipped",
             self.corrupt, self.unusable
         )?;
         if self.stray_bytes > 0 {
             write!(
                 f,
-                "; {} lines read from the `$` after stray bytes",
+                "; {} lines with stray bytes besides their sentences (the sentences read)",
                 self.stray_bytes
             )?;
+        }
+        if self.joined > 0 {
+            write!(
+                f,
+                "; {} lines with more than one sentence (each read)",
+                self.joined
+            )?;
+        }
+        if self.skipped_bytes > 0 {
+            write!(
+                f,
+                "; {} bytes outside any sentence or frame skipped",
+                self.skipped_bytes
+            )?;
+        }
+        for n in &self.notes {
+            write!(f, "\n    {n}")?;
         }
         for p in &self.problems {
             write!(f, "\n    {p}")?;
@@ -465,7 +501,7 @@ pub fn parse(file: &str, bytes: &[u8], o: &ReferenceOptions) -> Result<Reference
         Ok(t) => std::borrow::Cow::Borrowed(t),
         Err(_) => String::from_utf8_lossy(bytes),
     };
-    let format = o.format.unwrap_or_else(|| detect_bytes(bytes, &text));
+    let format = o.format.unwrap_or_else(|| detect_format(bytes, &text));
     match format {
         Format::Csv => {
             let rows = csvio::parse_reference(file, &text)?;
@@ -498,6 +534,10 @@ pub fn parse(file: &str, bytes: &[u8], o: &ReferenceOptions) -> Result<Reference
                 vec![note],
                 o,
             ))
+        }
+        Format::Ubx => {
+            let log = ubx::parse(file, bytes, o.leap_seconds)?;
+            Reference::from_log(file, format, log, o)
         }
     }
 }

@@ -1,13 +1,17 @@
 //! An NMEA 0183 log of the reference receiver: GGA positions, dated by RMC or ZDA, with the
 //! heading of HDT and the standard deviations of GST.
 //!
-//! Every line is checked by the firmware's sentence parser first
+//! Lines end at CR LF, LF or a CR alone. A line may hold several sentences (a lost line
+//! feed): each `$` followed by an address (at least three letters or digits and a `,`) starts
+//! one, which ends after its `*hh` or at the next `$`; every one of them is read, and the
+//! line is counted as joined. Bytes of the line outside its sentences (binary messages
+//! between the sentences) are counted as stray bytes and skipped; a line without any sentence
+//! is corrupt. Every sentence is checked by the firmware's sentence parser first
 //! (`odo_unit::timing::nmea::parse_sentence`: `$`, `*hh` checksum, any talker), which also
 //! reads RMC and ZDA (date and time, the same code as on the unit). GGA, HDT and GST are
-//! read by the `nmea` crate. Other sentences are counted by type and skipped; corrupt lines
-//! (checksum, syntax, binary data between sentences) are counted and skipped; a line with
-//! stray bytes before its `$` is read from the `$` and counted; only a log with no usable
-//! epoch is an error.
+//! read by the `nmea` crate. Other sentences are counted by type and skipped; corrupt
+//! sentences (checksum, syntax) are counted and skipped; only a log with no usable epoch is
+//! an error. The talkers of the checksum-valid sentences are counted.
 //!
 //! Times: GGA carries the UTC time of day only. Each epoch is dated by the nearest earlier
 //! date (an RMC with status A, a ZDA, or the previous dated epoch), taking the day that puts
@@ -21,7 +25,10 @@
 //! Association: a GST belongs to the GGA of the same time of day (before or after it). An
 //! HDT carries no time: it belongs to the epoch being sent, the time of the last sentence
 //! that carries one (GGA, GST, RMC, ZDA), whether its GGA came before or comes after it; an
-//! HDT sent first in its epoch, before any timed sentence, is taken for the previous epoch's.
+//! HDT sent first in its epoch, before any timed sentence, is taken for the previous epoch's,
+//! unless the log shows that its receiver sends HDT first in every epoch (as Hemisphere
+//! receivers do: see `hdt_order`); then each HDT belongs to the GGA after it. The report
+//! notes the order used when the time alone cannot tell.
 //! A GGA that repeats the previous epoch's time is counted and skipped; an HDT or GST that
 //! went with the repeat goes to that epoch. A date sentence before the GPS epoch
 //! (1980-01-06) is counted and skipped like a corrupt one.
@@ -32,6 +39,7 @@ use odo_unit::timing::nmea::{days_from_civil, parse_sentence, NmeaError, TimeMes
 
 use super::geodetic::Geodetic;
 use super::{gps_time, Epoch, FixQuality, GeodeticLog, ReadReport};
+use crate::text::{excerpt, excerpt_n, lines};
 
 /// `$` + body + `*hh`: the sentence with its checksum (XOR of the body's bytes).
 pub fn with_checksum(body: &str) -> String {
@@ -92,13 +100,145 @@ fn sentence_type(s: &str) -> &str {
 }
 
 /// Parses an NMEA log; `file` names it in messages. UTC + leap seconds = GPS time, with
-/// `leap_seconds` for every epoch when given, else those of each epoch's date.
+/// `leap_seconds` for every epoch when given, else those of each epoch's date. Lines end at
+/// CR LF, LF or CR alone.
 pub fn parse(file: &str, text: &str, leap_seconds: Option<i32>) -> Result<GeodeticLog> {
+    let order = hdt_order(text);
     let mut reader = LogReader::new(file, leap_seconds);
-    for (i, raw) in text.lines().enumerate() {
-        reader.line(i + 1, raw);
+    reader.hdt_leads = order.leads;
+    reader.report.notes.extend(order.note);
+    reader.report.talkers = order.talkers;
+    for (n, raw) in lines(text) {
+        reader.line(n, raw);
     }
     reader.finish(leap_seconds)
+}
+
+/// The sentences of a line (see the module doc): each `$` starts a candidate that runs to
+/// the next `$`; a candidate with an address (`$` + at least three letters or digits + `,`)
+/// is a sentence, cut after its `*hh`; the rest of the line is stray bytes. Gives the
+/// sentences and the number of stray bytes.
+fn split_sentences(raw: &str) -> (Vec<&str>, usize) {
+    let starts: Vec<usize> = raw.match_indices('$').map(|(i, _)| i).collect();
+    let mut sentences = Vec::new();
+    let mut stray = starts.first().copied().unwrap_or(raw.len());
+    for (k, &s) in starts.iter().enumerate() {
+        let end = starts.get(k + 1).copied().unwrap_or(raw.len());
+        let candidate = &raw[s..end];
+        let address = candidate[1..].split(',').next().unwrap_or("");
+        let has_address = address.len() >= 3
+            && address.len() < candidate.len() - 1
+            && address.bytes().all(|b| b.is_ascii_alphanumeric());
+        if !has_address {
+            stray += candidate.len();
+            continue;
+        }
+        let sentence = candidate
+            .find('*')
+            .and_then(|i| candidate.get(..i + 3))
+            .unwrap_or(candidate);
+        // Blanks between sentences are no stray bytes.
+        stray += candidate[sentence.len()..].trim().len();
+        sentences.push(sentence);
+    }
+    (sentences, stray)
+}
+
+/// The order of HDT within the log's epochs, what the report says about it, and the
+/// talkers seen.
+struct HdtOrder {
+    talkers: std::collections::BTreeMap<String, usize>,
+    /// HDT is sent before its epoch's GGA, where the time alone cannot tell: it belongs to
+    /// the GGA after it.
+    leads: bool,
+    note: Option<String>,
+}
+
+/// Detects where HDT sits in the log's epochs. An HDT between sentences of the same time
+/// belongs to that epoch; only an HDT at an epoch boundary (the timed sentences before and
+/// after it carry different times) is ambiguous. For those the ends of the log decide: a log
+/// that opens with an HDT (before any timed sentence) and does not end with one sends HDT
+/// first in each epoch (before GGA, as Hemisphere receivers do); a log that opens with the
+/// epoch's first timed sentence, or ends with an HDT, sends HDT last. Undecided: HDT is
+/// taken as sent last.
+fn hdt_order(text: &str) -> HdtOrder {
+    // (type, time field) of each checksum-valid sentence; HDT and untimed ones carry None.
+    let mut seq: Vec<(&str, Option<&str>)> = Vec::new();
+    let mut talkers = std::collections::BTreeMap::new();
+    for (_, raw) in lines(text) {
+        for s in split_sentences(raw.trim()).0 {
+            if !checksum_ok(s) {
+                continue;
+            }
+            *talkers.entry(talker(s)).or_default() += 1;
+            let kind = sentence_type(s);
+            let time = match kind {
+                "GGA" | "RMC" | "ZDA" | "GST" => s.split(',').nth(1).filter(|t| !t.is_empty()),
+                _ => None,
+            };
+            if kind == "HDT" || time.is_some() {
+                seq.push((kind, time));
+            }
+        }
+    }
+    // The first HDT at a boundary: the timed sentences before and after it.
+    let mut boundary = None;
+    let mut last_timed: Option<usize> = None;
+    for (i, (kind, time)) in seq.iter().enumerate() {
+        if *kind == "HDT" {
+            let next = seq[i + 1..].iter().find(|(_, t)| t.is_some());
+            if let (Some(p), Some(n)) = (last_timed, next) {
+                if seq[p].1 != n.1 {
+                    boundary = Some((seq[p].0, n.0));
+                    break;
+                }
+            }
+        } else if time.is_some() {
+            last_timed = Some(i);
+        }
+    }
+    let Some((closer, opener)) = boundary else {
+        return HdtOrder {
+            talkers,
+            leads: false,
+            note: None,
+        };
+    };
+    let first_hdt = matches!(seq.first(), Some(("HDT", _)));
+    let last_hdt = matches!(seq.last(), Some(("HDT", _)));
+    let first_opens = seq.first().is_some_and(|(k, _)| *k == opener);
+    let leads = first_hdt && !last_hdt;
+    let how = if leads {
+        "HDT first in each epoch, before its GGA (the log opens with an HDT)"
+    } else if first_opens || last_hdt {
+        "HDT last in each epoch, after its GGA"
+    } else {
+        "HDT order undecided by the log's ends: taken as last in each epoch"
+    };
+    HdtOrder {
+        talkers,
+        leads,
+        note: Some(format!(
+            "heading order: {how} (HDT between {closer} and {opener}, which carry different times)"
+        )),
+    }
+}
+
+/// The talker of sentence `s`: `GN` for `$GNGGA`, `P` + maker for a proprietary sentence
+/// (`PUBX`, `PTNL`, `PSAT`), as an excerpt.
+fn talker(s: &str) -> String {
+    let address = s[1..].split(',').next().unwrap_or("");
+    let n = if address.starts_with('P') { 4 } else { 2 };
+    excerpt(address.get(..n).unwrap_or(address))
+}
+
+/// True when sentence `s` (`$...*hh`) has a valid checksum.
+fn checksum_ok(s: &str) -> bool {
+    let Some((body, sum)) = s.get(1..).and_then(|b| b.rsplit_once('*')) else {
+        return false;
+    };
+    let x = body.bytes().fold(0u8, |a, b| a ^ b);
+    u8::from_str_radix(sum, 16).is_ok_and(|v| v == x) && sum.len() == 2
 }
 
 /// A log being read: the GGA epochs so far, the date sentences, and the GST and HDT
@@ -119,6 +259,8 @@ struct LogReader<'a> {
     epoch_time: Option<i64>,
     /// An HDT sent in an epoch before its GGA: (time of day in ms, heading in rad, line).
     pending_hdt: Option<(i64, f64, usize)>,
+    /// HDT is sent first in each epoch: it waits for the next GGA whatever its time.
+    hdt_leads: bool,
 }
 
 impl<'a> LogReader<'a> {
@@ -133,6 +275,7 @@ impl<'a> LogReader<'a> {
             hdt_target: None,
             epoch_time: None,
             pending_hdt: None,
+            hdt_leads: false,
         }
     }
 
@@ -146,24 +289,38 @@ impl<'a> LogReader<'a> {
         }
     }
 
-    /// Reads line number `line`.
+    /// Reads line number `line`: each of its sentences, counting the stray bytes.
     fn line(&mut self, line: usize, raw: &str) {
         let file = self.file;
         let raw = raw.trim();
         if raw.is_empty() {
             return;
         }
-        let Some(start) = raw.rfind('$') else {
-            self.report
-                .corrupt(format!("{file}:{line}: not an NMEA sentence (no `$`)"));
+        let (sentences, stray) = split_sentences(raw);
+        if sentences.is_empty() {
+            self.report.corrupt(format!(
+                "{file}:{line}: not an NMEA sentence (no `$` and address): `{}`",
+                excerpt(raw)
+            ));
             return;
-        };
-        if start > 0 {
+        }
+        if stray > 0 {
+            self.report.skipped_bytes += stray;
             self.report.stray_bytes(format!(
-                "{file}:{line}: {start} bytes before the `$` (read from the `$`)"
+                "{file}:{line}: {stray} stray bytes besides the sentences (the sentences read)"
             ));
         }
-        let s = &raw[start..];
+        if sentences.len() > 1 {
+            self.report.joined += 1;
+        }
+        for s in sentences {
+            self.sentence(line, s);
+        }
+    }
+
+    /// Reads sentence `s` (from its `$`) of line `line`.
+    fn sentence(&mut self, line: usize, s: &str) {
+        let file = self.file;
         let Some(kind) = self.checked(line, s) else {
             return;
         };
@@ -177,9 +334,11 @@ impl<'a> LogReader<'a> {
                 let time = s.split(',').nth(1).unwrap_or("");
                 if kind != "HDT" && time.get(4..6) == Some("60") {
                     self.report.unusable(format!(
-                        "{file}:{line}: {kind} in a leap second ({time}): skipped"
+                        "{file}:{line}: {kind} in a leap second ({}): skipped",
+                        excerpt(time)
                     ));
                 } else {
+                    let e = excerpt_n(&e.to_string(), 100);
                     self.report.corrupt(format!("{file}:{line}: {kind}: {e}"));
                 }
                 return;
@@ -291,7 +450,7 @@ impl<'a> LogReader<'a> {
         let mut heading = None;
         self.hdt_target = Some(self.undated.len());
         match self.pending_hdt.take() {
-            Some((k, h, _)) if k == ms(sod) => {
+            Some((k, h, _)) if k == ms(sod) || self.hdt_leads => {
                 heading = Some(h);
                 self.hdt_target = None;
                 self.report.used("HDT");
@@ -318,6 +477,12 @@ impl<'a> LogReader<'a> {
             return;
         };
         let heading = crate::stats::wrap_angle(deg.to_radians());
+        if self.hdt_leads {
+            // Sent first in its epoch: the next GGA's, whatever the time now.
+            let old = self.pending_hdt.replace((i64::MIN, heading, line));
+            self.drop_hdt(old);
+            return;
+        }
         match (self.hdt_target, self.epoch_time) {
             // After the GGA of the epoch being sent.
             (Some(k), Some(t)) if ms(self.undated[k].sod) == t => {
@@ -845,5 +1010,118 @@ mod tests {
         let o = parse("f.nmea", &noon_log(1, 5, 2040), Some(19)).unwrap();
         assert!(o.report.warnings.is_empty());
         assert_eq!(o.epochs[0].gps_time, gps_of(2040, 5, 1, 43_200.0, 19));
+    }
+
+    #[test]
+    fn two_sentences_on_a_line_and_any_line_ending() {
+        let z = zda("120000.00", 23, 11, 2026);
+        let g0 = gga("GN", "120000.00", "4912.0", "N", "01636.0", "E", 4);
+        let g1 = gga("GN", "120000.10", "4912.0", "N", "01636.0", "E", 4);
+        let hdt = with_checksum("GNHDT,45.000,T");
+        // A lost line feed: ZDA and GGA on one line, GGA and HDT on the next; binary bytes
+        // between two sentences.
+        let joined = format!("{z}{g0}\r\n{g1}\u{1}\u{2}{hdt}\r\n");
+        let l = parse("j.nmea", &joined, Some(18)).unwrap();
+        assert_eq!(l.epochs.len(), 2, "{}", l.report);
+        assert_eq!(l.report.used["ZDA"], 1);
+        assert!(l.epochs[1].heading.is_some());
+        assert_eq!((l.report.joined, l.report.stray_bytes), (2, 1));
+        assert_eq!(l.report.skipped_bytes, 2);
+        let text = l.report.to_string();
+        assert!(
+            text.contains("2 lines with more than one sentence"),
+            "{text}"
+        );
+        // CR only, LF only, CR LF: the same epochs, the same lines.
+        let lines3 = [z.as_str(), g0.as_str(), g1.as_str()];
+        let want = parse("l.nmea", &lines3.join("\n"), Some(18)).unwrap();
+        for sep in ["\r", "\r\n", "\n\r\n"] {
+            let l = parse("l.nmea", &lines3.join(sep), Some(18)).unwrap();
+            assert_eq!(l.epochs.len(), 2, "{sep:?}");
+            assert_eq!(
+                l.epochs.iter().map(|e| e.gps_time).collect::<Vec<_>>(),
+                want.epochs.iter().map(|e| e.gps_time).collect::<Vec<_>>()
+            );
+            if sep != "\n\r\n" {
+                assert_eq!(l.epochs[1].line, 3, "{sep:?}");
+            }
+        }
+        // A checksum-bad sentence beside a good one: the bad one counted, the good one read.
+        let mut bad = g1.clone();
+        bad.replace_range(bad.len() - 2.., "00");
+        let l = parse("b.nmea", &format!("{z}\n{bad}{g0}\n"), Some(18)).unwrap();
+        assert_eq!((l.epochs.len(), l.report.corrupt), (1, 1), "{}", l.report);
+        assert!(l.report.problems[0].starts_with("b.nmea:2: checksum 00"));
+    }
+
+    /// `(time, heading)` epochs of a receiver sending HDT before each GGA (Hemisphere) or
+    /// after it, each epoch `[HDT] GGA RMC [HDT]`; headings 10, 20, 30... degrees.
+    fn ordered_log(hdt_first: bool, epochs: usize) -> String {
+        let rmc = |t: &str| {
+            with_checksum(&format!(
+                "GPRMC,{t},A,4912.0,N,01636.0,E,0.0,0.0,020226,,,D"
+            ))
+        };
+        let mut out = Vec::new();
+        for k in 0..epochs {
+            let t = format!("1000{:02}.00", k);
+            let hdt = with_checksum(&format!("HEHDT,{}.0,T", 10 * (k + 1)));
+            if hdt_first {
+                out.push(hdt.clone());
+            }
+            out.push(gga("GP", &t, "4912.0", "N", "01636.0", "E", 4));
+            out.push(rmc(&t));
+            if !hdt_first {
+                out.push(hdt);
+            }
+        }
+        out.join("\r\n")
+    }
+
+    #[test]
+    fn hdt_order_is_detected_from_the_log() {
+        for hdt_first in [true, false] {
+            let l = parse("o.nmea", &ordered_log(hdt_first, 4), Some(18)).unwrap();
+            let deg: Vec<f64> = l
+                .epochs
+                .iter()
+                .map(|e| e.heading.map_or(-1.0, |h| h.to_degrees().round()))
+                .collect();
+            assert_eq!(deg, vec![10.0, 20.0, 30.0, 40.0], "first {hdt_first}");
+            let note = l.report.notes.join(" ");
+            let want = if hdt_first { "HDT first" } else { "HDT last" };
+            assert!(note.contains(want), "{note}");
+            assert_eq!(l.report.unusable, 0, "{}", l.report);
+            assert_eq!(l.report.talkers["HE"], 4);
+        }
+        // Cut so that neither end tells: the order is said to be undecided.
+        let log = ordered_log(true, 4);
+        let cut: Vec<&str> = log.split("\r\n").collect();
+        let l = parse("u.nmea", &cut[2..cut.len() - 1].join("\n"), Some(18)).unwrap();
+        assert!(
+            l.report.notes[0].contains("undecided"),
+            "{:?}",
+            l.report.notes
+        );
+        // HDT between sentences of its own epoch needs no detection.
+        let l = parse("n.nmea", &noon_log(1, 2, 2026), Some(18)).unwrap();
+        assert!(l.report.notes.is_empty());
+    }
+
+    #[test]
+    fn published_sentences_joined_and_with_carriage_returns_only() {
+        // The Trimble GGA and GST of `published_receiver_sentences`, written as a receiver
+        // that lost a line feed and ends lines with CR only.
+        let zda = zda("172813.00", 12, 7, 2024);
+        let gga = "$GPGGA,172814.0,3723.46587704,N,12202.26957864,W,2,6,1.2,18.893,M,-25.669,M,2.0,0031*4F";
+        let gst = "$GPGST,172814.0,0.006,0.023,0.020,273.6,0.023,0.020,0.031*6A";
+        let log = format!("{zda}\r{gga}{gst}\r");
+        let l = parse("t.nmea", &log, Some(18)).unwrap();
+        assert_eq!(l.epochs.len(), 1, "{}", l.report);
+        let e = &l.epochs[0];
+        assert_eq!(e.line, 2);
+        assert!(e.sigma_north_east_up.is_some(), "{}", l.report);
+        assert_eq!((l.report.joined, l.report.corrupt), (1, 0));
+        assert_eq!(l.report.talkers["GP"], 3);
     }
 }

@@ -16,6 +16,7 @@ use odo_unit::timing::nmea::days_from_civil;
 
 use super::geodetic::Geodetic;
 use super::{gps_time, Epoch, FixQuality, GeodeticLog, ReadReport};
+use crate::text::excerpt;
 
 /// The Q column's meaning.
 pub fn fix_quality(q: u32) -> FixQuality {
@@ -71,7 +72,7 @@ fn row(tokens: &[&str], layout: Layout, leap_seconds: Option<i32>) -> Result<Epo
         v.parse::<f64>()
             .ok()
             .filter(|x| x.is_finite())
-            .ok_or_else(|| format!("{what} `{v}` is not a number"))
+            .ok_or_else(|| format!("{what} `{}` is not a number", excerpt(v)))
     };
     let first = tokens.first().copied().unwrap_or("");
     let gps_time = if first.contains('/') {
@@ -90,7 +91,10 @@ fn row(tokens: &[&str], layout: Layout, leap_seconds: Option<i32>) -> Result<Epo
             (d.next().is_none() && t.next().is_none()).then_some(v)
         };
         let Some((y, m, dd, hh, mm, ss)) = fields() else {
-            return Err(format!("time `{first} {clock}` is not yyyy/mm/dd hh:mm:ss"));
+            return Err(format!(
+                "time `{}` is not yyyy/mm/dd hh:mm:ss",
+                excerpt(&format!("{first} {clock}"))
+            ));
         };
         if !(1..=12).contains(&m)
             || !(1..=31).contains(&dd)
@@ -98,11 +102,14 @@ fn row(tokens: &[&str], layout: Layout, leap_seconds: Option<i32>) -> Result<Epo
             || mm > 59
             || !(0.0..61.0).contains(&ss)
         {
-            return Err(format!("time `{first} {clock}` is out of range"));
+            return Err(format!(
+                "time `{}` is out of range",
+                excerpt(&format!("{first} {clock}"))
+            ));
         }
         let days = days_from_civil(y, m, dd);
         if odo_unit::timing::nmea::civil_from_days(days) != (y, m, dd) {
-            return Err(format!("date `{first}` does not exist"));
+            return Err(format!("date `{}` does not exist", excerpt(first)));
         }
         let sod = f64::from(hh * 3600 + mm * 60) + ss;
         let leap = if layout.utc {
@@ -114,7 +121,7 @@ fn row(tokens: &[&str], layout: Layout, leap_seconds: Option<i32>) -> Result<Epo
     } else {
         let week = first
             .parse::<u32>()
-            .map_err(|_| format!("`{first}` is neither a date nor a GPS week"))?;
+            .map_err(|_| format!("`{}` is neither a date nor a GPS week", excerpt(first)))?;
         let tow = num(1, "time of week")?;
         if !(0.0..gps_time::WEEK).contains(&tow) {
             return Err(format!("time of week {tow} is outside 0..604800 s"));
@@ -142,7 +149,12 @@ fn row(tokens: &[&str], layout: Layout, leap_seconds: Option<i32>) -> Result<Epo
     let q = tokens
         .get(i + 1)
         .and_then(|v| v.parse::<u32>().ok())
-        .ok_or_else(|| format!("Q `{}` is not an integer", tokens.get(i + 1).unwrap_or(&"")))?;
+        .ok_or_else(|| {
+            format!(
+                "Q `{}` is not an integer",
+                excerpt(tokens.get(i + 1).unwrap_or(&""))
+            )
+        })?;
     let position = Geodetic {
         lat_deg: lat,
         lon_deg: lon,
@@ -171,8 +183,7 @@ pub fn parse(file: &str, text: &str, leap_seconds: Option<i32>) -> Result<Geodet
     let mut report = ReadReport::default();
     let mut layout = Layout::default();
     let mut epochs: Vec<Epoch> = Vec::new();
-    for (i, raw) in text.lines().enumerate() {
-        let line = i + 1;
+    for (line, raw) in crate::text::lines(text) {
         let l = raw.trim();
         if l.is_empty() {
             continue;
@@ -343,6 +354,22 @@ mod tests {
             .to_string();
         assert!(
             e.contains("b.pos: no usable") && e.contains("b.pos:3:"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn errors_quote_binary_tokens_short_and_escaped() {
+        let bin: String = (0..600u32)
+            .map(|i| char::from_u32(i % 0x7f + 0x80).unwrap_or('?'))
+            .collect();
+        let text = format!(
+            "2024/02/04 00:00:00.000 {bin} 16.6 300 1 12 0.01 0.01 0.02 0 0 0 1.0 99.9\r\n"
+        );
+        let e = parse("b.pos", &text, None).unwrap_err().to_string();
+        assert!(e.contains("b.pos:1: latitude `"), "{e}");
+        assert!(
+            e.len() < 400 && !e.chars().any(|c| c.is_control() && c != '\n'),
             "{e}"
         );
     }
