@@ -1,25 +1,27 @@
 //! Header stamps: the sample's UTC time when the unit's GNSS time tag is valid (GPS time minus
-//! the leap seconds), else the unit's MCU time; one source per recording, named in the file's
-//! metadata.
-
-use odo_unit::timing::GPS_UTC_LEAP_SECONDS;
+//! the leap seconds of its date, [`gps_time::leap_seconds_at_gps`]), else the unit's MCU time;
+//! one source per recording, named in the file's metadata.
 
 use crate::csvio::Sample;
+use crate::reference::gps_time;
 
 /// GPS time of the GPS epoch (1980-01-06 00:00:00 UTC) as Unix time, seconds.
 pub const GPS_EPOCH_UNIX: i64 = 315_964_800;
 /// Seconds per GPS week.
 pub const WEEK_SECONDS: i64 = 604_800;
 
-/// GPS - UTC (s): the core's figure (18 since 2017-01-01; no leap second since), the one
-/// the firmware and the reference readers use.
-pub const LEAP_SECONDS: i64 = GPS_UTC_LEAP_SECONDS as i64;
+/// GPS - UTC (s) at GPS week `week`, `tow_ms` milliseconds, by the leap-second table.
+pub fn leap_seconds(week: u16, tow_ms: u32) -> i64 {
+    let gps = f64::from(week) * WEEK_SECONDS as f64 + f64::from(tow_ms) * 1e-3;
+    i64::from(gps_time::leap_seconds_at_gps(gps))
+}
 
 /// Unix UTC nanoseconds of GPS week `week`, `tow_ms` milliseconds plus `sub` seconds
-/// (`0 <= sub`, the sample's place in its second); `None` before 1970.
+/// (`0 <= sub`, the sample's place in its second), GPS - UTC taken from the table by the
+/// date; `None` before 1970.
 pub fn gps_to_unix_nanos(week: u16, tow_ms: u32, sub: f64) -> Option<u64> {
     let whole_ms = i64::from(week) * WEEK_SECONDS * 1000 + i64::from(tow_ms);
-    let unix_ms = whole_ms + (GPS_EPOCH_UNIX - LEAP_SECONDS) * 1000;
+    let unix_ms = whole_ms + (GPS_EPOCH_UNIX - leap_seconds(week, tow_ms)) * 1000;
     let ns = u64::try_from(unix_ms).ok()? * 1_000_000;
     Some(ns + (sub * 1e9).round() as u64)
 }
@@ -60,7 +62,7 @@ pub struct Stamps {
     /// Samples of a UTC recording without a valid tag, stamped by MCU time from the last
     /// tagged sample.
     pub extrapolated: usize,
-    /// GPS - UTC used (s), for UTC stamps.
+    /// GPS - UTC used (s) at the first sample, for UTC stamps.
     pub leap_seconds: Option<i64>,
 }
 
@@ -104,7 +106,7 @@ pub fn stamp(samples: &[Sample]) -> Stamps {
                 source: StampSource::Utc,
                 nanos,
                 extrapolated,
-                leap_seconds: Some(LEAP_SECONDS),
+                leap_seconds: Some(leap_seconds(week, tow_ms)),
             };
         }
     }
@@ -136,7 +138,32 @@ mod tests {
     fn gps_epoch() {
         let days = odo_unit::timing::nmea::days_from_civil(1980, 1, 6);
         assert_eq!(days * 86_400, GPS_EPOCH_UNIX);
-        assert_eq!(LEAP_SECONDS, 18);
+    }
+
+    /// UTC stamps take GPS - UTC of their date: 14 s in 2008, 16 s in 2014, 17 s up to the
+    /// leap second at the end of 2016, 18 s from 2017-01-01 (GPS week 1930 starts on it).
+    #[test]
+    fn leap_seconds_by_date() {
+        let day = |y, m, d| odo_unit::timing::nmea::days_from_civil(y, m, d) * 86_400;
+        let unix_s =
+            |week: u16, tow_ms: u32| gps_to_unix_nanos(week, tow_ms, 0.0).unwrap() / 1_000_000_000;
+        // 2008-06-01 00:00:00 UTC: GPS week 1481 (from 2008-05-25), 7 days + 14 s.
+        assert_eq!(
+            unix_s(1481, (7 * 86_400 + 14) * 1000) as i64,
+            day(2008, 6, 1)
+        );
+        // 2014-06-01 00:00:00 UTC: GPS week 1794 (from 2014-05-25).
+        assert_eq!(
+            unix_s(1794, (7 * 86_400 + 16) * 1000) as i64,
+            day(2014, 6, 1)
+        );
+        // Across the leap second 2016-12-31 23:59:60.
+        assert_eq!(unix_s(1930, 16_000) as i64, day(2017, 1, 1) - 1);
+        assert_eq!(unix_s(1930, 18_000) as i64, day(2017, 1, 1));
+        assert_eq!(
+            (leap_seconds(1930, 16_000), leap_seconds(1930, 18_000)),
+            (17, 18)
+        );
     }
 
     #[test]
