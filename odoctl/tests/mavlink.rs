@@ -1,9 +1,11 @@
 //! MAVLink output read by pymavlink (ArduPilot's MAVLink library, from the registry;
 //! tests/mavlink/read_mavlink.py): the core encoder's frames as the firmware sends them
 //! (each followed by 0x00) for simulated records with a pose reset, and `odoctl bridge
-//! --mavlink udpout:...` against the fake unit. Every frame's CRC and sequence, the
-//! HEARTBEAT, and every ODOMETRY field against our own records. Skipped with a message when
-//! python3 or `pymavlink` is missing, unless `ODO_PY_REQUIRED=1` (CI).
+//! --mavlink udpout:...` against the fake unit, and the QEMU image's output against the
+//! records of a second boot left in frames (QEMU skipped as in host-tests/support/qemu.rs).
+//! Every frame's CRC and sequence, the HEARTBEAT, and every ODOMETRY field against our own
+//! records. Skipped with a message when python3 or `pymavlink` is missing, unless
+//! `ODO_PY_REQUIRED=1` (CI).
 
 mod common;
 
@@ -13,8 +15,9 @@ use std::path::Path;
 use std::process::{Child, Command, Stdio};
 
 use common::scratch;
-use odo_unit::odometry::ChassisParams;
+use odo_unit::odometry::{ChassisParams, IndexRefs, Integrator, Pose, WheelCounts};
 use odo_unit::protocol::PoseRecord;
+use odo_unit::settings::Settings;
 use odoctl::mavlink::{Converter, Target};
 use odoctl::simulate::PathKind;
 
@@ -293,13 +296,43 @@ fn qemu_mavlink_output_read_by_pymavlink() {
     assert!(text.contains("records_dropped = 0"), "{text}");
     let (ok, text) = link.command("set output frames");
     assert!(ok, "{text}");
+    // Records again after `output frames`.
+    let n = link.records.len();
+    while link.records.len() < n + 3 {
+        link.next_frame();
+    }
+    let bytes = link.raw.lock().unwrap()[from..to].to_vec();
+    let sent_as_frames = link.records.clone();
+    drop(link);
+    drop(qemu);
+    // Our records of the same samples: a second boot left in `output frames` (the simulated
+    // drive is a function of the sample instant), with the pose reset replayed onto them.
+    let odometry = odometry_frames(&bytes);
+    let last = odometry.last().expect("ODOMETRY frames").time_usec;
+    let until = last.max(sent_as_frames.last().unwrap().mcu_time_us);
+    let records = frames_boot_records(&repo, until, limit);
+    let params = Settings::DEFAULT.chassis;
+    let reset = Pose {
+        x: 1.0,
+        y: 2.0,
+        heading: 0.5,
+    };
+    let at = reset_sample(&odometry, &records);
+    let expected = with_pose_reset(&records, at, reset, &params);
+    // The determinism this rests on: what the first boot sent as frames, before the MAVLink
+    // stretch and after it (past the reset), equals the expectation bit for bit.
+    assert_same_records(&sent_as_frames, &expected);
     let dir = scratch("mavlink_qemu");
-    let raw = dir.join("link.bin");
-    std::fs::write(&raw, &link.raw.lock().unwrap()[from..to]).unwrap();
+    let (raw, expect) = (dir.join("link.bin"), dir.join("expect.csv"));
+    std::fs::write(&raw, &bytes).unwrap();
+    expect_csv(&expected, &expect);
     let mut args: Vec<String> = ["--file", raw.to_str().unwrap(), "--rate", "25"]
         .iter()
         .map(|s| s.to_string())
         .collect();
+    args.extend(["--expect".into(), expect.to_str().unwrap().into()]);
+    args.push("--params".into());
+    args.extend(params_args(&params));
     args.extend(["--resets", "1", "--reset-pose", "1", "2", "0.5"].map(String::from));
     // The reset may fall on a sample that output_divider 2 skips: the step then comes with the
     // next sample, one 20 ms step (at most 0.021 m, 0.02 rad on the simulated path) later.
@@ -309,12 +342,149 @@ fn qemu_mavlink_output_read_by_pymavlink() {
     // lap (src/board/qemu/drive.rs): quality 50 and -1 besides 100.
     args.extend(["--qualities", "100", "50", "-1"].map(String::from));
     let out = run_reader(&args);
-    assert!(out.contains("read_mavlink: ok"), "{out}");
-    eprintln!("{}", out.trim());
-    // Records again after `output frames`.
-    let n = link.records.len();
-    while link.records.len() < n + 3 {
+    assert!(
+        out.contains(&format!(
+            "read_mavlink: ok {0} ODOMETRY ({0} matched",
+            odometry.len()
+        )),
+        "{out}"
+    );
+    let sent = odometry.iter().any(|o| o.time_usec == at);
+    eprintln!(
+        "{} (reset at t = {at} us, a sample {}; {} records of the second boot)",
+        out.trim(),
+        if sent { "sent" } else { "skipped" },
+        records.len()
+    );
+}
+
+/// What the test needs of an `ODOMETRY` frame: its time and reset counter, and whether its
+/// pose covariance is all zero (the reset sample's).
+struct OdometryFrame {
+    time_usec: u64,
+    reset_counter: u8,
+    zero_covariance: bool,
+}
+
+/// The `ODOMETRY` frames (MAVLink 2, CRC valid) in `bytes`, in order; other bytes skipped.
+fn odometry_frames(bytes: &[u8]) -> Vec<OdometryFrame> {
+    use odo_unit::mavlink::frame::{crc16, crc_accumulate, STX_V2};
+    use odo_unit::mavlink::odometry::{ODOMETRY_ID, ODOMETRY_LEN};
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i + 12 <= bytes.len() {
+        let len = usize::from(bytes[i + 1]);
+        let end = i + 12 + len;
+        let id = u32::from_le_bytes([bytes[i + 7], bytes[i + 8], bytes[i + 9], 0]);
+        let valid = bytes[i] == STX_V2
+            && bytes[i + 2] == 0
+            && id == ODOMETRY_ID.id
+            && len <= ODOMETRY_LEN
+            && end <= bytes.len()
+            && crc_accumulate(crc16(&bytes[i + 1..end - 2]), ODOMETRY_ID.crc_extra).to_le_bytes()
+                == bytes[end - 2..end];
+        if !valid {
+            i += 1;
+            continue;
+        }
+        // The payload with its trailing zeros back.
+        let mut p = [0u8; ODOMETRY_LEN];
+        p[..len].copy_from_slice(&bytes[i + 10..end - 2]);
+        let f = |at: usize| f32::from_le_bytes(p[at..at + 4].try_into().unwrap());
+        // pose_covariance at byte 60: elements 0 (north), 1 (north-east), 6 (east), 20 (yaw).
+        out.push(OdometryFrame {
+            time_usec: u64::from_le_bytes(p[..8].try_into().unwrap()),
+            reset_counter: p[230],
+            zero_covariance: [0, 1, 6, 20].iter().all(|k| f(60 + 4 * k) == 0.0),
+        });
+        i = end;
+    }
+    out
+}
+
+/// The pose records of a boot left in `output frames`, from its first sample until MCU time
+/// `until_us`, with no sequence gap.
+fn frames_boot_records(repo: &Path, until_us: u64, limit: std::time::Duration) -> Vec<PoseRecord> {
+    let qemu = qemu_support::boot(repo, "qemu_mavlink_output_read_by_pymavlink (frames)")
+        .expect("the image booted once already");
+    let mut link = qemu_support::UnitLink::connect(qemu.port, limit);
+    while link.records.last().is_none_or(|r| r.mcu_time_us < until_us) {
         link.next_frame();
+    }
+    for (a, b) in link.records.iter().zip(&link.records[1..]) {
+        assert_eq!(b.sequence, a.sequence + 1, "a record lost");
+    }
+    link.records.clone()
+}
+
+/// MCU time of the sample the pose reset fell on: the first `ODOMETRY` of the next
+/// `reset_counter`, or (when it carries a covariance already, one step on) the sample before
+/// it, which `output_divider` skipped.
+fn reset_sample(odometry: &[OdometryFrame], records: &[PoseRecord]) -> u64 {
+    let first = odometry
+        .iter()
+        .find(|o| o.reset_counter != odometry[0].reset_counter)
+        .expect("a reset_counter step");
+    if first.zero_covariance {
+        return first.time_usec;
+    }
+    let k = records
+        .iter()
+        .position(|r| r.mcu_time_us == first.time_usec)
+        .expect("a record at the reset step");
+    records[k - 1].mcu_time_us
+}
+
+/// `records` with the pose reset to `pose` at the sample of MCU time `at_us` and replayed
+/// from there through the core integrator (as the firmware does: the counts rebased, the
+/// uncertainty zeroed); counts, index references and flags as recorded.
+fn with_pose_reset(
+    records: &[PoseRecord],
+    at_us: u64,
+    pose: Pose,
+    params: &ChassisParams,
+) -> Vec<PoseRecord> {
+    let counts = |r: &PoseRecord| WheelCounts {
+        left: r.gamma_left,
+        right: r.gamma_right,
+    };
+    let k = records
+        .iter()
+        .position(|r| r.mcu_time_us == at_us)
+        .expect("a record at the reset sample");
+    let mut out = records.to_vec();
+    let mut integ = Integrator::new(params, counts(&records[k]), pose).unwrap();
+    for (i, r) in out.iter_mut().enumerate().skip(k) {
+        if i > k {
+            let refs = IndexRefs {
+                left: r.flags.left.index_seen.then_some(r.index_left),
+                right: r.flags.right.index_seen.then_some(r.index_right),
+            };
+            assert!(!integ.step(counts(r), refs).overrange);
+        }
+        let (p, s) = (integ.pose(), integ.sigma());
+        (r.x, r.y, r.heading) = (p.x, p.y, p.heading);
+        (r.sigma_x, r.sigma_y, r.sigma_heading, r.cov_xy) = (s.x, s.y, s.heading, s.cov_xy);
+    }
+    out
+}
+
+/// Every record of `got` equals the one of `want` at the same MCU time: pose, sigmas and
+/// counts bit for bit.
+fn assert_same_records(got: &[PoseRecord], want: &[PoseRecord]) {
+    let key = |r: &PoseRecord| {
+        (
+            [r.x, r.y, r.heading].map(f64::to_bits),
+            [r.sigma_x, r.sigma_y, r.sigma_heading, r.cov_xy].map(f32::to_bits),
+            (r.gamma_left, r.gamma_right),
+        )
+    };
+    for g in got {
+        let w = want
+            .iter()
+            .find(|w| w.mcu_time_us == g.mcu_time_us)
+            .expect("a record of the same sample");
+        assert_eq!(key(g), key(w), "record at {} us", g.mcu_time_us);
     }
 }
 

@@ -6,7 +6,8 @@ sequence number, the HEARTBEAT, and the ODOMETRY fields, against our own records
 Input: `--udp PORT` (listens on 127.0.0.1) or `--file PATH` (raw bytes of a link).
 Options:
   --expect CSV     records: t_us,x,y,heading,sigma_x,sigma_y,sigma_heading,cov_xy,gamma_left,
-                   gamma_right,fault,mismatch (quality -1 with a fault, 50 with a mismatch)
+                   gamma_right,fault,mismatch (quality -1 with a fault, 50 with a mismatch
+                   in this record or one skipped since the previous ODOMETRY)
   --params D_L D_R W TICKS DELTA_L DELTA_R DELTA_DIFF   the paper model, for vx and yawspeed
   --count N        ODOMETRY frames to read (udp)
   --timeout S      seconds (udp)
@@ -20,6 +21,7 @@ Options:
   --qualities Q..  the quality values allowed (default 100: no fault, no index mismatch)
 Prints `read_mavlink: ok ...` or exits 1 with the first failure."""
 import argparse
+import bisect
 import math
 import socket
 import struct
@@ -40,6 +42,12 @@ def fail(msg):
 
 def close(a, b, tol, what):
     if not (abs(a - b) <= tol * max(1.0, abs(b))):
+        fail(f"{what}: {a!r} != {b!r}")
+
+
+def rel(a, b, tol, what, scale=0.0):
+    """Within `tol` of |b| (or of `scale` where that is larger: a difference of variances)."""
+    if not (abs(a - b) <= tol * max(abs(b), scale)):
         fail(f"{what}: {a!r} != {b!r}")
 
 
@@ -127,6 +135,7 @@ def check_odometry_static(o, qualities):
 
 def check_against_records(odo, rows, params):
     by_t = {int(r["t_us"]): r for r in rows}
+    times = sorted(by_t)
     prev = None
     matched = 0
     for o in odo:
@@ -135,7 +144,12 @@ def check_against_records(odo, rows, params):
             fail(f"no record at time_usec {o.time_usec}")
         matched += 1
         if "fault" in r:
-            expect = -1 if r["fault"] else 50 if r["mismatch"] else 100
+            # An index mismatch on a record that output_divider skips comes with the next
+            # ODOMETRY: any mismatch in the records since the previous one.
+            lo = bisect.bisect_right(times, int(prev["t_us"])) if prev else times.index(o.time_usec)
+            hi = bisect.bisect_right(times, o.time_usec)
+            mismatch = any(by_t[t]["mismatch"] for t in times[lo:hi])
+            expect = -1 if r["fault"] else 50 if mismatch else 100
             if o.quality != expect:
                 fail(f"quality {o.quality} at {o.time_usec}, expected {expect}")
         close(o.x, f32(r["y"]), 0, "x (north) = our y")
@@ -143,10 +157,11 @@ def check_against_records(odo, rows, params):
         for a, b in zip(o.q, quaternion(r["heading"])):
             close(a, b, 1e-6, "q")
         pc = o.pose_covariance
-        close(pc[0], f32(f32(r["sigma_y"]) * f32(r["sigma_y"])), 1e-6, "var north")
-        close(pc[6], f32(f32(r["sigma_x"]) * f32(r["sigma_x"])), 1e-6, "var east")
-        close(pc[1], f32(r["cov_xy"]), 1e-6, "cov north-east")
-        close(pc[20], f32(f32(r["sigma_heading"]) * f32(r["sigma_heading"])), 1e-6, "var yaw")
+        # Single-precision squares of the record's sigmas: exactly what the unit sends.
+        close(pc[0], f32(f32(r["sigma_y"]) * f32(r["sigma_y"])), 0, "var north")
+        close(pc[6], f32(f32(r["sigma_x"]) * f32(r["sigma_x"])), 0, "var east")
+        close(pc[1], f32(r["cov_xy"]), 0, "cov north-east")
+        close(pc[20], f32(f32(r["sigma_heading"]) * f32(r["sigma_heading"])), 0, "var yaw")
         vc = o.velocity_covariance
         if prev is None:
             if not (math.isnan(vc[0]) and o.vx == 0 and o.yawspeed == 0):
@@ -163,10 +178,12 @@ def check_against_records(odo, rows, params):
             vl = (del_l * nl) ** 2 + ql * ql / 6
             vr = (del_r * nr) ** 2 + qr * qr / 6
             ve = (del_d * (nl - nr)) ** 2
-            close(vc[0], (vl + vr) / 4 / dt ** 2, 1e-3, "var vx")
+            # Relative: the unit computes them in single precision.
+            rel(vc[0], (vl + vr) / 4 / dt ** 2, 1e-5, "var vx")
             close(vc[6], vc[0], 0, "var vy = var vx")
-            close(vc[20], (vl + vr + 4 * ve) / (w * w * dt * dt), 1e-3, "var yawspeed")
-            close(vc[5], (vl - vr) / (2 * w * dt * dt), 1e-3, "cov vx yawspeed")
+            rel(vc[20], (vl + vr + 4 * ve) / (w * w * dt * dt), 1e-5, "var yawspeed")
+            scale = (vl + vr) / (2 * w * dt * dt)
+            rel(vc[5], (vl - vr) / (2 * w * dt * dt), 1e-5, "cov vx yawspeed", scale)
         prev = r
     return matched
 
