@@ -1,6 +1,6 @@
 //! Trajectory references (motion capture, SLAM, localisation): poses of a marker in the
-//! reference system's own frame and on its own clock, as a TUM file ([`super::tum`]) or a ROS 2
-//! MCAP recording ([`super::mcap_pose`]) gives them.
+//! reference system's own frame and on its own clock, as a TUM file (`tum.rs`) or a ROS 2
+//! MCAP recording (`mcap_pose.rs`) gives them.
 //!
 //! The frame's origin and orientation are unknown: its x/y are taken as the calibration's
 //! plane as they are (a rotation and translation of it is what the calibration's start pose

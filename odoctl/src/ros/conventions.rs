@@ -21,9 +21,9 @@ pub const UNOBSERVED_VARIANCE: f64 = 1.0e6;
 /// sigma, below the quantisation of one count of the designed chassis.
 pub const VARIANCE_FLOOR: f64 = 1.0e-10;
 
-/// Parent frame of the pose (REP-105), the default of [`super::names`].
+/// Parent frame of the pose (REP-105), the default of the frame options.
 pub const ODOM_FRAME: &str = "odom";
-/// Frame of the chassis and of the twist (REP-105), the default of [`super::names`].
+/// Frame of the chassis and of the twist (REP-105), the default of the frame options.
 pub const BASE_FRAME: &str = "base_link";
 
 /// Raises the observed variances `[0]`, `[7]`, `[35]` to at least [`VARIANCE_FLOOR`].

@@ -106,9 +106,7 @@ pub(crate) fn with_covariance_coefficients(
     }
 }
 
-/// The `delta_diff` fit of the paper's model (see [`fit_delta_diff`]).
-///
-/// [`fit_delta_diff`]: super::delta_diff::fit_delta_diff
+/// The `delta_diff` fit of the paper's model (`delta_diff.rs` makes it).
 #[derive(Debug, Clone)]
 pub struct DiffFit {
     /// The initial `delta_diff` (from the first estimate).
@@ -120,7 +118,7 @@ pub struct DiffFit {
     /// delta (`delta_left`) of the horizontal fit with the initial `delta_diff`.
     pub delta_before: f64,
     /// Whether delta was refitted with it (both criteria hold); false when delta was held
-    /// (see [`fit_delta_diff`](super::delta_diff::fit_delta_diff)).
+    /// (see `delta_diff.rs`).
     pub joint: bool,
     /// Heading points used (common times after each restart with a reference heading).
     pub points: usize,
