@@ -10,7 +10,7 @@
 mod common;
 
 use std::fmt::Write as FmtWrite;
-use std::io::{BufRead, BufReader, Write as IoWrite};
+use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 
@@ -21,22 +21,9 @@ use odo_unit::settings::Settings;
 use odoctl::mavlink::{Converter, Target};
 use odoctl::simulate::PathKind;
 
+/// Whether the independent reader can run ([`common::python_has`]).
 fn pymavlink_ready() -> bool {
-    let ok = Command::new("python3")
-        .args(["-c", "import pymavlink.dialects.v20.common"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !ok {
-        assert!(
-            std::env::var("ODO_PY_REQUIRED").as_deref() != Ok("1"),
-            "ODO_PY_REQUIRED=1 but python3 with the `pymavlink` package is missing"
-        );
-        let _ = writeln!(
-            std::io::stderr(),
-            "mavlink: skipped: python3 with `pymavlink` not found (python3 -m pip install pymavlink)"
-        );
-    }
-    ok
+    common::python_has("mavlink", "pymavlink.dialects.v20.common", "pymavlink")
 }
 
 fn script() -> std::path::PathBuf {

@@ -7,7 +7,6 @@
 
 mod common;
 
-use std::io::Write as _;
 use std::process::Command;
 
 use common::{odoctl, scratch, success_stdout};
@@ -17,21 +16,7 @@ use odoctl::reference::{gps_time, simulated, Epoch, FixQuality};
 
 /// Whether the readers can run; panics when they cannot and CI requires them.
 fn python_ready() -> bool {
-    let ok = Command::new("python3")
-        .args(["-c", "import gpxpy"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !ok {
-        assert!(
-            std::env::var("ODO_PY_REQUIRED").as_deref() != Ok("1"),
-            "ODO_PY_REQUIRED=1 but python3 with the `gpxpy` package is missing"
-        );
-        let _ = writeln!(
-            std::io::stderr(),
-            "reference_cmd: skipped the Python readers: python3 with `gpxpy` not found (python3 -m pip install gpxpy)"
-        );
-    }
-    ok
+    common::python_has("reference_cmd", "gpxpy", "gpxpy")
 }
 
 /// 2 Hz for 60 s from 2026-03-01 10:00:00 UTC, moving north 0.5 m a step; epochs 40..60

@@ -6,7 +6,6 @@
 
 mod common;
 
-use std::io::Write as _;
 use std::process::Command;
 
 use common::scratch;
@@ -14,21 +13,7 @@ use odoctl::reference::{self, Format, ReferenceOptions};
 
 /// Whether the writer can run; panics when it cannot and CI requires it.
 fn python_ready() -> bool {
-    let ok = Command::new("python3")
-        .args(["-c", "import pyubx2, pyrtcm"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !ok {
-        assert!(
-            std::env::var("ODO_PY_REQUIRED").as_deref() != Ok("1"),
-            "ODO_PY_REQUIRED=1 but python3 with the `pyubx2` package is missing"
-        );
-        let _ = writeln!(
-            std::io::stderr(),
-            "reference_ubx: skipped: python3 with `pyubx2` not found (python3 -m pip install pyubx2)"
-        );
-    }
-    ok
+    common::python_has("reference_ubx", "pyubx2, pyrtcm", "pyubx2")
 }
 
 #[test]

@@ -14,22 +14,9 @@ use common::scratch;
 use odo_unit::odometry::ChassisParams;
 use odoctl::simulate::PathKind;
 
+/// Whether the independent reader can run ([`common::python_has`]).
 fn cyclonedds_ready() -> bool {
-    let ok = Command::new("python3")
-        .args(["-c", "import cyclonedds.domain"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !ok {
-        assert!(
-            std::env::var("ODO_PY_REQUIRED").as_deref() != Ok("1"),
-            "ODO_PY_REQUIRED=1 but python3 with the `cyclonedds` package is missing"
-        );
-        let _ = writeln!(
-            std::io::stderr(),
-            "ros_bridge: skipped: python3 with `cyclonedds` not found (python3 -m pip install cyclonedds)"
-        );
-    }
-    ok
+    common::python_has("ros_bridge", "cyclonedds.domain", "cyclonedds")
 }
 
 /// Starts the subscriber on `domain` and waits until its readers exist.

@@ -22,22 +22,13 @@ use odo_unit::protocol::{CommandReply, FrameEncoder, Message, PoseRecord, MAX_EN
 use odo_unit::settings::Settings;
 use odoctl::simulate::PathKind;
 
+/// Whether the independent reader can run ([`common::python_has`]).
 fn client_ready() -> bool {
-    let ok = Command::new("python3")
-        .args(["-c", "import websockets, mcap_ros2._dynamic"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !ok {
-        assert!(
-            std::env::var("ODO_PY_REQUIRED").as_deref() != Ok("1"),
-            "ODO_PY_REQUIRED=1 but python3 with `websockets` and `mcap-ros2-support` is missing"
-        );
-        let _ = writeln!(
-            std::io::stderr(),
-            "ros_foxglove: skipped: python3 with `websockets` and `mcap-ros2-support` not found (python3 -m pip install websockets mcap-ros2-support)"
-        );
-    }
-    ok
+    common::python_has(
+        "ros_foxglove",
+        "websockets, mcap_ros2._dynamic",
+        "websockets mcap-ros2-support",
+    )
 }
 
 fn expect_csv(dir: &Path, records: &[PoseRecord]) -> PathBuf {

@@ -7,7 +7,6 @@
 mod common;
 
 use std::fmt::Write as _;
-use std::io::Write as _;
 use std::path::Path;
 use std::process::Command;
 
@@ -17,22 +16,11 @@ use odoctl::replay::{counts, index_refs};
 
 /// Whether the reader can run; panics when it cannot and CI requires it.
 fn python_ready() -> bool {
-    let ok = Command::new("python3")
-        .args(["-c", "import mcap, mcap_ros2.decoder"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !ok {
-        assert!(
-            std::env::var("ODO_PY_REQUIRED").as_deref() != Ok("1"),
-            "ODO_PY_REQUIRED=1 but python3 with the `mcap` and `mcap-ros2-support` packages is missing"
-        );
-        // Straight to stderr, past the test harness's capture, so the skip is seen.
-        let _ = writeln!(
-            std::io::stderr(),
-            "ros_mcap: skipped: python3 with `mcap` and `mcap-ros2-support` not found (python3 -m pip install mcap mcap-ros2-support)"
-        );
-    }
-    ok
+    common::python_has(
+        "ros_mcap",
+        "mcap, mcap_ros2.decoder",
+        "mcap mcap-ros2-support",
+    )
 }
 
 /// A parameter file with every key the reader uses written out.

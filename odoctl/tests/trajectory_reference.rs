@@ -7,7 +7,6 @@
 
 mod common;
 
-use std::io::Write as _;
 use std::process::Command;
 
 /// (left, right, track, marker forward, marker left) estimates and standard errors.
@@ -236,21 +235,11 @@ fn clock_offset_and_rate_estimated_within_their_standard_errors() {
 /// Whether python3 with `mcap` and `mcap-ros2-support` can run; panics when it cannot and CI
 /// requires it.
 fn python_ready() -> bool {
-    let ok = Command::new("python3")
-        .args(["-c", "import mcap, mcap_ros2.writer"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !ok {
-        assert!(
-            std::env::var("ODO_PY_REQUIRED").as_deref() != Ok("1"),
-            "ODO_PY_REQUIRED=1 but python3 with the `mcap` and `mcap-ros2-support` packages is missing"
-        );
-        let _ = writeln!(
-            std::io::stderr(),
-            "trajectory_reference: skipped: python3 with `mcap` and `mcap-ros2-support` not found (python3 -m pip install mcap mcap-ros2-support)"
-        );
-    }
-    ok
+    common::python_has(
+        "trajectory_reference",
+        "mcap, mcap_ros2.writer",
+        "mcap mcap-ros2-support",
+    )
 }
 
 #[test]

@@ -261,3 +261,25 @@ pub fn fake_unit(samples: Vec<Sample>, period: Duration) -> (u16, JoinHandle<Set
 pub fn read(p: &Path) -> String {
     std::fs::read_to_string(p).unwrap()
 }
+
+/// Whether python3 can `import` the modules `imports` (`"gpxpy, pyubx2"`): the independent
+/// readers some tests check our files with. Without them the test named `test` skips, saying
+/// so on stderr (past the harness's capture) with the pip `packages` to install, unless
+/// `ODO_PY_REQUIRED=1` (CI), which makes a missing reader a failure.
+pub fn python_has(test: &str, imports: &str, packages: &str) -> bool {
+    let ok = Command::new("python3")
+        .args(["-c", &format!("import {imports}")])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !ok {
+        assert!(
+            std::env::var("ODO_PY_REQUIRED").as_deref() != Ok("1"),
+            "ODO_PY_REQUIRED=1 but python3 cannot import {imports} (python3 -m pip install {packages})"
+        );
+        let _ = writeln!(
+            std::io::stderr(),
+            "{test}: skipped: python3 cannot import {imports} (python3 -m pip install {packages})"
+        );
+    }
+    ok
+}
