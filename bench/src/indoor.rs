@@ -26,36 +26,50 @@ use odoctl::simulate::{default_truth, simulate, Rng, Segment, SimOptions, SimSet
 const MARKER: (f64, f64) = (0.25, -0.08);
 
 /// A simulated trajectory reference: its label, the samples' rate (Hz), a pose every this
-/// many samples, position noise (m), yaw noise (degrees), length (m), seeds by default.
+/// many samples, position noise (m), yaw noise (degrees), drift (m/sqrt(s), `simulate
+/// --trajectory-drift`), length (m), seeds by default.
 struct Case {
     label: &'static str,
     rate: f64,
     every: u32,
     sigma: f64,
     yaw_sigma_deg: f64,
+    drift: f64,
     length: f64,
     seeds: u64,
 }
 
 /// The trajectory references of the tables.
-const CASES: [Case; 2] = [
+const CASES: [Case; 3] = [
     Case {
         label: "motion capture",
         rate: 100.0,
         every: 1,
         sigma: 0.0005,
         yaw_sigma_deg: 0.1,
+        drift: 0.0,
         length: 300.0,
-        seeds: 25,
+        seeds: 20,
     },
     Case {
-        label: "SLAM",
+        label: "SLAM without drift",
         rate: 100.0,
         every: 10,
         sigma: 0.01,
         yaw_sigma_deg: 0.5,
+        drift: 0.0,
         length: 300.0,
-        seeds: 15,
+        seeds: 12,
+    },
+    Case {
+        label: "SLAM with drift",
+        rate: 100.0,
+        every: 10,
+        sigma: 0.01,
+        yaw_sigma_deg: 0.5,
+        drift: 0.001,
+        length: 300.0,
+        seeds: 12,
     },
 ];
 
@@ -145,11 +159,12 @@ fn trajectory_seed(case: &Case, dir: &Path, seed: u64) -> Result<([f64; 7], [f64
     let yaw = format!("{}", (seed * 83 % 360) as f64 - 180.0);
     let offset = -1.7e9 - sf * 12.345 - 0.0037;
     let ppm = (seed * 17 % 101) as f64 - 50.0;
-    let (rate, every, sigma, yaw_sigma, length) = (
+    let (rate, every, sigma, yaw_sigma, drift, length) = (
         case.rate.to_string(),
         case.every.to_string(),
         case.sigma.to_string(),
         case.yaw_sigma_deg.to_string(),
+        case.drift.to_string(),
         case.length.to_string(),
     );
     let (offset_s, ppm_s, seed_s) = (offset.to_string(), ppm.to_string(), seed.to_string());
@@ -181,6 +196,8 @@ fn trajectory_seed(case: &Case, dir: &Path, seed: u64) -> Result<([f64; 7], [f64
         &sigma,
         "--trajectory-yaw-sigma-deg",
         &yaw_sigma,
+        "--trajectory-drift",
+        &drift,
         "--trajectory-time-offset",
         &offset_s,
         "--trajectory-clock-ppm",
@@ -270,13 +287,22 @@ fn trajectory_table(case: &Case, root: &Path) {
         }
     }
     println!(
-        "{}: {} m of the estimation path at 0.5 m/s, samples at {} Hz, poses at {} Hz, position noise {} mm RMS, yaw noise {} degrees; seeds 1 to {n}{}.",
+        "{}: {} m of the estimation path at 0.5 m/s, samples at {} Hz, poses at {} Hz, position noise {} mm RMS, yaw noise {} degrees, {}; seeds 1 to {n}{}.",
         capitalised(case.label),
         case.length,
         case.rate,
         case.rate / case.every as f64,
         case.sigma * 1e3,
         case.yaw_sigma_deg,
+        if case.drift > 0.0 {
+            format!(
+                "a drift of the positions by a random walk of {} mm/sqrt(s) per axis (RMS {:.0} mm after 100 s)",
+                case.drift * 1e3,
+                case.drift * 1e4
+            )
+        } else {
+            "no drift".into()
+        },
         if failed > 0 {
             format!(" ({failed} failed, left out)")
         } else {
@@ -373,7 +399,7 @@ fn square_test(dir: &Path, seed: u64) -> PathBuf {
 
 /// The square test's table over its seeds.
 fn square_table(root: &Path) {
-    let n = seeds(100);
+    let n = seeds(60);
     let dir = root.join("square");
     std::fs::create_dir_all(&dir).expect("the scratch directory");
     let t = default_truth();
