@@ -59,7 +59,7 @@ const CASES: [Case; 3] = [
         yaw_sigma_deg: 0.5,
         drift: 0.0,
         length: 300.0,
-        seeds: 12,
+        seeds: 8,
     },
     Case {
         label: "SLAM with drift",
@@ -69,7 +69,7 @@ const CASES: [Case; 3] = [
         yaw_sigma_deg: 0.5,
         drift: 0.001,
         length: 300.0,
-        seeds: 12,
+        seeds: 8,
     },
 ];
 
@@ -399,7 +399,7 @@ fn square_test(dir: &Path, seed: u64) -> PathBuf {
 
 /// The square test's table over its seeds.
 fn square_table(root: &Path) {
-    let n = seeds(60);
+    let n = seeds(40);
     let dir = root.join("square");
     std::fs::create_dir_all(&dir).expect("the scratch directory");
     let t = default_truth();
