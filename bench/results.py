@@ -28,6 +28,7 @@ SECTIONS = [
     ("accuracy", "Calibration accuracy"),
     ("coverage", "Uncertainty coverage"),
     ("stderr", "Standard errors"),
+    ("indoor", "Indoor calibration accuracy"),
     ("fuzzing", "Fuzzing"),
 ]
 

@@ -7,7 +7,8 @@
 //! and the stack used by one step. On the host: numerical fidelity of the integrator
 //! against an f64 reference after 1, 10 and 100 km, beside a naive f32 integrator; and
 //! (`odo-bench calibrate [accuracy|speed]`, host) the accuracy and the speed of `odoctl`'s
-//! calibration on simulated runs.
+//! calibration on simulated runs; (`odo-bench indoor DIR`, host) the accuracy of the
+//! calibration against motion capture and SLAM trajectories and of the square test.
 //!
 //! Every table is printed as Markdown: `bench/run` runs them and writes docs/RESULTS.md.
 #![cfg_attr(target_os = "none", no_std, no_main)]
@@ -20,10 +21,13 @@ mod calibration;
 #[cfg(not(target_os = "none"))]
 mod fidelity;
 #[cfg(not(target_os = "none"))]
+mod indoor;
+#[cfg(not(target_os = "none"))]
 mod markdown;
 
 /// `odo-bench` prints the fidelity table; `odo-bench calibrate [accuracy|speed]` the
-/// calibration's accuracy and speed tables (both without a second argument).
+/// calibration's accuracy and speed tables (both without a second argument); `odo-bench
+/// indoor DIR` the indoor calibration's accuracy tables (scratch files in DIR).
 #[cfg(not(target_os = "none"))]
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -31,6 +35,12 @@ fn main() {
         // As odoctl's main does (odoctl::memory), so the in-process figures are odoctl's.
         odoctl::memory::keep_freed_memory();
         calibration::run(args.get(1).map(String::as_str));
+    } else if args.first().map(String::as_str) == Some("indoor") {
+        let dir = args.get(1).map_or_else(
+            || std::env::temp_dir().join("odo-bench-indoor"),
+            std::path::PathBuf::from,
+        );
+        indoor::run(&dir);
     } else {
         fidelity::run();
     }

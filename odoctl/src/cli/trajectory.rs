@@ -38,6 +38,10 @@ pub struct TrajectoryArgs {
     /// Noise of the trajectory's yaw (degrees).
     #[arg(long, default_value_t = 0.1, allow_negative_numbers = true, value_parser = v::sigma_deg)]
     pub trajectory_yaw_sigma_deg: f64,
+    /// Slow drift of the trajectory's positions, as a SLAM trajectory drifts: a random walk of
+    /// each axis growing by this many metres per square root of a second (m/sqrt(s)).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true, value_parser = v::sigma_m)]
+    pub trajectory_drift: f64,
     /// The samples' t minus the trajectory's stamp at the middle of the stamps (s): what
     /// `calibrate --time-offset` takes.
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true, value_parser = v::time_offset)]

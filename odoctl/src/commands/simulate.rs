@@ -275,6 +275,7 @@ fn write_trajectory(a: &TrajectoryArgs, run: &SimRun, marker: (f64, f64), seed: 
         every: a.trajectory_every as usize,
         sigma: a.trajectory_sigma,
         yaw_sigma: a.trajectory_yaw_sigma_deg.to_radians(),
+        drift: a.trajectory_drift,
         time_offset: a.trajectory_time_offset,
         clock_ppm: a.trajectory_clock_ppm,
         seed,
