@@ -8,8 +8,9 @@
 //! slip's drift. So:
 //!
 //! 1. **coarse** ([`coarse_offset`]): the normalised cross-correlation of the two yaw rates
-//!    (counts `n_1 - n_2` and the trajectory's unwrapped yaw, both on a grid of [`GRID`] s,
-//!    or of a 40,000th of the longer span when that is coarser) over
+//!    (changes over [`RATE_SPAN`] of the counts `n_1 - n_2` and of the trajectory's unwrapped
+//!    yaw, both on a grid of [`GRID`] s, or of a 40,000th of the longer span when that is
+//!    coarser) over
 //!    every lag at which they overlap by at least half the shorter; the largest |correlation|,
 //!    refined by a parabola through its neighbours;
 //! 2. **fit** ([`fit`]): least squares of the yaw at each pose against `c_w + a U(t) + b S(t)`,
@@ -29,6 +30,9 @@ use crate::csvio::Sample;
 
 /// The grid of the coarse cross-correlation (s).
 pub const GRID: f64 = 0.05;
+/// The interval (s) over which the coarse stage takes each yaw change: the rate over 0.5 s, so
+/// that a 10 Hz trajectory's yaw noise (differenced pose to pose) does not drown the turning.
+pub const RATE_SPAN: f64 = 0.5;
 /// Path length of a window of the fit (m).
 pub const WINDOW: f64 = 0.5;
 /// Fewest windows of the fit.
@@ -132,9 +136,10 @@ pub fn coarse_offset(samples: &[Sample], poses: &[StampedYaw]) -> Result<(f64, f
         let vals: Vec<f64> = (0..=n as usize)
             .map(|i| f(start + i as f64 * grid).unwrap_or(f64::NAN))
             .collect();
-        vals.windows(2)
+        let span = ((RATE_SPAN / grid).round() as usize).max(1);
+        vals.windows(span + 1)
             .map(|w| {
-                let d = w[1] - w[0];
+                let d = w[span] - w[0];
                 if d.is_finite() {
                     d
                 } else {
