@@ -129,6 +129,9 @@ fn print_summary(
     for w in check.warnings() {
         eprintln!("warning: {w}");
     }
+    if let Some(h) = check.hint() {
+        crate::outln!("  {h}");
+    }
     let horizontal = (
         noise.horizontal_coverage(ev, 1.0),
         noise.horizontal_coverage(ev, 3.0),

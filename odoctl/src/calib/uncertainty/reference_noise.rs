@@ -179,6 +179,21 @@ impl NoiseCheck {
         }
         w
     }
+
+    /// A hint, not a warning: a horizontal scatter below a [`SCATTER_RATIO_WARNING`]th of the
+    /// stated noise. A receiver's correlated errors scatter less than its sigma, but a
+    /// reference whose errors are independent from epoch to epoch (motion capture, most
+    /// trajectory references) is then far less noisy than stated, and the fits would ascribe
+    /// the odometry's own errors to it.
+    pub fn hint(&self) -> Option<String> {
+        let h = self.scatter_horizontal?;
+        (h * SCATTER_RATIO_WARNING < self.stated_horizontal && !self.from_log).then(|| {
+            format!(
+                "note: the reference scatters only {h:.4} m from epoch to epoch against the stated {:.4} m: if its errors are independent from epoch to epoch (motion capture), give --reference-sigma {h:.4}",
+                self.stated_horizontal
+            )
+        })
+    }
 }
 
 /// The median of `v` (reordered), `None` when empty.
@@ -253,6 +268,19 @@ mod tests {
             heading: 5f64.to_radians(),
         };
         assert!(over.check(&ev).warnings().is_empty());
+    }
+
+    #[test]
+    fn a_reference_far_quieter_than_stated_gets_a_hint() {
+        let ev = noisy(5, 2000, 0.1, 0.0007, 0.001);
+        let stated = |horizontal| ReferenceNoise {
+            horizontal,
+            heading: 0.001,
+        };
+        let hint = stated(0.008).check(&ev).hint().expect("a hint");
+        assert!(hint.contains("--reference-sigma 0.0007"), "{hint}");
+        assert_eq!(stated(0.0007).check(&ev).hint(), None);
+        assert_eq!(stated(0.0012).check(&ev).hint(), None);
     }
 
     #[test]

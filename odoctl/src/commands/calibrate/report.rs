@@ -366,6 +366,9 @@ fn print_errors(c: &Calibration, e: &ErrorSummary) {
     for w in e.noise.warnings() {
         eprintln!("warning: {w}");
     }
+    if let Some(h) = e.noise.hint() {
+        crate::outln!("{h}");
+    }
 }
 
 /// The stability study: per length, the statistics of each parameter and the failed windows.
