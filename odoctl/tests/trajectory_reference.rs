@@ -318,3 +318,39 @@ fn validate_reads_a_trajectory_in_another_frame_on_another_clock() {
         "{stdout}"
     );
 }
+
+/// A SLAM-like trajectory (10 Hz, 10 mm, 0.5 degree of yaw noise) determines the clock rate
+/// poorly: the clock line says so and names `--clock-ppm 0`; given it, the fit uses rate 0.
+#[test]
+fn a_poorly_determined_clock_rate_is_named() {
+    let d = common::scratch("trajectory_slam_rate");
+    let noisy = [
+        "--trajectory-every",
+        "10",
+        "--trajectory-sigma",
+        "0.01",
+        "--trajectory-yaw-sigma-deg",
+        "0.5",
+    ];
+    simulate(&d, 6, "300", &noisy);
+    let s = |n: &str| d.join(n).to_str().unwrap().to_string();
+    let run = |extra: &[&str]| {
+        let mut args = vec!["calibrate", "--samples"];
+        let (samples, tum) = (s("run.csv"), s("run.tum"));
+        args.extend([
+            samples.as_str(),
+            "--reference",
+            tum.as_str(),
+            "--no-delta",
+            "--fit-antenna",
+        ]);
+        args.extend_from_slice(extra);
+        common::success_stdout(&common::odoctl(&args))
+    };
+    let out = run(&[]);
+    assert!(out.contains("the clock rate is poorly determined"), "{out}");
+    assert!(out.contains("--clock-ppm 0"), "{out}");
+    let fixed = run(&["--clock-ppm", "0"]);
+    assert!(!fixed.contains("poorly determined"), "{fixed}");
+    assert!(fixed.contains("+0.000 ppm (se 0.000 ppm)"), "{fixed}");
+}

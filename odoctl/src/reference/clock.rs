@@ -37,6 +37,10 @@ pub const RATE_SPAN: f64 = 0.5;
 pub const WINDOW: f64 = 0.5;
 /// Fewest windows of the fit.
 pub const MIN_WINDOWS: usize = 5;
+/// A rate standard error (ppm) above which the fit says that the rate is poorly determined:
+/// two quartz clocks (the unit's HSE crystal, a computer's) differ by well under it, so fixing
+/// the rate at 0 (`--clock-ppm 0`) errs less than the estimate.
+pub const RATE_SE_NOTE: f64 = 100.0;
 /// Least |correlation| of the coarse stage.
 pub const MIN_CORRELATION: f64 = 0.5;
 

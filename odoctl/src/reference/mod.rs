@@ -859,6 +859,17 @@ impl Reference {
             fit.ppm_se,
             fit.s_mid
         );
+        let how = if fit.ppm_se > clock::RATE_SE_NOTE {
+            format!(
+                "{how}\n  the clock rate is poorly determined (se {:.0} ppm, above {:.0}): when both clocks \
+                 are quartz (the unit on its HSE crystal), --clock-ppm 0 errs less; a rate error \
+                 scales the distances, and so the diameters, by as much",
+                fit.ppm_se,
+                clock::RATE_SE_NOTE
+            )
+        } else {
+            how
+        };
         Ok((fit, how))
     }
 
