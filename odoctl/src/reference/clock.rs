@@ -27,6 +27,7 @@
 use anyhow::{bail, Result};
 
 use crate::csvio::Sample;
+use crate::optim::solve;
 
 /// The grid of the coarse cross-correlation (s).
 pub const GRID: f64 = 0.05;
@@ -214,34 +215,6 @@ fn prefix_squares(v: &[f64]) -> Vec<f64> {
         out.push(acc);
     }
     out
-}
-
-/// Solves `a x = b` (n x n, row-major) by Gaussian elimination with partial pivoting; `None`
-/// when singular.
-fn solve(mut a: Vec<f64>, mut b: Vec<f64>, n: usize) -> Option<Vec<f64>> {
-    for c in 0..n {
-        let p = (c..n).max_by(|&i, &j| a[i * n + c].abs().total_cmp(&a[j * n + c].abs()))?;
-        if a[p * n + c].abs() < 1e-300 {
-            return None;
-        }
-        for k in 0..n {
-            a.swap(c * n + k, p * n + k);
-        }
-        b.swap(c, p);
-        for r in c + 1..n {
-            let f = a[r * n + c] / a[c * n + c];
-            for k in c..n {
-                a[r * n + k] -= f * a[c * n + k];
-            }
-            b[r] -= f * b[c];
-        }
-    }
-    let mut x = vec![0.0; n];
-    for c in (0..n).rev() {
-        let s: f64 = (c + 1..n).map(|k| a[c * n + k] * x[k]).sum();
-        x[c] = (b[c] - s) / a[c * n + c];
-    }
-    x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
 /// What [`fit`] holds fixed: the offset (s), the rate (ppm).
@@ -501,7 +474,7 @@ fn scaled_solve(h: &[f64], g: &[f64], n: usize) -> Option<Vec<f64>> {
     let d: Vec<f64> = (0..n).map(|i| h[i * n + i].sqrt().max(1e-300)).collect();
     let hs: Vec<f64> = (0..n * n).map(|k| h[k] / (d[k / n] * d[k % n])).collect();
     let gs: Vec<f64> = (0..n).map(|i| g[i] / d[i]).collect();
-    solve(hs, gs, n).map(|x| x.iter().zip(&d).map(|(x, d)| x / d).collect())
+    solve(hs, gs).map(|x| x.iter().zip(&d).map(|(x, d)| x / d).collect())
 }
 
 /// Standard errors of the offset and the rate (0 when fixed) by the linearised
