@@ -376,7 +376,71 @@ fn all_kinds() -> Vec<(Message, u32)> {
             0,
         ),
         (Message::DeviceInfo(info), u32::MAX),
+        (example_sentence(), 42),
     ]
+}
+
+fn example_sentence() -> Message {
+    let mut text = heapless::String::new();
+    text.push_str("$GPGST,172814.0,0.006,0.023,0.020,273.6,0.023,0.020,0.031*6A")
+        .unwrap();
+    Message::Gnss(GnssSentence {
+        mcu_time_us: 61_234_567,
+        number: 17,
+        text,
+    })
+}
+
+#[test]
+fn gnss_sentence_round_trip() {
+    let msg = example_sentence();
+    assert_eq!(roundtrip(&msg, 3).message, msg);
+}
+
+/// The sentence body's boundaries: lengths up to [`MAX_SENTENCE_TEXT`], printable ASCII from
+/// `$`, a body cut short anywhere.
+#[test]
+fn gnss_sentence_boundaries() {
+    let body = |n: usize, text: &[u8]| {
+        let mut b = vec![0u8; 16];
+        b[..8].copy_from_slice(&5u64.to_le_bytes());
+        b[8..12].copy_from_slice(&9u32.to_le_bytes());
+        b[12] = n as u8;
+        b.extend_from_slice(text);
+        b
+    };
+    let longest = [b"$".as_slice(), &[b'A'; MAX_SENTENCE_TEXT - 1]].concat();
+    let ok = GnssSentence::read_body(&body(longest.len(), &longest)).unwrap();
+    assert_eq!(ok.text.len(), MAX_SENTENCE_TEXT);
+    assert_eq!((ok.mcu_time_us, ok.number), (5, 9));
+    let too_long = [longest.as_slice(), b"B"].concat();
+    let cases: [(&[u8], &str); 5] = [
+        (&too_long, "sentence length"),
+        (b"", "sentence text"),
+        (b"GPGGA*00", "sentence text"),
+        (b"$GP\xc3\xa9*00", "sentence text"),
+        (b"$GP\r\n", "sentence text"),
+    ];
+    for (text, why) in cases {
+        let err = GnssSentence::read_body(&body(text.len(), text)).unwrap_err();
+        assert!(err.to_string().contains(why), "{text:?}: {err}");
+    }
+    let whole = body(6, b"$GPZDA");
+    for cut in 0..whole.len() {
+        assert!(
+            matches!(
+                GnssSentence::read_body(&whole[..cut]),
+                Err(DecodeError::BodyTooShort(0x05))
+            ),
+            "cut at {cut}"
+        );
+    }
+    // Appended fields are ignored.
+    let longer = [whole.as_slice(), b"xyz"].concat();
+    assert_eq!(
+        GnssSentence::read_body(&longer).unwrap().text.as_str(),
+        "$GPZDA"
+    );
 }
 
 /// Flip every bit of every encoded frame (delimiter included), between intact frames: the

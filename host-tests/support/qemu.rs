@@ -184,7 +184,7 @@ impl UnitLink {
                     Message::Pose(r) => self.records.push(*r),
                     Message::Status(s) => self.heartbeats.push(*s),
                     Message::DeviceInfo(_) => self.device_info += 1,
-                    Message::Reply(_) => {}
+                    Message::Reply(_) | Message::Gnss(_) => {}
                 }
                 self.frames.push((*f).clone());
                 *f

@@ -335,7 +335,7 @@ pub fn describe(f: &Frame) -> Option<String> {
             d.settings_checksum
         )),
         Message::Reply(r) => Some(format!("# reply: {}", escape_control(r.text.trim_end()))),
-        Message::Pose(_) => None,
+        Message::Pose(_) | Message::Gnss(_) => None,
     }
 }
 

@@ -600,3 +600,72 @@ impl Iterator for ReplyChunks<'_> {
         })
     }
 }
+
+/// Longest sentence text of one [`GnssSentence`], bytes: the GNSS line buffer's length
+/// ([`crate::timing::nmea::MAX_SENTENCE`]), which covers the high-precision sentences some
+/// receivers send beyond NMEA 0183's 82 characters.
+pub const MAX_SENTENCE_TEXT: usize = crate::timing::nmea::MAX_SENTENCE;
+
+/// One NMEA sentence received from the GNSS receiver and forwarded to the host (message type
+/// 0x05). Body length [`GnssSentence::FIXED_LEN`] + text length.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct GnssSentence {
+    /// Unit time at which the sentence's line ending arrived, microseconds since start: the
+    /// clock of [`PoseRecord::mcu_time_us`].
+    pub mcu_time_us: u64,
+    /// Number of the sentence among the checksum-valid sentences of the forwarded kinds received
+    /// since start, the first being 0 (wrapping). A jump of `k + 1` between two consecutive
+    /// GnssSentence frames means `k` sentences were received but not forwarded.
+    pub number: u32,
+    /// The sentence as received, ASCII from `$` through the two checksum digits, without the
+    /// line ending, e.g. `$GPGGA,...*47`.
+    pub text: String<MAX_SENTENCE_TEXT>,
+}
+
+impl GnssSentence {
+    /// Length of the fixed part of the body, bytes.
+    pub const FIXED_LEN: usize = 16;
+
+    /// Writes the body into `out`; returns its length.
+    pub fn write_body(&self, out: &mut [u8]) -> Result<usize, EncodeError> {
+        let mut w = Writer::new(out);
+        (|| {
+            w.u64(self.mcu_time_us)?;
+            w.u32(self.number)?;
+            w.u8(self.text.len() as u8)?;
+            w.bytes(&[0; 3])?;
+            w.bytes(self.text.as_bytes())
+        })()
+        .map_err(|_| EncodeError::BufferTooSmall)?;
+        Ok(w.pos())
+    }
+
+    /// Reads a body. The text must be printable ASCII starting with `$`; its checksum is the
+    /// reader's to check.
+    pub fn read_body(body: &[u8]) -> Result<Self, DecodeError> {
+        let short = |_| DecodeError::BodyTooShort(MsgType::GnssSentence as u8);
+        let mut r = Reader::new(body);
+        let mcu_time_us = r.u64().map_err(short)?;
+        let number = r.u32().map_err(short)?;
+        let n = r.u8().map_err(short)? as usize;
+        r.bytes(3).map_err(short)?;
+        if n > MAX_SENTENCE_TEXT {
+            return Err(DecodeError::BadField("sentence length"));
+        }
+        let bytes = r.bytes(n).map_err(short)?;
+        if bytes.first() != Some(&b'$') || !bytes.iter().all(|b| (0x20..0x7f).contains(b)) {
+            return Err(DecodeError::BadField("sentence text"));
+        }
+        let mut text = String::new();
+        // Printable ASCII (checked above) is UTF-8, and `n` fits the capacity.
+        for &b in bytes {
+            text.push(b as char)
+                .map_err(|_| DecodeError::BadField("sentence length"))?;
+        }
+        Ok(Self {
+            mcu_time_us,
+            number,
+            text,
+        })
+    }
+}

@@ -17,8 +17,8 @@ pub mod tx_ring;
 
 pub use decoder::{DecoderStats, FrameDecoder};
 pub use messages::{
-    CommandReply, DeviceInfo, GnssTime, PoseRecord, ReplyChunks, Status, StatusFlags, WheelStatus,
-    MAX_FIRMWARE_VERSION, MAX_REPLY_TEXT,
+    CommandReply, DeviceInfo, GnssSentence, GnssTime, PoseRecord, ReplyChunks, Status, StatusFlags,
+    WheelStatus, MAX_FIRMWARE_VERSION, MAX_REPLY_TEXT, MAX_SENTENCE_TEXT,
 };
 pub use reset_cause::ResetCause;
 pub use tx_ring::{Queued, TxLink, TxRing};
@@ -54,6 +54,8 @@ pub enum MsgType {
     DeviceInfo = 0x03,
     /// [`CommandReply`].
     CommandReply = 0x04,
+    /// [`GnssSentence`].
+    GnssSentence = 0x05,
 }
 
 impl MsgType {
@@ -64,6 +66,7 @@ impl MsgType {
             0x02 => Some(Self::Status),
             0x03 => Some(Self::DeviceInfo),
             0x04 => Some(Self::CommandReply),
+            0x05 => Some(Self::GnssSentence),
             _ => None,
         }
     }
@@ -142,6 +145,8 @@ pub enum Message {
     DeviceInfo(DeviceInfo),
     /// Type 0x04.
     Reply(CommandReply),
+    /// Type 0x05.
+    Gnss(GnssSentence),
 }
 
 impl Message {
@@ -152,6 +157,7 @@ impl Message {
             Self::Status(_) => MsgType::Status,
             Self::DeviceInfo(_) => MsgType::DeviceInfo,
             Self::Reply(_) => MsgType::CommandReply,
+            Self::Gnss(_) => MsgType::GnssSentence,
         }
     }
 
@@ -162,6 +168,7 @@ impl Message {
             Self::Status(m) => m.write_body(out),
             Self::DeviceInfo(m) => m.write_body(out),
             Self::Reply(m) => m.write_body(out),
+            Self::Gnss(m) => m.write_body(out),
         }
     }
 
@@ -172,6 +179,7 @@ impl Message {
             Some(MsgType::Status) => Status::read_body(body).map(Self::Status),
             Some(MsgType::DeviceInfo) => DeviceInfo::read_body(body).map(Self::DeviceInfo),
             Some(MsgType::CommandReply) => CommandReply::read_body(body).map(Self::Reply),
+            Some(MsgType::GnssSentence) => GnssSentence::read_body(body).map(Self::Gnss),
             None => Err(DecodeError::UnknownType(msg_type)),
         }
     }
@@ -195,6 +203,11 @@ impl From<DeviceInfo> for Message {
 impl From<CommandReply> for Message {
     fn from(m: CommandReply) -> Self {
         Self::Reply(m)
+    }
+}
+impl From<GnssSentence> for Message {
+    fn from(m: GnssSentence) -> Self {
+        Self::Gnss(m)
     }
 }
 
