@@ -78,12 +78,7 @@ fn run_reader(args: &[String]) -> String {
         .args(args)
         .output()
         .unwrap();
-    let out = String::from_utf8_lossy(&o.stdout).into_owned();
-    assert!(
-        o.status.success(),
-        "{out}\n{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    let out = common::success_stdout(&o);
     out
 }
 

@@ -49,12 +49,7 @@ fn subscriber_with(domain: u16, args: &[&str], config: Option<&str>) -> Child {
 
 fn finish(child: Child) -> String {
     let o = child.wait_with_output().unwrap();
-    let out = String::from_utf8_lossy(&o.stdout).into_owned();
-    assert!(
-        o.status.success(),
-        "{out}\n{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    let out = common::success_stdout(&o);
     out
 }
 
@@ -256,12 +251,7 @@ fn reset_call(domain: u16, ns: &str) -> String {
         .env("ROS_DOMAIN_ID", domain.to_string())
         .output()
         .expect("python3 runs");
-    let out = String::from_utf8_lossy(&o.stdout).into_owned();
-    assert!(
-        o.status.success(),
-        "{out}\n{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    let out = common::success_stdout(&o);
     out
 }
 

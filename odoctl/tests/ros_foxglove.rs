@@ -91,12 +91,7 @@ fn client(port: u16, expect: &Path, args: &[&str]) -> String {
         .args(args)
         .output()
         .unwrap();
-    let out = String::from_utf8_lossy(&o.stdout).into_owned();
-    assert!(
-        o.status.success(),
-        "{out}\n{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    let out = common::success_stdout(&o);
     assert!(out.contains("foxglove_client: ok"), "{out}");
     out
 }

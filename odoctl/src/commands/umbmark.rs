@@ -57,9 +57,13 @@ pub struct Sigmas {
     pub heading: f64,
 }
 
-/// The end pose of a run integrated with `p` from the start pose: (forward, left, heading
-/// change counter-clockwise) in m, m, rad.
-pub fn end_pose(p: &ChassisParams, samples: &[Sample]) -> Result<(f64, f64, f64)> {
+/// Integrates a run with `p` from the origin pose (x = y = heading = 0), calling `each` with the
+/// pose after every sample (the first included); returns the integrator at the run's end.
+fn integrate(
+    p: &ChassisParams,
+    samples: &[Sample],
+    mut each: impl FnMut(&Pose),
+) -> Result<Integrator> {
     let first = samples.first().ok_or_else(|| anyhow!("no samples"))?;
     let start = Pose {
         x: 0.0,
@@ -68,10 +72,18 @@ pub fn end_pose(p: &ChassisParams, samples: &[Sample]) -> Result<(f64, f64, f64)
     };
     let mut integ =
         Integrator::new(p, counts(first), start).map_err(|e| anyhow!("parameters: {e}"))?;
+    each(&integ.pose());
     for s in &samples[1..] {
         let _ = integ.step(counts(s), index_refs(s));
+        each(&integ.pose());
     }
-    let e = integ.pose();
+    Ok(integ)
+}
+
+/// The end pose of a run integrated with `p` from the start pose: (forward, left, heading
+/// change counter-clockwise) in m, m, rad.
+pub fn end_pose(p: &ChassisParams, samples: &[Sample]) -> Result<(f64, f64, f64)> {
+    let e = integrate(p, samples, |_| ())?.pose();
     // Forward is +y at heading 0, left is -x; the heading is clockwise.
     Ok((e.y, -e.x, -e.heading))
 }
@@ -92,18 +104,7 @@ pub fn slip_shape(p: &ChassisParams, samples: &[Sample]) -> Result<[f64; 4]> {
         geometry_uncertainty: ChassisParams::DESIGNED.geometry_uncertainty,
         ..*p
     };
-    let first = samples.first().ok_or_else(|| anyhow!("no samples"))?;
-    let start = Pose {
-        x: 0.0,
-        y: 0.0,
-        heading: 0.0,
-    };
-    let mut integ =
-        Integrator::new(&q, counts(first), start).map_err(|e| anyhow!("parameters: {e}"))?;
-    for s in &samples[1..] {
-        let _ = integ.step(counts(s), index_refs(s));
-    }
-    let g = integ.sigma();
+    let g = integrate(&q, samples, |_| ())?.sigma();
     let v = |a: f32| f64::from(a) * f64::from(a) / KAPPA_UNIT;
     // Forward is y, left is -x.
     Ok([
@@ -421,22 +422,16 @@ fn check_run(
     direction: Direction,
     side: f64,
 ) -> Result<()> {
-    let first = samples.first().ok_or_else(|| anyhow!("{at}: no samples"))?;
-    let start = Pose {
-        x: 0.0,
-        y: 0.0,
-        heading: 0.0,
-    };
-    let mut integ =
-        Integrator::new(p, counts(first), start).map_err(|e| anyhow!("parameters: {e}"))?;
     let mut path = 0.0;
-    let mut prev = integ.pose();
-    for s in &samples[1..] {
-        let _ = integ.step(counts(s), index_refs(s));
-        let q = integ.pose();
-        path += (q.x - prev.x).hypot(q.y - prev.y);
-        prev = q;
-    }
+    let mut prev: Option<Pose> = None;
+    integrate(p, samples, |q| {
+        if let Some(r) = prev {
+            path += (q.x - r.x).hypot(q.y - r.y);
+        }
+        prev = Some(*q);
+    })
+    .map_err(|e| anyhow!("{at}: {e}"))?;
+    let prev = prev.unwrap_or_default();
     let turn = -prev.heading.to_degrees();
     let ok = match direction {
         Direction::Cw => (turn + 360.0).abs() < 45.0 && (path / (4.0 * side) - 1.0).abs() < 0.2,
