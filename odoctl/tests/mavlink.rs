@@ -78,8 +78,7 @@ fn run_reader(args: &[String]) -> String {
         .args(args)
         .output()
         .unwrap();
-    let out = common::success_stdout(&o);
-    out
+    common::success_stdout(&o)
 }
 
 #[test]

@@ -49,8 +49,7 @@ fn subscriber_with(domain: u16, args: &[&str], config: Option<&str>) -> Child {
 
 fn finish(child: Child) -> String {
     let o = child.wait_with_output().unwrap();
-    let out = common::success_stdout(&o);
-    out
+    common::success_stdout(&o)
 }
 
 /// The unit's records of `samples` as the subscriber's `--expect` CSV in `dir`.
@@ -251,8 +250,7 @@ fn reset_call(domain: u16, ns: &str) -> String {
         .env("ROS_DOMAIN_ID", domain.to_string())
         .output()
         .expect("python3 runs");
-    let out = common::success_stdout(&o);
-    out
+    common::success_stdout(&o)
 }
 
 #[test]

@@ -14,6 +14,8 @@
 //! `ODOCTL_ENSEMBLE_COVERAGE_CRITERION=1` adds the covariance model fitted by the paper's
 //! coverage criterion; `ODOCTL_ENSEMBLE_FIGURES=DIR` draws each
 //! regime's coverage and reliability figures there (`bench/run` draws them into `docs/figures/`).
+//! `ODOCTL_ENSEMBLE_DEBUG=1` prints each second-generator calibration's kappa against the truth,
+//! its geometry errors in standard errors and its own 3-sigma share.
 //! `ODO_RESULTS_DIR=DIR` writes the tables there as Markdown (`bench/run` puts them into
 //! docs/RESULTS.md with the figures).
 //!
@@ -28,7 +30,10 @@ use odoctl::calib::{
     CHECKPOINTS,
 };
 use odoctl::replay::{counts, index_refs};
-use odoctl::simulate::{default_truth, simulate_path, PathKind, SimSettings};
+use odoctl::simulate::{default_truth, simulate_path, PathKind, SimRun, SimSettings};
+
+#[path = "generators/white_slip.rs"]
+mod white_slip;
 
 /// Runs per regime replayed against the truth.
 const RUNS: u64 = 400;
@@ -71,22 +76,14 @@ fn regime(name: &'static str, q: f64, corr: f64, slip_turn: f64) -> Regime {
 }
 
 fn regimes() -> Vec<Regime> {
-    // Measured with 20 calibrations x 20 runs each (10 x 20 before: too few calibrations,
-    // whose geometry errors every run replayed with one of them shares, to tell 72 % from
-    // 78 %). The target holds in every regime:
-    // - q 0.0002 64-73 %, q 0.001 66-74 %, q 0.003 67-75 %, Gauss-Markov 2 m 65-73 %; at
-    //   least 98.5 % inside 3 sigma. Before the filter was linearised about its own estimate,
-    //   q 0.003 covered 74-80 %: kappa read 20 % high, and the refinement of the geometry was
-    //   refused (its open-loop linearisation), so the sub-trajectory fit's wider standard
-    //   errors of the wheels' difference went into the unit.
-    // - Opposite-phase slip when turning, correlated over 2 m of wheel-distance difference:
-    //   63-74 %, at least 97.2 % inside 3 sigma. The unit carries it as the calibration fits
-    //   it (`kappa_diff` and `kappa_diff_corr`, a Gauss-Markov state, `kappa_diff` taken as
-    //   its mean over the likelihood); one 70 m run measures the slip rate's variance within
-    //   a factor of about 5 either way. Before the re-linearisation kappa took part of it and
-    //   the 3-sigma coverage was 95.8 % at worst.
+    // 20 calibrations x 20 runs each: with fewer calibrations, whose geometry errors every run
+    // replayed with one of them shares, 72 % cannot be told from 78 %. The figures are in
+    // docs/RESULTS.md. Opposite-phase slip when turning is carried as the calibration fits it
+    // (`kappa_diff` and `kappa_diff_corr`, a Gauss-Markov state, `kappa_diff` taken as its mean
+    // over the likelihood); one 70 m run measures the slip rate's variance within a factor of
+    // about 5 either way.
     vec![
-        regime("q 0.0002", 0.0002, 0.1, 0.0),
+        regime("q 0.0003", 0.0003, 0.1, 0.0),
         regime("q 0.001", 0.001, 0.1, 0.0),
         regime("q 0.003", 0.003, 0.1, 0.0),
         regime("q 0.001, Gauss-Markov 2 m", 0.001, 2.0, 0.0),
@@ -144,37 +141,48 @@ fn replay_runs(
                 ..settings
             },
         );
-        let mut dist = Vec::with_capacity(run.truth.len());
-        let mut d = 0.0;
-        for (i, t) in run.truth.iter().enumerate() {
-            if i > 0 {
-                let p = run.truth[i - 1];
-                d += (t.0 - p.0).hypot(t.1 - p.1);
-            }
-            dist.push(d);
+        replay_run(&run, params, &models, out);
+    }
+}
+
+/// Replays `run` from its true start with `params` under each of `models` into `out` (one
+/// ensemble per model).
+fn replay_run(
+    run: &SimRun,
+    params: &ChassisParams,
+    models: &[UncertaintyModel],
+    out: &mut [Ensemble],
+) {
+    let mut dist = Vec::with_capacity(run.truth.len());
+    let mut d = 0.0;
+    for (i, t) in run.truth.iter().enumerate() {
+        if i > 0 {
+            let p = run.truth[i - 1];
+            d += (t.0 - p.0).hypot(t.1 - p.1);
         }
-        for (m, ens) in models.iter().zip(out.iter_mut()) {
-            let p = ChassisParams {
-                uncertainty_model: *m,
-                ..*params
-            };
-            let (x, y, h) = run.truth[0];
-            let mut integ = Integrator::new(&p, counts(&run.samples[0]), Pose { x, y, heading: h })
-                .expect("parameters");
-            let mut rows = vec![CheckpointSample {
-                horizontal: (0.0, 0.0),
-                heading: Some((0.0, 0.0)),
-            }];
-            for (s, t) in run.samples[1..].iter().zip(&run.truth[1..]) {
-                let _ = integ.step(counts(s), index_refs(s));
-                let (o, sg) = (integ.pose(), integ.sigma());
-                rows.push(CheckpointSample {
-                    horizontal: ((o.x - t.0).hypot(o.y - t.1), f64::from(sg.horizontal())),
-                    heading: Some((o.heading - t.2, f64::from(sg.heading))),
-                });
-            }
-            ens.add_run(&dist, |i| rows[i]);
+        dist.push(d);
+    }
+    for (m, ens) in models.iter().zip(out.iter_mut()) {
+        let p = ChassisParams {
+            uncertainty_model: *m,
+            ..*params
+        };
+        let (x, y, h) = run.truth[0];
+        let mut integ = Integrator::new(&p, counts(&run.samples[0]), Pose { x, y, heading: h })
+            .expect("parameters");
+        let mut rows = vec![CheckpointSample {
+            horizontal: (0.0, 0.0),
+            heading: Some((0.0, 0.0)),
+        }];
+        for (s, t) in run.samples[1..].iter().zip(&run.truth[1..]) {
+            let _ = integ.step(counts(s), index_refs(s));
+            let (o, sg) = (integ.pose(), integ.sigma());
+            rows.push(CheckpointSample {
+                horizontal: ((o.x - t.0).hypot(o.y - t.1), f64::from(sg.horizontal())),
+                heading: Some((o.heading - t.2, f64::from(sg.heading))),
+            });
         }
+        ens.add_run(&dist, |i| rows[i]);
     }
 }
 
@@ -314,10 +322,10 @@ fn table_row(regime: &str, model: &str, c: &[CheckpointCoverage]) -> String {
 
 /// The checkpoints where `c` is outside `floor` (1-sigma in `floor.one_sigma`..76 %, 3-sigma
 /// at least `floor.three_sigma`), or not reached by every run.
-fn misses(regime: &str, c: &[CheckpointCoverage], floor: Floor) -> Vec<String> {
+fn misses(regime: &str, c: &[CheckpointCoverage], floor: Floor, runs: u64) -> Vec<String> {
     let mut out = Vec::new();
     for k in c {
-        if k.runs as u64 != RUNS {
+        if k.runs as u64 != runs {
             out.push(format!(
                 "{regime}: {} m reached by {} runs",
                 k.distance, k.runs
@@ -387,7 +395,7 @@ fn calibrated_uncertainty_covers_the_true_errors_across_slip_regimes() {
             };
             table.push_str(&table_row(r.name, &label, &c));
             if m == default_model {
-                failed.extend(misses(r.name, &c, TARGET));
+                failed.extend(misses(r.name, &c, TARGET, RUNS));
             }
         }
         if std::env::var_os("ODOCTL_ENSEMBLE_COVERAGE_CRITERION").is_some() {
@@ -455,7 +463,7 @@ fn turning_slip_with_the_simulated_slips_coefficients_meets_the_target() {
             table_row(r.name, "covariance (simulated turning slip)", &c)
         ),
     );
-    let failed = misses(r.name, &c, floor);
+    let failed = misses(r.name, &c, floor, RUNS);
     assert!(failed.is_empty(), "{}", failed.join("\n"));
 }
 
@@ -514,4 +522,159 @@ fn the_filter_likelihood_recovers_kappa_with_the_true_geometry() {
         );
     }
     write_results("kappa_recovery", &table);
+}
+
+/// Calibrations per slip level on the second generator.
+const SECOND_CALIBRATIONS: u64 = 20;
+/// Tight-turning runs replayed with each of them.
+const SECOND_RUNS_EACH: u64 = 20;
+
+/// The least share of one calibration's errors inside 3 sigma.
+const SINGLE_THREE_SIGMA: f64 = 0.90;
+
+/// The share of the errors inside 3 sigma over all checkpoints, horizontal and heading alike.
+fn three_sigma_share(c: &[CheckpointCoverage]) -> f64 {
+    let (mut inside, mut all) = (0.0, 0.0);
+    for k in c {
+        inside += (k.horizontal.1 + k.heading.1) * k.runs as f64;
+        all += 2.0 * k.runs as f64;
+    }
+    inside / all
+}
+
+/// The second generator ([`white_slip`]) at slip `q`: 6 mm per axis and 0.4 deg of reference
+/// noise (not the first generator's 8 mm horizontal and 0.5 deg).
+fn second_settings(q: f64) -> white_slip::Settings {
+    white_slip::Settings {
+        truth: default_truth(),
+        q,
+        sigma_axis: 0.006,
+        heading_sigma: 0.4f64.to_radians(),
+    }
+}
+
+/// A start pose of `seed`'s own: anywhere in a 100 m square, any heading.
+fn second_start(seed: u64) -> (f64, f64, f64) {
+    let f = |k: u64| {
+        ((seed.wrapping_mul(2_654_435_761).wrapping_add(k * 40_503)) % 10_007) as f64 / 10_007.0
+    };
+    (
+        100.0 * f(1) - 50.0,
+        100.0 * f(2) - 50.0,
+        2.0 * std::f64::consts::PI * f(3),
+    )
+}
+
+/// The default calibration (covariance model, likelihood) of a gentle 70 m drive of the second
+/// generator, told the reference noise as the options define it (horizontal RMS:
+/// `sqrt(2)` times the per-axis sigma).
+fn second_calibration(s: &white_slip::Settings, seed: u64) -> ChassisParams {
+    let run = white_slip::run(
+        white_slip::Course::Gentle,
+        70.0,
+        s,
+        second_start(seed),
+        seed,
+    );
+    calib::calibrate(
+        &run.samples,
+        &run.reference,
+        ("samples", "reference"),
+        &ChassisParams::DESIGNED,
+        &CalibrationOptions {
+            models: vec![UncertaintyModel::Covariance],
+            reference_sigma: s.sigma_axis * 2f64.sqrt(),
+            reference_heading_sigma: s.heading_sigma,
+            ..CalibrationOptions::default()
+        },
+    )
+    .expect("calibration")
+    .params
+}
+
+/// The default model's coverage on data of a generator written apart from the simulator:
+/// white slip, other paths (gentle calibration drives, tight-turning validation drives),
+/// a 10 Hz reference with other noise, at three slip levels.
+#[test]
+fn calibrated_uncertainty_covers_the_true_errors_on_a_second_generator() {
+    let mut failed = Vec::new();
+    let runs = SECOND_CALIBRATIONS * SECOND_RUNS_EACH;
+    let mut table = format!(
+        "Second generator (odoctl/tests/generators/white_slip.rs: white slip, random-curvature \
+         calibration drives, tight-turning validation drives, 10 Hz reference of 6 mm per axis \
+         and 0.4 deg): per slip level, {SECOND_CALIBRATIONS} calibrations on gentle 70 m drives \
+         and {runs} tight-turning runs replayed from their true start, each with one of them; \
+         default model, same target.\n\n{}",
+        table_header()
+    );
+    let mut lowest_single = f64::INFINITY;
+    for q in [0.0003, 0.001, 0.003] {
+        let name = format!("white q {q}");
+        let s = second_settings(q);
+        let mut out = [Ensemble::new(&CHECKPOINTS)];
+        let (mut kappas, mut singles) = (Vec::new(), Vec::new());
+        for k in 0..SECOND_CALIBRATIONS {
+            let p = second_calibration(&s, 1 + k);
+            kappas.push(format!("{:.2}", f64::from(p.kappa_left) / (q * q)));
+            let mut single = [Ensemble::new(&CHECKPOINTS)];
+            for r in 0..SECOND_RUNS_EACH {
+                let seed = 500 + k * SECOND_RUNS_EACH + r;
+                let run = white_slip::run(
+                    white_slip::Course::Tight,
+                    62.0,
+                    &s,
+                    second_start(seed),
+                    seed,
+                );
+                replay_run(&run, &p, &[UncertaintyModel::Covariance], &mut out);
+                replay_run(&run, &p, &[UncertaintyModel::Covariance], &mut single);
+            }
+            singles.push(three_sigma_share(&single[0].coverage()));
+            if std::env::var_os("ODOCTL_ENSEMBLE_DEBUG").is_some() {
+                let t = default_truth();
+                let g = p.geometry_uncertainty;
+                println!(
+                    "  cal {k}: kappa/q2 {:.2} z(dl,dr,b) {:.2} {:.2} {:.2} 3sigma {:.1} %",
+                    f64::from(p.kappa_left) / (q * q),
+                    (p.left_diameter - t.left_diameter) / f64::from(g.left_diameter_se),
+                    (p.right_diameter - t.right_diameter) / f64::from(g.right_diameter_se),
+                    (p.track_width - t.track_width) / f64::from(g.track_width_se),
+                    100.0 * singles.last().copied().unwrap_or(0.0)
+                );
+            }
+        }
+        println!("{name}: kappa / q^2 per calibration {}", kappas.join(" "));
+        let c = out[0].coverage();
+        print_table(&name, "covariance", "likelihood", &default_truth(), &c);
+        let lowest = singles.iter().copied().fold(f64::INFINITY, f64::min);
+        println!(
+            "{name}: lowest 3-sigma share of a single calibration {:.1} %",
+            100.0 * lowest
+        );
+        table.push_str(&table_row(
+            &name,
+            "**covariance (likelihood, default)**",
+            &c,
+        ));
+        failed.extend(misses(&name, &c, TARGET, runs));
+        if lowest < SINGLE_THREE_SIGMA {
+            failed.push(format!(
+                "{name}: a single calibration covers {:.1} % inside 3 sigma",
+                100.0 * lowest
+            ));
+        }
+        lowest_single = lowest_single.min(lowest);
+    }
+    table.push_str(&format!(
+        "\nThe lowest share of one calibration's errors (all its runs, horizontal and heading, \
+         every checkpoint) inside 3 sigma: {:.1} % (held to at least {:.0} %).\n",
+        100.0 * lowest_single,
+        100.0 * SINGLE_THREE_SIGMA
+    ));
+    write_results("uncertainty_coverage_second", &table);
+    assert!(
+        failed.is_empty(),
+        "the coverage target (60-76 % / >= 97 %) missed on the second generator:\n{}",
+        failed.join("\n")
+    );
 }

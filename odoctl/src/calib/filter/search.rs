@@ -80,7 +80,7 @@ pub(crate) fn largest_likelihood(nll: impl Fn(f64) -> f64, lo: f64, hi: f64) -> 
 /// likely value, and the sigma it gives is then too narrow; the mean is what the errors' spread
 /// over the likelihood's uncertainty has. Under turning slip it took the ensemble test's
 /// coverage from 54-67 % inside 1 sigma (92.5 % inside 3) to 57.5-68.5 % (94 %).
-pub(super) fn posterior_mean(nll: impl Fn(f64) -> f64, x: f64, hi: f64) -> f64 {
+pub(crate) fn posterior_mean(nll: impl Fn(f64) -> f64, x: f64, hi: f64) -> f64 {
     let (l, h) = (x.ln(), 0.3);
     let curvature = (nll(l + h) - 2.0 * nll(l) + nll(l - h)) / (h * h);
     if curvature.is_finite() && curvature > 0.0 {

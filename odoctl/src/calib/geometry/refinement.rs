@@ -31,7 +31,9 @@ use odo_unit::odometry::ChassisParams;
 
 use crate::calib::antenna::LeverArm;
 use crate::calib::filter::innovations::{Innovations, Turning, OBSERVATION_BLOCK};
-use crate::calib::filter::search::{largest_likelihood, slip_rate_range, EVIDENCE_PER_PARAMETER};
+use crate::calib::filter::search::{
+    largest_likelihood, posterior_mean, slip_rate_range, EVIDENCE_PER_PARAMETER,
+};
 use crate::calib::run::Run;
 
 use super::subtrajectory::SubtrajectoryFit;
@@ -116,7 +118,15 @@ pub fn refine_geometry(
     if !s.nll.is_finite() || s.geometry.iter().any(|v| !v.is_finite()) {
         return Err(anyhow!("the filter failed at kappa {kappa:e}"));
     }
-    let (g, rel_cov, heading_var) = (s.geometry, s.geometry_cov, s.heading_var);
+    // The covariance at kappa's mean over the likelihood: one drive reads kappa low about as
+    // often as high, and the geometry's variances grow with it.
+    let kappa_mean = posterior_mean(|l| nll(l.exp(), Turning::NONE), kappa, hi);
+    let rel_cov = if kappa_mean > kappa {
+        inn.score_with(kappa_mean, 0.0, Turning::NONE).geometry_cov
+    } else {
+        s.geometry_cov
+    };
+    let (g, heading_var) = (s.geometry, s.heading_var);
     let mut p = *params;
     p.left_diameter *= 1.0 + g[0];
     p.right_diameter *= 1.0 + g[1];

@@ -57,6 +57,9 @@ pub struct UncertaintyFit {
     /// log-likelihood (likelihood criterion): the coefficient is known within a factor of
     /// `exp(ln_se)` (1 sigma).
     pub ln_se: Option<f64>,
+    /// The coefficient of the largest likelihood, where the unit is told another: its mean over
+    /// the likelihood (likelihood criterion; see [`crate::calib::uncertainty::likelihood`]).
+    pub most_likely: Option<f64>,
 }
 
 /// `base` with the fitted coefficient `v` of its uncertainty model: `delta_left` or

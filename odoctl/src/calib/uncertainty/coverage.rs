@@ -267,6 +267,7 @@ pub(crate) fn fit_coefficient(
         criterion: UncertaintyCriterion::Coverage,
         heading_coverage: None,
         ln_se: None,
+        most_likely: None,
     })
 }
 

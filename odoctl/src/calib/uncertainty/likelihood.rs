@@ -4,15 +4,19 @@
 use odo_unit::odometry::{ChassisParams, UncertaintyModel};
 
 use crate::calib::filter::innovations::Innovations;
-use crate::calib::filter::search::slip_rate_range;
+use crate::calib::filter::search::{posterior_mean, slip_rate_range};
 
 use super::coefficients::{set_coefficient, DeltaMode, UncertaintyCriterion, UncertaintyFit};
 
 /// The covariance model's kappa by the filter's likelihood ([`Innovations::fit_with_turning`]):
 /// the long-range wheel-distance variance per metre, with the slip's correlation length fitted
 /// beside it (the unit's model has white slip; over the tens of metres a sigma is used for,
-/// the long-range rate is what it must carry), and the opposite-phase slip. Returns the fit
-/// and the wheel slip's correlation length (m; 0: white).
+/// the long-range rate is what it must carry), and the opposite-phase slip. The unit is told
+/// kappa's mean over the likelihood ([`posterior_mean`]: `exp(ln_se^2 / 2)` times the most
+/// likely value), not the most likely value: its variances are linear in kappa, so the mean is
+/// what the errors' spread over kappa's own uncertainty has, and one drive that happened to read
+/// kappa low does not leave the unit's bands too narrow. Returns the fit and the wheel slip's
+/// correlation length (m; 0: white).
 pub fn fit_kappa_filter(
     innovations: &Innovations,
     geometry: &ChassisParams,
@@ -20,7 +24,10 @@ pub fn fit_kappa_filter(
     mode: DeltaMode,
 ) -> (UncertaintyFit, f64) {
     let (lo, hi) = slip_rate_range();
-    let (kappa, corr, turning) = innovations.fit_with_turning(lo, hi);
+    let (most_likely, corr, turning) = innovations.fit_with_turning(lo, hi);
+    let nll = |k: f64| innovations.score_with(k, corr, turning).nll;
+    let ln_se = ln_standard_error(nll, most_likely);
+    let kappa = posterior_mean(|l| nll(l.exp()), most_likely, hi);
     let mut params = set_coefficient(
         &ChassisParams {
             uncertainty_model: UncertaintyModel::Covariance,
@@ -35,13 +42,12 @@ pub fn fit_kappa_filter(
     // `|s_1 - s_2|` as `Turning::corr`); 0 when the white form won.
     params.kappa_diff_corr = turning.corr as f32;
     let score = innovations.score_with(kappa, corr, turning);
-    let ln_se = ln_standard_error(|k| innovations.score_with(k, corr, turning).nll, kappa);
-    let warning = if kappa <= lo * 1.01 {
+    let warning = if most_likely <= lo * 1.01 {
         Some(
             "the errors are explained by the reference noise alone: kappa is not identifiable"
                 .to_string(),
         )
-    } else if kappa >= hi * 0.99 {
+    } else if most_likely >= hi * 0.99 {
         Some(format!("kappa reached its largest admissible value {hi:e}"))
     } else {
         None
@@ -60,6 +66,7 @@ pub fn fit_kappa_filter(
             criterion: UncertaintyCriterion::Likelihood,
             heading_coverage: (!score.heading.0.is_nan()).then_some(score.heading),
             ln_se,
+            most_likely: Some(most_likely),
         },
         corr,
     )

@@ -258,6 +258,13 @@ fn print_uncertainty(
                 100.0 * (KAPPA_TARGET_LN_SE.exp() - 1.0)
             );
         }
+        if let Some(ml) = u.most_likely {
+            crate::outln!(
+                "  the unit is told kappa's mean over the likelihood, {:.3e} ({:.2} times the most likely {ml:.3e}), and the geometry's covariance at it",
+                u.params.kappa_left,
+                f64::from(u.params.kappa_left) / ml
+            );
+        }
     } else {
         crate::outln!(
             "{} model fit: {} sub-trajectories of {} m, {} points; 1-sigma band covers {:.1} % (target 68.3 %), 3-sigma {:.1} %",

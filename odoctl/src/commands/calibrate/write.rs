@@ -257,6 +257,9 @@ fn model_fit(c: &Calibration, opts: &CalibrationOptions) -> Vec<(String, FitValu
         if let Some(se) = u.ln_se {
             per_model.push((format!("{name}_ln_se"), FitValue::Num(se)));
         }
+        if let Some(ml) = u.most_likely {
+            per_model.push((format!("{name}_most_likely"), FitValue::Num(ml)));
+        }
     }
     let diff = c.uncertainty.iter().find_map(|u| u.diff.as_ref());
     if let Some(d) = diff {
