@@ -143,8 +143,20 @@ fn runs_that_do_not_match_their_recordings_are_refused() {
         out.to_str().unwrap(),
     ]);
     let e = String::from_utf8_lossy(&o.stderr);
+    // The entry's line: the last `samples = "cw0.csv"` of the file.
+    let text = std::fs::read_to_string(&m).unwrap();
+    let line = text
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| l.trim() == "samples = \"cw0.csv\"")
+        .last()
+        .unwrap()
+        .0
+        + 1;
     assert!(
-        !o.status.success() && e.contains("run 12 (cw0.csv)") && e.contains("does not match"),
+        !o.status.success()
+            && e.contains(&format!(":{line}: run 12 (cw0.csv)"))
+            && e.contains("does not match"),
         "{e}"
     );
     assert!(!out.exists());

@@ -366,7 +366,7 @@ fn default_heading_sigma() -> f64 {
 #[derive(Debug, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RunEntry {
-    samples: PathBuf,
+    samples: toml::Spanned<PathBuf>,
     direction: String,
     forward: f64,
     left: f64,
@@ -386,7 +386,12 @@ pub fn read_runs(path: &Path, initial: &ChassisParams) -> Result<(Vec<Run>, Sigm
     let dir = path.parent().unwrap_or(Path::new("."));
     let mut runs = Vec::new();
     for (i, e) in m.run.iter().enumerate() {
-        let at = format!("{file}: run {} ({})", i + 1, e.samples.display());
+        let line = text[..e.samples.span().start.min(text.len())]
+            .matches('\n')
+            .count()
+            + 1;
+        let samples_path = e.samples.get_ref();
+        let at = format!("{file}:{line}: run {} ({})", i + 1, samples_path.display());
         let direction = match e.direction.as_str() {
             "cw" => Direction::Cw,
             "ccw" => Direction::Ccw,
@@ -396,11 +401,11 @@ pub fn read_runs(path: &Path, initial: &ChassisParams) -> Result<(Vec<Run>, Sigm
         if ![e.forward, e.left].iter().all(|v| v.is_finite()) {
             bail!("{at}: forward and left must be finite (m)");
         }
-        let samples = csvio::read_samples(&dir.join(&e.samples))
+        let samples = csvio::read_samples(&dir.join(samples_path))
             .with_context(|| format!("{at}: cannot read the samples"))?;
         check_run(&at, initial, &samples, direction, m.side)?;
         runs.push(Run {
-            name: e.samples.display().to_string(),
+            name: samples_path.display().to_string(),
             samples,
             direction,
             end: (e.forward, e.left),
