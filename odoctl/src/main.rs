@@ -46,5 +46,6 @@ fn run(cmd: &Cmd) -> anyhow::Result<ExitCode> {
         Cmd::Bridge(a) => commands::bridge::run(a),
         Cmd::Umbmark(a) => commands::umbmark::run(a),
         Cmd::Reference(a) => commands::reference::run(a),
+        Cmd::Pool(a) => commands::pool::run(a),
     }
 }

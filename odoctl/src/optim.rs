@@ -97,6 +97,21 @@ pub fn objective(kind: Objective, r: &[f64]) -> f64 {
     }
 }
 
+/// The inverse of a symmetric 3x3 matrix; `None` when singular.
+pub fn invert3(m: [[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
+    let c = |r: usize, k: usize| {
+        let (r1, r2) = ((r + 1) % 3, (r + 2) % 3);
+        let (k1, k2) = ((k + 1) % 3, (k + 2) % 3);
+        m[r1][k1] * m[r2][k2] - m[r1][k2] * m[r2][k1]
+    };
+    let det = m[0][0] * c(0, 0) + m[0][1] * c(0, 1) + m[0][2] * c(0, 2);
+    let scale = m[0][0] * m[1][1] * m[2][2];
+    if det.abs() <= 1e-12 * scale.abs() || !det.is_finite() {
+        return None;
+    }
+    Some([0, 1, 2].map(|r| [0, 1, 2].map(|k| c(k, r) / det)))
+}
+
 /// Solves the dense system `a x = b` (n x n, row-major) by Gaussian elimination with partial
 /// pivoting; `None` when singular.
 pub fn solve(mut a: Vec<f64>, mut b: Vec<f64>) -> Option<Vec<f64>> {
@@ -813,6 +828,19 @@ pub fn brent_min(mut f: impl FnMut(f64) -> f64, a: f64, b: f64, tol: f64) -> (f6
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn invert3_inverts_and_refuses_a_singular_matrix() {
+        let m = [[4.0, 1.0, 0.5], [1.0, 3.0, 0.2], [0.5, 0.2, 2.0]];
+        let inv = invert3(m).unwrap();
+        for (r, row) in m.iter().enumerate() {
+            for c in 0..3 {
+                let v: f64 = row.iter().zip(&inv).map(|(a, i)| a * i[c]).sum();
+                assert!((v - f64::from(u8::from(r == c))).abs() < 1e-12);
+            }
+        }
+        assert!(invert3([[1.0, 1.0, 0.0], [1.0, 1.0, 0.0], [0.0, 0.0, 1.0]]).is_none());
+    }
 
     #[test]
     fn brent_finds_smooth_and_kinked_minima_and_the_interval_end() {

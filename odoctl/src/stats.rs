@@ -100,9 +100,24 @@ pub fn wrap_angle(a: f64) -> f64 {
     r
 }
 
+/// The 99 % quantile of chi-square with `k` degrees of freedom (Wilson-Hilferty).
+pub fn chi2_quantile_99(k: f64) -> f64 {
+    let z = 2.326_347_874;
+    let a = 2.0 / (9.0 * k);
+    k * (1.0 - a + z * a.sqrt()).powi(3)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn chi2_quantile_99_matches_the_tables() {
+        // Tabulated 99 % quantiles: 10 -> 23.21, 30 -> 50.89.
+        for (k, q) in [(10.0, 23.21), (30.0, 50.89)] {
+            assert!((chi2_quantile_99(k) - q).abs() < 0.1, "{k}");
+        }
+    }
 
     #[test]
     fn summary_and_coverage() {

@@ -198,14 +198,22 @@ pub fn geometry_uncertainty(
             _ => 0.0,
         }
     };
+    unit_geometry_uncertainty([se(0), se(1), se(2)], [corr(0, 1), corr(0, 2), corr(1, 2)])
+}
+
+/// The unit's keys of a geometry uncertainty: standard errors of `left_diameter`,
+/// `right_diameter`, `track_width` (m) capped at [`GeometryUncertainty::MAX_SE`], and their
+/// correlations (left-right, left-track, right-track) shrunk until f32 rounding leaves them
+/// consistent.
+pub fn unit_geometry_uncertainty(se: [f64; 3], corr: [f64; 3]) -> GeometryUncertainty {
     let cap = |v: f64| v.min(f64::from(GeometryUncertainty::MAX_SE)) as f32;
     let mut g = GeometryUncertainty {
-        left_diameter_se: cap(se(0)),
-        right_diameter_se: cap(se(1)),
-        track_width_se: cap(se(2)),
-        diameters_correlation: corr(0, 1) as f32,
-        left_track_correlation: corr(0, 2) as f32,
-        right_track_correlation: corr(1, 2) as f32,
+        left_diameter_se: cap(se[0]),
+        right_diameter_se: cap(se[1]),
+        track_width_se: cap(se[2]),
+        diameters_correlation: corr[0] as f32,
+        left_track_correlation: corr[1] as f32,
+        right_track_correlation: corr[2] as f32,
     };
     while !g.correlations_consistent() {
         g.diameters_correlation *= 0.999;

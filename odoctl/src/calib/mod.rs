@@ -38,6 +38,7 @@
 //! - `antenna.rs`: the reference antenna's lever arm: the observed point and its derivatives.
 //! - `heading_fit.rs`: the start heading of a stretch minimising eq (16), the geometry held.
 //! - `evaluation.rs`: errors and predicted uncertainty along a run.
+//! - `pooling.rs`: several drives' calibrations pooled into one (`odoctl pool`).
 //!
 //! The layers, each using only the matched run and the layers before it:
 //! - [`filter`]: the likelihood's Kalman filter, which the geometry's refinement and the
@@ -58,6 +59,7 @@ pub mod filter;
 pub mod geometry;
 pub mod heading_fit;
 pub mod pipeline;
+pub mod pooling;
 pub mod run;
 pub mod sensitivity;
 pub mod studies;

@@ -8,6 +8,7 @@ use clap::{Args, Parser, Subcommand};
 use odo_unit::odometry::UncertaintyModel;
 
 mod calibrate;
+mod pool;
 mod reference;
 mod ros;
 mod simulate;
@@ -16,6 +17,7 @@ mod umbmark;
 pub mod values;
 
 pub use calibrate::{CalibrateArgs, GeometryArgs};
+pub use pool::PoolArgs;
 pub use reference::{PosTimeArg, ReceiverArgs, ReferenceArgs, ReferenceCmdArgs};
 pub use ros::RosNameArgs;
 pub use simulate::SimulateArgs;
@@ -81,6 +83,8 @@ pub enum Cmd {
     Umbmark(UmbmarkArgs),
     /// Inspect a reference (receiver log, RTKLIB solution, CSV); `--to` converts its track.
     Reference(ReferenceCmdArgs),
+    /// Pool several drives' calibration results into one set of parameters.
+    Pool(PoolArgs),
 }
 
 /// `odoctl monitor`.

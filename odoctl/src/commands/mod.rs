@@ -18,6 +18,7 @@ pub mod calibrate;
 pub mod config;
 pub mod decode;
 pub mod monitor;
+pub mod pool;
 pub mod record;
 pub mod reference;
 pub mod replay;

@@ -20,7 +20,9 @@ use odo_unit::odometry::{ChassisParams, Integrator, Pose};
 use crate::cli::UmbmarkArgs;
 use crate::config::{self as cfg, FitValue};
 use crate::csvio::{self, Sample};
+use crate::optim::invert3;
 use crate::replay::{counts, index_refs};
+use crate::stats::chi2_quantile_99;
 
 /// Direction of a run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -323,28 +325,6 @@ pub fn fit(initial: &ChassisParams, runs: &[Run], s: Sigmas) -> Result<UmbmarkFi
     })
 }
 
-/// The inverse of a symmetric 3x3 matrix; `None` when singular.
-fn invert3(m: [[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
-    let c = |r: usize, k: usize| {
-        let (r1, r2) = ((r + 1) % 3, (r + 2) % 3);
-        let (k1, k2) = ((k + 1) % 3, (k + 2) % 3);
-        m[r1][k1] * m[r2][k2] - m[r1][k2] * m[r2][k1]
-    };
-    let det = m[0][0] * c(0, 0) + m[0][1] * c(0, 1) + m[0][2] * c(0, 2);
-    let scale = m[0][0] * m[1][1] * m[2][2];
-    if det.abs() <= 1e-12 * scale.abs() || !det.is_finite() {
-        return None;
-    }
-    Some([0, 1, 2].map(|r| [0, 1, 2].map(|k| c(k, r) / det)))
-}
-
-/// The 99 % quantile of chi-square with `k` degrees of freedom (Wilson-Hilferty).
-pub fn chi2_quantile_99(k: f64) -> f64 {
-    let z = 2.326_347_874;
-    let a = 2.0 / (9.0 * k);
-    k * (1.0 - a + z * a.sqrt()).powi(3)
-}
-
 /// The measurements file (TOML).
 #[derive(Debug, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -554,27 +534,5 @@ fn report(initial: &ChassisParams, runs: &[Run], f: &UmbmarkFit, s: Sigmas, side
                 r.name
             );
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn chi2_quantile_and_inverse() {
-        // Tabulated 99 % quantiles: 1 -> 6.63, 10 -> 23.21, 30 -> 50.89.
-        for (k, q) in [(10.0, 23.21), (30.0, 50.89)] {
-            assert!((chi2_quantile_99(k) - q).abs() < 0.1, "{k}");
-        }
-        let m = [[4.0, 1.0, 0.5], [1.0, 3.0, 0.2], [0.5, 0.2, 2.0]];
-        let inv = invert3(m).unwrap();
-        for (r, row) in m.iter().enumerate() {
-            for c in 0..3 {
-                let v: f64 = row.iter().zip(&inv).map(|(a, i)| a * i[c]).sum();
-                assert!((v - f64::from(u8::from(r == c))).abs() < 1e-12);
-            }
-        }
-        assert!(invert3([[1.0, 1.0, 0.0], [1.0, 1.0, 0.0], [0.0, 0.0, 1.0]]).is_none());
     }
 }

@@ -72,6 +72,9 @@ pub fn fit_kappa_filter(
     )
 }
 
+/// `ln kappa`'s standard error that measures kappa within 20 %: `ln 1.2`.
+pub const KAPPA_TARGET_LN_SE: f64 = 0.182_321_556_793_954_6;
+
 /// Step in `ln kappa` of the curvature's finite difference.
 const LN_STEP: f64 = 0.3;
 

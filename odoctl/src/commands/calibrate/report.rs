@@ -10,9 +10,6 @@ use crate::calib::{
 use crate::config as cfg;
 use crate::stats::coverage;
 
-/// The `ln kappa` standard error the report's drive length aims at (a factor of 1.2).
-const KAPPA_TARGET_LN_SE: f64 = 0.182_321_556_793_954_6;
-
 /// The result on stdout (warnings on stderr).
 pub fn print(
     c: &Calibration,
@@ -254,8 +251,8 @@ fn print_uncertainty(
                 "  kappa is known within a factor of {:.2} (1 sigma, the likelihood's curvature: ln kappa +- {:.2}); about {:.0} m of such driving would measure it within {:.0} %",
                 se.exp(),
                 se,
-                calib::uncertainty::likelihood::length_for(se, length, KAPPA_TARGET_LN_SE),
-                100.0 * (KAPPA_TARGET_LN_SE.exp() - 1.0)
+                calib::uncertainty::likelihood::length_for(se, length, calib::uncertainty::likelihood::KAPPA_TARGET_LN_SE),
+                100.0 * (calib::uncertainty::likelihood::KAPPA_TARGET_LN_SE.exp() - 1.0)
             );
         }
         if let Some(ml) = u.most_likely {
