@@ -5,7 +5,7 @@ mod common;
 use std::time::Instant;
 
 use indicatif::ProgressBar;
-use odo_unit::odometry::{ChassisParams, Pose, UncertaintyModel};
+use odo_unit::odometry::{ChassisParams, Pose};
 use odoctl::calib::{self, CalibrationOptions, Run, UncertaintyCriterion, WindowStart};
 use odoctl::csvio::match_times;
 use odoctl::simulate::PathKind;
@@ -273,23 +273,8 @@ fn kappa_standard_error_matches_its_spread_over_drives() {
     let truth_kappa: f64 = 2.0 * 0.001f64.powi(2) * 0.1;
     let z: Vec<f64> = (10..26)
         .map(|seed| {
-            let sim = common::sim(PathKind::Estimation, 70.0, seed);
-            let c = calib::calibrate(
-                &sim.samples,
-                &sim.reference,
-                ("s", "r"),
-                &ChassisParams::DESIGNED,
-                &CalibrationOptions {
-                    models: vec![UncertaintyModel::Covariance],
-                    ..CalibrationOptions::default()
-                },
-            )
-            .unwrap();
-            let u = c
-                .uncertainty
-                .iter()
-                .find(|u| u.criterion == UncertaintyCriterion::Likelihood)
-                .unwrap();
+            let (_, u) =
+                common::calibrate_covariance(&common::sim(PathKind::Estimation, 70.0, seed));
             let se = u.ln_se.expect("a likelihood fit has a standard error");
             assert!(se > 0.1 && se < 0.5, "seed {seed}: ln se {se}");
             // The standard error is the most likely value's; the unit is told the mean.

@@ -3,31 +3,14 @@
 mod common;
 
 use common::scratch;
-use odo_unit::odometry::{ChassisParams, UncertaintyModel};
+use odo_unit::odometry::ChassisParams;
 use odoctl::calib::pooling::{pool, DriveEstimate};
-use odoctl::calib::{self, CalibrationOptions, UncertaintyCriterion};
 use odoctl::simulate::{default_truth, PathKind};
 use odoctl::stats::chi2_quantile_99;
 
 /// The default calibration of a simulated 70 m drive, as the pooling takes it.
 fn drive(seed: u64) -> DriveEstimate {
-    let sim = common::sim(PathKind::Estimation, 70.0, seed);
-    let c = calib::calibrate(
-        &sim.samples,
-        &sim.reference,
-        ("s", "r"),
-        &ChassisParams::DESIGNED,
-        &CalibrationOptions {
-            models: vec![UncertaintyModel::Covariance],
-            ..CalibrationOptions::default()
-        },
-    )
-    .unwrap();
-    let u = c
-        .uncertainty
-        .iter()
-        .find(|u| u.criterion == UncertaintyCriterion::Likelihood)
-        .unwrap();
+    let (c, u) = common::calibrate_covariance(&common::sim(PathKind::Estimation, 70.0, seed));
     let p = c.params;
     let g = p.geometry_uncertainty;
     let se = [g.left_diameter_se, g.right_diameter_se, g.track_width_se].map(f64::from);

@@ -11,11 +11,14 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use odo_unit::console::{execute, Action, LineAssembler};
-use odo_unit::odometry::{ChassisParams, IndexRefs, Integrator, Pose, WheelCounts};
+use odo_unit::odometry::{
+    ChassisParams, IndexRefs, Integrator, Pose, UncertaintyModel, WheelCounts,
+};
 use odo_unit::protocol::{
     CommandReply, FrameEncoder, Message, PoseRecord, StatusFlags, WheelStatus, MAX_ENCODED_FRAME,
 };
 use odo_unit::settings::Settings;
+use odoctl::calib::{self, Calibration, CalibrationOptions, UncertaintyFit};
 use odoctl::csvio::Sample;
 use odoctl::simulate::{self, PathKind, SimRun, SimSettings};
 
@@ -282,4 +285,26 @@ pub fn python_has(test: &str, imports: &str, packages: &str) -> bool {
         );
     }
     ok
+}
+
+/// The default calibration of `sim` with the covariance model only, and its likelihood fit.
+pub fn calibrate_covariance(sim: &SimRun) -> (Calibration, UncertaintyFit) {
+    let c = calib::calibrate(
+        &sim.samples,
+        &sim.reference,
+        ("s", "r"),
+        &ChassisParams::DESIGNED,
+        &CalibrationOptions {
+            models: vec![UncertaintyModel::Covariance],
+            ..CalibrationOptions::default()
+        },
+    )
+    .unwrap();
+    let u = c
+        .uncertainty
+        .iter()
+        .find(|u| u.criterion == calib::UncertaintyCriterion::Likelihood)
+        .expect("a likelihood fit")
+        .clone();
+    (c, u)
 }
