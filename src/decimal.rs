@@ -524,9 +524,14 @@ fn write_bits(bits: u64, f: &Format, out: &mut dyn fmt::Write) -> fmt::Result {
     let digits = d.digits();
     let len = digits.len() as i32;
     let k = d.k;
-    // The digits are ASCII: written as one str (`write_char` would encode each as UTF-8).
+    // The digits are ASCII '0'..='9': each written as its slice of a constant str, so that
+    // no UTF-8 validation (core's, with its 256-byte table) is linked for them.
+    const DIGITS: &str = "0123456789";
     let put = |out: &mut dyn fmt::Write, ds: &[u8]| -> fmt::Result {
-        out.write_str(core::str::from_utf8(ds).map_err(|_| fmt::Error)?)
+        ds.iter().try_for_each(|&b| {
+            let i = usize::from(b.wrapping_sub(b'0'));
+            out.write_str(DIGITS.get(i..=i).ok_or(fmt::Error)?)
+        })
     };
     let zeros = |out: &mut dyn fmt::Write, n: i32| -> fmt::Result {
         (0..n).try_for_each(|_| out.write_str("0"))

@@ -608,6 +608,12 @@ key_table! {
         name: "mavlink_compid", unit: "", kind: Kind::U32 { min: 1, max: 255 }, default: 197,
         field: [mavlink_compid], record: 152 since 5, group: Unit,
     }
+    /// `gnss_baud`: baud rate of the GNSS receiver's NMEA output (USART1), bit/s (applied at
+    /// the next start).
+    GnssBaud {
+        name: "gnss_baud", unit: "bit/s", kind: Kind::U32Set(&BAUD_RATES), default: 38_400,
+        field: [gnss_baud], record: 156 since 6, group: Unit,
+    }
 }
 
 /// An entry of the firmware's copy of the key table (16 bytes on the target).

@@ -83,6 +83,10 @@ pub(crate) fn write(reply: &mut Reply, s: &StatusInputs<'_>) {
         "nmea_time_messages = {}, nmea_errors = {}",
         live.time_messages, live.nmea_errors
     ));
+    reply.push_line(format_args!(
+        "gnss_forwarded = {}, gnss_not_forwarded = {}, gnss_bad_checksum = {}, gnss_overlong = {}",
+        live.gnss.forwarded, live.gnss.not_forwarded, live.gnss.bad_checksum, live.gnss.overlong
+    ));
     for (name, e) in [(Text("gnss"), s.gnss), (Text("host"), s.host)] {
         reply.push_line(format_args!(
             "{name}_rx_lost = {}, {name}_rx_overruns = {}, {name}_rx_framing = {}, {name}_rx_noise = {}, {name}_rx_parity = {}",
