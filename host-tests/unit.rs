@@ -268,7 +268,7 @@ fn moving_means_a_wheel_moved_beyond_the_threshold_within_one_second() {
 fn settings_dirty_means_different_from_the_stored_settings() {
     let mut c = commands(MemFlash::new(4, 0));
     assert!(!c.store_state().dirty, "defaults, nothing stored");
-    line(&mut c, "set rate 100", false);
+    line(&mut c, "set rate 60", false);
     assert!(c.store_state().dirty);
     line(&mut c, "set rate 50", false);
     assert!(!c.store_state().dirty, "back to what a reset starts with");
