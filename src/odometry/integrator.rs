@@ -572,7 +572,7 @@ struct Motion {
 }
 
 /// `round(a * b / 2^46)`: a distance in 2^-48 m times a Q30 factor, in 2^-32 m.
-#[inline]
+#[inline(always)]
 fn mul_q30_shift16(a: i64, b: i32) -> i64 {
     ((i128::from(a) * i128::from(b) + (1 << 45)) >> 46) as i64
 }
