@@ -1,6 +1,7 @@
 //! Bytes from the host link to command lines.
 
 use super::MAX_LINE;
+use crate::decimal::Dec;
 use heapless::{String, Vec};
 
 /// Why a received line was discarded by the [`LineAssembler`].
@@ -15,7 +16,7 @@ pub enum LineError {
 impl core::fmt::Display for LineError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
-            Self::TooLong => write!(f, "line too long (max {MAX_LINE} bytes)"),
+            Self::TooLong => write!(f, "line too long (max {} bytes)", Dec(MAX_LINE as u64)),
             Self::BadEncoding => f.write_str("line is not valid UTF-8"),
         }
     }

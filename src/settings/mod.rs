@@ -13,7 +13,7 @@ pub mod store;
 
 use crate::bytes::Text;
 use crate::crc::crc32;
-use crate::decimal::{self, DecimalError, Shortest};
+use crate::decimal::{self, Dec, DecimalError, Shortest};
 use crate::odometry::integrator::MAX_STEP_COUNTS;
 use crate::odometry::{
     ChassisParams, GeometryUncertainty, ParamError, UncertaintyModel, WheelHarmonics,
@@ -481,10 +481,12 @@ impl fmt::Display for SettingError {
             ),
             Self::CountsPerSample { counts } => write!(
                 f,
-                "rate/max_wheel_speed/ticks_per_rev/left_diameter/right_diameter: up to {counts} \
-                 increments per sample at max_wheel_speed, above {MAX_COUNTS_PER_SAMPLE} (the \
+                "rate/max_wheel_speed/ticks_per_rev/left_diameter/right_diameter: up to {} \
+                 increments per sample at max_wheel_speed, above {} (the \
                  16-bit right counter would alias; raise rate, or lower max_wheel_speed or \
-                 ticks_per_rev)"
+                 ticks_per_rev)",
+                Dec(counts),
+                Dec(MAX_COUNTS_PER_SAMPLE)
             ),
             Self::UnknownFormatVersion(_) => {
                 f.write_str("serialised settings: unknown format version")
