@@ -144,7 +144,7 @@ fn command_table() {
         ("mode gnss", false, "expected pps|free"),
         ("mode", false, "missing argument, usage: mode pps|free"),
         ("mode pps free", false, "too many arguments"),
-        ("rate 100", true, "rate = 100"),
+        ("rate 60", true, "rate = 60"),
         ("rate", false, "missing argument"),
         ("save", true, "ok"),
         ("save now", false, "too many arguments"),
@@ -198,7 +198,7 @@ fn documented_edge_cases() {
         // Each value in range, the relation (records per baud) refused in step 3.
         (
             "set rate 1000 output_divider 1",
-            Err("error: rate/output_divider: records need more than the baud rate (raise output_divider or baud); nothing changed"),
+            Err("error: rate/output_divider: records need more than the baud rate (raise output_divider or baud; output frames also carries GNSS sentences, 44000 bit/s); nothing changed"),
         ),
         ("set rate 20 foo", Err("error: unknown key 'foo' (try help)")),
         ("set foo 1 rate abc", Err("error: unknown key 'foo' (try help)")),
@@ -269,7 +269,7 @@ fn actions() {
         }
     );
     assert_eq!(run("rate 50", &mut s).1, Action::None, "unchanged value");
-    assert_eq!(run("rate 100", &mut s).1, Action::SettingsChanged);
+    assert_eq!(run("rate 60", &mut s).1, Action::SettingsChanged);
     assert_eq!(run("defaults", &mut s).1, Action::SettingsChanged);
     assert_eq!(s, Settings::DEFAULT);
 }
@@ -536,4 +536,67 @@ fn reset_pose_out_of_range_is_refused() {
             heading: -MAX_HEADING
         }
     );
+}
+
+/// The console's UTF-8 decoder accepts exactly what `core::str::from_utf8` accepts and gives
+/// the same characters: arbitrary bytes, and the boundaries of RFC 3629 (overlong forms,
+/// surrogates, beyond U+10FFFF, truncated sequences).
+#[test]
+fn utf8_decoder_is_core_from_utf8() {
+    use odo_unit::console::line::decode_utf8;
+    let check = |bytes: &[u8]| {
+        let mut got = String::new();
+        let ok = decode_utf8(bytes, |c| {
+            got.push(c);
+            true
+        });
+        match std::str::from_utf8(bytes) {
+            Ok(s) => assert!(ok && got == s, "{bytes:02x?}"),
+            Err(_) => assert!(!ok, "{bytes:02x?} accepted"),
+        }
+    };
+    for case in [
+        &b""[..],
+        b"set rate 50",
+        "ä€𝄞 ok".as_bytes(),
+        &[0xC0, 0x80],
+        &[0xC1, 0xBF],
+        &[0xC2, 0x80],
+        &[0xDF, 0xBF],
+        &[0xE0, 0x9F, 0xBF],
+        &[0xE0, 0xA0, 0x80],
+        &[0xED, 0x9F, 0xBF],
+        &[0xED, 0xA0, 0x80],
+        &[0xEF, 0xBF, 0xBF],
+        &[0xF0, 0x8F, 0xBF, 0xBF],
+        &[0xF0, 0x90, 0x80, 0x80],
+        &[0xF4, 0x8F, 0xBF, 0xBF],
+        &[0xF4, 0x90, 0x80, 0x80],
+        &[0xF5, 0x80, 0x80, 0x80],
+        &[0xE2, 0x82],
+        &[0xE2, 0x82, 0x41],
+        &[0x80],
+        &[0xFF],
+    ] {
+        check(case);
+    }
+    let mut rng = 0x1234_5678_9abc_def0u64;
+    for _ in 0..200_000 {
+        rng ^= rng << 13;
+        rng ^= rng >> 7;
+        rng ^= rng << 17;
+        let len = (rng % 6) as usize;
+        // Bytes biased to the lead and continuation ranges.
+        let bytes: Vec<u8> = (0..len)
+            .map(|i| {
+                let b = (rng >> (8 * i)) as u8;
+                if i == 0 {
+                    b | 0x80
+                } else {
+                    0x80 | (b & 0x3F) | (b & 0x40)
+                }
+            })
+            .collect();
+        check(&bytes);
+    }
 }

@@ -494,3 +494,34 @@ fn writes_into_any_writer() {
     assert!(write_f64(0.2608, &mut tiny).is_err());
     assert_eq!(format!("[{}]", Shortest(2.5f32)), "[2.5]");
 }
+
+/// `Dec` writes an integer as `{}` does, at the boundaries and across the range.
+#[test]
+fn dec_is_core_integer_display() {
+    use odo_unit::decimal::Dec;
+    let mut x = 0x9E37_79B9_7F4A_7C15u64;
+    let mut cases = vec![
+        0,
+        1,
+        9,
+        10,
+        99,
+        100,
+        u64::from(u32::MAX),
+        u64::MAX,
+        u64::MAX - 1,
+    ];
+    for k in 0..20 {
+        cases.push(10u64.pow(k));
+        cases.push(10u64.pow(k) - 1);
+    }
+    for _ in 0..10_000 {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        cases.push(x >> (x % 64));
+    }
+    for v in cases {
+        assert_eq!(Dec(v).to_string(), v.to_string());
+    }
+}

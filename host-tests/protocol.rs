@@ -100,13 +100,17 @@ fn status_round_trip() {
         host_rx_line_errors: 7,
         gnss_rx_overruns: 8,
         gnss_rx_line_errors: 9,
+        gnss_forwarded: 10,
+        gnss_not_forwarded: 11,
+        gnss_bad_checksum: 12,
+        gnss_overlong: 13,
     });
     assert_eq!(roundtrip(&msg, u32::MAX).message, msg);
 }
 
 /// The Status body layout of docs/PROTOCOL.md, field by field, and the lengths a reader
-/// accepts: at least 76 bytes (longer is a later revision), shorter is malformed,
-/// including the 40- and 52-byte bodies of earlier firmware.
+/// accepts: at least 92 bytes (longer is a later revision), shorter is malformed,
+/// including the 40-, 52- and 76-byte bodies of earlier firmware.
 #[test]
 fn status_layout_and_short_bodies() {
     let st = Status {
@@ -134,9 +138,13 @@ fn status_layout_and_short_bodies() {
         host_rx_line_errors: 0x9192_9394,
         gnss_rx_overruns: 0x8182_8384,
         gnss_rx_line_errors: 0x7172_7374,
+        gnss_forwarded: 0x6162_6364,
+        gnss_not_forwarded: 0x5152_5354,
+        gnss_bad_checksum: 0x4142_4344,
+        gnss_overlong: 0x3132_3334,
     };
-    assert_eq!(Status::BODY_LEN, 76);
-    let mut body = [0xEEu8; 84];
+    assert_eq!(Status::BODY_LEN, 92);
+    let mut body = [0xEEu8; 100];
     let n = st.write_body(&mut body).unwrap();
     assert_eq!(n, Status::BODY_LEN);
     let field = |at: usize| u32::from_le_bytes(body[at..at + 4].try_into().unwrap());
@@ -175,28 +183,35 @@ fn status_layout_and_short_bodies() {
         (0xD1D2_D3D4, 0xE1E2_E3E4, 0xF1F2_F3F4, 0x9192_9394, 0x8182_8384, 0x7172_7374),
         "output_divider, index_lost, host_rx_overruns, host_rx_line_errors, gnss_rx_overruns, gnss_rx_line_errors"
     );
-    assert_eq!(Status::read_body(&body[..76]), Ok(st));
     assert_eq!(
-        Status::read_body(&body[..84]),
+        (field(76), field(80), field(84), field(88)),
+        (0x6162_6364, 0x5152_5354, 0x4142_4344, 0x3132_3334),
+        "gnss_forwarded, gnss_not_forwarded, gnss_bad_checksum, gnss_overlong"
+    );
+    assert_eq!(Status::read_body(&body[..92]), Ok(st));
+    assert_eq!(
+        Status::read_body(&body[..100]),
         Ok(st),
         "appended bytes ignored"
     );
-    // Through the decoder: a body one byte short, and the old 40-byte body, are malformed;
-    // the frames around them decode and the sequence counts them.
+    // Through the decoder: a body one byte short, and the old 40-, 52- and 76-byte bodies,
+    // are malformed; the frames around them decode and the sequence counts them.
     let mut dec = FrameDecoder::new();
     let mut got = Vec::new();
-    dec.feed(&raw_frame(1, 0x02, 0, &body[..76]), |r| got.push(r));
-    dec.feed(&raw_frame(1, 0x02, 1, &body[..75]), |r| got.push(r));
+    dec.feed(&raw_frame(1, 0x02, 0, &body[..92]), |r| got.push(r));
+    dec.feed(&raw_frame(1, 0x02, 1, &body[..91]), |r| got.push(r));
     dec.feed(&raw_frame(1, 0x02, 2, &body[..40]), |r| got.push(r));
-    dec.feed(&raw_frame(1, 0x02, 3, &body[..84]), |r| got.push(r));
+    dec.feed(&raw_frame(1, 0x02, 3, &body[..100]), |r| got.push(r));
     dec.feed(&raw_frame(1, 0x02, 4, &body[..52]), |r| got.push(r));
+    dec.feed(&raw_frame(1, 0x02, 5, &body[..76]), |r| got.push(r));
     assert_eq!(got[0].as_ref().unwrap().message, Message::Status(st));
     assert_eq!(got[1], Err(DecodeError::BodyTooShort(0x02)));
     assert_eq!(got[2], Err(DecodeError::BodyTooShort(0x02)));
     assert_eq!(got[3].as_ref().unwrap().message, Message::Status(st));
     assert_eq!(got[4], Err(DecodeError::BodyTooShort(0x02)));
+    assert_eq!(got[5], Err(DecodeError::BodyTooShort(0x02)));
     let s = dec.stats();
-    assert_eq!((s.frames, s.malformed, s.seq_gaps), (2, 3, 0));
+    assert_eq!((s.frames, s.malformed, s.seq_gaps), (2, 4, 0));
     for len in 0..Status::BODY_LEN {
         assert_eq!(
             Status::read_body(&body[..len]),
@@ -867,7 +882,7 @@ fn doc_counts_are_the_code_constants() {
         format!("log of {SLOT_LEN}-byte slots"),
         format!("one {RECORD_LEN}-byte record"),
         format!("the {}-byte serialised", Settings::SERIALIZED_LEN),
-        format!("version 5: {} bytes", Settings::SERIALIZED_LEN),
+        format!("version 6: {} bytes", Settings::SERIALIZED_LEN),
     ] {
         assert!(doc.contains(&phrase), "PROTOCOL.md lacks {phrase:?}");
     }

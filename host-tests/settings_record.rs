@@ -33,13 +33,13 @@ fn serialisation_round_trip_and_checksum() {
     assert_eq!(Settings::from_bytes(&b).unwrap(), s);
     assert!(
         Settings::from_bytes(&b[..116]).is_err(),
-        "version 5 needs 156 bytes"
+        "version 6 needs 160 bytes"
     );
     assert!(
-        Settings::from_bytes(&b[..148]).is_err(),
-        "version 5 needs 156 bytes"
+        Settings::from_bytes(&b[..156]).is_err(),
+        "version 6 needs 160 bytes"
     );
-    assert!(Settings::from_bytes_version(6, &b).is_err());
+    assert!(Settings::from_bytes_version(7, &b).is_err());
     assert!(Settings::from_bytes_version(0, &b).is_err());
 }
 
@@ -86,28 +86,28 @@ fn v3_record(settings: &Settings, generation: u32) -> Vec<u8> {
 }
 
 #[test]
-fn record_layout_of_format_version_5() {
+fn record_layout_of_format_version_6() {
     let r = encode_record(&variant(4), 9);
-    assert_eq!(RECORD_LEN, 172);
+    assert_eq!(RECORD_LEN, 176);
     assert_eq!(r.len(), RECORD_LEN);
     assert_eq!(RECORD_LEN % WORD, 0);
-    assert_eq!(&r[4..8], &[5, 0, 156, 0]);
-    assert_eq!(&r[12..168], &variant(4).to_bytes());
-    assert_eq!(&r[168..172], &crc32(&r[..168]).to_le_bytes());
+    assert_eq!(&r[4..8], &[6, 0, 160, 0]);
+    assert_eq!(&r[12..172], &variant(4).to_bytes());
+    assert_eq!(&r[172..176], &crc32(&r[..172]).to_le_bytes());
     // The v1 record is the same bytes up to the payload's end, but its own header and CRC.
     let old = v1_record(&variant(4), 9);
     assert_eq!(&old[12..124], &r[12..124]);
 }
 
 /// An old record at the start of `f`, of generation `generation`, loads as `expect`; the next
-/// save of `new` writes version 5 after it (payload 156) with the next generation and wins;
+/// save of `new` writes version 6 after it (payload 160) with the next generation and wins;
 /// with that record damaged the old one is the fallback again; no used word is programmed.
 fn assert_upgrades(f: &mut SimFlash, generation: u32, expect: Settings, new: &Settings) {
     assert_eq!(load(f), (expect, SettingsSource::Flash, generation));
     let mut store = SettingsStore::new(&mut *f);
     assert_eq!(store.save(new).unwrap(), generation + 1);
     assert_eq!(load(f), (*new, SettingsSource::Flash, generation + 1));
-    assert_eq!(&f.mem[0][SLOT_LEN + 4..SLOT_LEN + 8], &[5, 0, 156, 0]);
+    assert_eq!(&f.mem[0][SLOT_LEN + 4..SLOT_LEN + 8], &[6, 0, 160, 0]);
     f.mem[0][SLOT_LEN + 20] ^= 0x10;
     assert_eq!(load(f), (expect, SettingsSource::Flash, generation));
     assert_eq!(f.violations, 0);
@@ -116,7 +116,7 @@ fn assert_upgrades(f: &mut SimFlash, generation: u32, expect: Settings, new: &Se
 #[test]
 fn format_version_1_record_loads_with_the_default_max_wheel_speed() {
     let mut old = variant(3);
-    old.rate = 100;
+    old.rate = 60;
     // Whatever the in-memory value, a v1 record cannot carry it.
     old.max_wheel_speed = 7.0;
     let mut f = SimFlash::new(4 * SLOT_LEN);
@@ -250,9 +250,9 @@ fn corrupt_or_mislabelled_old_records_are_rejected() {
     assert_eq!(SettingsStore::new(&mut f).save(&variant(7)).unwrap(), 11);
 }
 
-/// The version 5 layout written field by field as docs/PROTOCOL.md section 5 lists it (the
+/// The version 6 layout written field by field as docs/PROTOCOL.md section 5 lists it (the
 /// encoder before the key table): the table's codec must give the same bytes.
-fn layout_v5_by_hand(s: &Settings) -> Vec<u8> {
+fn layout_v6_by_hand(s: &Settings) -> Vec<u8> {
     let c = &s.chassis;
     let mut b = Vec::new();
     for v in [c.left_diameter, c.right_diameter, c.track_width] {
@@ -306,7 +306,7 @@ fn layout_v5_by_hand(s: &Settings) -> Vec<u8> {
     ] {
         b.extend_from_slice(&v.to_le_bytes());
     }
-    for v in [s.mavlink_sysid, s.mavlink_compid] {
+    for v in [s.mavlink_sysid, s.mavlink_compid, s.gnss_baud] {
         b.extend_from_slice(&v.to_le_bytes());
     }
     b
@@ -330,8 +330,9 @@ fn table_codec_is_the_documented_layout_byte_for_byte() {
     };
     s.chassis.kappa_diff = 3.5e-5;
     s.chassis.kappa_diff_corr = 2.25;
+    s.gnss_baud = 230_400;
     for s in [Settings::DEFAULT, variant(1), s] {
-        assert_eq!(s.to_bytes().to_vec(), layout_v5_by_hand(&s));
+        assert_eq!(s.to_bytes().to_vec(), layout_v6_by_hand(&s));
         // Version 1 is its first 112 bytes.
         let without_se = Settings {
             chassis: odo_unit::odometry::ChassisParams {
@@ -340,9 +341,10 @@ fn table_codec_is_the_documented_layout_byte_for_byte() {
                 kappa_diff_corr: 0.0,
                 ..s.chassis
             },
+            gnss_baud: 38_400,
             ..s
         };
-        let v1 = Settings::from_bytes_version(1, &layout_v5_by_hand(&s)[..112]).unwrap();
+        let v1 = Settings::from_bytes_version(1, &layout_v6_by_hand(&s)[..112]).unwrap();
         assert_eq!(
             v1,
             Settings {
@@ -351,10 +353,10 @@ fn table_codec_is_the_documented_layout_byte_for_byte() {
             }
         );
         // Version 2 is its first 116 bytes.
-        let v2 = Settings::from_bytes_version(2, &layout_v5_by_hand(&s)[..116]).unwrap();
+        let v2 = Settings::from_bytes_version(2, &layout_v6_by_hand(&s)[..116]).unwrap();
         assert_eq!(v2, without_se);
         // Version 4 is its first 148 bytes, with 0 (`frames`) in byte 99.
-        let mut v4_bytes = layout_v5_by_hand(&s)[..148].to_vec();
+        let mut v4_bytes = layout_v6_by_hand(&s)[..148].to_vec();
         v4_bytes[99] = 0;
         let v4 = Settings::from_bytes_version(4, &v4_bytes).unwrap();
         assert_eq!(
@@ -363,11 +365,21 @@ fn table_codec_is_the_documented_layout_byte_for_byte() {
                 output: odo_unit::settings::Output::Frames,
                 mavlink_sysid: 1,
                 mavlink_compid: 197,
+                gnss_baud: 38_400,
+                ..s
+            }
+        );
+        // Version 5 is its first 156 bytes.
+        let v5 = Settings::from_bytes_version(5, &layout_v6_by_hand(&s)[..156]).unwrap();
+        assert_eq!(
+            v5,
+            Settings {
+                gnss_baud: 38_400,
                 ..s
             }
         );
         // Version 3 is its first 144 bytes.
-        let v3 = Settings::from_bytes_version(3, &layout_v5_by_hand(&s)[..144]).unwrap();
+        let v3 = Settings::from_bytes_version(3, &layout_v6_by_hand(&s)[..144]).unwrap();
         assert_eq!(
             v3,
             Settings {
@@ -375,16 +387,18 @@ fn table_codec_is_the_documented_layout_byte_for_byte() {
                     kappa_diff_corr: 0.0,
                     ..s.chassis
                 },
+                gnss_baud: 38_400,
                 ..s
             }
         );
     }
-    // The checksum of the defaults: over the 156 bytes of version 5 (firmware of version 4
+    // The checksum of the defaults: over the 160 bytes of version 6 (firmware of version 5
+    // reported the CRC of the first 156, of version 4
     // reported the CRC of the first 148, of version 3 of the first 144, of version 2 of the
     // first 116).
     assert_eq!(
         Settings::DEFAULT.checksum(),
-        crc32(&layout_v5_by_hand(&Settings::DEFAULT))
+        crc32(&layout_v6_by_hand(&Settings::DEFAULT))
     );
     // Every byte belongs to one key (byte 99, reserved before version 5, to `output`).
     let mut owner = [0u32; Settings::SERIALIZED_LEN];
@@ -401,5 +415,6 @@ fn table_codec_is_the_documented_layout_byte_for_byte() {
     assert_eq!(serialized_len(2), Settings::SERIALIZED_LEN_V2);
     assert_eq!(serialized_len(3), Settings::SERIALIZED_LEN_V3);
     assert_eq!(serialized_len(4), Settings::SERIALIZED_LEN_V4);
-    assert_eq!(serialized_len(5), Settings::SERIALIZED_LEN);
+    assert_eq!(serialized_len(5), Settings::SERIALIZED_LEN_V5);
+    assert_eq!(serialized_len(6), Settings::SERIALIZED_LEN);
 }

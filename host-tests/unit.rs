@@ -268,7 +268,7 @@ fn moving_means_a_wheel_moved_beyond_the_threshold_within_one_second() {
 fn settings_dirty_means_different_from_the_stored_settings() {
     let mut c = commands(MemFlash::new(4, 0));
     assert!(!c.store_state().dirty, "defaults, nothing stored");
-    line(&mut c, "set rate 100", false);
+    line(&mut c, "set rate 60", false);
     assert!(c.store_state().dirty);
     line(&mut c, "set rate 50", false);
     assert!(!c.store_state().dirty, "back to what a reset starts with");
@@ -427,7 +427,7 @@ fn sync_state_changes_are_logged_and_flagged() {
 fn bad_nmea_sentences_are_counted() {
     let mut p = processor();
     for b in b"$GPZDA,120000.00,01,01,2024,00,00*00\r\n" {
-        p.on_nmea_byte(*b);
+        p.on_nmea_byte(*b, None);
     }
     let live = p.live(&raw(0, 0, 0), 0);
     assert_eq!((live.nmea_errors, live.time_messages), (1, 0));
@@ -905,6 +905,7 @@ fn status_text_reports_every_counter() {
         "reset_cause = brown-out",
         "rate = 50 Hz, output_divider = 1",
         "nmea_time_messages = 0, nmea_errors = 0",
+        "gnss_forwarded = 0, gnss_not_forwarded = 0, gnss_bad_checksum = 0, gnss_overlong = 0",
         "gnss_rx_lost = 4, gnss_rx_overruns = 4, gnss_rx_framing = 0, gnss_rx_noise = 7, gnss_rx_parity = 0",
         "host_rx_lost = 3, host_rx_overruns = 2, host_rx_framing = 1, host_rx_noise = 0, host_rx_parity = 0",
         "left: fault = no, index_seen = no, index_mismatches = 0, index_lost = 0",

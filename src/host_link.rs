@@ -10,6 +10,10 @@ pub const TX_BUF: usize = 4096;
 /// Transmit space a pose record leaves free for command replies, bytes.
 pub const RECORD_RESERVE: usize = 1024;
 
+/// Transmit space a GNSS sentence frame leaves free: [`RECORD_RESERVE`] plus one Status and
+/// one pose record frame (`odo_unit::unit::forward::sentence_reserve`).
+pub const SENTENCE_RESERVE: usize = odo_unit::unit::forward::sentence_reserve(RECORD_RESERVE);
+
 /// The host link's transmit side.
 pub type Link = TxLink<TX_BUF>;
 

@@ -46,7 +46,9 @@ mod app {
         serial::{GnssUart, HostUart, RxErrors},
         Acquisition, GnssRx, Led,
     };
-    use crate::host_link::{queue_now, send, send_blocking, send_mavlink, Link, RECORD_RESERVE};
+    use crate::host_link::{
+        queue_now, send, send_blocking, send_mavlink, Link, RECORD_RESERVE, SENTENCE_RESERVE,
+    };
     use heapless::spsc::{Consumer, Producer, Queue};
     use odo_unit::mavlink::{FrameBuf, Ids, MavlinkOut};
     use odo_unit::protocol::{CommandReply, Message};
@@ -85,6 +87,8 @@ mod app {
         gnss: GnssRx,
         gnss_in: Producer<'static, u8>,
         gnss_out: Consumer<'static, u8>,
+        line_end_in: Producer<'static, u32>,
+        line_end_out: Consumer<'static, u32>,
         cfg_in: Producer<'static, DisciplineConfig>,
         cfg_out: Consumer<'static, DisciplineConfig>,
         processor: Processor,
@@ -99,6 +103,7 @@ mod app {
         index_right_q: Queue<IndexCapture, 16> = Queue::new(),
         host_rx_q: Queue<u8, 512> = Queue::new(),
         gnss_q: Queue<u8, 512> = Queue::new(),
+        line_end_q: Queue<u32, 16> = Queue::new(),
         cfg_q: Queue<DisciplineConfig, 4> = Queue::new(),
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
@@ -128,15 +133,16 @@ mod app {
         let mut acq = Acquisition::new(dp.TIM2, dp.TIM3, pins.faults, &mut rcc);
 
         let host = HostUart::new(dp.USART2, &mut rcc, clocks.pclk1, settings.baud);
-        let gnss = GnssUart::new(dp.USART1, &mut rcc, clocks.pclk2, board::GNSS_BAUD);
+        let gnss = GnssUart::new(dp.USART1, &mut rcc, clocks.pclk2, settings.gnss_baud);
         // QEMU: PPS captures and NMEA bytes from the simulated receiver (board/qemu/gnss.rs).
-        let (gnss, sampler_extra) = board::attach_gnss(gnss);
+        let (gnss, sampler_extra) = board::attach_gnss(gnss, settings.gnss_baud);
 
         let (mut samples_in, samples_out) = cx.local.samples_q.split();
         let (index_in_left, index_out_left) = cx.local.index_left_q.split();
         let (index_in_right, index_out_right) = cx.local.index_right_q.split();
         let (host_rx_in, host_rx_out) = cx.local.host_rx_q.split();
         let (gnss_in, gnss_out) = cx.local.gnss_q.split();
+        let (line_end_in, line_end_out) = cx.local.line_end_q.split();
         let (cfg_in, cfg_out) = cx.local.cfg_q.split();
 
         let cfg = *start.discipline.config();
@@ -178,6 +184,8 @@ mod app {
             gnss,
             gnss_in,
             gnss_out,
+            line_end_in,
+            line_end_out,
             cfg_in,
             cfg_out,
             processor,
@@ -273,16 +281,29 @@ mod app {
         }
     }
 
-    /// NMEA bytes from the GNSS receiver.
-    #[task(binds = USART1, priority = 3, local = [gnss, gnss_in], shared = [gnss_errors])]
+    /// NMEA bytes from the GNSS receiver; a line ending (CR, LF) goes with the tick it
+    /// arrived at, or is dropped and counted as lost with it when either queue is full.
+    #[task(
+        binds = USART1,
+        priority = 3,
+        local = [gnss, gnss_in, line_end_in],
+        shared = [gnss_errors]
+    )]
     fn gnss_rx(mut cx: gnss_rx::Context) {
         let gnss = cx.local.gnss;
         let gnss_in = cx.local.gnss_in;
+        let line_end_in = cx.local.line_end_in;
         cx.shared.gnss_errors.lock(|errors| {
             if let Some(byte) = gnss.on_interrupt(errors) {
-                if gnss_in.enqueue(byte).is_err() {
+                let line_end = byte == b'\r' || byte == b'\n';
+                if !gnss_in.ready() || (line_end && !line_end_in.ready()) {
                     errors.on_queue_full();
+                    return;
                 }
+                if line_end {
+                    let _ = line_end_in.enqueue(board::tick_now());
+                }
+                let _ = gnss_in.enqueue(byte);
                 if byte == b'\n' {
                     rtic::pend(Interrupt::SPI2);
                 }
@@ -307,7 +328,7 @@ mod app {
         binds = SPI2,
         priority = 2,
         local = [
-            samples_out, index_out, gnss_out, processor, led, watchdog,
+            samples_out, index_out, gnss_out, line_end_out, processor, led, watchdog,
             mav: MavlinkOut = MavlinkOut::new(),
         ],
         shared = [link, requests, live, host_errors, gnss_errors, store_state]
@@ -315,8 +336,18 @@ mod app {
     fn process(mut cx: process::Context) {
         let p = cx.local.processor;
         let log = &mut crate::log::Defmt;
+        // GNSS lines first (the time tag of the samples below); a forwarded sentence is
+        // queued only with room left for the next Status and record (`SENTENCE_RESERVE`).
         while let Some(byte) = cx.local.gnss_out.dequeue() {
-            p.on_nmea_byte(byte);
+            let line_end = match byte {
+                b'\r' | b'\n' => cx.local.line_end_out.dequeue(),
+                _ => None,
+            };
+            if let Some(sentence) = p.on_nmea_byte(byte, line_end) {
+                let msg = Message::Gnss(sentence);
+                let sent = send(&mut cx.shared.link, &msg, SENTENCE_RESERVE);
+                p.gnss_sent(sent);
+            }
         }
         while let Some(raw) = cx.local.samples_out.dequeue() {
             let start = board::cycles();

@@ -304,7 +304,7 @@ pub const TABLE_HEADER: &str =
 pub fn describe(f: &Frame) -> Option<String> {
     match &f.message {
         Message::Status(s) => Some(format!(
-            "# status: uptime {:.1} s, rate {} Hz / output_divider {}, sync {}, samples {}, dropped {}, samples lost {}, merged {}, PPS edges {} (rejected {}), index lost {}, host rx lost {} (overruns {}, line errors {}), GNSS rx lost {} (overruns {}, line errors {}), reset cause {}, settings {:?}{}",
+            "# status: uptime {:.1} s, rate {} Hz / output_divider {}, sync {}, samples {}, dropped {}, samples lost {}, merged {}, PPS edges {} (rejected {}), index lost {}, host rx lost {} (overruns {}, line errors {}), GNSS rx lost {} (overruns {}, line errors {}), GNSS sentences forwarded {} (not forwarded {}, bad checksum {}, overlong {}), reset cause {}, settings {:?}{}",
             s.uptime_us as f64 * 1e-6,
             s.rate_hz,
             s.output_divider,
@@ -322,6 +322,10 @@ pub fn describe(f: &Frame) -> Option<String> {
             s.gnss_rx_lost,
             s.gnss_rx_overruns,
             s.gnss_rx_line_errors,
+            s.gnss_forwarded,
+            s.gnss_not_forwarded,
+            s.gnss_bad_checksum,
+            s.gnss_overlong,
             s.reset_cause.name(),
             s.settings_source,
             if s.settings_dirty { " (unsaved changes)" } else { "" }

@@ -88,6 +88,7 @@ fn every_key_changed(rng: &mut Rng) -> Settings {
     s.output = odo_unit::settings::Output::Mavlink;
     s.mavlink_sysid = 2 + (rng.next() % 254) as u32;
     s.mavlink_compid = 1 + (rng.next() % 196) as u32;
+    s.gnss_baud = 230_400;
     s.validate().expect("valid test settings");
     s
 }
@@ -249,7 +250,7 @@ fn push_refuses_bad_files() {
 #[test]
 fn related_keys_share_one_set() {
     let mut a = Settings::DEFAULT;
-    let (r, _) = execute("set ticks_per_rev 1048576 rate 79", &mut a);
+    let (r, _) = execute("set ticks_per_rev 1048576 rate 79 output_divider 2", &mut a);
     assert!(r.ok, "{}", r.text);
     let (get, _) = execute("get", &mut a);
     let (s, keys) = config::parse_get_reply(&get.text).unwrap();

@@ -17,7 +17,7 @@
 //! (`src/board/sampler.rs`). The store erases only when a sector is full (one save in 64);
 //! the watchdog is fed just before the erase, and its shortest timeout (LSI at 47 kHz,
 //! 2,723 ms) is 3.4 times [`MAX_ERASE_MS`] ([`super::WATCHDOG_MIN_MS`]). Every save also
-//! programs its record ([`odo_unit::settings::store::RECORD_LEN`], 164 bytes): one program
+//! programs its record ([`odo_unit::settings::store::RECORD_LEN`], 176 bytes): one program
 //! operation per byte at x8, per half-word at x16, per word at x32, each stalling the CPU
 //! for 16 us typical and 100 us at most, with interrupts served between them
 //! (docs/HARDWARE.md, Flash and watchdog). The data cache is reset after every erase and
@@ -45,7 +45,9 @@ impl core::fmt::Debug for FlashError {
         match self {
             Self::Range => f.write_str("Range"),
             Self::Locked => f.write_str("Locked"),
-            Self::Status(flags) => write!(f, "Status({flags})"),
+            Self::Status(flags) => {
+                write!(f, "Status({})", odo_unit::decimal::Dec(u64::from(*flags)))
+            }
         }
     }
 }

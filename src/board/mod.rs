@@ -10,7 +10,7 @@
 //! | left encoder fault           | GPIO in, pull-up      | PC2  | -  | active low |
 //! | right encoder fault          | GPIO in, pull-up      | PC3  | -  | active low |
 //! | GNSS 1-PPS                   | TIM5 CH1 input capture | PA0 | 2  | rising edge, pull-down, filtered; TIM5 also times the samples |
-//! | GNSS NMEA (receiver TX)      | USART1 RX             | PA10 | 7  | [`GNSS_BAUD`] 8N1, RS-232 level shifter, pull-up |
+//! | GNSS NMEA (receiver TX)      | USART1 RX             | PA10 | 7  | `gnss_baud` setting 8N1, RS-232 level shifter, pull-up |
 //! | host link TX / RX            | USART2 TX / RX        | PA2 / PA3 | 7 | Nucleo ST-LINK virtual COM port; QEMU `-serial` #2 |
 //! | status LED                   | GPIO out              | PA5  | -  | on = PPS locked (Nucleo LD2) |
 //!
@@ -37,8 +37,8 @@ pub mod stack;
 pub mod variant;
 
 pub use variant::{
-    attach_gnss, cycles, start_clocks, start_cycle_counter, timer_hz, unique_id, Acquisition,
-    GnssRx, SamplerExtra, COUNTER_BITS, CYCLES_UNIT,
+    attach_gnss, cycles, start_clocks, start_cycle_counter, tick_now, timer_hz, unique_id,
+    Acquisition, GnssRx, SamplerExtra, COUNTER_BITS, CYCLES_UNIT,
 };
 
 use odo_unit::unit::watchdog::{IwdgSetting, LSI_MAX_HZ, LSI_NOMINAL_HZ};
@@ -54,9 +54,6 @@ pub struct BusClocks {
     /// The APB1 timers (TIM2-5).
     pub timer: u32,
 }
-
-/// Baud rate of the GNSS receiver's NMEA output (USART1).
-pub const GNSS_BAUD: u32 = 38_400;
 
 /// Watchdog timeout, milliseconds, at the LSI's nominal 32 kHz. The LSI runs anywhere
 /// from 17 to 47 kHz (datasheet DS10086), so the real timeout lies between 2.7 s and 7.5 s

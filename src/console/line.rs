@@ -1,7 +1,8 @@
 //! Bytes from the host link to command lines.
 
 use super::MAX_LINE;
-use heapless::Vec;
+use crate::decimal::Dec;
+use heapless::{String, Vec};
 
 /// Why a received line was discarded by the [`LineAssembler`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -15,10 +16,48 @@ pub enum LineError {
 impl core::fmt::Display for LineError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
-            Self::TooLong => write!(f, "line too long (max {MAX_LINE} bytes)"),
+            Self::TooLong => write!(f, "line too long (max {} bytes)", Dec(MAX_LINE as u64)),
             Self::BadEncoding => f.write_str("line is not valid UTF-8"),
         }
     }
+}
+
+/// Decodes `bytes` as UTF-8, handing each character to `put` (which returns false to stop);
+/// true when all of `bytes` is well-formed UTF-8 (RFC 3629: shortest forms only, no
+/// surrogates, at most U+10FFFF: what `core::str::from_utf8` accepts) and `put` took it all.
+pub fn decode_utf8(bytes: &[u8], mut put: impl FnMut(char) -> bool) -> bool {
+    let mut i = 0;
+    while let Some(&b) = bytes.get(i) {
+        // Continuation bytes after the lead, the range of the first of them, the lead's bits.
+        let (n, lo, hi, lead) = match b {
+            0x00..=0x7F => (0, 0, 0, u32::from(b)),
+            0xC2..=0xDF => (1, 0x80, 0xBF, u32::from(b & 0x1F)),
+            0xE0 => (2, 0xA0, 0xBF, 0),
+            0xE1..=0xEC | 0xEE..=0xEF => (2, 0x80, 0xBF, u32::from(b & 0x0F)),
+            0xED => (2, 0x80, 0x9F, 0x0D),
+            0xF0 => (3, 0x90, 0xBF, 0),
+            0xF1..=0xF3 => (3, 0x80, 0xBF, u32::from(b & 0x07)),
+            0xF4 => (3, 0x80, 0x8F, 4),
+            _ => return false,
+        };
+        let Some(tail) = bytes.get(i + 1..i + 1 + n) else {
+            return false;
+        };
+        if tail.first().is_some_and(|c| !(lo..=hi).contains(c))
+            || !tail.iter().all(|c| (0x80..=0xBF).contains(c))
+        {
+            return false;
+        }
+        let cp = tail
+            .iter()
+            .fold(lead, |cp, c| cp << 6 | u32::from(c & 0x3F));
+        match char::from_u32(cp) {
+            Some(c) if put(c) => {}
+            _ => return false,
+        }
+        i += 1 + n;
+    }
+    true
 }
 
 /// Assembles lines from received bytes.
@@ -30,6 +69,8 @@ impl core::fmt::Display for LineError {
 #[derive(Debug, Clone, Default)]
 pub struct LineAssembler {
     buf: Vec<u8, MAX_LINE>,
+    /// The finished line, decoded.
+    text: String<MAX_LINE>,
     overflow: bool,
     complete: bool,
 }
@@ -39,6 +80,7 @@ impl LineAssembler {
     pub const fn new() -> Self {
         Self {
             buf: Vec::new(),
+            text: String::new(),
             overflow: false,
             complete: false,
         }
@@ -62,7 +104,15 @@ impl LineAssembler {
                     return None;
                 }
                 self.complete = true;
-                Some(core::str::from_utf8(&self.buf).map_err(|_| LineError::BadEncoding))
+                self.text.clear();
+                let text = &mut self.text;
+                // Decoded here rather than by `core::str::from_utf8` (and its 256-byte table).
+                let ok = decode_utf8(&self.buf, |c| text.push(c).is_ok());
+                Some(if ok {
+                    Ok(self.text.as_str())
+                } else {
+                    Err(LineError::BadEncoding)
+                })
             }
             0x08 | 0x7F => {
                 if !self.overflow {

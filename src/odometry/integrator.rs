@@ -40,6 +40,7 @@ use super::uncertainty::{
 };
 use super::wheel::{WheelModel, DISTANCE_SCALE};
 use crate::bytes::Text;
+use crate::decimal::Dec;
 
 /// Largest increment count of one wheel in one sample that is integrated (2^18).
 pub const MAX_STEP_COUNTS: u64 = 1 << 18;
@@ -105,19 +106,19 @@ impl core::fmt::Display for PoseRangeError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
             // The limits are whole numbers, written as integers: formatting an f64 would link
-            // core's float formatting (about 12 KiB of flash); as u64, whose formatting the
-            // firmware links anyway.
+            // core's float formatting (about 12 KiB of flash).
             Self::X | Self::Y => write!(
                 f,
                 "{} must be within -{}..={} m",
                 Text(if *self == Self::X { "x" } else { "y" }),
-                MAX_POSITION as u64,
-                MAX_POSITION as u64
+                Dec(MAX_POSITION as u64),
+                Dec(MAX_POSITION as u64)
             ),
             Self::Heading => write!(
                 f,
                 "heading must be within -{}..={} rad",
-                MAX_HEADING as u64, MAX_HEADING as u64
+                Dec(MAX_HEADING as u64),
+                Dec(MAX_HEADING as u64)
             ),
         }
     }
@@ -572,7 +573,7 @@ struct Motion {
 }
 
 /// `round(a * b / 2^46)`: a distance in 2^-48 m times a Q30 factor, in 2^-32 m.
-#[inline]
+#[inline(always)]
 fn mul_q30_shift16(a: i64, b: i32) -> i64 {
     ((i128::from(a) * i128::from(b) + (1 << 45)) >> 46) as i64
 }

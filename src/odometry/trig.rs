@@ -92,7 +92,7 @@ pub fn q30_to_f32(v: i32) -> f32 {
 /// `1 - sin(x)/x` for |x| <= pi/2 (x in radians): the relative shortening of the chord of an
 /// arc against the arc (eq 9 with x = dalpha/2). Power series to x^10: absolute error below
 /// 1e-7 at |x| = pi/2, at f32 rounding for |x| < 0.5; exactly 0 at x = 0.
-#[inline]
+#[inline(always)]
 pub fn chord_defect(x: f32) -> f32 {
     let u = x * x;
     u * (1.0 / 6.0
@@ -101,7 +101,7 @@ pub fn chord_defect(x: f32) -> f32 {
 
 /// Derivative of `sin(x)/x` with respect to x for |x| <= pi/2, as a power series to x^11
 /// (absolute error below 1e-7).
-#[inline]
+#[inline(always)]
 pub fn sinc_derivative(x: f32) -> f32 {
     let u = x * x;
     -x * (1.0 / 3.0

@@ -52,7 +52,7 @@ impl CompensatedSum {
     }
 
     /// Adds `v`.
-    #[inline]
+    #[inline(always)]
     pub fn add(&mut self, v: f32) {
         let y = v - self.carry;
         let t = self.sum + y;
@@ -61,13 +61,13 @@ impl CompensatedSum {
     }
 
     /// The accumulated value.
-    #[inline]
+    #[inline(always)]
     pub const fn value(&self) -> f32 {
         self.sum
     }
 
     /// Multiplies the accumulated value (and its carry) by `factor`.
-    #[inline]
+    #[inline(always)]
     pub fn scale(&mut self, factor: f32) {
         self.sum *= factor;
         self.carry *= factor;

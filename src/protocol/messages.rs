@@ -315,14 +315,25 @@ pub struct Status {
     pub gnss_rx_overruns: u32,
     /// GNSS receiver bytes with a framing, noise or parity error (wrapping).
     pub gnss_rx_line_errors: u32,
+    /// GNSS sentences forwarded as [`GnssSentence`] frames since start (wrapping).
+    pub gnss_forwarded: u32,
+    /// Checksum-valid GNSS sentences of the forwarded kinds not forwarded since start: no
+    /// room on the link for them beside the pose stream, or `output = mavlink` (wrapping).
+    pub gnss_not_forwarded: u32,
+    /// GNSS lines with a missing or wrong checksum, or a byte outside printable ASCII, since
+    /// start (wrapping).
+    pub gnss_bad_checksum: u32,
+    /// GNSS lines longer than the line buffer (96 bytes), discarded, since start (wrapping).
+    pub gnss_overlong: u32,
 }
 
 impl Status {
     /// Body length in bytes. Version 1 of the protocol first had 40 bytes (up to
     /// `settings_dirty` and 2 reserved bytes); `samples_lost`, `gnss_rx_lost` and
     /// `merged_samples` were appended (52), then `output_divider` and the index and UART
-    /// error counters (76); `reset_cause` took the reserved byte at 38.
-    pub const BODY_LEN: usize = 76;
+    /// error counters (76), then the GNSS forwarding counters (92); `reset_cause` took the
+    /// reserved byte at 38.
+    pub const BODY_LEN: usize = 92;
 
     /// Writes the body into `out`; returns its length.
     pub fn write_body(&self, out: &mut [u8]) -> Result<usize, EncodeError> {
@@ -348,14 +359,18 @@ impl Status {
             w.u32(self.host_rx_overruns)?;
             w.u32(self.host_rx_line_errors)?;
             w.u32(self.gnss_rx_overruns)?;
-            w.u32(self.gnss_rx_line_errors)
+            w.u32(self.gnss_rx_line_errors)?;
+            w.u32(self.gnss_forwarded)?;
+            w.u32(self.gnss_not_forwarded)?;
+            w.u32(self.gnss_bad_checksum)?;
+            w.u32(self.gnss_overlong)
         })()
         .map_err(|_| EncodeError::BufferTooSmall)?;
         Ok(w.pos())
     }
 
     /// Reads a body (at least [`Self::BODY_LEN`] bytes; extra bytes are ignored). The
-    /// 40-byte body of earlier firmware is too short: the loss counters it lacks cannot be
+    /// shorter bodies of earlier firmware are too short: the counters they lack cannot be
     /// told from zero.
     pub fn read_body(body: &[u8]) -> Result<Self, DecodeError> {
         if body.len() < Self::BODY_LEN {
@@ -382,11 +397,11 @@ impl Status {
         let samples_lost = r.u32().map_err(short)?;
         let gnss_rx_lost = r.u32().map_err(short)?;
         let merged_samples = r.u32().map_err(short)?;
-        let mut u32s = [0u32; 6];
+        let mut u32s = [0u32; 10];
         for v in &mut u32s {
             *v = r.u32().map_err(short)?;
         }
-        let [output_divider, index_lost, host_rx_overruns, host_rx_line_errors, gnss_rx_overruns, gnss_rx_line_errors] =
+        let [output_divider, index_lost, host_rx_overruns, host_rx_line_errors, gnss_rx_overruns, gnss_rx_line_errors, gnss_forwarded, gnss_not_forwarded, gnss_bad_checksum, gnss_overlong] =
             u32s;
         Ok(Self {
             uptime_us,
@@ -409,6 +424,10 @@ impl Status {
             host_rx_line_errors,
             gnss_rx_overruns,
             gnss_rx_line_errors,
+            gnss_forwarded,
+            gnss_not_forwarded,
+            gnss_bad_checksum,
+            gnss_overlong,
         })
     }
 }

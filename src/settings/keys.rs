@@ -8,7 +8,7 @@
 //! plus its row in `docs/PROTOCOL.md` (a test checks the docs name every key).
 
 use super::{Output, Settings, BAUD_RATES, MAX_RATE_HZ};
-use crate::decimal;
+use crate::decimal::{self, Dec};
 use crate::odometry::{ChassisParams, GeometryUncertainty, UncertaintyModel};
 use crate::timing::{SyncMode, TimeTagPps};
 use core::fmt;
@@ -63,11 +63,13 @@ impl fmt::Display for Kind {
         match *self {
             Kind::F64 { min, max } => write!(f, "{}..={}", Value::F64(min), Value::F64(max)),
             Kind::F32 { min, max } => write!(f, "{}..={}", Value::F32(min), Value::F32(max)),
-            Kind::U32 { min, max } => write!(f, "{min}..={max}"),
+            Kind::U32 { min, max } => {
+                write!(f, "{}..={}", Dec(u64::from(min)), Dec(u64::from(max)))
+            }
             Kind::U32Set(set) => {
                 for (i, v) in set.iter().enumerate() {
                     f.write_str(if i == 0 { "" } else { "|" })?;
-                    write!(f, "{v}")?;
+                    write!(f, "{}", Dec(u64::from(*v)))?;
                 }
                 Ok(())
             }
@@ -136,7 +138,7 @@ impl fmt::Display for Value {
         match *self {
             Value::F64(v) => decimal::write_f64(v, f),
             Value::F32(v) => decimal::write_f32(v, f),
-            Value::U32(v) => write!(f, "{v}"),
+            Value::U32(v) => write!(f, "{}", Dec(u64::from(v))),
             Value::Word(w) => f.write_str(w),
         }
     }
@@ -607,6 +609,12 @@ key_table! {
     MavlinkCompid {
         name: "mavlink_compid", unit: "", kind: Kind::U32 { min: 1, max: 255 }, default: 197,
         field: [mavlink_compid], record: 152 since 5, group: Unit,
+    }
+    /// `gnss_baud`: baud rate of the GNSS receiver's NMEA output (USART1), bit/s (applied at
+    /// the next start).
+    GnssBaud {
+        name: "gnss_baud", unit: "bit/s", kind: Kind::U32Set(&BAUD_RATES), default: 38_400,
+        field: [gnss_baud], record: 156 since 6, group: Unit,
     }
 }
 

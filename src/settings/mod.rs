@@ -13,7 +13,7 @@ pub mod store;
 
 use crate::bytes::Text;
 use crate::crc::crc32;
-use crate::decimal::{self, DecimalError, Shortest};
+use crate::decimal::{self, Dec, DecimalError, Shortest};
 use crate::odometry::integrator::MAX_STEP_COUNTS;
 use crate::odometry::{
     ChassisParams, GeometryUncertainty, ParamError, UncertaintyModel, WheelHarmonics,
@@ -25,7 +25,7 @@ pub use keys::{Choice, Group, Key, KeyInfo, Kind, RecordField, Value, KEY_TABLE}
 pub use record::{serialized_len, SETTINGS_FORMAT_VERSION};
 pub use store::SettingsSource;
 
-/// Baud rates accepted by `baud`.
+/// Baud rates accepted by `baud` and `gnss_baud`.
 pub const BAUD_RATES: [u32; 8] = [
     9_600, 19_200, 38_400, 57_600, 115_200, 230_400, 460_800, 921_600,
 ];
@@ -41,6 +41,27 @@ pub const MAVLINK_FRAME_BITS: u32 = 2460;
 
 /// Bits on the wire of the `HEARTBEAT` frame sent once a second (21 bytes and the `0x00`).
 pub const MAVLINK_HEARTBEAT_BITS: u32 = 220;
+
+/// Bits on the wire of the Status frame sent once a second in `output = frames` (92-byte
+/// body: 106 bytes encoded with its delimiter, 10 bits per byte).
+pub const STATUS_FRAME_BITS: u32 = 1060;
+
+/// Text bytes assumed per forwarded GNSS sentence in the bandwidth budget: NMEA 0183's
+/// longest sentence (82 characters with `$` and CR LF: 80 forwarded).
+pub const GNSS_SENTENCE_BYTES: u32 = 80;
+
+/// Forwarded sentences per GNSS epoch in the budget: GGA, GST, RMC and HDT.
+pub const GNSS_SENTENCES_PER_EPOCH: u32 = 4;
+
+/// GNSS epochs per second in the budget (a 10 Hz receiver).
+pub const GNSS_EPOCHS_PER_S: u32 = 10;
+
+/// Bits per second on the wire of the forwarded GNSS sentences the budget assumes:
+/// [`GNSS_EPOCHS_PER_S`] epochs of [`GNSS_SENTENCES_PER_EPOCH`] GnssSentence frames of
+/// [`GNSS_SENTENCE_BYTES`] text each (16-byte fixed part, 12 bytes of header and CRC, one
+/// COBS code byte, the delimiter: 110 bytes a frame, 440 an epoch): 44,000 bit/s.
+pub const GNSS_FORWARD_BITS: u32 =
+    GNSS_EPOCHS_PER_S * GNSS_SENTENCES_PER_EPOCH * (GNSS_SENTENCE_BYTES + 30) * 10;
 
 /// What the host link streams (`output`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -163,6 +184,9 @@ pub struct Settings {
     pub mavlink_sysid: u32,
     /// `mavlink_compid`: MAVLink component id (1..=255).
     pub mavlink_compid: u32,
+    /// `gnss_baud`: baud rate of the GNSS receiver's NMEA output (one of [`BAUD_RATES`]);
+    /// the firmware applies it at start.
+    pub gnss_baud: u32,
 }
 
 impl Settings {
@@ -195,6 +219,7 @@ impl Settings {
         output: Output::Frames,
         mavlink_sysid: 0,
         mavlink_compid: 0,
+        gnss_baud: 0,
     };
 
     /// Default `max_wheel_speed`, m/s; also what a stored record of format version 1
@@ -256,7 +281,10 @@ impl Settings {
         }
         let records_per_s = u64::from(self.rate.div_ceil(self.output_divider));
         let bits = match self.output {
-            Output::Frames => records_per_s * u64::from(POSE_FRAME_BITS),
+            Output::Frames => {
+                records_per_s * u64::from(POSE_FRAME_BITS)
+                    + u64::from(STATUS_FRAME_BITS + GNSS_FORWARD_BITS)
+            }
             Output::Mavlink => {
                 records_per_s * u64::from(MAVLINK_FRAME_BITS) + u64::from(MAVLINK_HEARTBEAT_BITS)
             }
@@ -378,7 +406,8 @@ pub enum SettingError {
     Params(ParamError),
     /// `mode pps` with a `rate` that does not divide 1,000,000.
     PpsRate,
-    /// `rate / output_divider` records per second need more than `baud`.
+    /// `rate / output_divider` records per second need more than `baud` (with the Status and
+    /// the forwarded GNSS sentences in `output = frames`, [`GNSS_FORWARD_BITS`]).
     RecordsOverBaud,
     /// A wheel at `max_wheel_speed` could make more than [`MAX_COUNTS_PER_SAMPLE`]
     /// increments between two samples (keys `rate`, `max_wheel_speed`, `ticks_per_rev`,
@@ -447,14 +476,17 @@ impl fmt::Display for SettingError {
                 "rate: in pps mode the rate must divide 1000000 (e.g. 1, 10, 20, 50, 100, 200, 500, 1000)",
             ),
             Self::RecordsOverBaud => f.write_str(
-                "rate/output_divider: records need more than the baud rate (raise output_divider or baud)",
+                "rate/output_divider: records need more than the baud rate (raise output_divider or \
+                 baud; output frames also carries GNSS sentences, 44000 bit/s)",
             ),
             Self::CountsPerSample { counts } => write!(
                 f,
-                "rate/max_wheel_speed/ticks_per_rev/left_diameter/right_diameter: up to {counts} \
-                 increments per sample at max_wheel_speed, above {MAX_COUNTS_PER_SAMPLE} (the \
+                "rate/max_wheel_speed/ticks_per_rev/left_diameter/right_diameter: up to {} \
+                 increments per sample at max_wheel_speed, above {} (the \
                  16-bit right counter would alias; raise rate, or lower max_wheel_speed or \
-                 ticks_per_rev)"
+                 ticks_per_rev)",
+                Dec(counts),
+                Dec(MAX_COUNTS_PER_SAMPLE)
             ),
             Self::UnknownFormatVersion(_) => {
                 f.write_str("serialised settings: unknown format version")

@@ -9,8 +9,8 @@ use super::{Key, SettingError, Settings};
 /// `max_wheel_speed` to version 1, version 3 the geometry's standard errors and correlations
 /// (`left_diameter_se`.. `right_track_correlation`) and `kappa_diff`, version 4
 /// `kappa_diff_corr`, version 5 `output` (in the reserved byte 99), `mavlink_sysid` and
-/// `mavlink_compid`; [`Settings::from_bytes_version`] reads all five.
-pub const SETTINGS_FORMAT_VERSION: u16 = 5;
+/// `mavlink_compid`, version 6 `gnss_baud`; [`Settings::from_bytes_version`] reads all six.
+pub const SETTINGS_FORMAT_VERSION: u16 = 6;
 
 /// Length of the payload of format `version`: the end of its last key, bytes.
 pub const fn serialized_len(version: u16) -> usize {
@@ -48,8 +48,8 @@ const fn no_overlap() -> bool {
 const _: () = assert!(no_overlap(), "two keys share bytes of the settings record");
 
 impl Settings {
-    /// Length of the serialised form of format version [`SETTINGS_FORMAT_VERSION`] (5),
-    /// bytes: 156 (from the key table).
+    /// Length of the serialised form of format version [`SETTINGS_FORMAT_VERSION`] (6),
+    /// bytes: 160 (from the key table).
     pub const SERIALIZED_LEN: usize = serialized_len(SETTINGS_FORMAT_VERSION);
 
     /// Length of the serialised form of format version 1, bytes: 112, the version 2 layout
@@ -63,6 +63,10 @@ impl Settings {
     /// Length of the serialised form of format version 4, bytes: 148, the version 5 layout
     /// without `mavlink_sysid` and `mavlink_compid` (and 0, `frames`, in byte 99).
     pub const SERIALIZED_LEN_V4: usize = serialized_len(4);
+
+    /// Length of the serialised form of format version 5, bytes: 156, the version 6 layout
+    /// without `gnss_baud`.
+    pub const SERIALIZED_LEN_V5: usize = serialized_len(5);
 
     /// Length of the serialised form of format version 3, bytes: 144, the version 4 layout
     /// without `kappa_diff_corr`.
@@ -108,8 +112,9 @@ impl Settings {
         Self::from_bytes_version(SETTINGS_FORMAT_VERSION, bytes)
     }
 
-    /// Parses the serialised form of format `version` and validates it: version 5
-    /// ([`Self::SERIALIZED_LEN`] bytes), 4 ([`Self::SERIALIZED_LEN_V4`] bytes, before the
+    /// Parses the serialised form of format `version` and validates it: version 6
+    /// ([`Self::SERIALIZED_LEN`] bytes), 5 ([`Self::SERIALIZED_LEN_V5`] bytes, before
+    /// `gnss_baud`), 4 ([`Self::SERIALIZED_LEN_V4`] bytes, before the
     /// MAVLink keys), 3 ([`Self::SERIALIZED_LEN_V3`] bytes, before
     /// `kappa_diff_corr`), 2 ([`Self::SERIALIZED_LEN_V2`] bytes, before the geometry's
     /// standard errors) or 1 ([`Self::SERIALIZED_LEN_V1`] bytes, before `max_wheel_speed`); a

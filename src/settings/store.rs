@@ -20,19 +20,20 @@
 //! | offset | size | field |
 //! |---|---|---|
 //! | 0 | 4 | magic `0x534F444F` (bytes `4F 44 4F 53`, "ODOS") |
-//! | 4 | 2 | settings format version ([`super::SETTINGS_FORMAT_VERSION`], 5) |
-//! | 6 | 2 | payload length `n` ([`Settings::SERIALIZED_LEN`], 156) |
+//! | 4 | 2 | settings format version ([`super::SETTINGS_FORMAT_VERSION`], 6) |
+//! | 6 | 2 | payload length `n` ([`Settings::SERIALIZED_LEN`], 160) |
 //! | 8 | 4 | generation, 1 for the first save |
 //! | 12 | n | payload ([`Settings::to_bytes`]) |
 //! | 12 + n | 4 | CRC-32/ISO-HDLC of bytes 0..12 + n |
 //!
-//! Saves write format version 5 ([`RECORD_LEN`] = 172 bytes). Loading also accepts the
-//! records of format version 4 (payload 148 bytes, 164 bytes in all), written before the
+//! Saves write format version 6 ([`RECORD_LEN`] = 176 bytes). Loading also accepts the
+//! records of format version 5 (payload 156 bytes, 172 bytes in all), written before
+//! `gnss_baud` existed, of format version 4 (payload 148 bytes, 164 bytes in all), written before the
 //! MAVLink keys existed, of format version 3 (payload 144 bytes, 160 bytes in all), written before
 //! `kappa_diff_corr` existed, of format version 2 (payload 116 bytes, 132 bytes), written
 //! before the geometry's standard errors existed, and of format version 1 (payload 112 bytes,
 //! 128 bytes), written before `max_wheel_speed` existed: keys newer than a record load at
-//! their defaults. The version and length must be one of these five pairs, else the record
+//! their defaults. The version and length must be one of these six pairs, else the record
 //! is skipped.
 
 use super::{Settings, SETTINGS_FORMAT_VERSION};
@@ -52,11 +53,12 @@ pub const WORD: usize = 4;
 const CRC_AT: usize = 12 + Settings::SERIALIZED_LEN;
 
 /// The (format version, payload length) pairs a record may carry, bytes.
-const FORMATS: [(u16, usize); 5] = [
+const FORMATS: [(u16, usize); 6] = [
     (1, Settings::SERIALIZED_LEN_V1),
     (2, Settings::SERIALIZED_LEN_V2),
     (3, Settings::SERIALIZED_LEN_V3),
     (4, Settings::SERIALIZED_LEN_V4),
+    (5, Settings::SERIALIZED_LEN_V5),
     (SETTINGS_FORMAT_VERSION, Settings::SERIALIZED_LEN),
 ];
 

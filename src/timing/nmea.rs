@@ -125,6 +125,8 @@ pub struct LineBuffer {
     buf: [u8; MAX_SENTENCE],
     len: usize,
     overflow: bool,
+    /// Length of the line [`Self::push`] returned last (0 after an overflow).
+    done: usize,
 }
 
 impl Default for LineBuffer {
@@ -140,7 +142,14 @@ impl LineBuffer {
             buf: [0; MAX_SENTENCE],
             len: 0,
             overflow: false,
+            done: 0,
         }
+    }
+
+    /// The line whose end [`Self::push`] just returned a result for, from `$` to its last
+    /// byte before the line ending (empty after an overflow; valid until the next byte).
+    pub fn last_line(&self) -> &[u8] {
+        &self.buf[..self.done]
     }
 
     /// Adds one byte; at the end of a non-empty line (LF, or CR) returns what it parsed to.
@@ -149,8 +158,10 @@ impl LineBuffer {
         match byte {
             b'\r' | b'\n' => {
                 let done = if self.overflow {
+                    self.done = 0;
                     Some(Err(NmeaError::Overflow))
                 } else if self.len > 0 {
+                    self.done = self.len;
                     Some(parse_sentence(&self.buf[..self.len]))
                 } else {
                     None

@@ -3,6 +3,7 @@
 
 use super::discipline_config;
 use crate::console::{self, Action, LineAssembler, Reply};
+use crate::decimal::Dec;
 use crate::mavlink::MavlinkRx;
 use crate::odometry::Pose;
 use crate::protocol::{DeviceInfo, ResetCause, PROTOCOL_VERSION};
@@ -168,7 +169,7 @@ impl<F: StallingFlash> Commands<F> {
             {
                 reply = Reply::error(format_args!(
                     "save refused while the wheels turn: a flash erase stops the CPU for up to {} ms, longer than the right counter can go unread at max_wheel_speed; save at rest",
-                    self.store.flash().max_stall_ms()
+                    Dec(u64::from(self.store.flash().max_stall_ms()))
                 ));
                 Effect::None
             }
@@ -176,7 +177,10 @@ impl<F: StallingFlash> Commands<F> {
                 Ok(generation) => {
                     self.stored = self.settings;
                     self.source = SettingsSource::Flash;
-                    reply.push_line(format_args!("saved (generation {generation})"));
+                    reply.push_line(format_args!(
+                        "saved (generation {})",
+                        Dec(u64::from(generation))
+                    ));
                     Effect::Saved { generation }
                 }
                 Err(e) => {
@@ -198,7 +202,10 @@ impl<F: StallingFlash> Commands<F> {
             "firmware = odo-unit ",
             env!("CARGO_PKG_VERSION")
         )));
-        reply.push_line(format_args!("protocol = {}", u32::from(PROTOCOL_VERSION)));
+        reply.push_line(format_args!(
+            "protocol = {}",
+            Dec(u64::from(PROTOCOL_VERSION))
+        ));
         self.device_info(uid, reset_cause)
     }
 

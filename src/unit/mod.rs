@@ -8,6 +8,7 @@
 //! - [`rx_errors`]: a UART's receive errors ([`RxErrors`]).
 //! - [`start`](mod@start): the settings and sampler configuration the unit starts with.
 //! - [`event`]: what the unit logs ([`Event`]).
+//! - [`forward`]: which GNSS sentences go to the host link, and the room they must leave.
 //! - [`watchdog`]: the independent watchdog's prescaler, reload value and timeouts.
 //!
 //! `src/main.rs` holds the tasks, resources and queues around these; host tests in
@@ -15,6 +16,7 @@
 
 pub mod commands;
 pub mod event;
+pub mod forward;
 pub mod processor;
 pub mod rx_errors;
 pub mod sample;
@@ -24,6 +26,7 @@ pub mod watchdog;
 
 pub use commands::{Commands, Effect, StallingFlash};
 pub use event::{Event, Log};
+pub use forward::{Forwarder, GnssCounters};
 pub use processor::{HeartbeatInputs, Live, Processor, Requests, SampleOutcome, StoreState};
 pub use rx_errors::{RxByte, RxErrors};
 pub use sample::{IndexCapture, PpsLatch, RawCounts, RawSample};

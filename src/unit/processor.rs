@@ -2,6 +2,7 @@
 //! index-mismatch and motion accounting, the time tag and the Status heartbeat.
 
 use super::event::{Event, Log};
+use super::forward::{Forwarder, GnssCounters};
 use super::rx_errors::RxErrors;
 use super::sample::{IndexCapture, RawSample};
 use super::time_tag;
@@ -10,8 +11,10 @@ use crate::odometry::{
     ChassisParams, CounterExtender, IndexCheck, IndexRefs, IndexTracker, Integrator, Pose,
     StepStatus, WheelCounts,
 };
-use crate::protocol::{GnssTime, PoseRecord, ResetCause, Status, StatusFlags, WheelStatus};
-use crate::settings::{Settings, SettingsSource};
+use crate::protocol::{
+    GnssSentence, GnssTime, PoseRecord, ResetCause, Status, StatusFlags, WheelStatus,
+};
+use crate::settings::{Output, Settings, SettingsSource};
 use crate::timing::{LineBuffer, NmeaError, PpsEvent, PpsStats, SyncState, TimeTagger};
 
 /// Increments a wheel must turn away from where it rests to count as moving (for the
@@ -75,6 +78,8 @@ pub struct Live {
     pub nmea_errors: u32,
     /// NMEA time messages used.
     pub time_messages: u32,
+    /// GNSS sentence forwarding counters.
+    pub gnss: GnssCounters,
     /// MCU time of the latest sample, microseconds.
     pub mcu_time_us: u64,
     /// Most cycles of one sample interrupt.
@@ -151,6 +156,7 @@ pub struct Processor {
     nmea: LineBuffer,
     nmea_errors: u32,
     time_messages: u32,
+    forward: Forwarder,
     last_tick: u64,
     sequence: u32,
     dropped_since: u32,
@@ -202,6 +208,7 @@ impl Processor {
             nmea: LineBuffer::new(),
             nmea_errors: 0,
             time_messages: 0,
+            forward: Forwarder::new(),
             last_tick: 0,
             sequence: 0,
             dropped_since: 0,
@@ -243,20 +250,48 @@ impl Processor {
         self.on_index(wheel, capture.raw, log);
     }
 
-    /// One byte from the GNSS receiver's NMEA output.
-    pub fn on_nmea_byte(&mut self, byte: u8) {
-        match self.nmea.push(byte) {
-            None | Some(Err(NmeaError::Unsupported)) => {}
-            Some(Err(_)) => self.nmea_errors = self.nmea_errors.wrapping_add(1),
-            Some(Ok(msg)) if msg.valid() => match msg.time().gps_seconds() {
+    /// One byte from the GNSS receiver's NMEA output; `line_end` is the low 32 bits of the
+    /// sample timer's tick when the interrupt received it, given for CR and LF. Time
+    /// messages of a whole second (ZDA, valid RMC) tag the samples; messages of a fraction
+    /// of a second (a 10-20 Hz receiver's) are forwarded but not used for the tag. Returns
+    /// the GnssSentence to queue when the byte ended a line that is forwarded
+    /// ([`super::forward`]); report the outcome with [`Self::gnss_sent`].
+    pub fn on_nmea_byte(&mut self, byte: u8, line_end: Option<u32>) -> Option<GnssSentence> {
+        let parsed = self.nmea.push(byte)?;
+        match parsed {
+            Err(NmeaError::Unsupported) => {}
+            Err(_) => self.nmea_errors = self.nmea_errors.wrapping_add(1),
+            Ok(msg) if msg.valid() && msg.time().millis == 0 => match msg.time().gps_seconds() {
                 Ok(gps) => {
                     self.time_messages = self.time_messages.wrapping_add(1);
                     self.tagger.on_message(gps, self.last_tick);
                 }
                 Err(_) => self.nmea_errors = self.nmea_errors.wrapping_add(1),
             },
-            Some(Ok(_)) => {}
+            Ok(_) => {}
         }
+        let tick = line_end.map_or(self.last_tick, |low| self.tick_near(low));
+        let at = self.mcu_time_us(tick);
+        let forwarding = self.settings.output == Output::Frames;
+        self.forward
+            .on_line(&parsed, self.nmea.last_line(), at, forwarding)
+    }
+
+    /// The GnssSentence from [`Self::on_nmea_byte`] was queued (true) or found no room.
+    pub fn gnss_sent(&mut self, queued: bool) {
+        self.forward.sent(queued);
+    }
+
+    /// The GNSS forwarding counters.
+    pub fn gnss_counters(&self) -> GnssCounters {
+        self.forward.counters()
+    }
+
+    /// The tick whose low 32 bits are `low`, nearest the last sample's tick (within 2^31
+    /// ticks: 25 s at 84 MHz, 2.1 s in QEMU).
+    fn tick_near(&self, low: u32) -> u64 {
+        let d = low.wrapping_sub(self.last_tick as u32) as i32;
+        self.last_tick.wrapping_add_signed(i64::from(d))
     }
 
     fn on_index(&mut self, wheel: usize, raw: u32, log: &mut impl Log) {
@@ -530,6 +565,7 @@ impl Processor {
 
     /// The Status heartbeat after sample `raw`, with the counters kept elsewhere (`inputs`).
     pub fn heartbeat(&self, raw: &RawSample, inputs: &HeartbeatInputs) -> Status {
+        let gnss = self.forward.counters();
         Status {
             uptime_us: self.mcu_time_us,
             flags: self.flags,
@@ -551,6 +587,10 @@ impl Processor {
             host_rx_line_errors: inputs.host.line_errors(),
             gnss_rx_overruns: inputs.gnss.overruns,
             gnss_rx_line_errors: inputs.gnss.line_errors(),
+            gnss_forwarded: gnss.forwarded,
+            gnss_not_forwarded: gnss.not_forwarded,
+            gnss_bad_checksum: gnss.bad_checksum,
+            gnss_overlong: gnss.overlong,
         }
     }
 
@@ -592,6 +632,7 @@ impl Processor {
             index_mismatches: [self.trackers[0].mismatches(), self.trackers[1].mismatches()],
             nmea_errors: self.nmea_errors,
             time_messages: self.time_messages,
+            gnss: self.gnss_counters(),
             mcu_time_us: self.mcu_time_us,
             samples_lost: raw.queue_lost,
             merged_samples: self.merged_samples,

@@ -31,9 +31,9 @@ pub type GnssRx = gnss::SimUart;
 /// What the sampler needs besides TIM5: the simulated receiver (PPS captures and NMEA).
 pub type SamplerExtra = gnss::SimGnss;
 
-/// The simulated receiver, wired to the GNSS UART's interrupt.
-pub fn attach_gnss(uart: GnssUart) -> (GnssRx, SamplerExtra) {
-    gnss::attach(uart)
+/// The simulated receiver, wired to the GNSS UART's interrupt, sending at `baud`.
+pub fn attach_gnss(uart: GnssUart, baud: u32) -> (GnssRx, SamplerExtra) {
+    gnss::attach(uart, baud)
 }
 
 /// Starts the independent watchdog: nothing to do, QEMU's `netduinoplus2` models no IWDG
@@ -128,6 +128,22 @@ pub fn cycles() -> u32 {
     // Note(unsafe): a read of TIM2 CNT, a register no other code of the qemu build uses
     // (the encoders are simulated); reads have no side effect.
     unsafe { (*pac::TIM2::ptr()).cnt().read().bits() }
+}
+
+/// The low 32 bits of the sample timeline's tick now: the last sample instant plus the
+/// counter ticks since its interrupt read TIM5 (`sampler::base`). QEMU's TIM5 counter keeps
+/// counting across its update events and runs ahead of the software's tick timeline (on which
+/// the drive, the receiver and the records are defined) by the interrupt latency of each
+/// sample, so only its advance since the last sample is used.
+pub fn tick_now() -> u32 {
+    loop {
+        let (base, cnt_then) = sampler::base();
+        let cnt = sampler::counter();
+        // The sample interrupt (higher priority) may have moved the base between the reads.
+        if sampler::base() == (base, cnt_then) {
+            return base.wrapping_add(cnt.wrapping_sub(cnt_then));
+        }
+    }
 }
 
 /// Starts what [`cycles`] reads.

@@ -4,10 +4,31 @@
 
 use super::gnss::SimGnss;
 use crate::board::sampler::{Event, Sampler};
+use core::sync::atomic::{AtomicU32, Ordering};
 use odo_unit::timing::{catch_up, Sample, SyncMode};
 use stm32f4xx_hal::pac;
 
 const SR_UIF: u32 = 1 << 0;
+
+/// Low 32 bits of [`Timeline`]'s base and TIM5's counter when the interrupt took it, for
+/// [`super::tick_now`] in other interrupts.
+static BASE_LOW: AtomicU32 = AtomicU32::new(0);
+static BASE_CNT: AtomicU32 = AtomicU32::new(0);
+
+/// The low 32 bits of the last sample instant's tick, and TIM5's counter when its interrupt
+/// ran.
+pub fn base() -> (u32, u32) {
+    (
+        BASE_LOW.load(Ordering::Acquire),
+        BASE_CNT.load(Ordering::Acquire),
+    )
+}
+
+/// TIM5's counter now.
+pub fn counter() -> u32 {
+    // Note(unsafe): a read of TIM5 CNT; reads have no side effect.
+    unsafe { (*pac::TIM5::ptr()).cnt().read().bits() }
+}
 
 /// The restarting counter's timeline and the simulated receiver.
 pub struct Timeline {
@@ -59,6 +80,8 @@ impl Sampler {
         // stall); its CNT counts from the last ARR write, so the instant is taken as is.
         self.timeline.base = self.timeline.next.tick;
         let now = self.timeline.base;
+        BASE_LOW.store(now as u32, Ordering::Release);
+        BASE_CNT.store(counter(), Ordering::Release);
         if self.disc.config().mode == SyncMode::Pps {
             if let Some(ccr) = self.timeline.gnss.capture(start, now - start) {
                 // The CC1 interrupt the board takes at the edge, before this sample.

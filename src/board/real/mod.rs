@@ -27,8 +27,10 @@ pub type GnssRx = GnssUart;
 /// What the sampler needs besides TIM5: nothing on the board (the PPS is captured by TIM5).
 pub type SamplerExtra = ();
 
-/// The GNSS receiver's UART as the USART1 interrupt reads it.
-pub fn attach_gnss(uart: GnssUart) -> (GnssRx, SamplerExtra) {
+/// The GNSS receiver's UART as the USART1 interrupt reads it (`baud`: its rate, already
+/// applied to the UART).
+pub fn attach_gnss(uart: GnssUart, baud: u32) -> (GnssRx, SamplerExtra) {
+    let _ = baud;
     (uart, ())
 }
 
@@ -331,6 +333,14 @@ impl Acquisition {
 #[inline(always)]
 pub fn cycles() -> u32 {
     cortex_m::peripheral::DWT::cycle_count()
+}
+
+/// The low 32 bits of the sample timeline's tick now: TIM5's counter (the timeline is the
+/// counter extended to 64 bits, `src/board/sampler.rs`).
+#[inline(always)]
+pub fn tick_now() -> u32 {
+    // Note(unsafe): a read of TIM5 CNT; reads have no side effect.
+    unsafe { (*pac::TIM5::ptr()).cnt().read().bits() }
 }
 
 /// Starts what [`cycles`] reads.
