@@ -198,7 +198,7 @@ fn documented_edge_cases() {
         // Each value in range, the relation (records per baud) refused in step 3.
         (
             "set rate 1000 output_divider 1",
-            Err("error: rate/output_divider: records need more than the baud rate (raise output_divider or baud; output frames also carries GNSS sentences, 44000 bit/s); nothing changed"),
+            Err("error: rate/output_divider: records need more than the baud rate (raise output_divider or baud; output frames in pps mode also carries GNSS sentences, 44000 bit/s); nothing changed"),
         ),
         ("set rate 20 foo", Err("error: unknown key 'foo' (try help)")),
         ("set foo 1 rate abc", Err("error: unknown key 'foo' (try help)")),

@@ -6,6 +6,7 @@ use odo_unit::protocol::{
     encode_frame, GnssSentence, Message, PoseRecord, Queued, Status, TxLink, MAX_ENCODED_FRAME,
 };
 use odo_unit::settings::{Key, SetManyError, SettingError, Settings, Value};
+use odo_unit::timing::SyncMode;
 use odo_unit::unit::forward::{
     encoded_frame_len, is_forwarded_kind, sentence_reserve, POSE_STREAM_NEED,
 };
@@ -226,15 +227,15 @@ fn gnss_baud_setting() {
     assert_eq!(Settings::SERIALIZED_LEN - Settings::SERIALIZED_LEN_V5, 4);
 }
 
-/// The budget at 115,200 baud in `output = frames`: records x 1140 + Status 1060 + GNSS
-/// sentences 44,000 bit/s; 61 records per second fit, 62 do not. A refused `set` changes
-/// nothing and says why.
+/// The budget at 115,200 baud in `output = frames`, `mode = pps`: records x 1140, Status 1060
+/// and GNSS sentences 44,000 bit/s (61 records per second fit, 62 do not: the table test).
+/// A refused `set` changes nothing and says why.
 #[test]
 fn bandwidth_budget_refuses_what_cannot_fit() {
     let mut s = Settings::DEFAULT;
-    s.set_many([("rate", "61")]).unwrap();
+    s.set_many([("mode", "pps"), ("rate", "50")]).unwrap();
     let before = s;
-    let err = s.set_many([("rate", "62")]).unwrap_err();
+    let err = s.set_many([("rate", "100")]).unwrap_err();
     assert_eq!(err, SetManyError::Value(SettingError::RecordsOverBaud));
     assert_eq!(s, before);
     let text = err.to_string();
@@ -242,30 +243,46 @@ fn bandwidth_budget_refuses_what_cannot_fit() {
         text.starts_with("rate/output_divider: records need more than the baud rate"),
         "{text}"
     );
-    assert!(text.contains("GNSS sentences, 44000 bit/s"), "{text}");
-    // 50 Hz, every sample (the end-to-end test's configuration), fits; 38,400 baud carries
-    // no frames output at all; MAVLink output forwards no sentences, so its budget is as
-    // before (46 ODOMETRY frames a second fit 115,200 baud, 47 do not).
-    s.set_many([("rate", "50")]).unwrap();
+    assert!(
+        text.contains("in pps mode also carries GNSS sentences, 44000 bit/s"),
+        "{text}"
+    );
+    // Every second sample of 100 Hz fits; 50 Hz, every sample (the end-to-end test's
+    // configuration), fits; 38,400 baud carries no frames output at all; MAVLink output
+    // forwards no sentences, so its budget is as before (46 ODOMETRY frames a second fit
+    // 115,200 baud, 47 do not).
+    s.set_many([("rate", "100"), ("output_divider", "2")])
+        .unwrap();
+    s.set_many([("rate", "50"), ("output_divider", "1")])
+        .unwrap();
     assert!(s.set_many([("baud", "38400")]).is_err());
-    s.set_many([("rate", "46"), ("output", "mavlink")]).unwrap();
-    assert!(s.set_many([("rate", "47")]).is_err());
+    s.set_many([("rate", "40"), ("output", "mavlink")]).unwrap();
+    assert!(s.set_many([("rate", "50")]).is_err());
+    // Free-running (indoors) the sentences are not budgeted: they take only room left over,
+    // so 100 records a second fit 115,200 baud (1140 bits each, plus Status), 101 do not.
+    let mut free = Settings::DEFAULT;
+    free.set_many([("mode", "free"), ("rate", "100")]).unwrap();
+    assert!(free.set_many([("rate", "101")]).is_err());
+    let mut free = Settings {
+        rate: 1000,
+        max_wheel_speed: 0.5,
+        ..Settings::DEFAULT
+    };
+    free.set_many([("mode", "free"), ("output_divider", "10")])
+        .unwrap();
+    assert!(free.set_many([("output_divider", "9")]).is_err());
 }
 
-/// Our frames at `baud`, `rate`, `output_divider`: accepted or not.
+/// Our frames at `baud`, `rate`, `output_divider` in `mode = pps`: within the budget or not.
 fn fits(baud: u32, rate: u32, divider: u32) -> bool {
     let s = Settings {
         baud,
         rate,
         output_divider: divider,
-        max_wheel_speed: 0.5,
+        mode: SyncMode::Pps,
         ..Settings::DEFAULT
     };
-    match s.validate() {
-        Ok(()) => true,
-        Err(SettingError::RecordsOverBaud) => false,
-        Err(e) => panic!("{e}"),
-    }
+    s.link_bits_per_second() <= u64::from(baud)
 }
 
 /// The table of docs/PROTOCOL.md, *Bandwidth budget of the host link*, is the settings check.

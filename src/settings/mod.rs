@@ -78,23 +78,24 @@ pub enum Output {
 /// Derivation, from the instruction counts in docs/RESULTS.md (`bench/run`, Instructions on the
 /// Cortex-M4F: release code under QEMU) and the firmware's own `process_max` in `status`:
 ///
-/// * a typical sample costs the processing task about 7,500 instructions (timing, flags,
-///   index, odometry and uncertainty, the record's f64 fields, the 114-byte frame at
-///   2,871, queueing); the per-angle wheel model adds up to 2,101 - 797 = 1,304 in its
-///   worst case: about **8,800 instructions** per sample;
+/// * a typical sample costs the processing task about 9,400 instructions in the release
+///   build (`opt-level = "z"`: timing, flags, index, odometry and uncertainty, the record's
+///   f64 fields, the 114-byte frame, queueing); the per-angle wheel model adds up to about
+///   1,450 in its worst case: about **10,900 instructions** per sample;
 /// * the worst sample (`process_max`: the first one, which builds the integrator, and the
 ///   ones that log a state change or send the once-a-second Status) costs about
-///   **27,100 instructions**;
+///   **31,100 instructions**;
 /// * at 84 MHz the flash needs 2 wait states; the ART accelerator hides most of them, but
 ///   counted at **2 cycles per instruction** (no cache hits at all) a typical sample takes
-///   17,600 cycles (210 us) and the worst 54,200 cycles (645 us).
+///   21,800 cycles (260 us) and the worst 62,200 cycles (740 us).
 ///
-/// At 1,000 Hz this is 999 x 17,600 + 54,200 = 17.6 million cycles per second, **21 % of the
-/// CPU** (within the 25 % budget that leaves the rest to the sample interrupt, the UART
-/// interrupts and the command task), and even the worst sample ends well within one 1 ms
-/// sample period, so the sample queue never fills in steady state. 1,000 also divides
-/// 1,000,000, so it is accepted in `pps` mode. Above it the budget would be spent on a
-/// cost that has not been measured on a board.
+/// At 1,000 Hz this is 999 x 21,800 + 62,200 = 21.8 million cycles per second, **26 % of the
+/// CPU** without a single cache hit (the ART accelerator's hits bring the cycles per
+/// instruction towards 1, and the share towards half that), which leaves the rest to the
+/// sample interrupt, the UART interrupts and the command task; even the worst sample ends
+/// well within one 1 ms sample period, so the sample queue never fills in steady state.
+/// 1,000 also divides 1,000,000, so it is accepted in `pps` mode. Above it the margin would
+/// be spent on a cost that has not been measured on a board.
 pub const MAX_RATE_HZ: u32 = 1_000;
 
 /// Most counts the 16-bit right encoder counter (TIM3) may advance between two reads and
@@ -270,6 +271,27 @@ impl Settings {
         self.max_unread_interval() * 1000.0 > gap_ms
     }
 
+    /// Bits per second the host link must carry (10 bits per byte): the records, each
+    /// `rate / output_divider` second, and the once-a-second Status or HEARTBEAT; in
+    /// `output = frames` with `mode = pps` also the forwarded GNSS sentences
+    /// ([`GNSS_FORWARD_BITS`]). Free-running they are forwarded only into room left over, so
+    /// they are not counted. docs/PROTOCOL.md, *Bandwidth budget of the host link*.
+    pub fn link_bits_per_second(&self) -> u64 {
+        let records_per_s = u64::from(self.rate.div_ceil(self.output_divider.max(1)));
+        match self.output {
+            Output::Frames => {
+                let gnss = match self.mode {
+                    SyncMode::Pps => GNSS_FORWARD_BITS,
+                    SyncMode::Free => 0,
+                };
+                records_per_s * u64::from(POSE_FRAME_BITS) + u64::from(STATUS_FRAME_BITS + gnss)
+            }
+            Output::Mavlink => {
+                records_per_s * u64::from(MAVLINK_FRAME_BITS) + u64::from(MAVLINK_HEARTBEAT_BITS)
+            }
+        }
+    }
+
     /// Checks every key's range and the relations between keys; names the offending key.
     pub fn validate(&self) -> Result<(), SettingError> {
         for key in Key::ALL {
@@ -279,16 +301,7 @@ impl Settings {
         if self.mode == SyncMode::Pps && 1_000_000 % self.rate != 0 {
             return Err(SettingError::PpsRate);
         }
-        let records_per_s = u64::from(self.rate.div_ceil(self.output_divider));
-        let bits = match self.output {
-            Output::Frames => {
-                records_per_s * u64::from(POSE_FRAME_BITS)
-                    + u64::from(STATUS_FRAME_BITS + GNSS_FORWARD_BITS)
-            }
-            Output::Mavlink => {
-                records_per_s * u64::from(MAVLINK_FRAME_BITS) + u64::from(MAVLINK_HEARTBEAT_BITS)
-            }
-        };
+        let bits = self.link_bits_per_second();
         if bits > u64::from(self.baud) {
             return Err(SettingError::RecordsOverBaud);
         }
@@ -477,7 +490,7 @@ impl fmt::Display for SettingError {
             ),
             Self::RecordsOverBaud => f.write_str(
                 "rate/output_divider: records need more than the baud rate (raise output_divider or \
-                 baud; output frames also carries GNSS sentences, 44000 bit/s)",
+                 baud; output frames in pps mode also carries GNSS sentences, 44000 bit/s)",
             ),
             Self::CountsPerSample { counts } => write!(
                 f,
