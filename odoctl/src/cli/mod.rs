@@ -236,8 +236,10 @@ pub struct ValidateArgs {
     #[arg(long, required_unless_present = "runs")]
     pub samples: Vec<PathBuf>,
     /// Reference: REFERENCE CSV, NMEA 0183 log, u-blox UBX log or RTKLIB `.pos` file (one per
-    /// `--samples`).
-    #[arg(long, required_unless_present = "runs")]
+    /// `--samples`). Default for one run: the recording's NMEA log beside `--samples`
+    /// (`run.csv` -> `run.nmea`, as `record` writes it), its times checked against the
+    /// samples'.
+    #[arg(long)]
     pub reference: Vec<PathBuf>,
     /// A list of runs, one `SAMPLES REFERENCE` a line: the ensemble coverage by distance.
     #[arg(long, conflicts_with_all = ["samples", "reference"])]

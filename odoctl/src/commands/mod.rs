@@ -19,6 +19,7 @@ pub mod config;
 pub mod decode;
 pub mod monitor;
 pub mod record;
+pub mod recording;
 pub mod reference;
 pub mod replay;
 pub mod simulate;

@@ -1,4 +1,5 @@
-//! `odoctl record`: the live pose stream to a SAMPLES CSV (and, with `--mcap`, to ROS 2 topics).
+//! `odoctl record`: the live pose stream to a SAMPLES CSV, the forwarded GNSS sentences to
+//! the NMEA log beside it ([`recording`](super::recording)), and with `--mcap` ROS 2 topics.
 
 use std::collections::VecDeque;
 use std::path::Path;
@@ -8,6 +9,7 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Result};
 use odo_unit::protocol::{Frame, Message, PoseRecord};
 
+use super::recording::{nmea_path, NmeaWriter};
 use crate::cli::RecordArgs;
 use crate::link::{describe, health, open, SegmentWriter, Session, REPLY_TIMEOUT};
 
@@ -54,17 +56,23 @@ pub fn record(
 ) -> Result<ExitCode> {
     let mut s = Session::new(open(port, baud)?, raw)?;
     // The sample rate turns the GNSS time tag (second + sample index) into seconds.
-    let (ok, text) = s.command("get rate", REPLY_TIMEOUT)?;
+    // Sentences that arrive while a command waits for its reply go to the log too.
+    let mut early_gnss = Vec::new();
+    let (ok, text) = s.command_with("get rate", REPLY_TIMEOUT, |f| {
+        if let Message::Gnss(g) = &f.message {
+            early_gnss.push(g.clone());
+        }
+    })?;
     let rate = if ok { parse_rate(&text) } else { None };
     let mut early = Vec::new();
     let mut started = !reset_pose;
     if reset_pose {
         // The unit answers and applies the reset at its next sample, whose record carries
         // the reset pose with zero sigmas: the recording starts there.
-        let (ok, text) = s.command_with("reset_pose", REPLY_TIMEOUT, |f| {
-            if let Message::Pose(r) = &f.message {
-                early.push(*r);
-            }
+        let (ok, text) = s.command_with("reset_pose", REPLY_TIMEOUT, |f| match &f.message {
+            Message::Pose(r) => early.push(*r),
+            Message::Gnss(g) => early_gnss.push(g.clone()),
+            _ => {}
         })?;
         if !ok {
             bail!("reset_pose: {}", crate::text::excerpt_n(text.trim(), 80));
@@ -79,6 +87,10 @@ pub fn record(
             && r.sigma_heading == 0.0
     };
     let mut writer = SegmentWriter::new(Some(out), None, rate);
+    let mut nmea = NmeaWriter::create(&nmea_path(out))?;
+    for g in &early_gnss {
+        nmea.push(g)?;
+    }
     let end = duration.map(|d| Instant::now() + Duration::from_secs_f64(d));
     let start_deadline = Instant::now() + REPLY_TIMEOUT;
     let mut queue: VecDeque<PoseRecord> = early.into();
@@ -91,6 +103,13 @@ pub fn record(
                     message: Message::Pose(r),
                     ..
                 }) => r,
+                Some(Frame {
+                    message: Message::Gnss(g),
+                    ..
+                }) => {
+                    nmea.push(&g)?;
+                    continue;
+                }
                 Some(f) => {
                     if let Message::Status(st) = &f.message {
                         writer.on_status(st);
@@ -125,6 +144,7 @@ pub fn record(
     let recorded = writer.finish()?;
     let rows = recorded.rows();
     eprint!("recorded {}", recorded.report());
+    eprintln!("{}", nmea.finish()?);
     eprintln!("link: {}", health(&s.decoder_stats(), &s.stats));
     if s.stats.record_gaps > 0 || s.stats.dropped_by_unit > 0 {
         eprintln!("warning: records are missing; a replay integrates across the gaps and will differ from the unit there");
