@@ -408,6 +408,7 @@ struct RecordWriter<W: Write> {
     w: W,
     time: TimeBase,
     last: Option<(f64, u32)>,
+    last_row: Option<Sample>,
     rows: u64,
     buf: String,
 }
@@ -419,6 +420,7 @@ impl<W: Write> RecordWriter<W> {
             w,
             time,
             last: None,
+            last_row: None,
             rows: 0,
             buf: String::new(),
         })
@@ -469,6 +471,7 @@ impl<W: Write> RecordWriter<W> {
         ];
         self.buf.clear();
         SamplesLayout::Record.push_row(&mut self.buf, &sample, Some(&clocks));
+        self.last_row = Some(sample);
         self.w.write_all(self.buf.as_bytes())?;
         self.rows += 1;
         Ok(())
@@ -599,6 +602,11 @@ impl<'a> SegmentWriter<'a> {
             Continuity::Next => {}
         }
         self.current.as_mut().expect("open segment").row(r)
+    }
+
+    /// The SAMPLES row of the last record written to the current segment.
+    pub fn last_row(&self) -> Option<Sample> {
+        self.current.as_ref()?.last_row
     }
 
     fn finish_segment(&mut self) -> Result<()> {

@@ -133,6 +133,21 @@ pub struct RecordArgs {
     /// Frames, topics and joints of `--mcap`.
     #[command(flatten)]
     pub ros: RosNameArgs,
+    /// Calibrate while recording (docs/CALIBRATION.md): the sub-trajectory fit follows the
+    /// records and the forwarded sentences, shown once a second with what is still missing
+    /// against `--target-se`; when the drive ends (Ctrl-C, `--duration`, `--count`, the end
+    /// of the link) `calibrate` runs on the recording, from `--config`/`--set` as its initial
+    /// estimate, and writes `--result`.
+    #[arg(long)]
+    pub calibrate: bool,
+    /// Standard errors `--calibrate` aims at, `DIAMETER,TRACK`: each wheel diameter's and the
+    /// track width's, as lengths with `mm` (also without a unit), `um` or `m`; default
+    /// `0.05mm,0.5mm`.
+    #[arg(long, value_parser = v::target_se, requires = "calibrate")]
+    pub target_se: Option<v::Targets>,
+    /// Where `--calibrate` writes the result (TOML, as `calibrate --out`).
+    #[arg(long, requires = "calibrate")]
+    pub result: Option<PathBuf>,
 }
 
 /// `odoctl decode`.

@@ -17,6 +17,7 @@ pub mod bridge;
 pub mod calibrate;
 pub mod config;
 pub mod decode;
+pub mod live;
 pub mod monitor;
 pub mod record;
 pub mod recording;

@@ -9,6 +9,7 @@
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use odo_unit::protocol::GnssSentence;
@@ -56,20 +57,21 @@ impl NmeaWriter {
         })
     }
 
-    /// One forwarded sentence: counted, and written with CR LF when its checksum holds.
-    pub fn push(&mut self, g: &GnssSentence) -> Result<()> {
+    /// One forwarded sentence: counted, and written with CR LF when its checksum holds
+    /// (then true).
+    pub fn push(&mut self, g: &GnssSentence) -> Result<bool> {
         if let Some(n) = self.next_number {
             self.not_forwarded += u64::from(g.number.wrapping_sub(n));
         }
         self.next_number = Some(g.number.wrapping_add(1));
         if !checksum_holds(&g.text) {
             self.bad_checksum += 1;
-            return Ok(());
+            return Ok(false);
         }
         write!(self.w, "{}\r\n", g.text)?;
         self.written += 1;
         *self.kinds.entry(kind(&g.text).to_string()).or_default() += 1;
-        Ok(())
+        Ok(true)
     }
 
     /// Flushes; the report line.
@@ -89,6 +91,83 @@ impl NmeaWriter {
             },
             self.not_forwarded,
             self.bad_checksum
+        ))
+    }
+}
+
+/// How long the receiver may send no GGA before `record` says so.
+pub const SILENCE: Duration = Duration::from_secs(3);
+
+/// GGA intervals in a row that make a new rate.
+const RATE_CHANGE_RUN: u32 = 3;
+
+/// The receiver's GGA as `record` sees them: a silence longer than [`SILENCE`] and a change
+/// of its rate (an interval 25 % off the established one [`RATE_CHANGE_RUN`] times in a row),
+/// each reported once, as they happen.
+#[derive(Debug, Default)]
+pub struct ReceiverWatch {
+    /// Unit time (us) and wall time of the last GGA.
+    last: Option<(u64, Instant)>,
+    /// The established GGA interval (s).
+    interval: Option<f64>,
+    /// A different interval (s) and how often in a row it came.
+    candidate: Option<(f64, u32)>,
+    silent: bool,
+}
+
+impl ReceiverWatch {
+    /// A forwarded sentence received at unit time `mcu_us`, wall time `now`: a line to show
+    /// when it ends a silence or establishes a new rate.
+    pub fn sentence(&mut self, mcu_us: u64, text: &str, now: Instant) -> Option<String> {
+        if kind(text) != "GGA" {
+            return None;
+        }
+        let mut note = None;
+        if let Some((t0, w0)) = self.last {
+            let dt = mcu_us.saturating_sub(t0) as f64 * 1e-6;
+            let similar = |a: f64, b: f64| (a / b - 1.0).abs() <= 0.25;
+            if self.silent {
+                self.silent = false;
+                note = Some(format!(
+                    "the receiver sends GGA again, after {:.1} s",
+                    now.duration_since(w0).as_secs_f64()
+                ));
+            } else if dt > 0.0 {
+                match (self.interval, self.candidate) {
+                    (Some(i), _) if similar(dt, i) => self.candidate = None,
+                    (_, Some((c, n))) if similar(dt, c) => {
+                        if n + 1 >= RATE_CHANGE_RUN {
+                            if let Some(i) = self.interval {
+                                note = Some(format!(
+                                    "warning: the receiver's GGA rate changed from {:.2} Hz to {:.2} Hz",
+                                    1.0 / i,
+                                    1.0 / c
+                                ));
+                            }
+                            self.interval = Some(c);
+                            self.candidate = None;
+                        } else {
+                            self.candidate = Some((c, n + 1));
+                        }
+                    }
+                    _ => self.candidate = Some((dt, 1)),
+                }
+            }
+        }
+        self.last = Some((mcu_us, now));
+        note
+    }
+
+    /// A warning once the receiver has sent no GGA for [`SILENCE`] (once per silence).
+    pub fn silence(&mut self, now: Instant) -> Option<String> {
+        let (_, w0) = self.last?;
+        if self.silent || now.duration_since(w0) < SILENCE {
+            return None;
+        }
+        self.silent = true;
+        Some(format!(
+            "warning: the receiver has sent no GGA for {} s (is it still connected and powered?)",
+            SILENCE.as_secs()
         ))
     }
 }
@@ -208,6 +287,33 @@ mod tests {
         assert!(!checksum_holds("$GPGGA,1*0"));
         assert_eq!(kind(&s), "GGA");
         assert_eq!(kind("$PUBX,00*33"), "PUBX");
+    }
+
+    #[test]
+    fn receiver_watch_reports_silence_and_rate_changes() {
+        let gga = with_checksum("GNGGA,120000.00,4912.0,N");
+        let t0 = Instant::now();
+        let mut w = ReceiverWatch::default();
+        let mut notes = Vec::new();
+        // 10 Hz, one GGA lost (no change), then 5 Hz.
+        let mut us = 0u64;
+        for step in [100_000u64; 5]
+            .into_iter()
+            .chain([200_000])
+            .chain([100_000; 3])
+            .chain([200_000; 4])
+        {
+            us += step;
+            notes.extend(w.sentence(us, &gga, t0));
+            assert_eq!(w.sentence(us, "$GNGST,1*00", t0), None);
+        }
+        assert_eq!(notes.len(), 1, "{notes:?}");
+        assert!(notes[0].contains("from 10.00 Hz to 5.00 Hz"), "{notes:?}");
+        assert_eq!(w.silence(t0 + Duration::from_millis(2900)), None);
+        assert!(w.silence(t0 + SILENCE).unwrap().contains("no GGA for 3 s"));
+        assert_eq!(w.silence(t0 + 2 * SILENCE), None);
+        let back = w.sentence(us + 5_000_000, &gga, t0 + Duration::from_secs(5));
+        assert!(back.unwrap().contains("again, after 5.0 s"));
     }
 
     /// Boundary table of the time check: (reference span, samples span, refused).
