@@ -17,6 +17,9 @@ use crate::cli::values::Targets;
 use crate::csvio::Sample;
 use crate::reference::stream::NmeaStream;
 
+/// Sub-trajectories before the hints project how much more driving the targets need.
+pub const SETTLED: usize = 5;
+
 /// How often the display is refreshed.
 pub const REFRESH: Duration = Duration::from_secs(1);
 
@@ -35,12 +38,21 @@ pub fn advice(e: &LiveEstimate, t: &Targets) -> (Vec<String>, bool) {
         (Some(l), Some(r)) => l.max(r),
         _ => f64::INFINITY,
     };
+    // Standard errors fall as one over the root of the distance (or of the turning); with a
+    // few sub-trajectories they are too rough for a projection.
+    let settled = e.subtrajectories >= SETTLED;
+    let about = |what: String| {
+        if settled {
+            format!(" (about {what} more at this mix)")
+        } else {
+            format!(" (how much more shows after {SETTLED} sub-trajectories)")
+        }
+    };
     if se_d > t.diameter {
-        // Standard errors fall as one over the root of the distance.
         let more = e.distance * ((se_d / t.diameter).powi(2) - 1.0);
         out.push(format!(
-            "diameters: drive a longer straight (about {:.0} m more at this mix)",
-            more.min(1e6)
+            "diameters: drive a longer straight{}",
+            about(format!("{:.0} m", more.min(1e6)))
         ));
     }
     if !e.track_estimated {
@@ -60,8 +72,8 @@ pub fn advice(e: &LiveEstimate, t: &Targets) -> (Vec<String>, bool) {
                 "turn more, both ways"
             };
             out.push(format!(
-                "track width: {way} (about {:.0} deg more turning)",
-                more.min(1e7)
+                "track width: {way}{}",
+                about(format!("{:.0} deg of turning", more.min(1e7)))
             ));
         }
     }
