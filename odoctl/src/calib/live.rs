@@ -47,6 +47,61 @@ pub const MIN_TURNING_DEG: f64 = 30.0;
 /// Path step (m of reference path) over which the turning is summed, as in the batch fit.
 const TURNING_STEP: f64 = 0.25;
 
+/// Items of a chunk of [`Chunked`].
+const CHUNK: usize = 4096;
+
+/// A growing sequence stored in chunks of [`CHUNK`] items: appending never moves what is
+/// stored (a `Vec` of a long drive's samples copies megabytes when it grows).
+#[derive(Debug, Clone)]
+struct Chunked<T> {
+    chunks: Vec<Vec<T>>,
+    len: usize,
+}
+
+impl<T> Default for Chunked<T> {
+    fn default() -> Self {
+        Self {
+            chunks: Vec::new(),
+            len: 0,
+        }
+    }
+}
+
+impl<T: Copy> Chunked<T> {
+    fn push(&mut self, v: T) {
+        if self.len % CHUNK == 0 {
+            self.chunks.push(Vec::with_capacity(CHUNK));
+        }
+        self.chunks.last_mut().expect("a chunk").push(v);
+        self.len += 1;
+    }
+
+    fn len(&self) -> usize {
+        self.len
+    }
+
+    fn first(&self) -> Option<&T> {
+        self.chunks.first()?.first()
+    }
+
+    fn last(&self) -> Option<&T> {
+        self.chunks.last()?.last()
+    }
+
+    /// Items `lo..=hi`, contiguous.
+    fn copy(&self, lo: usize, hi: usize) -> Vec<T> {
+        (lo..=hi).map(|i| self[i]).collect()
+    }
+}
+
+impl<T> std::ops::Index<usize> for Chunked<T> {
+    type Output = T;
+
+    fn index(&self, i: usize) -> &T {
+        &self.chunks[i / CHUNK][i % CHUNK]
+    }
+}
+
 /// One complete sub-trajectory and its linear model.
 #[derive(Debug, Clone)]
 struct Block {
@@ -94,8 +149,8 @@ pub struct LiveEstimate {
 pub struct LiveCalibration {
     initial: ChassisParams,
     length: f64,
-    samples: Vec<Sample>,
-    reference: Vec<RefPoint>,
+    samples: Chunked<Sample>,
+    reference: Chunked<RefPoint>,
     out_of_order: usize,
     /// Next sample to match, and the reference cursor of the matching.
     next_sample: usize,
@@ -126,8 +181,8 @@ impl LiveCalibration {
         Self {
             initial: *initial,
             length,
-            samples: Vec::new(),
-            reference: Vec::new(),
+            samples: Chunked::default(),
+            reference: Chunked::default(),
             out_of_order: 0,
             next_sample: 0,
             ref_cursor: 0,
@@ -152,14 +207,9 @@ impl LiveCalibration {
         }
     }
 
-    /// The samples received so far.
-    pub fn samples(&self) -> &[Sample] {
-        &self.samples
-    }
-
-    /// The reference points received so far (times increasing).
-    pub fn reference(&self) -> &[RefPoint] {
-        &self.reference
+    /// The first and the last sample's time (s), once there is a sample.
+    pub fn time_span(&self) -> Option<(f64, f64)> {
+        Some((self.samples.first()?.t, self.samples.last()?.t))
     }
 
     /// Appends a sample (times increasing; a sample not after the previous one is left out).
@@ -182,9 +232,12 @@ impl LiveCalibration {
     /// up to [`RELINEARISE_PER_UPDATE`] relinearisations, the estimate and its errors.
     pub fn update(&mut self) {
         self.match_new(false);
-        self.close_blocks(false);
-        self.relinearise(RELINEARISE_PER_UPDATE);
-        self.solve();
+        let closed = self.close_blocks(false);
+        let redone = self.relinearise(RELINEARISE_PER_UPDATE);
+        // The estimate changes only with the sums.
+        if closed + redone > 0 {
+            self.solve();
+        }
     }
 
     /// The drive ended: the last samples matched, the last sub-trajectory closed (as the
@@ -308,7 +361,8 @@ impl LiveCalibration {
             return;
         };
         let from = self.matches[self.matches.len() - 2].0;
-        for s in &self.samples[from + 1..=i] {
+        for j in from + 1..=i {
+            let s = &self.samples[j];
             let _ = integ.step_pose(counts(s), index_refs(s));
         }
         let h = integ.pose().heading;
@@ -331,11 +385,12 @@ impl LiveCalibration {
 
     /// Closes the sub-trajectories that a match beyond `length` metres from their start
     /// completes (at the end: the rest), as `run::windows` cuts; each is evaluated at the
-    /// estimate.
-    fn close_blocks(&mut self, end: bool) {
+    /// estimate. Returns how many.
+    fn close_blocks(&mut self, end: bool) -> usize {
         let n = self.matches.len();
+        let before = self.blocks.len();
         if n == 0 {
-            return;
+            return 0;
         }
         let last = n - 1;
         loop {
@@ -357,6 +412,7 @@ impl LiveCalibration {
             }
             self.open = b;
         }
+        self.blocks.len() - before
     }
 
     /// Sub-trajectory `a..=b` evaluated at the estimate, from start heading `guess` (the
@@ -379,7 +435,8 @@ impl LiveCalibration {
             .iter()
             .map(|&(i, k)| (i - s0, k - r0))
             .collect();
-        let run = Run::new(&self.samples[s0..=s1], &self.reference[r0..=r1], local);
+        let (samples, reference) = (self.samples.copy(s0, s1), self.reference.copy(r0, r1));
+        let run = Run::new(&samples, &reference, local);
         let (la, lb) = (a - lo, b - lo);
         let guess = guess.unwrap_or_else(|| run.heading_guess(la));
         let params = self.params();

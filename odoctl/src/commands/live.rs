@@ -163,9 +163,8 @@ impl LiveSession {
 
     fn update(&mut self, end: bool) {
         let started = Instant::now();
-        let span = match (self.live.samples().first(), self.live.samples().last()) {
-            (Some(a), Some(b)) => (a.t, b.t),
-            _ => return,
+        let Some(span) = self.live.time_span() else {
+            return;
         };
         for p in self.stream.take(span, end) {
             self.live.push_reference(p);
