@@ -13,10 +13,11 @@
 //!   `g_j(x) = g_j + S_j (x - x_j)` about its linearisation point `x_j`. The estimate solves
 //!   `sum_j g_j(x) = 0`, from running sums: a 3 x 3 system whatever the length of the drive.
 //! - Relinearisation: after each update, the sub-trajectories whose linearisation point is
-//!   farther than [`RELINEARISE`] standard errors from the estimate are evaluated again at it,
-//!   at most [`RELINEARISE_PER_UPDATE`] per update (the farthest first); [`LiveCalibration::finish`]
-//!   relinearises until none is that far, so that the last estimate is the batch fit's
-//!   minimum to within the linearisation's second order.
+//!   farther than [`RELINEARISE_LIVE`] standard errors from the estimate are evaluated again
+//!   at it, at most [`RELINEARISE_PER_UPDATE`] per update (the farthest first);
+//!   [`LiveCalibration::finish`] relinearises until none is farther than [`RELINEARISE`], so
+//!   that the last estimate is the batch fit's minimum to within the linearisation's second
+//!   order.
 //! - Standard errors: the batch's cluster jackknife over the sub-trajectories, from their
 //!   `S_j` and `g_j(x)` (a few microseconds per sub-trajectory).
 //!
@@ -35,8 +36,11 @@ use super::geometry::subtrajectory::{eval_block, MIN_POINTS};
 use super::run::{Run, PATH_STEP};
 
 /// Distance (standard errors of the estimate) of a sub-trajectory's linearisation point from
-/// the estimate beyond which it is evaluated again.
+/// the estimate beyond which it is evaluated again at the drive's end.
 pub const RELINEARISE: f64 = 0.02;
+
+/// The same during the drive: the display's resolution.
+pub const RELINEARISE_LIVE: f64 = 0.1;
 
 /// Sub-trajectories evaluated again per update at most (the farthest first).
 pub const RELINEARISE_PER_UPDATE: usize = 4;
@@ -233,7 +237,7 @@ impl LiveCalibration {
     pub fn update(&mut self) {
         self.match_new(false);
         let closed = self.close_blocks(false);
-        let redone = self.relinearise(RELINEARISE_PER_UPDATE);
+        let redone = self.relinearise(RELINEARISE_LIVE, RELINEARISE_PER_UPDATE);
         // The estimate changes only with the sums.
         if closed + redone > 0 {
             self.solve();
@@ -251,7 +255,7 @@ impl LiveCalibration {
         self.close_blocks(true);
         self.solve();
         for _ in 0..8 {
-            if self.relinearise(usize::MAX) == 0 {
+            if self.relinearise(RELINEARISE, usize::MAX) == 0 {
                 break;
             }
             self.solve();
@@ -547,9 +551,9 @@ impl LiveCalibration {
     }
 
     /// Evaluates again, at the estimate, up to `most` sub-trajectories whose linearisation
-    /// point is farther than [`RELINEARISE`] standard errors from it (the farthest first);
-    /// returns how many.
-    fn relinearise(&mut self, most: usize) -> usize {
+    /// point is farther than `limit` standard errors from it (the farthest first); returns
+    /// how many.
+    fn relinearise(&mut self, limit: f64, most: usize) -> usize {
         let scale: [f64; 3] = std::array::from_fn(|i| match self.se[i] {
             Some(se) if se > 0.0 => se,
             _ => 1e-6 * self.x[i],
@@ -564,7 +568,7 @@ impl LiveCalibration {
             .iter()
             .enumerate()
             .map(|(i, b)| (far(b), i))
-            .filter(|(d, _)| *d > RELINEARISE)
+            .filter(|(d, _)| *d > limit)
             .collect();
         stale.sort_by(|p, q| q.0.total_cmp(&p.0));
         let mut done = 0;

@@ -74,11 +74,22 @@ impl NmeaWriter {
         Ok(true)
     }
 
-    /// Flushes; the report line.
+    /// Flushes; the report line. A log without any sentence is removed (a unit without a
+    /// receiver, or one that does not forward), so that `calibrate` asks for `--reference`.
     pub fn finish(mut self) -> Result<String> {
         self.w
             .flush()
             .with_context(|| format!("{}: cannot write", self.path.display()))?;
+        if self.written == 0 {
+            drop(self.w);
+            let _ = std::fs::remove_file(&self.path);
+            return Ok(format!(
+                "GNSS sentences: none forwarded ({} not forwarded, {} with a bad checksum); no {} written",
+                self.not_forwarded,
+                self.bad_checksum,
+                self.path.display()
+            ));
+        }
         let kinds: Vec<String> = self.kinds.iter().map(|(k, n)| format!("{n} {k}")).collect();
         Ok(format!(
             "GNSS sentences: {} written to {}{}; {} not forwarded by the unit (gaps in their numbers), {} with a bad checksum (left out)",
