@@ -19,7 +19,8 @@
 //!   that the last estimate is the batch fit's minimum to within the linearisation's second
 //!   order.
 //! - Standard errors: the batch's cluster jackknife over the sub-trajectories, from their
-//!   `S_j` and `g_j(x)` (a few microseconds per sub-trajectory).
+//!   `S_j` and `g_j(x)` (a few microseconds per sub-trajectory), computed when a
+//!   sub-trajectory is added.
 //!
 //! The track width is held (as in the batch fit) until the drive has turned
 //! [`MIN_TURNING_DEG`] in all. The filter's refinement and the uncertainty coefficients are
@@ -43,7 +44,7 @@ pub const RELINEARISE: f64 = 0.02;
 pub const RELINEARISE_LIVE: f64 = 0.1;
 
 /// Sub-trajectories evaluated again per update at most (the farthest first).
-pub const RELINEARISE_PER_UPDATE: usize = 4;
+pub const RELINEARISE_PER_UPDATE: usize = 2;
 
 /// Total turning (degrees) before the track width is estimated, as in the batch fit.
 pub const MIN_TURNING_DEG: f64 = 30.0;
@@ -238,9 +239,10 @@ impl LiveCalibration {
         self.match_new(false);
         let closed = self.close_blocks(false);
         let redone = self.relinearise(RELINEARISE_LIVE, RELINEARISE_PER_UPDATE);
-        // The estimate changes only with the sums.
+        // The estimate changes only with the sums; its errors (a pass over the
+        // sub-trajectories) are computed again when one is added.
         if closed + redone > 0 {
-            self.solve();
+            self.solve(closed > 0);
         }
     }
 
@@ -253,12 +255,12 @@ impl LiveCalibration {
         // The last match ends the last turning step, as in the batch.
         self.add_turn(self.turn_h, self.dist.last().copied().unwrap_or(0.0));
         self.close_blocks(true);
-        self.solve();
+        self.solve(true);
         for _ in 0..8 {
             if self.relinearise(RELINEARISE, usize::MAX) == 0 {
                 break;
             }
-            self.solve();
+            self.solve(true);
         }
         // The running sums again from the blocks (no rounding carried from replacements).
         self.sum_s = [0.0; 9];
@@ -266,7 +268,7 @@ impl LiveCalibration {
         for i in 0..self.blocks.len() {
             self.add(i, 1.0);
         }
-        self.solve();
+        self.solve(true);
     }
 
     /// The estimate now.
@@ -486,8 +488,8 @@ impl LiveCalibration {
     }
 
     /// The estimate from the running sums (the held track width's column moved to the right
-    /// side), and its jackknife standard errors.
-    fn solve(&mut self) {
+    /// side), and with `errors` its jackknife standard errors.
+    fn solve(&mut self, errors: bool) {
         if self.blocks.len() < 2 {
             return;
         }
@@ -523,6 +525,9 @@ impl LiveCalibration {
             x[c] = v;
         }
         self.x = x;
+        if !errors {
+            return;
+        }
         // Each block's gradient at the estimate, for the jackknife.
         let clusters: Vec<(Vec<f64>, Vec<f64>)> = self
             .blocks

@@ -127,7 +127,8 @@ pub struct RecordArgs {
     /// (`--config`, `--set`).
     #[arg(long)]
     pub mcap: Option<PathBuf>,
-    /// The unit's parameters, for the twist of `--mcap`.
+    /// The unit's parameters, for the twist of `--mcap` and as `--calibrate`'s initial
+    /// estimate.
     #[command(flatten)]
     pub params: ParamArgs,
     /// Frames, topics and joints of `--mcap`.
