@@ -74,7 +74,7 @@ impl<T> Default for Chunked<T> {
 
 impl<T: Copy> Chunked<T> {
     fn push(&mut self, v: T) {
-        if self.len % CHUNK == 0 {
+        if self.len.is_multiple_of(CHUNK) {
             self.chunks.push(Vec::with_capacity(CHUNK));
         }
         self.chunks.last_mut().expect("a chunk").push(v);
@@ -657,17 +657,16 @@ mod tests {
             batch.params.right_diameter,
             batch.params.track_width,
         ];
-        for i in 0..3 {
+        for (i, &b) in b.iter().enumerate() {
             let Some(se) = batch.std_errors[i] else {
                 assert!(e.std_errors[i].is_none());
                 continue;
             };
-            let d = (e.values[i] - b[i]).abs() / se;
+            let d = (e.values[i] - b).abs() / se;
             assert!(
                 d < 0.1,
-                "unknown {i}: live {} batch {} se {se}: {d:.3} SE",
-                e.values[i],
-                b[i]
+                "unknown {i}: live {} batch {b} se {se}: {d:.3} SE",
+                e.values[i]
             );
             let ls = e.std_errors[i].unwrap();
             assert!(
