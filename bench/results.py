@@ -25,6 +25,7 @@ SECTIONS = [
     ("instructions", "Instructions on the Cortex-M4F"),
     ("fidelity", "Numerical fidelity"),
     ("speed", "Host tool speed"),
+    ("live", "Live calibration"),
     ("accuracy", "Calibration accuracy"),
     ("coverage", "Uncertainty coverage"),
     ("stderr", "Standard errors"),

@@ -8,7 +8,9 @@
 //! against an f64 reference after 1, 10 and 100 km, beside a naive f32 integrator; and
 //! (`odo-bench calibrate [accuracy|speed]`, host) the accuracy and the speed of `odoctl`'s
 //! calibration on simulated runs; (`odo-bench indoor DIR`, host) the accuracy of the
-//! calibration against motion capture and SLAM trajectories and of the square test.
+//! calibration against motion capture and SLAM trajectories and of the square test;
+//! (`odo-bench live DIR`, host) the live calibration's update cost, end-to-final time and
+//! agreement with the batch calibration on a 3 km drive.
 //!
 //! Every table is printed as Markdown: `bench/run` runs them and writes docs/RESULTS.md.
 #![cfg_attr(target_os = "none", no_std, no_main)]
@@ -23,11 +25,14 @@ mod fidelity;
 #[cfg(not(target_os = "none"))]
 mod indoor;
 #[cfg(not(target_os = "none"))]
+mod live;
+#[cfg(not(target_os = "none"))]
 mod markdown;
 
 /// `odo-bench` prints the fidelity table; `odo-bench calibrate [accuracy|speed]` the
 /// calibration's accuracy and speed tables (both without a second argument); `odo-bench
-/// indoor DIR` the indoor calibration's accuracy tables (scratch files in DIR).
+/// indoor DIR` the indoor calibration's accuracy tables (scratch files in DIR); `odo-bench live
+/// DIR` the live calibration's section.
 #[cfg(not(target_os = "none"))]
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -41,6 +46,12 @@ fn main() {
             std::path::PathBuf::from,
         );
         indoor::run(&dir);
+    } else if args.first().map(String::as_str) == Some("live") {
+        let dir = args.get(1).map_or_else(
+            || std::env::temp_dir().join("odo-bench-live"),
+            std::path::PathBuf::from,
+        );
+        live::run(&dir);
     } else {
         fidelity::run();
     }

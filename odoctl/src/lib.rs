@@ -4,7 +4,8 @@
 //!
 //! The library holds everything the binary does, so the tests can reach it; the odometry
 //! itself is always `odo_unit`'s integrator, never a copy.
-// Unsafe code only in `memory` (one allocator setting, through libc).
+// Unsafe code only in `memory` (one allocator setting, through libc) and `interrupt` (the
+// Ctrl-C handler, through libc).
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 
@@ -23,6 +24,7 @@ pub mod cli;
 pub mod commands;
 pub mod config;
 pub mod csvio;
+pub mod interrupt;
 pub mod link;
 pub mod mavlink;
 pub mod memory;

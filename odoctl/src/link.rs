@@ -412,6 +412,7 @@ struct RecordWriter<W: Write> {
     w: W,
     time: TimeBase,
     last: Option<(f64, u32)>,
+    last_row: Option<Sample>,
     rows: u64,
     buf: String,
 }
@@ -423,6 +424,7 @@ impl<W: Write> RecordWriter<W> {
             w,
             time,
             last: None,
+            last_row: None,
             rows: 0,
             buf: String::new(),
         })
@@ -473,6 +475,7 @@ impl<W: Write> RecordWriter<W> {
         ];
         self.buf.clear();
         SamplesLayout::Record.push_row(&mut self.buf, &sample, Some(&clocks));
+        self.last_row = Some(sample);
         self.w.write_all(self.buf.as_bytes())?;
         self.rows += 1;
         Ok(())
@@ -603,6 +606,11 @@ impl<'a> SegmentWriter<'a> {
             Continuity::Next => {}
         }
         self.current.as_mut().expect("open segment").row(r)
+    }
+
+    /// The SAMPLES row of the last record written to the current segment.
+    pub fn last_row(&self) -> Option<Sample> {
+        self.current.as_ref()?.last_row
     }
 
     fn finish_segment(&mut self) -> Result<()> {

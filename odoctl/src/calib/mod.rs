@@ -48,7 +48,9 @@
 //! - [`uncertainty`]: `coefficients.rs`, `likelihood.rs`, `coverage.rs`, `restarts.rs`,
 //!   `delta_diff.rs`, `reference_noise.rs`;
 //! - [`studies`]: `stability.rs`, `ensemble.rs`;
-//! - `calibration.rs`: all of it in memory ([`calibrate`]).
+//! - `calibration.rs`: all of it in memory ([`calibrate`]);
+//! - `live.rs`: the sub-trajectory fit as the data arrive ([`live::LiveCalibration`], `record
+//!   --calibrate`).
 //!
 //! The items the rest of `odoctl`, the benchmarks and the tests use are re-exported here.
 
@@ -58,6 +60,7 @@ pub mod evaluation;
 pub mod filter;
 pub mod geometry;
 pub mod heading_fit;
+pub mod live;
 pub mod pipeline;
 pub mod pooling;
 pub mod run;

@@ -18,7 +18,7 @@ use super::sensitivity::{PoseSensitivity, SensitivityTracker, GEOMETRY_UNKNOWNS}
 pub const START_ALIGN: f64 = 1.0;
 /// Reference points closer than this to the last anchor do not add to the path length (m):
 /// keeps the RTK noise from inflating the distance travelled.
-const PATH_STEP: f64 = 0.05;
+pub(crate) const PATH_STEP: f64 = 0.05;
 
 /// A recorded run matched to its reference.
 pub struct Run<'a> {

@@ -15,9 +15,10 @@ pub struct CalibrateArgs {
     #[arg(long)]
     pub samples: PathBuf,
     /// Reference (RTK GNSS) of the same run: REFERENCE CSV, NMEA 0183 log, u-blox UBX log or
-    /// RTKLIB `.pos`.
+    /// RTKLIB `.pos`. Default: the recording's NMEA log beside `--samples` (`run.csv` ->
+    /// `run.nmea`, as `record` writes it), its times checked against the samples'.
     #[arg(long)]
-    pub reference: PathBuf,
+    pub reference: Option<PathBuf>,
     /// How `--reference` is read.
     #[command(flatten)]
     pub reference_input: ReferenceArgs,

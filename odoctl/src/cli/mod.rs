@@ -131,12 +131,28 @@ pub struct RecordArgs {
     /// (`--config`, `--set`).
     #[arg(long)]
     pub mcap: Option<PathBuf>,
-    /// The unit's parameters, for the twist of `--mcap`.
+    /// The unit's parameters, for the twist of `--mcap` and as `--calibrate`'s initial
+    /// estimate.
     #[command(flatten)]
     pub params: ParamArgs,
     /// Frames, topics and joints of `--mcap`.
     #[command(flatten)]
     pub ros: RosNameArgs,
+    /// Calibrate while recording (docs/CALIBRATION.md): the sub-trajectory fit follows the
+    /// records and the forwarded sentences, shown once a second with what is still missing
+    /// against `--target-se`; when the drive ends (Ctrl-C, `--duration`, `--count`, the end
+    /// of the link) `calibrate` runs on the recording, from `--config`/`--set` as its initial
+    /// estimate, and writes `--result`.
+    #[arg(long)]
+    pub calibrate: bool,
+    /// Standard errors `--calibrate` aims at, `DIAMETER,TRACK`: each wheel diameter's and the
+    /// track width's, as lengths with `mm` (also without a unit), `um` or `m`; default
+    /// `0.05mm,0.5mm`.
+    #[arg(long, value_parser = v::target_se, requires = "calibrate")]
+    pub target_se: Option<v::Targets>,
+    /// Where `--calibrate` writes the result (TOML, as `calibrate --out`).
+    #[arg(long, requires = "calibrate")]
+    pub result: Option<PathBuf>,
 }
 
 /// `odoctl decode`.
@@ -240,8 +256,10 @@ pub struct ValidateArgs {
     #[arg(long, required_unless_present = "runs")]
     pub samples: Vec<PathBuf>,
     /// Reference: REFERENCE CSV, NMEA 0183 log, u-blox UBX log or RTKLIB `.pos` file (one per
-    /// `--samples`).
-    #[arg(long, required_unless_present = "runs")]
+    /// `--samples`). Default for one run: the recording's NMEA log beside `--samples`
+    /// (`run.csv` -> `run.nmea`, as `record` writes it), its times checked against the
+    /// samples'.
+    #[arg(long)]
     pub reference: Vec<PathBuf>,
     /// A list of runs, one `SAMPLES REFERENCE` a line: the ensemble coverage by distance.
     #[arg(long, conflicts_with_all = ["samples", "reference"])]

@@ -138,6 +138,59 @@ pub fn time_offset(text: &str) -> Result<f64, String> {
     real(text, -1e10, 1e10, false, "s")
 }
 
+/// Default standard-error targets (m): the diameters', the track width's.
+pub const DEFAULT_TARGETS: Targets = Targets {
+    diameter: 0.05e-3,
+    track: 0.5e-3,
+};
+
+/// The standard errors the user asks for (m).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Targets {
+    /// Largest standard error of each wheel diameter (m).
+    pub diameter: f64,
+    /// Largest standard error of the track width (m).
+    pub track: f64,
+}
+
+/// `--target-se D,T`: two lengths, each a number with `mm`, `um` or `m` (no unit: mm), in
+/// (0, 1] m.
+pub fn target_se(text: &str) -> Result<Targets, String> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    let [d, t] = parts.as_slice() else {
+        return Err("expected two standard errors, DIAMETER,TRACK, e.g. 0.02mm,0.1mm".into());
+    };
+    Ok(Targets {
+        diameter: length(d)?,
+        track: length(t)?,
+    })
+}
+
+/// One length of `--target-se` in metres.
+fn length(text: &str) -> Result<f64, String> {
+    let (number, scale) = if let Some(n) = text.strip_suffix("mm") {
+        (n, 1e-3)
+    } else if let Some(n) = text.strip_suffix("um") {
+        (n, 1e-6)
+    } else if let Some(n) = text.strip_suffix('m') {
+        (n, 1.0)
+    } else {
+        (text, 1e-3)
+    };
+    let v: f64 = number
+        .trim()
+        .parse()
+        .map_err(|_| format!("{text}: not a length (e.g. 0.02mm)"))?;
+    let m = v * scale;
+    if m.is_finite() && m > 0.0 && m <= 1.0 {
+        Ok(m)
+    } else {
+        Err(format!(
+            "{text}: out of range; expected a length in (0, 1] m"
+        ))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -158,5 +211,24 @@ mod tests {
         assert!(leap_seconds("-1").is_err());
         assert_eq!(speed("0.01"), Ok(0.01));
         assert!(speed("1e-300").is_err());
+    }
+    #[test]
+    fn targets_parse_with_units() {
+        let t = target_se("0.02mm,0.1mm").unwrap();
+        assert!((t.diameter - 2e-5).abs() < 1e-12 && (t.track - 1e-4).abs() < 1e-12);
+        let t = target_se("20um, 0.0001m").unwrap();
+        assert!((t.diameter - 2e-5).abs() < 1e-12 && (t.track - 1e-4).abs() < 1e-12);
+        assert_eq!(target_se("0.05,0.5").unwrap(), DEFAULT_TARGETS);
+        for bad in [
+            "0.02mm",
+            "0mm,1mm",
+            "-1mm,1mm",
+            "nanmm,1mm",
+            "2m,1mm",
+            "a,b",
+            "1,2,3",
+        ] {
+            assert!(target_se(bad).is_err(), "{bad}");
+        }
     }
 }

@@ -1,4 +1,5 @@
-//! `odoctl record`: the live pose stream to a SAMPLES CSV (and, with `--mcap`, to ROS 2 topics).
+//! `odoctl record`: the live pose stream to a SAMPLES CSV, the forwarded GNSS sentences to
+//! the NMEA log beside it ([`recording`](super::recording)), and with `--mcap` ROS 2 topics.
 
 use std::collections::VecDeque;
 use std::path::Path;
@@ -6,29 +7,99 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Result};
-use odo_unit::protocol::{Frame, Message, PoseRecord};
+use clap::Parser;
+use odo_unit::protocol::{Frame, GnssSentence, Message, PoseRecord};
 
+use super::live::LiveSession;
+use super::recording::{nmea_path, NmeaWriter, ReceiverWatch};
+use crate::cli::values::DEFAULT_TARGETS;
 use crate::cli::RecordArgs;
 use crate::link::{describe, health, open, SegmentWriter, Session, REPLY_TIMEOUT};
 
-/// `odoctl record`: the recording, then its MCAP export when `--mcap` is given.
+/// `odoctl record`: the recording (with `--calibrate`, calibrated as it goes and at its end),
+/// then its MCAP export when `--mcap` is given.
 pub fn run(a: &RecordArgs) -> Result<ExitCode> {
     // A bad name is refused before recording.
     let names = crate::ros::names::RosNames::resolve(&a.ros.options("odoctl"))?;
+    let mut live = if a.calibrate {
+        let initial = crate::config::load(a.params.config.as_deref(), &a.params.sets)?;
+        Some(LiveSession::new(
+            &initial,
+            a.target_se.unwrap_or(DEFAULT_TARGETS),
+        ))
+    } else {
+        None
+    };
+    crate::interrupt::catch_ctrl_c();
+    let stop = Stop {
+        duration: a.duration,
+        count: a.count,
+    };
     let code = record(
-        &a.port.port,
-        a.port.baud,
+        (&a.port.port, a.port.baud),
         &a.out,
         a.raw.as_deref(),
-        a.duration,
-        a.count,
+        stop,
         a.reset_pose,
+        live.as_mut(),
     )?;
+    if let Some(session) = &mut live {
+        final_calibration(a, session)?;
+    }
     if let Some(m) = &a.mcap {
         let params = (a.params.config.as_deref(), a.params.sets.as_slice());
         crate::ros::export::record_hook(m, &a.out, params, names)?;
     }
     Ok(code)
+}
+
+/// The batch calibration of the recording at the drive's end, printed at once and written
+/// to `--result`: `odoctl calibrate --samples OUT` (the NMEA log beside it as the reference)
+/// with `--config` as `--initial` and the `--set`s.
+fn final_calibration(a: &RecordArgs, session: &mut LiveSession) -> Result<()> {
+    let ended = Instant::now();
+    session.finish();
+    session.check()?;
+    let mut args: Vec<String> = vec![
+        "odoctl".into(),
+        "calibrate".into(),
+        "--quiet".into(),
+        "--samples".into(),
+        a.out.display().to_string(),
+    ];
+    if let Some(c) = &a.params.config {
+        args.extend(["--initial".into(), c.display().to_string()]);
+    }
+    for s in &a.params.sets {
+        args.extend(["--set".into(), s.clone()]);
+    }
+    if let Some(r) = &a.result {
+        args.extend(["--out".into(), r.display().to_string()]);
+    }
+    crate::outln!(
+        "final calibration (the batch one on the whole recording): {}",
+        args[1..].join(" ")
+    );
+    let cli = crate::cli::Cli::try_parse_from(&args)?;
+    let crate::cli::Cmd::Calibrate(c) = &cli.cmd else {
+        unreachable!("a calibrate command line");
+    };
+    super::calibrate::run(c)?;
+    crate::outln!(
+        "final calibration printed {:.3} s after the drive's end (slowest live update {:.1} ms)",
+        ended.elapsed().as_secs_f64(),
+        session.slowest_update.as_secs_f64() * 1e3
+    );
+    Ok(())
+}
+
+/// When the recording ends (besides Ctrl-C and the end of the link).
+#[derive(Debug, Clone, Copy)]
+pub struct Stop {
+    /// After this many seconds.
+    pub duration: Option<f64>,
+    /// After this many pose records.
+    pub count: Option<u64>,
 }
 
 /// The sample rate in a `get rate` reply.
@@ -41,35 +112,140 @@ fn parse_rate(text: &str) -> Option<f64> {
     })
 }
 
-/// Records the live pose stream to `out` (and the raw bytes to `raw`) until `duration`,
-/// `count` records or the end of the link; reports on stderr.
+/// Records the live pose stream from `port` (name, baud) to `out`, the forwarded sentences to
+/// the NMEA log beside it (and the raw bytes to `raw`) until `stop`, Ctrl-C or the end of the
+/// link, feeding `live` when given; reports on stderr.
 pub fn record(
-    port: &str,
-    baud: u32,
+    port: (&str, u32),
     out: &Path,
     raw: Option<&Path>,
-    duration: Option<f64>,
-    count: Option<u64>,
+    stop: Stop,
     reset_pose: bool,
+    mut live: Option<&mut LiveSession>,
 ) -> Result<ExitCode> {
-    let mut s = Session::new(open(port, baud)?, raw)?;
+    let mut s = Session::new(open(port.0, port.1)?, raw)?;
+    // Sentences that arrive while a command waits for its reply go to the log too.
+    let mut early_gnss = Vec::new();
     // The sample rate turns the GNSS time tag (second + sample index) into seconds.
-    let (ok, text) = s.command("get rate", REPLY_TIMEOUT)?;
+    let (ok, text) = s.command_with("get rate", REPLY_TIMEOUT, |f| {
+        if let Message::Gnss(g) = &f.message {
+            early_gnss.push(g.clone());
+        }
+    })?;
     let rate = if ok { parse_rate(&text) } else { None };
     let mut early = Vec::new();
-    let mut started = !reset_pose;
     if reset_pose {
         // The unit answers and applies the reset at its next sample, whose record carries
         // the reset pose with zero sigmas: the recording starts there.
-        let (ok, text) = s.command_with("reset_pose", REPLY_TIMEOUT, |f| {
-            if let Message::Pose(r) = &f.message {
-                early.push(*r);
-            }
+        let (ok, text) = s.command_with("reset_pose", REPLY_TIMEOUT, |f| match &f.message {
+            Message::Pose(r) => early.push(*r),
+            Message::Gnss(g) => early_gnss.push(g.clone()),
+            _ => {}
         })?;
         if !ok {
             bail!("reset_pose: {}", crate::text::excerpt_n(text.trim(), 80));
         }
     }
+    let mut sink = Sink {
+        writer: SegmentWriter::new(Some(out), None, rate),
+        nmea: NmeaWriter::create(&nmea_path(out))?,
+        watch: ReceiverWatch::default(),
+        live: live.as_deref_mut(),
+        received: 0,
+    };
+    for g in &early_gnss {
+        sink.sentence(g)?;
+    }
+    let mut queue: VecDeque<PoseRecord> = early.into();
+    stream(&mut s, &mut queue, &mut sink, stop, reset_pose)?;
+    let Sink {
+        writer,
+        nmea,
+        received,
+        ..
+    } = sink;
+    s.finish()?;
+    let recorded = writer.finish()?;
+    let rows = recorded.rows();
+    eprint!("recorded {}", recorded.report());
+    eprintln!("{}", nmea.finish()?);
+    eprintln!("link: {}", health(&s.decoder_stats(), &s.stats));
+    if s.stats.record_gaps > 0 || s.stats.dropped_by_unit > 0 {
+        eprintln!("warning: records are missing; a replay integrates across the gaps and will differ from the unit there");
+    }
+    if s.closed() && stop.count.is_none_or(|c| received < c) {
+        let what = format!(
+            "the unit closed the connection after {received} pose records{}",
+            if rows > 0 {
+                " (those received are kept)"
+            } else {
+                ""
+            }
+        );
+        if live.is_none() || rows == 0 {
+            bail!(what);
+        }
+        // With --calibrate, the end of the link ends the drive.
+        eprintln!("{what}");
+    }
+    if rows == 0 {
+        bail!("no pose record received");
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Where the frames of a recording go: the SAMPLES CSV, the NMEA log, the receiver's watch,
+/// the live calibration.
+struct Sink<'a, 'b> {
+    writer: SegmentWriter<'a>,
+    nmea: NmeaWriter,
+    watch: ReceiverWatch,
+    live: Option<&'b mut LiveSession>,
+    received: u64,
+}
+
+impl Sink<'_, '_> {
+    fn record(&mut self, r: &PoseRecord) -> Result<()> {
+        self.writer.push(r)?;
+        self.received += 1;
+        if let (Some(live), Some(row)) = (self.live.as_deref_mut(), self.writer.last_row()) {
+            live.on_sample(row);
+        }
+        Ok(())
+    }
+
+    fn sentence(&mut self, g: &GnssSentence) -> Result<()> {
+        if self.nmea.push(g)? {
+            if let Some(note) = self.watch.sentence(g.mcu_time_us, &g.text, Instant::now()) {
+                eprintln!("{note}");
+            }
+            if let Some(live) = self.live.as_deref_mut() {
+                live.on_sentence(g.mcu_time_us as f64 * 1e-6, &g.text);
+            }
+        }
+        Ok(())
+    }
+
+    /// Once per frame or tick: the receiver's silence, the live display.
+    fn tick(&mut self) {
+        if let Some(note) = self.watch.silence(Instant::now()) {
+            eprintln!("{note}");
+        }
+        if let Some(live) = self.live.as_deref_mut() {
+            live.tick();
+        }
+    }
+}
+
+/// The frames until `stop`, Ctrl-C or the end of the link: pose records (after the reset
+/// pose's record with `reset_pose`) and sentences into `sink`.
+fn stream(
+    s: &mut Session,
+    queue: &mut VecDeque<PoseRecord>,
+    sink: &mut Sink,
+    stop: Stop,
+    reset_pose: bool,
+) -> Result<()> {
     let is_start = |r: &PoseRecord| {
         r.x == 0.0
             && r.y == 0.0
@@ -78,30 +254,44 @@ pub fn record(
             && r.sigma_y == 0.0
             && r.sigma_heading == 0.0
     };
-    let mut writer = SegmentWriter::new(Some(out), None, rate);
-    let end = duration.map(|d| Instant::now() + Duration::from_secs_f64(d));
+    let mut started = !reset_pose;
+    let end = stop
+        .duration
+        .map(|d| Instant::now() + Duration::from_secs_f64(d));
     let start_deadline = Instant::now() + REPLY_TIMEOUT;
-    let mut queue: VecDeque<PoseRecord> = early.into();
-    let mut received = 0u64;
-    loop {
+    while !crate::interrupt::interrupted() {
+        sink.tick();
         let r = match queue.pop_front() {
             Some(r) => r,
-            None => match s.next_frame(end)? {
-                Some(Frame {
-                    message: Message::Pose(r),
-                    ..
-                }) => r,
-                Some(f) => {
-                    if let Message::Status(st) = &f.message {
-                        writer.on_status(st);
+            None => {
+                // Wake at least every TICK for the display and Ctrl-C.
+                let wake = Instant::now() + TICK;
+                let deadline = Some(end.map_or(wake, |e| e.min(wake)));
+                match s.next_frame(deadline)? {
+                    Some(Frame {
+                        message: Message::Pose(r),
+                        ..
+                    }) => r,
+                    Some(Frame {
+                        message: Message::Gnss(g),
+                        ..
+                    }) => {
+                        sink.sentence(&g)?;
+                        continue;
                     }
-                    if let Some(d) = describe(&f) {
-                        eprintln!("{d}");
+                    Some(f) => {
+                        if let Message::Status(st) = &f.message {
+                            sink.writer.on_status(st);
+                        }
+                        if let Some(d) = describe(&f) {
+                            eprintln!("{d}");
+                        }
+                        continue;
                     }
-                    continue;
+                    None if s.closed() || end.is_some_and(|e| Instant::now() >= e) => break,
+                    None => continue,
                 }
-                None => break,
-            },
+            }
         };
         if !started {
             if is_start(&r) {
@@ -115,32 +305,13 @@ pub fn record(
                 continue;
             }
         }
-        writer.push(&r)?;
-        received += 1;
-        if count.is_some_and(|c| received >= c) {
+        sink.record(&r)?;
+        if stop.count.is_some_and(|c| sink.received >= c) {
             break;
         }
     }
-    s.finish()?;
-    let recorded = writer.finish()?;
-    let rows = recorded.rows();
-    eprint!("recorded {}", recorded.report());
-    eprintln!("link: {}", health(&s.decoder_stats(), &s.stats));
-    if s.stats.record_gaps > 0 || s.stats.dropped_by_unit > 0 {
-        eprintln!("warning: records are missing; a replay integrates across the gaps and will differ from the unit there");
-    }
-    if s.closed() && count.is_none_or(|c| received < c) {
-        bail!(
-            "the unit closed the connection after {received} pose records{}",
-            if rows > 0 {
-                " (those received are kept)"
-            } else {
-                ""
-            }
-        );
-    }
-    if rows == 0 {
-        bail!("no pose record received");
-    }
-    Ok(ExitCode::SUCCESS)
+    Ok(())
 }
+
+/// Longest wait for a frame before the display and Ctrl-C are looked at.
+const TICK: Duration = Duration::from_millis(200);

@@ -14,6 +14,7 @@ use crate::csvio;
 use crate::reference::matched::{read_matched_run, MatchedRun, ReferenceSummary};
 use crate::stats::{coverage, summarize};
 
+use super::recording::{check_recording_times, reference_for};
 use super::{create, reference_options};
 
 /// `odoctl validate`: one run (with its MCAP tracks first when `--mcap` is given), or an
@@ -22,22 +23,24 @@ pub fn run(a: &ValidateArgs) -> Result<ExitCode> {
     if a.runs.is_some() || a.samples.len() > 1 || a.reference.len() > 1 {
         return super::validate_ensemble::run(a);
     }
+    let (reference, own) = reference_for(&a.samples[0], a.reference.first().map(|p| p.as_path()))?;
     if let Some(m) = &a.mcap {
         crate::ros::tracks::validate_hook(
             m,
             &a.samples[0],
-            &a.reference[0],
+            &reference,
             &reference_options(&a.reference_input)?,
             a.params.config.as_deref(),
             &a.params.sets,
             a.heading,
         )?;
     }
-    validate(a)
+    validate(a, &reference, own)
 }
 
-/// One run evaluated with the parameters: printed, and written as asked.
-fn validate(a: &ValidateArgs) -> Result<ExitCode> {
+/// One run evaluated with the parameters against `reference_path` (the recording's own
+/// log when `own`: its times checked): printed, and written as asked.
+fn validate(a: &ValidateArgs, reference_path: &Path, own: bool) -> Result<ExitCode> {
     let noise = ReferenceNoise {
         horizontal: a.reference_sigma,
         heading: a.reference_heading_sigma_deg.to_radians(),
@@ -57,10 +60,13 @@ fn validate(a: &ValidateArgs) -> Result<ExitCode> {
         matches,
     } = read_matched_run(
         &a.samples[0],
-        &a.reference[0],
+        reference_path,
         &reference_options(&a.reference_input)?,
         ReferenceSummary::Print,
     )?;
+    if own {
+        check_recording_times(&samples, &reference)?;
+    }
     let run = Run::new(&samples, &reference, matches).with_antenna(super::lever_arm(config)?);
     let last = run.len() - 1;
     let h0 = match a.heading {

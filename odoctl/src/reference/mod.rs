@@ -20,6 +20,7 @@ pub mod nmea;
 pub mod rtklib;
 pub mod simulated;
 pub mod simulated_trajectory;
+pub mod stream;
 pub mod summary;
 pub mod trajectory;
 pub mod tum;

@@ -15,7 +15,8 @@ use odo_unit::odometry::{
     ChassisParams, IndexRefs, Integrator, Pose, UncertaintyModel, WheelCounts,
 };
 use odo_unit::protocol::{
-    CommandReply, FrameEncoder, Message, PoseRecord, StatusFlags, WheelStatus, MAX_ENCODED_FRAME,
+    CommandReply, FrameEncoder, GnssSentence, Message, PoseRecord, StatusFlags, WheelStatus,
+    MAX_ENCODED_FRAME,
 };
 use odo_unit::settings::Settings;
 use odoctl::calib::{self, Calibration, CalibrationOptions, UncertaintyFit};
@@ -154,6 +155,16 @@ pub fn encode(msgs: impl IntoIterator<Item = Message>) -> Vec<u8> {
 /// pose records of `samples` (integrated by the core with its working settings), one every
 /// `period`. Serves one connection, and stops when the client closes it or after 30 s.
 pub fn fake_unit(samples: Vec<Sample>, period: Duration) -> (u16, JoinHandle<Settings>) {
+    fake_unit_with_gnss(samples, period, Vec::new())
+}
+
+/// [`fake_unit`] that also forwards GNSS sentences: each `(k, sentence)` right after the
+/// record of sample `k` (in the order given).
+pub fn fake_unit_with_gnss(
+    samples: Vec<Sample>,
+    period: Duration,
+    gnss: Vec<(usize, GnssSentence)>,
+) -> (u16, JoinHandle<Settings>) {
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();
     let port = listener.local_addr().unwrap().port();
     let handle = std::thread::spawn(move || {
@@ -171,6 +182,7 @@ pub fn fake_unit(samples: Vec<Sample>, period: Duration) -> (u16, JoinHandle<Set
         let mut integ: Option<Integrator> = None;
         let mut reset: Option<Pose> = None;
         let mut next = 0usize;
+        let mut sent_gnss = 0usize;
         let started = Instant::now();
         let mut last = Instant::now();
         let mut send = |sock: &mut std::net::TcpStream, m: Message| -> bool {
@@ -251,6 +263,12 @@ pub fn fake_unit(samples: Vec<Sample>, period: Duration) -> (u16, JoinHandle<Set
                 let r = record(next as u32, s, integ.as_ref().unwrap());
                 if !send(&mut sock, r.into()) {
                     break;
+                }
+                while gnss.get(sent_gnss).is_some_and(|(k, _)| *k <= next) {
+                    if !send(&mut sock, Message::Gnss(gnss[sent_gnss].1.clone())) {
+                        break 'serve;
+                    }
+                    sent_gnss += 1;
                 }
                 next += 1;
             }

@@ -60,7 +60,7 @@ use super::turning::turning;
 pub const SUBTRAJECTORY_LENGTH: f64 = 10.0;
 
 /// Common times a sub-trajectory needs after its start to be used.
-const MIN_POINTS: usize = 10;
+pub(crate) const MIN_POINTS: usize = 10;
 
 /// Options of [`fit_subtrajectories`].
 #[derive(Debug, Clone, Copy)]
@@ -183,25 +183,25 @@ impl SubtrajectoryFit {
 /// One sub-trajectory's share at given shared unknowns: its cost, its reduced normal
 /// equations, and what a step of the shared unknowns does to its start heading.
 #[derive(Debug, Clone)]
-struct BlockEval {
-    cost: f64,
-    points: usize,
+pub(crate) struct BlockEval {
+    pub(crate) cost: f64,
+    pub(crate) points: usize,
     /// The start heading and position at their optimum for these shared unknowns.
-    heading: f64,
-    shift: (f64, f64),
+    pub(crate) heading: f64,
+    pub(crate) shift: (f64, f64),
     /// Reduced `p x p` Hessian `A - B C^-1 B^T` (row-major) and gradient `g_A - B C^-1 g_C`.
-    s: Vec<f64>,
-    g: Vec<f64>,
+    pub(crate) s: Vec<f64>,
+    pub(crate) g: Vec<f64>,
     /// The heading's change for a step `dx` of the shared unknowns:
     /// `dh = h_const + h_lin . dx` (the heading row of `-C^-1 (g_C + B^T dx)`).
-    h_const: f64,
-    h_lin: Vec<f64>,
+    pub(crate) h_const: f64,
+    pub(crate) h_lin: Vec<f64>,
 }
 
 /// Per-point rows of one integration: observed point and reference relative to the anchor,
 /// and the observed point's derivatives (shared unknowns, then the start heading).
 #[derive(Clone, Copy, Default)]
-struct Row {
+pub(crate) struct Row {
     q: (f64, f64),
     r: (f64, f64),
     jx: [f64; MODEL_UNKNOWNS],
@@ -231,7 +231,7 @@ fn unpack(
 }
 
 /// Evaluates sub-trajectory `a..=b` at `params`, `antenna` from start heading `guess`.
-fn eval_block(
+pub(crate) fn eval_block(
     run: &Run,
     params: &ChassisParams,
     antenna: (f64, f64),

@@ -17,6 +17,7 @@ use crate::csvio::{self, RefPoint, Sample};
 use crate::reference::matched::reference_for_samples;
 use crate::stats::{coverage, summarize, Summary};
 
+use super::recording::{check_recording_times, reference_for};
 use super::reference_options;
 
 pub mod options;
@@ -80,12 +81,16 @@ pub fn filter_refined(c: &Calibration) -> bool {
 pub fn run(a: &CalibrateArgs) -> Result<ExitCode> {
     let started = Instant::now();
     let timer = calib::PhaseTimer::new();
-    let (samples, reference) = read_run(&a.samples, &a.reference, &a.reference_input)?;
+    let (reference_path, own) = reference_for(&a.samples, a.reference.as_deref())?;
+    let (samples, reference) = read_run(&a.samples, &reference_path, &a.reference_input)?;
+    if own {
+        check_recording_times(&samples, &reference)?;
+    }
     timer.lap("read CSV");
     let initial = initial_estimate(a)?;
     let names = (
         a.samples.display().to_string(),
-        a.reference.display().to_string(),
+        reference_path.display().to_string(),
     );
     let opts = &options::calibration_options(a)?;
     let c = calib::calibrate(&samples, &reference, (&names.0, &names.1), &initial, opts)?;
@@ -96,10 +101,10 @@ pub fn run(a: &CalibrateArgs) -> Result<ExitCode> {
     };
     let errors = ErrorSummary::of(&c, &noise);
     report::print(&c, &initial, opts, &errors);
-    write::write_result(a, &c, opts, &errors)?;
+    write::write_result(a, &reference_path, &c, opts, &errors)?;
     timer.lap("report");
     crate::outln!("done in {:.2} s", started.elapsed().as_secs_f64());
-    export_ros(a)?;
+    export_ros(a, &reference_path)?;
     Ok(ExitCode::SUCCESS)
 }
 
@@ -133,7 +138,7 @@ fn initial_estimate(a: &CalibrateArgs) -> Result<ChassisParams> {
 
 /// The result's ROS forms, from the result file `--out`: the diff_drive_controller
 /// parameters (`--export-ros`) and the tracks (`--mcap`).
-fn export_ros(a: &CalibrateArgs) -> Result<()> {
+fn export_ros(a: &CalibrateArgs, reference: &Path) -> Result<()> {
     let Some(result) = &a.out else {
         return Ok(());
     };
@@ -144,7 +149,7 @@ fn export_ros(a: &CalibrateArgs) -> Result<()> {
         crate::ros::tracks::validate_hook(
             m,
             &a.samples,
-            &a.reference,
+            reference,
             &reference_options(&a.reference_input)?,
             Some(result),
             &[],

@@ -16,6 +16,7 @@ use crate::csvio;
 /// The files asked for, in this order: the stability study's CSV, the result, the figures.
 pub fn write_result(
     a: &CalibrateArgs,
+    reference: &Path,
     c: &Calibration,
     opts: &CalibrationOptions,
     e: &ErrorSummary,
@@ -26,7 +27,7 @@ pub fn write_result(
         }
     }
     if let Some(p) = &a.out {
-        write_params(p, a, c, opts, e)?;
+        write_params(p, a, reference, c, opts, e)?;
     }
     if let Some(dir) = &a.plots {
         write_plots(dir, c)?;
@@ -38,12 +39,13 @@ pub fn write_result(
 fn write_params(
     p: &Path,
     a: &CalibrateArgs,
+    reference: &Path,
     c: &Calibration,
     opts: &CalibrationOptions,
     e: &ErrorSummary,
 ) -> Result<()> {
     let per_model = model_fit(c, opts);
-    let mut fit: Vec<(&str, FitValue)> = geometry_fit(a, c, opts);
+    let mut fit: Vec<(&str, FitValue)> = geometry_fit(a, reference, c, opts);
     fit.extend(error_fit(c, e));
     fit.extend(uncertainty_fit(c, opts));
     fit.extend(per_model.iter().map(|(k, v)| (k.as_str(), v.clone())));
@@ -70,6 +72,7 @@ fn write_params(
 /// `[fit]`: the files, the start, the geometry method and its figures.
 fn geometry_fit(
     a: &CalibrateArgs,
+    reference: &Path,
     c: &Calibration,
     opts: &CalibrationOptions,
 ) -> Vec<(&'static str, FitValue)> {
@@ -77,10 +80,7 @@ fn geometry_fit(
     let refined = filter_refined(c);
     let mut fit = vec![
         ("samples", FitValue::Text(a.samples.display().to_string())),
-        (
-            "reference",
-            FitValue::Text(a.reference.display().to_string()),
-        ),
+        ("reference", FitValue::Text(reference.display().to_string())),
         ("initial_x", FitValue::Num(g.start.0)),
         ("initial_y", FitValue::Num(g.start.1)),
         ("initial_heading", FitValue::Num(g.heading0)),
