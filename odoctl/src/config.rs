@@ -317,29 +317,59 @@ pub fn load(config: Option<&Path>, sets: &[String]) -> Result<ChassisParams> {
     validated(p, "--set")
 }
 
-/// The `set` lines that send a TOML text of any keys to the unit: every key the file gives,
-/// the related keys ([`RELATED_KEYS`]) first, then in the table's order, in the unit's text
-/// form, at most
-/// [`odo_unit::console::MAX_SET_PAIRS`] pairs per (atomic) `set`. The values are
-/// checked first as in [`parse_settings`] (over the defaults).
+/// The geometry's correlations, which the unit checks together (the matrix they form must
+/// stay consistent): one atomic `set`.
+const CORRELATION_KEYS: [Key; 3] = [
+    Key::DiametersCorrelation,
+    Key::LeftTrackCorrelation,
+    Key::RightTrackCorrelation,
+];
+
+/// The `set` lines that send a TOML text of any keys to the unit: every key the file gives, in
+/// the unit's text form, the keys checked against each other in one atomic `set` each (the
+/// related keys, [`RELATED_KEYS`], first; the geometry's correlations), then the rest in the
+/// table's order, as many pairs per line as fit the unit's line
+/// ([`odo_unit::console::MAX_LINE`] bytes, [`odo_unit::console::MAX_SET_PAIRS`] pairs). The
+/// values are checked first as in [`parse_settings`] (over the defaults).
 pub fn push_lines_of(origin: &str, text: &str) -> Result<Vec<String>> {
     let (s, given) = parse_settings(origin, text, Settings::DEFAULT)?;
-    // The keys checked against each other first, so that they share one atomic `set` (at
-    // most 9 of the 16 pairs): no intermediate combination of old and new values is refused.
-    let order = RELATED_KEYS
-        .into_iter()
-        .chain(Key::ALL.into_iter().filter(|k| !RELATED_KEYS.contains(k)));
-    let pairs: Vec<String> = order
-        .filter(|k| given.contains(k))
-        .map(|k| format!("{} {}", k.name(), value_text(&s, k)))
-        .collect();
-    if pairs.is_empty() {
+    let pair = |k: Key| format!("{} {}", k.name(), value_text(&s, k));
+    let group = |keys: &[Key]| -> Vec<String> {
+        keys.iter()
+            .filter(|k| given.contains(k))
+            .map(|&k| pair(k))
+            .collect()
+    };
+    let grouped: Vec<Key> = RELATED_KEYS.into_iter().chain(CORRELATION_KEYS).collect();
+    let mut groups = vec![group(&RELATED_KEYS), group(&CORRELATION_KEYS)];
+    groups.extend(
+        Key::ALL
+            .into_iter()
+            .filter(|k| given.contains(k) && !grouped.contains(k))
+            .map(|k| vec![pair(k)]),
+    );
+    groups.retain(|g| !g.is_empty());
+    if groups.is_empty() {
         return Err(ConfigError::NothingToSend(origin.into()).into());
     }
-    Ok(pairs
-        .chunks(odo_unit::console::MAX_SET_PAIRS)
-        .map(|c| format!("set {}", c.join(" ")))
-        .collect())
+    let mut lines: Vec<(String, usize)> = Vec::new();
+    for g in groups {
+        let words: usize = g.iter().map(|p| p.len() + 1).sum();
+        match lines.last_mut() {
+            Some((line, n))
+                if *n + g.len() <= odo_unit::console::MAX_SET_PAIRS
+                    && line.len() + words <= odo_unit::console::MAX_LINE =>
+            {
+                for p in &g {
+                    line.push(' ');
+                    line.push_str(p);
+                }
+                *n += g.len();
+            }
+            _ => lines.push((format!("set {}", g.join(" ")), g.len())),
+        }
+    }
+    Ok(lines.into_iter().map(|(l, _)| l).collect())
 }
 
 /// [`push_lines_of`] a file.

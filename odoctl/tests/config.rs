@@ -2,7 +2,7 @@
 //! and its `config push` lines carry every key bit for bit, and both sides know the same
 //! keys.
 
-use odo_unit::console::{execute, MAX_SET_PAIRS};
+use odo_unit::console::{execute, LineAssembler, MAX_LINE, MAX_SET_PAIRS};
 use odo_unit::settings::{Key, Kind, Settings, Value};
 use odo_unit::timing::{SyncMode, TimeTagPps};
 use odoctl::config::{self, ConfigError};
@@ -127,11 +127,24 @@ fn every_key_round_trips_unit_text_toml_push_unit() {
         let toml = config::render_settings(&pulled, &keys, "pulled from the unit");
         // -> `config push` lines.
         let lines = config::push_lines_of("unit.toml", &toml).unwrap();
-        assert_eq!(lines.len(), Key::COUNT.div_ceil(MAX_SET_PAIRS));
-        // -> another unit.
+        // -> another unit, through its line assembler: every line within its limits.
         let mut other = Settings::DEFAULT;
+        let mut assembler = LineAssembler::new();
         for line in &lines {
-            let (r, _) = execute(line, &mut other);
+            assert!(
+                line.len() <= MAX_LINE,
+                "case {case}: {} bytes: {line}",
+                line.len()
+            );
+            assert!(line.split_whitespace().count() <= 1 + 2 * MAX_SET_PAIRS);
+            let mut got = None;
+            for &b in line.as_bytes().iter().chain(b"\n") {
+                if let Some(r) = assembler.push(b) {
+                    got = Some(r.map(str::to_string));
+                }
+            }
+            let received = got.expect("a line").expect("within the unit's line");
+            let (r, _) = execute(&received, &mut other);
             assert!(r.ok, "case {case}: {line}: {}", r.text);
         }
         for k in Key::ALL {

@@ -101,3 +101,134 @@ fn odoctl_against_the_qemu_image() {
         String::from_utf8_lossy(&o.stderr).trim()
     );
 }
+
+/// A `pub const NAME: f64 = VALUE;` of the QEMU drive's source: its simulated truth.
+fn qemu_truth(name: &str) -> f64 {
+    let src = include_str!("../../src/board/qemu/drive.rs");
+    let line = src
+        .lines()
+        .find(|l| l.starts_with(&format!("pub const {name}: f64 = ")))
+        .unwrap_or_else(|| panic!("{name} in src/board/qemu/drive.rs"));
+    line.split('=')
+        .nth(1)
+        .unwrap()
+        .trim()
+        .trim_end_matches(';')
+        .parse()
+        .unwrap()
+}
+
+/// The calibration drive in one command against the firmware: locked to the simulated
+/// receiver's PPS, the unit forwards its GGA/GST/RMC/HDT; `record --calibrate` shows the live
+/// estimate, ends with the batch calibration of the recording and its NMEA log, which recovers
+/// the simulated chassis; `calibrate` takes the recording alone and `config push` sends the
+/// result.
+#[test]
+fn calibration_drive_in_one_command_against_the_qemu_image() {
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let Some(qemu) = qemu_support::boot(&repo, "calibration_drive_in_one_command") else {
+        return;
+    };
+    let port = qemu.port;
+    let addr = format!("tcp:127.0.0.1:{port}");
+    let start = Instant::now();
+    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+        assert!(
+            start.elapsed() < Duration::from_secs(20),
+            "QEMU's USART2 socket did not open"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let run = |args: &[&str]| {
+        for _ in 0..20 {
+            let o = odoctl(args);
+            if !String::from_utf8_lossy(&o.stderr).contains("cannot connect") {
+                return o;
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        panic!("cannot connect to {addr}");
+    };
+    let d = scratch("qemu_calibration_drive");
+    let o = run(&["config", "--port", &addr, "set", "mode", "pps"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stdout));
+    let csv = d.join("drive.csv");
+    let result = d.join("chassis.toml");
+    let started = Instant::now();
+    // Nine laps of the simulated path (20 s each) at 50 Hz.
+    let o = run(&[
+        "record",
+        "--port",
+        &addr,
+        "--out",
+        csv.to_str().unwrap(),
+        "--count",
+        "9000",
+        "--calibrate",
+        "--result",
+        result.to_str().unwrap(),
+    ]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{out}\n{err}");
+    eprintln!(
+        "record --calibrate: {:.1} s\n{out}\n{err}",
+        started.elapsed().as_secs_f64()
+    );
+    assert!(d.join("drive.nmea").is_file(), "{err}");
+    let truth = [
+        qemu_truth("TRUE_LEFT_DIAMETER"),
+        qemu_truth("TRUE_RIGHT_DIAMETER"),
+        qemu_truth("TRUE_TRACK_WIDTH"),
+    ];
+    let p = odoctl::config::read_params(&result, odo_unit::odometry::ChassisParams::DESIGNED)
+        .expect("the drive's result");
+    let g = p.geometry_uncertainty;
+    let se = [g.left_diameter_se, g.right_diameter_se, g.track_width_se].map(f64::from);
+    let est = common::lengths(&p);
+    for k in 0..3 {
+        assert!(
+            (est[k] - truth[k]).abs() <= 4.0 * se[k],
+            "parameter {k}: {} against the truth {} (standard error {})",
+            est[k],
+            truth[k],
+            se[k]
+        );
+    }
+    // The recording alone calibrates as well (the log is found beside it).
+    let again = d.join("again.toml");
+    let o = odoctl(&[
+        "calibrate",
+        "--samples",
+        csv.to_str().unwrap(),
+        "--out",
+        again.to_str().unwrap(),
+    ]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert_eq!(
+        common::lengths(
+            &odoctl::config::read_params(&again, odo_unit::odometry::ChassisParams::DESIGNED)
+                .unwrap()
+        ),
+        est
+    );
+    let o = run(&[
+        "config",
+        "--port",
+        &addr,
+        "push",
+        result.to_str().unwrap(),
+        "--no-save",
+    ]);
+    assert!(
+        o.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+}

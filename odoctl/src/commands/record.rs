@@ -104,11 +104,16 @@ pub struct Stop {
 
 /// The sample rate in a `get rate` reply.
 fn parse_rate(text: &str) -> Option<f64> {
+    parse_value(text, "rate").and_then(|v| v.parse().ok())
+}
+
+/// The value of `key` in a `get` reply (`key = value` lines).
+fn parse_value(text: &str, key: &str) -> Option<String> {
     text.lines().find_map(|l| {
         l.trim()
-            .strip_prefix("rate")
+            .strip_prefix(key)
             .and_then(|r| r.trim().strip_prefix('='))
-            .and_then(|v| v.trim().parse().ok())
+            .map(|v| v.trim().to_string())
     })
 }
 
@@ -133,6 +138,21 @@ pub fn record(
         }
     })?;
     let rate = if ok { parse_rate(&text) } else { None };
+    // The drive is matched to the receiver's epochs by the records' GNSS time tags: in pps
+    // mode the recording waits for them.
+    let mut on_gnss_time = false;
+    if live.is_some() {
+        let (ok, text) = s.command_with("get mode", REPLY_TIMEOUT, |f| {
+            if let Message::Gnss(g) = &f.message {
+                early_gnss.push(g.clone());
+            }
+        })?;
+        let mode = if ok { parse_value(&text, "mode") } else { None };
+        on_gnss_time = mode.as_deref() == Some("pps");
+        if let Some(m) = mode.filter(|m| m != "pps") {
+            eprintln!("warning: the unit is in mode {m}: its records carry no GNSS time, so the receiver's epochs can be matched to them only if its clock is GNSS time (`odoctl config --port {} set mode pps`)", port.0);
+        }
+    }
     let mut early = Vec::new();
     if reset_pose {
         // The unit answers and applies the reset at its next sample, whose record carries
@@ -150,8 +170,10 @@ pub fn record(
         writer: SegmentWriter::new(Some(out), None, rate),
         nmea: NmeaWriter::create(&nmea_path(out))?,
         watch: ReceiverWatch::default(),
+        wait_for_time: on_gnss_time,
         live: live.as_deref_mut(),
         received: 0,
+        before_time: 0,
     };
     for g in &early_gnss {
         sink.sentence(g)?;
@@ -202,10 +224,28 @@ struct Sink<'a, 'b> {
     watch: ReceiverWatch,
     live: Option<&'b mut LiveSession>,
     received: u64,
+    /// Leave out the records before the first on GNSS time (`--calibrate`: the unit has not
+    /// locked to the PPS yet).
+    wait_for_time: bool,
+    /// Records left out so.
+    before_time: u64,
 }
 
 impl Sink<'_, '_> {
     fn record(&mut self, r: &PoseRecord) -> Result<()> {
+        if self.wait_for_time && self.received == 0 && !r.flags.time_valid {
+            if self.before_time == 0 {
+                eprintln!("waiting for the unit's GNSS time (its lock to the receiver's PPS) before the first record");
+            }
+            self.before_time += 1;
+            return Ok(());
+        }
+        if self.before_time > 0 && self.received == 0 {
+            eprintln!(
+                "GNSS time from record {}: the {} records before it are left out",
+                r.sequence, self.before_time
+            );
+        }
         self.writer.push(r)?;
         self.received += 1;
         if let (Some(live), Some(row)) = (self.live.as_deref_mut(), self.writer.last_row()) {
