@@ -18,8 +18,7 @@ use odo_unit::odometry::ChassisParams;
 use odoctl::calib::live::LiveCalibration;
 use odoctl::calib::{fit_subtrajectories, Run, SubtrajectoryOptions, SUBTRAJECTORY_LENGTH};
 use odoctl::csvio::{self, Sample, SamplesLayout};
-use odoctl::reference::gps_time;
-use odoctl::reference::simulated::{receiver_epochs, write_nmea, ReceiverSim};
+use odoctl::reference::simulated::{drive_with_sentences, ReceiverSim};
 use odoctl::reference::stream::NmeaStream;
 use odoctl::simulate::{default_truth, simulate_path, PathKind, SimSettings};
 
@@ -76,31 +75,12 @@ fn drive() -> (Vec<Sample>, Vec<(usize, String)>) {
         seed: 1,
         ..Default::default()
     };
-    let mut sim = simulate_path(PathKind::Random, LENGTH, default_truth(), settings);
+    let sim = simulate_path(PathKind::Random, LENGTH, default_truth(), settings);
     let receiver = ReceiverSim {
         heading_sigma: Some(0.5f64.to_radians()),
         ..Default::default()
     };
-    let times: Vec<f64> = sim.samples.iter().map(|s| s.t).collect();
-    let epochs = receiver_epochs(&times, &sim.truth, &receiver);
-    let mut sentences = Vec::new();
-    let mut k = 0;
-    for e in &epochs {
-        let t = e.gps_time - receiver.gps_start;
-        while k + 1 < times.len() && times[k] < t - 1e-9 {
-            k += 1;
-        }
-        let mut bytes = Vec::new();
-        write_nmea(&mut bytes, std::slice::from_ref(e), 18).expect("NMEA in memory");
-        for line in String::from_utf8(bytes).expect("ASCII").lines() {
-            sentences.push((k, line.to_string()));
-        }
-    }
-    let (_, tow0) = gps_time::week_tow(receiver.gps_start);
-    for s in &mut sim.samples {
-        s.t += tow0;
-    }
-    (sim.samples, sentences)
+    drive_with_sentences(sim, &receiver, 18).expect("NMEA in memory")
 }
 
 /// One update per second of drive (its samples and sentences); the cost of each (with the

@@ -17,15 +17,12 @@ use common::{odoctl, read, scratch};
 #[path = "../../host-tests/support/qemu.rs"]
 mod qemu_support;
 
-#[test]
-fn odoctl_against_the_qemu_image() {
+/// Boots the image for `test` and waits for its USART2 socket: QEMU (killed when dropped)
+/// and the link's address; `None` when the test is skipped.
+fn boot(test: &str) -> Option<(qemu_support::Qemu, String)> {
     let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let Some(qemu) = qemu_support::boot(&repo, "odoctl_against_the_qemu_image") else {
-        return;
-    };
+    let qemu = qemu_support::boot(&repo, test)?;
     let port = qemu.port;
-    let addr = format!("tcp:127.0.0.1:{port}");
-    // Wait for QEMU's socket.
     let start = Instant::now();
     while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
         assert!(
@@ -34,19 +31,30 @@ fn odoctl_against_the_qemu_image() {
         );
         std::thread::sleep(Duration::from_millis(50));
     }
+    Some((qemu, format!("tcp:127.0.0.1:{port}")))
+}
+
+/// `odoctl ARGS`, retried while it cannot connect: QEMU may still be dropping the probe
+/// connection of [`boot`].
+fn run_retrying(addr: &str, args: &[&str]) -> std::process::Output {
+    for _ in 0..20 {
+        let o = odoctl(args);
+        if !String::from_utf8_lossy(&o.stderr).contains("cannot connect") {
+            return o;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    panic!("cannot connect to {addr}");
+}
+
+#[test]
+fn odoctl_against_the_qemu_image() {
+    let Some((_qemu, addr)) = boot("odoctl_against_the_qemu_image") else {
+        return;
+    };
+    let run = |args: &[&str]| run_retrying(&addr, args);
     let d = scratch("qemu");
     let started = Instant::now();
-    // Retry connecting once: QEMU may still be dropping the probe connection above.
-    let run = |args: &[&str]| {
-        for _ in 0..20 {
-            let o = odoctl(args);
-            if !String::from_utf8_lossy(&o.stderr).contains("cannot connect") {
-                return o;
-            }
-            std::thread::sleep(Duration::from_millis(100));
-        }
-        panic!("cannot connect to {addr}");
-    };
     let o = run(&["config", "--port", &addr, "set", "track_width", "0.57"]);
     assert!(
         o.status.success(),
@@ -125,30 +133,10 @@ fn qemu_truth(name: &str) -> f64 {
 /// result.
 #[test]
 fn calibration_drive_in_one_command_against_the_qemu_image() {
-    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let Some(qemu) = qemu_support::boot(&repo, "calibration_drive_in_one_command") else {
+    let Some((_qemu, addr)) = boot("calibration_drive_in_one_command") else {
         return;
     };
-    let port = qemu.port;
-    let addr = format!("tcp:127.0.0.1:{port}");
-    let start = Instant::now();
-    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
-        assert!(
-            start.elapsed() < Duration::from_secs(20),
-            "QEMU's USART2 socket did not open"
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    let run = |args: &[&str]| {
-        for _ in 0..20 {
-            let o = odoctl(args);
-            if !String::from_utf8_lossy(&o.stderr).contains("cannot connect") {
-                return o;
-            }
-            std::thread::sleep(Duration::from_millis(100));
-        }
-        panic!("cannot connect to {addr}");
-    };
+    let run = |args: &[&str]| run_retrying(&addr, args);
     let d = scratch("qemu_calibration_drive");
     let o = run(&["config", "--port", &addr, "set", "mode", "pps"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stdout));

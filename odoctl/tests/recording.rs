@@ -12,8 +12,7 @@ use std::time::Duration;
 use common::{odoctl, scratch};
 use odo_unit::protocol::GnssSentence;
 use odoctl::csvio::{self, Sample, SamplesLayout};
-use odoctl::reference::gps_time;
-use odoctl::reference::simulated::{receiver_epochs, write_nmea, ReceiverSim};
+use odoctl::reference::simulated::{drive_with_sentences, ReceiverSim};
 use odoctl::simulate::{self, default_truth, PathKind, SimSettings};
 
 /// A drive at `rate` Hz with its receiver's sentences at 10 Hz: the samples (t as a unit
@@ -25,34 +24,16 @@ fn drive(length: f64, rate: f64, leap: i32) -> (Vec<Sample>, Vec<(usize, String)
         seed: 7,
         ..Default::default()
     };
-    let mut sim = simulate::simulate_path(PathKind::Estimation, length, default_truth(), settings);
+    let sim = simulate::simulate_path(PathKind::Estimation, length, default_truth(), settings);
     let receiver = ReceiverSim {
         heading_sigma: Some(0.5f64.to_radians()),
         float_fraction: 0.0,
         ..Default::default()
     };
-    let times: Vec<f64> = sim.samples.iter().map(|s| s.t).collect();
-    let epochs = receiver_epochs(&times, &sim.truth, &receiver);
-    let mut sentences = Vec::new();
-    let mut k = 0;
-    for e in &epochs {
-        let t = e.gps_time - receiver.gps_start;
-        while k + 1 < times.len() && times[k] < t - 1e-9 {
-            k += 1;
-        }
-        let mut bytes = Vec::new();
-        write_nmea(&mut bytes, std::slice::from_ref(e), leap).unwrap();
-        for line in String::from_utf8(bytes).unwrap().lines() {
-            sentences.push((k, line.to_string()));
-        }
-    }
+    let (samples, mut sentences) = drive_with_sentences(sim, &receiver, leap).unwrap();
     // `record --count` ends at the last record: the sentences after it are never read.
-    sentences.retain(|(k, _)| k + 1 < times.len());
-    let (_, tow0) = gps_time::week_tow(receiver.gps_start);
-    for s in &mut sim.samples {
-        s.t += tow0;
-    }
-    (sim.samples, sentences)
+    sentences.retain(|(k, _)| k + 1 < samples.len());
+    (samples, sentences)
 }
 
 /// The frames of `sentences`, numbered from 0 with the numbers in `skipped` left out (not

@@ -255,6 +255,40 @@ pub fn write_pos(w: &mut dyn Write, epochs: &[Epoch], time: PosTime) -> Result<(
     Ok(())
 }
 
+/// Sentences each with the index of the sample after which the unit receives it.
+pub type TimedSentences = Vec<(usize, String)>;
+
+/// A simulated drive as a unit locked to its receiver records it: `sim`'s samples with `t` the
+/// GPS time of week of the receiver's start (`sim.gps_start`), and the receiver's NMEA
+/// sentences (leap seconds `leap`), each with the index of the sample after which the unit
+/// receives it.
+pub fn drive_with_sentences(
+    mut run: crate::simulate::SimRun,
+    sim: &ReceiverSim,
+    leap: i32,
+) -> Result<(Vec<crate::csvio::Sample>, TimedSentences)> {
+    let times: Vec<f64> = run.samples.iter().map(|s| s.t).collect();
+    let epochs = receiver_epochs(&times, &run.truth, sim);
+    let mut sentences = Vec::new();
+    let mut k = 0;
+    for e in &epochs {
+        let t = e.gps_time - sim.gps_start;
+        while k + 1 < times.len() && times[k] < t - 1e-9 {
+            k += 1;
+        }
+        let mut bytes = Vec::new();
+        write_nmea(&mut bytes, std::slice::from_ref(e), leap)?;
+        for line in String::from_utf8_lossy(&bytes).lines() {
+            sentences.push((k, line.to_string()));
+        }
+    }
+    let (_, tow0) = gps_time::week_tow(sim.gps_start);
+    for s in &mut run.samples {
+        s.t += tow0;
+    }
+    Ok((run.samples, sentences))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
