@@ -14,7 +14,8 @@ use crate::calib::{self, Calibration};
 use crate::cli::{CalibrateArgs, ReferenceArgs};
 use crate::config as cfg;
 use crate::csvio::{self, RefPoint, Sample};
-use crate::reference::matched::reference_for_samples;
+use crate::reference::clock::ClockFit;
+use crate::reference::matched::reference_and_clock_for_samples;
 use crate::stats::{coverage, summarize, Summary};
 
 use super::reference_options;
@@ -80,7 +81,7 @@ pub fn filter_refined(c: &Calibration) -> bool {
 pub fn run(a: &CalibrateArgs) -> Result<ExitCode> {
     let started = Instant::now();
     let timer = calib::PhaseTimer::new();
-    let (samples, reference) = read_run(&a.samples, &a.reference, &a.reference_input)?;
+    let (samples, reference, clock) = read_run(&a.samples, &a.reference, &a.reference_input)?;
     timer.lap("read CSV");
     let initial = initial_estimate(a)?;
     let names = (
@@ -88,7 +89,10 @@ pub fn run(a: &CalibrateArgs) -> Result<ExitCode> {
         a.reference.display().to_string(),
     );
     let opts = &options::calibration_options(a)?;
-    let c = calib::calibrate(&samples, &reference, (&names.0, &names.1), &initial, opts)?;
+    let mut c = calib::calibrate(&samples, &reference, (&names.0, &names.1), &initial, opts)?;
+    if let Some(k) = &clock {
+        add_clock_rate_uncertainty(&mut c, k);
+    }
     timer.lap("calibration");
     let noise = calib::ReferenceNoise {
         horizontal: opts.reference_sigma,
@@ -96,20 +100,37 @@ pub fn run(a: &CalibrateArgs) -> Result<ExitCode> {
     };
     let errors = ErrorSummary::of(&c, &noise);
     report::print(&c, &initial, opts, &errors);
-    write::write_result(a, &c, opts, &errors)?;
+    write::write_result(a, &c, opts, &errors, clock.as_ref())?;
     timer.lap("report");
     crate::outln!("done in {:.2} s", started.elapsed().as_secs_f64());
     export_ros(a)?;
     Ok(ExitCode::SUCCESS)
 }
 
+/// Adds what an estimated clock rate contributes to the diameters' standard errors: a rate
+/// error scales the reference's distances per sample time, and so both diameters, by as
+/// much (`D ppm_se 1e-6`, in quadrature); the track width, fitted from the heading change
+/// per count difference and the diameters, keeps its own.
+fn add_clock_rate_uncertainty(c: &mut Calibration, clock: &ClockFit) {
+    let g = &mut c.geometry;
+    let d = [g.params.left_diameter, g.params.right_diameter];
+    for (k, d) in d.iter().enumerate() {
+        let extra = d * clock.ppm_se * 1e-6;
+        for se in [&mut g.std_errors[k], &mut g.robust_std_errors[k]] {
+            if let Some(v) = se {
+                *v = v.hypot(extra);
+            }
+        }
+    }
+}
+
 /// Reads the samples and the reference (on two cores: the files are independent), the
-/// reference aligned to the samples.
+/// reference aligned to the samples, and a trajectory reference's clock.
 fn read_run(
     samples: &Path,
     reference: &Path,
     input: &ReferenceArgs,
-) -> Result<(Vec<Sample>, Vec<RefPoint>)> {
+) -> Result<(Vec<Sample>, Vec<RefPoint>, Option<ClockFit>)> {
     let (samples, reference) = std::thread::scope(|scope| {
         let reference = scope
             .spawn(|| reference_options(input).and_then(|o| crate::reference::load(reference, &o)));
@@ -117,8 +138,8 @@ fn read_run(
         (samples, reference.join().expect("CSV reader panicked"))
     });
     let (samples, reference) = (samples?, reference?);
-    let reference = reference_for_samples(&reference, &samples)?;
-    Ok((samples, reference))
+    let (reference, clock) = reference_and_clock_for_samples(&reference, &samples)?;
+    Ok((samples, reference, clock))
 }
 
 /// The first estimate: `--initial` (or the designed values) with the `--set`s over it.
