@@ -2,9 +2,10 @@
 //! `odo-bench indoor DIR`. Figures only: nothing here fails on noise.
 //!
 //! - Trajectory references ([`CASES`]: motion capture, SLAM): runs of the release `odoctl`
-//!   (`$ODOCTL`, else the `odoctl` beside this binary), `simulate --tum` then `calibrate
-//!   --fit-antenna` with the clock estimated, files in DIR; per seed the reference frame, the
-//!   marker's yaw, the clock offset and the clock rate differ.
+//!   (`$ODOCTL`, else the `odoctl` beside this binary), `simulate --path room --tum` (laps
+//!   within 8 x 8 m) then `calibrate --fit-antenna` with the clock estimated, files in DIR; per
+//!   seed the path's laps, the reference frame, the marker's yaw, the clock offset and the
+//!   clock rate differ.
 //! - The square test: five clockwise and five counter-clockwise 4 m squares and a 10 m
 //!   straight simulated in-process, end positions measured to 2 mm and the squares' end
 //!   headings to 0.5 degrees, read and fitted as `odoctl umbmark` reads and fits them.
@@ -174,6 +175,8 @@ fn trajectory_seed(case: &Case, dir: &Path, seed: u64) -> Result<([f64; 7], [f64
         "simulate",
         "--seed",
         &seed_s,
+        "--path",
+        "room",
         "--length",
         &length,
         "--rate",
@@ -287,7 +290,7 @@ fn trajectory_table(case: &Case, root: &Path) {
         }
     }
     println!(
-        "{}: {} m of the estimation path at 0.5 m/s, samples at {} Hz, poses at {} Hz, position noise {} mm RMS, yaw noise {} degrees, {}; seeds 1 to {n}{}.",
+        "{}: {} m of laps within 8 x 8 m (`simulate --path room`) at 0.5 m/s, samples at {} Hz, poses at {} Hz, position noise {} mm RMS, yaw noise {} degrees, {}; seeds 1 to {n}{}.",
         capitalised(case.label),
         case.length,
         case.rate,
