@@ -116,10 +116,11 @@ fn add_clock_rate_uncertainty(c: &mut Calibration, clock: &ClockFit) {
     let d = [g.params.left_diameter, g.params.right_diameter];
     for (k, d) in d.iter().enumerate() {
         let extra = d * clock.ppm_se * 1e-6;
-        for se in [&mut g.std_errors[k], &mut g.robust_std_errors[k]] {
-            if let Some(v) = se {
-                *v = v.hypot(extra);
-            }
+        for v in [&mut g.std_errors[k], &mut g.robust_std_errors[k]]
+            .into_iter()
+            .flatten()
+        {
+            *v = v.hypot(extra);
         }
     }
 }
