@@ -10,7 +10,8 @@
 //!   straight simulated in-process, end positions measured to 2 mm and the squares' end
 //!   headings to 0.5 degrees, read and fitted as `odoctl umbmark` reads and fits them.
 //!
-//! Per estimate: the RMS error to the truth, the RMS reported standard error (SE), and the
+//! Per estimate: the mean and the RMS error to the truth (a mean beyond the RMS SE over the
+//! square root of the seed count is a bias), the RMS reported standard error (SE), and the
 //! share of the seeds whose error is within 2 and within 3 reported SE. `BENCH_INDOOR_SEEDS`
 //! sets one seed count for every table.
 
@@ -77,6 +78,7 @@ const CASES: [Case; 3] = [
 /// Errors and reported standard errors of one estimate over the seeds.
 #[derive(Default)]
 struct Stat {
+    sum: f64,
     sq: f64,
     sq_se: f64,
     within2: usize,
@@ -87,6 +89,7 @@ struct Stat {
 impl Stat {
     /// Adds one estimate's error and its reported standard error (the same unit).
     fn add(&mut self, error: f64, se: f64) {
+        self.sum += error;
         self.sq += error * error;
         self.sq_se += se * se;
         self.within2 += usize::from(error.abs() <= 2.0 * se);
@@ -94,11 +97,12 @@ impl Stat {
         self.n += 1;
     }
 
-    /// `| RMS error | RMS SE | within 2 SE | within 3 SE |` with `decimals`.
+    /// `| mean error | RMS error | RMS SE | within 2 SE | within 3 SE |` with `decimals`.
     fn cells(&self, decimals: usize) -> String {
         let n = self.n.max(1) as f64;
         format!(
-            "{:.decimals$} | {:.decimals$} | {:.0} % | {:.0} %",
+            "{:+.decimals$} | {:.decimals$} | {:.decimals$} | {:.0} % | {:.0} %",
+            self.sum / n,
             (self.sq / n).sqrt(),
             (self.sq_se / n).sqrt(),
             100.0 * self.within2 as f64 / n,
@@ -313,8 +317,8 @@ fn trajectory_table(case: &Case, root: &Path) {
         }
     );
     println!();
-    println!("| estimate | RMS error | RMS reported SE | within 2 SE | within 3 SE | target (RMS error) |");
-    println!("| --- | ---: | ---: | ---: | ---: | --- |");
+    println!("| estimate | mean error | RMS error | RMS reported SE | within 2 SE | within 3 SE | target (RMS error) |");
+    println!("| --- | ---: | ---: | ---: | ---: | ---: | --- |");
     for ((label, unit, decimals, target), s) in TRAJECTORY_ROWS.iter().zip(&stats) {
         let target = if case.label == "motion capture" {
             target
@@ -447,8 +451,8 @@ fn square_table(root: &Path) {
         n as usize - failed
     );
     println!();
-    println!("| estimate | RMS error | RMS reported SE | within 2 SE | within 3 SE | target (RMS error) |");
-    println!("| --- | ---: | ---: | ---: | ---: | --- |");
+    println!("| estimate | mean error | RMS error | RMS reported SE | within 2 SE | within 3 SE | target (RMS error) |");
+    println!("| --- | ---: | ---: | ---: | ---: | ---: | --- |");
     for ((label, decimals, target), s) in [
         ("left diameter (mm)", 4, "-"),
         ("right diameter (mm)", 4, "-"),
