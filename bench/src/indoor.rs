@@ -1,15 +1,18 @@
 //! Indoor calibration accuracy, as Markdown tables for docs/RESULTS.md (`bench/run`):
 //! `odo-bench indoor DIR`. Figures only: nothing here fails on noise.
 //!
-//! - Trajectory references ([`CASES`]: motion capture, SLAM): runs of the release `odoctl`
-//!   (`$ODOCTL`, else the `odoctl` beside this binary), `simulate --tum` then `calibrate
-//!   --fit-antenna` with the clock estimated, files in DIR; per seed the reference frame, the
-//!   marker's yaw, the clock offset and the clock rate differ.
+//! - Trajectory references ([`CASES`]: motion capture, SLAM, and RTK on the same runs for
+//!   comparison): runs of the release `odoctl` (`$ODOCTL`, else the `odoctl` beside this
+//!   binary), `simulate --path room --tum` (laps within 8 x 8 m) then `calibrate
+//!   --fit-antenna` with the clock estimated (RTK: against the run's reference CSV), files in
+//!   DIR; per seed the path's laps, the reference frame, the marker's yaw, the clock offset and
+//!   the clock rate differ.
 //! - The square test: five clockwise and five counter-clockwise 4 m squares and a 10 m
 //!   straight simulated in-process, end positions measured to 2 mm and the squares' end
 //!   headings to 0.5 degrees, read and fitted as `odoctl umbmark` reads and fits them.
 //!
-//! Per estimate: the RMS error to the truth, the RMS reported standard error (SE), and the
+//! Per estimate: the mean and the RMS error to the truth (a mean beyond the RMS SE over the
+//! square root of the seed count is a bias), the RMS reported standard error (SE), and the
 //! share of the seeds whose error is within 2 and within 3 reported SE. `BENCH_INDOOR_SEEDS`
 //! sets one seed count for every table.
 
@@ -25,11 +28,13 @@ use odoctl::simulate::{default_truth, simulate, Rng, Segment, SimOptions, SimSet
 /// The marker's lever arm from the axle centre of every trajectory run: forward, left (m).
 const MARKER: (f64, f64) = (0.25, -0.08);
 
-/// A simulated trajectory reference: its label, the samples' rate (Hz), a pose every this
-/// many samples, position noise (m), yaw noise (degrees), drift (m/sqrt(s), `simulate
-/// --trajectory-drift`), length (m), seeds by default.
+/// A simulated trajectory reference: its label, whether the run is calibrated against the
+/// simulator's RTK reference CSV instead (8 mm, 0.5 degrees, the unit's clock) for comparison,
+/// the samples' rate (Hz), a pose every this many samples, position noise (m), yaw noise
+/// (degrees), drift (m/sqrt(s), `simulate --trajectory-drift`), length (m), seeds by default.
 struct Case {
     label: &'static str,
+    rtk: bool,
     rate: f64,
     every: u32,
     sigma: f64,
@@ -40,9 +45,21 @@ struct Case {
 }
 
 /// The trajectory references of the tables.
-const CASES: [Case; 3] = [
+const CASES: [Case; 4] = [
+    Case {
+        label: "RTK",
+        rtk: true,
+        rate: 100.0,
+        every: 1,
+        sigma: 0.0005,
+        yaw_sigma_deg: 0.1,
+        drift: 0.0,
+        length: 300.0,
+        seeds: 20,
+    },
     Case {
         label: "motion capture",
+        rtk: false,
         rate: 100.0,
         every: 1,
         sigma: 0.0005,
@@ -53,6 +70,7 @@ const CASES: [Case; 3] = [
     },
     Case {
         label: "SLAM without drift",
+        rtk: false,
         rate: 100.0,
         every: 10,
         sigma: 0.01,
@@ -63,6 +81,7 @@ const CASES: [Case; 3] = [
     },
     Case {
         label: "SLAM with drift",
+        rtk: false,
         rate: 100.0,
         every: 10,
         sigma: 0.01,
@@ -76,6 +95,7 @@ const CASES: [Case; 3] = [
 /// Errors and reported standard errors of one estimate over the seeds.
 #[derive(Default)]
 struct Stat {
+    sum: f64,
     sq: f64,
     sq_se: f64,
     within2: usize,
@@ -84,8 +104,13 @@ struct Stat {
 }
 
 impl Stat {
-    /// Adds one estimate's error and its reported standard error (the same unit).
+    /// Adds one estimate's error and its reported standard error (the same unit); not an
+    /// error that is not finite (an estimate the reference does not give).
     fn add(&mut self, error: f64, se: f64) {
+        if !error.is_finite() {
+            return;
+        }
+        self.sum += error;
         self.sq += error * error;
         self.sq_se += se * se;
         self.within2 += usize::from(error.abs() <= 2.0 * se);
@@ -93,11 +118,12 @@ impl Stat {
         self.n += 1;
     }
 
-    /// `| RMS error | RMS SE | within 2 SE | within 3 SE |` with `decimals`.
+    /// `| mean error | RMS error | RMS SE | within 2 SE | within 3 SE |` with `decimals`.
     fn cells(&self, decimals: usize) -> String {
         let n = self.n.max(1) as f64;
         format!(
-            "{:.decimals$} | {:.decimals$} | {:.0} % | {:.0} %",
+            "{:+.decimals$} | {:.decimals$} | {:.decimals$} | {:.0} % | {:.0} %",
+            self.sum / n,
             (self.sq / n).sqrt(),
             (self.sq_se / n).sqrt(),
             100.0 * self.within2 as f64 / n,
@@ -174,6 +200,8 @@ fn trajectory_seed(case: &Case, dir: &Path, seed: u64) -> Result<([f64; 7], [f64
         "simulate",
         "--seed",
         &seed_s,
+        "--path",
+        "room",
         "--length",
         &length,
         "--rate",
@@ -208,13 +236,17 @@ fn trajectory_seed(case: &Case, dir: &Path, seed: u64) -> Result<([f64; 7], [f64
         "--samples",
         &samples,
         "--reference",
-        &tum,
+        if case.rtk { &reference } else { &tum },
         "--out",
         &out,
         "--no-delta",
         "--fit-antenna",
     ])?;
-    let [eo, so, er, sr] = clock_line(&stdout).ok_or("no clock line in calibrate's output")?;
+    let [eo, so, er, sr] = if case.rtk {
+        [offset, 0.0, ppm, 0.0].map(|v| v + f64::NAN)
+    } else {
+        clock_line(&stdout).ok_or("no clock line in calibrate's output")?
+    };
     let text = std::fs::read_to_string(&out).map_err(|e| format!("{out}: {e}"))?;
     let t: toml::Table = text.parse().map_err(|e| format!("{out}: {e}"))?;
     let fit = t.get("fit").and_then(|f| f.as_table()).ok_or("no [fit]")?;
@@ -286,38 +318,48 @@ fn trajectory_table(case: &Case, root: &Path) {
             }
         }
     }
-    println!(
-        "{}: {} m of the estimation path at 0.5 m/s, samples at {} Hz, poses at {} Hz, position noise {} mm RMS, yaw noise {} degrees, {}; seeds 1 to {n}{}.",
-        capitalised(case.label),
-        case.length,
-        case.rate,
-        case.rate / case.every as f64,
-        case.sigma * 1e3,
-        case.yaw_sigma_deg,
-        if case.drift > 0.0 {
-            format!(
-                "a drift of the positions by a random walk of {} mm/sqrt(s) per axis (RMS {:.0} mm after 100 s)",
-                case.drift * 1e3,
-                case.drift * 1e4
-            )
-        } else {
-            "no drift".into()
-        },
-        if failed > 0 {
-            format!(" ({failed} failed, left out)")
-        } else {
-            String::new()
-        }
-    );
+    let failed = if failed > 0 {
+        format!(" ({failed} failed, left out)")
+    } else {
+        String::new()
+    };
+    if case.rtk {
+        println!(
+            "RTK, for comparison: the motion-capture runs calibrated against the simulator's reference CSV at the marker instead (8 mm horizontal RMS, heading noise 0.5 degrees, {} Hz on the unit's clock); seeds 1 to {n}{failed}.",
+            case.rate
+        );
+    } else {
+        println!(
+            "{}: {} m of laps within 8 x 8 m (`simulate --path room`) at 0.5 m/s, samples at {} Hz, poses at {} Hz, position noise {} mm RMS, yaw noise {} degrees, {}; seeds 1 to {n}{failed}.",
+            capitalised(case.label),
+            case.length,
+            case.rate,
+            case.rate / case.every as f64,
+            case.sigma * 1e3,
+            case.yaw_sigma_deg,
+            if case.drift > 0.0 {
+                format!(
+                    "a drift of the positions by a random walk of {} mm/sqrt(s) per axis (RMS {:.0} mm after 100 s)",
+                    case.drift * 1e3,
+                    case.drift * 1e4
+                )
+            } else {
+                "no drift".into()
+            },
+        );
+    }
     println!();
-    println!("| estimate | RMS error | RMS reported SE | within 2 SE | within 3 SE | target (RMS error) |");
-    println!("| --- | ---: | ---: | ---: | ---: | --- |");
+    println!("| estimate | mean error | RMS error | RMS reported SE | within 2 SE | within 3 SE | target (RMS error) |");
+    println!("| --- | ---: | ---: | ---: | ---: | ---: | --- |");
     for ((label, unit, decimals, target), s) in TRAJECTORY_ROWS.iter().zip(&stats) {
         let target = if case.label == "motion capture" {
             target
         } else {
             "-"
         };
+        if s.n == 0 {
+            continue;
+        }
         println!("| {label} ({unit}) | {} | {target} |", s.cells(*decimals));
     }
     println!();
@@ -444,8 +486,8 @@ fn square_table(root: &Path) {
         n as usize - failed
     );
     println!();
-    println!("| estimate | RMS error | RMS reported SE | within 2 SE | within 3 SE | target (RMS error) |");
-    println!("| --- | ---: | ---: | ---: | ---: | --- |");
+    println!("| estimate | mean error | RMS error | RMS reported SE | within 2 SE | within 3 SE | target (RMS error) |");
+    println!("| --- | ---: | ---: | ---: | ---: | ---: | --- |");
     for ((label, decimals, target), s) in [
         ("left diameter (mm)", 4, "-"),
         ("right diameter (mm)", 4, "-"),

@@ -54,6 +54,12 @@ pub enum PathKind {
     Validation,
     /// Random straights and arcs (seeded).
     Random,
+    /// Laps that stay within about 6.5 x 6 m around the start (a motion-capture volume): per lap a
+    /// clockwise and a counter-clockwise stadium (straights of 2-3.5 m, half circles of
+    /// 0.8-1.5 m radius), a full circle each way and a full turn on the spot each way, the
+    /// lengths and radii drawn per lap (seeded), so that no two laps are alike; laps until
+    /// `length`.
+    Room,
 }
 
 /// The default true chassis of `simulate`: the paper's final estimates (Table 2) with its
@@ -104,6 +110,7 @@ pub fn path(kind: PathKind, length: f64, rng: &mut Rng) -> Vec<Segment> {
             Arc(0.7, -180.0 * d),
             Straight(3.0),
         ],
+        PathKind::Room => return room_laps(length, rng),
         PathKind::Random => {
             let mut v = Vec::new();
             let mut total = 0.0;
@@ -127,6 +134,41 @@ pub fn path(kind: PathKind, length: f64, rng: &mut Rng) -> Vec<Segment> {
             other => other,
         })
         .collect()
+}
+
+/// The laps of [`PathKind::Room`] until `length` metres: each lap ends where it starts, with
+/// the heading it starts with.
+fn room_laps(length: f64, rng: &mut Rng) -> Vec<Segment> {
+    use Segment::*;
+    let mut v = Vec::new();
+    let mut total = 0.0;
+    while total < length {
+        let mut draw = |lo: f64, hi: f64| lo + (hi - lo) * rng.uniform();
+        let (l1, r1, l2, r2) = (
+            draw(2.0, 3.5),
+            draw(0.8, 1.5),
+            draw(2.0, 3.5),
+            draw(0.8, 1.5),
+        );
+        let (c1, c2) = (draw(0.6, 1.2), draw(0.6, 1.2));
+        let lap = [
+            Straight(l1),
+            Arc(r1, PI),
+            Straight(l1),
+            Arc(r1, PI),
+            Arc(c1, -2.0 * PI),
+            Spin(2.0 * PI),
+            Straight(l2),
+            Arc(r2, -PI),
+            Straight(l2),
+            Arc(r2, -PI),
+            Arc(c2, 2.0 * PI),
+            Spin(-2.0 * PI),
+        ];
+        total += lap.iter().map(seg_length).sum::<f64>();
+        v.extend(lap);
+    }
+    v
 }
 
 fn seg_length(s: &Segment) -> f64 {
@@ -511,6 +553,32 @@ impl EccentricWheel {
 mod tests {
     use super::*;
     use odo_unit::odometry::Pose;
+
+    #[test]
+    fn room_laps_stay_in_an_8_by_8_m_volume() {
+        let settings = SimSettings {
+            rate: 10.0,
+            seed: 7,
+            ..SimSettings::default()
+        };
+        let sim = simulate_path(PathKind::Room, 300.0, default_truth(), settings);
+        let (x, y): (Vec<f64>, Vec<f64>) = sim.truth.iter().map(|p| (p.0, p.1)).unzip();
+        let extent = |v: &[f64]| {
+            v.iter().fold(f64::NEG_INFINITY, |a, b| a.max(*b))
+                - v.iter().fold(f64::INFINITY, |a, b| a.min(*b))
+        };
+        assert!(
+            extent(&x) < 8.0 && extent(&y) < 8.0,
+            "{} {}",
+            extent(&x),
+            extent(&y)
+        );
+        // Laps until the length, no two alike.
+        let segs = path(PathKind::Room, 300.0, &mut Rng::new(1));
+        let total: f64 = segs.iter().map(seg_length).sum();
+        assert!((300.0..350.0).contains(&total), "{total}");
+        assert_ne!(segs[0], segs[12]);
+    }
 
     #[test]
     fn an_eccentric_wheel_rolls_its_wheel_function() {

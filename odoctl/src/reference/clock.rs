@@ -18,9 +18,11 @@
 //!    per window of [`WINDOW`] m of the trajectory's path (which the slip's drift cannot run far
 //!    from), and, on windows that are straights, of the position along the direction of travel
 //!    against `d_w + k S(t)` (the marker moves with the chassis there), each kind weighted by
-//!    its residuals' RMS; over `(a, b, k, offset, rate)` by Gauss-Newton with the windows'
-//!    constants eliminated; standard errors by the delete-one-window jackknife (the windows'
-//!    errors are independent of each other's, not the poses'). A time shift of a constant
+//!    its residuals' RMS (less the windows' constants); over `(a, b, k, offset, rate)` by
+//!    Gauss-Newton with the windows' constants eliminated, the offset's and the rate's columns
+//!    from the count rates over [`RATE_HALF_SPAN`] either side of each instant; standard
+//!    errors by the delete-one-window jackknife (the windows' errors are independent of each
+//!    other's, not the poses'). A time shift of a constant
 //!    rate is a constant, which the windows' constants absorb: the offset is seen where the
 //!    yaw rate (or the speed on a straight) changes within a window.
 
@@ -114,6 +116,32 @@ fn counts_at(samples: &[Sample], t: f64, hint: &mut usize) -> Option<[f64; 4]> {
         (u(b) - u(a)) / dt,
         (v(b) - v(a)) / dt,
     ])
+}
+
+/// Half the span (s) over which [`smoothed_rates`] takes the count rates.
+pub const RATE_HALF_SPAN: f64 = 0.05;
+
+/// The counts `c` at `t` ([`counts_at`]) with their rates taken over `t +- RATE_HALF_SPAN`
+/// (clamped to the samples) instead of between the two samples around `t`. The rates are
+/// the fit's sensitivity to a time shift; taken between two samples they jitter by a count
+/// per sample interval, and that jitter is correlated with the quantisation error of the
+/// interpolated counts at `t`: it would pull the clock towards instants halfway between
+/// samples (where interpolation averages the quantisation away), and so bias the rate.
+fn smoothed_rates(samples: &[Sample], t: f64, c: [f64; 4], hints: &mut [usize; 2]) -> [f64; 4] {
+    let (t0, t1) = (samples[0].t, samples[samples.len() - 1].t);
+    let (lo, hi) = ((t - RATE_HALF_SPAN).max(t0), (t + RATE_HALF_SPAN).min(t1));
+    match (
+        counts_at(samples, lo, &mut hints[0]),
+        counts_at(samples, hi, &mut hints[1]),
+    ) {
+        (Some(a), Some(b)) if hi > lo => [
+            c[0],
+            c[1],
+            (b[0] - a[0]) / (hi - lo),
+            (b[1] - a[1]) / (hi - lo),
+        ],
+        _ => c,
+    }
 }
 
 /// The yaw (unwrapped, rad) at stamp `s`, linear between poses; `None` outside.
@@ -237,7 +265,8 @@ const RATE: usize = 4;
 struct Rows {
     r: Vec<f64>,
     j: Vec<[f64; NP]>,
-    /// Sum of squares of the yaw and the position residuals (unweighted), and their counts.
+    /// Sum of squares of the yaw and the position residuals (unweighted, less the window's
+    /// constant), and their counts.
     ss: [f64; 2],
     n: [usize; 2],
 }
@@ -311,7 +340,7 @@ fn rows(
     s_mid: f64,
     weight: [f64; 2],
 ) -> Vec<Rows> {
-    let mut hint = 0;
+    let (mut hint, mut hints) = (0, [0, 0]);
     let mut out = Vec::with_capacity(windows.len());
     for win in windows {
         let mut w = Rows::default();
@@ -319,30 +348,30 @@ fn rows(
         for e in &poses[win.poses.clone()] {
             let t = e.s + p[OFFSET] + p[RATE] * (e.s - s_mid);
             if let Some(c) = counts_at(samples, t, &mut hint) {
-                at.push((e, c));
+                at.push((e, smoothed_rates(samples, t, c, &mut hints)));
             }
         }
         for (e, [u, sc, du, ds]) in &at {
             let rate = p[0] * du + p[1] * ds;
             let r = e.yaw - p[0] * u - p[1] * sc;
-            w.ss[0] += r * r;
             w.n[0] += 1;
             w.r.push(weight[0] * r);
             w.j.push([u, sc, &0.0, &rate, &(rate * (e.s - s_mid))].map(|v| weight[0] * v));
         }
         demean(&mut w, 0);
+        w.ss[0] = w.r.iter().map(|r| (r / weight[0]).powi(2)).sum();
         if let (Some((ux, uy)), Some((first, _))) = (win.along, at.first()) {
             let from = w.r.len();
             for (e, [_, sc, _, ds]) in &at {
                 let xi = (e.x - first.x) * ux + (e.y - first.y) * uy;
                 let rate = p[2] * ds;
                 let r = xi - p[2] * sc;
-                w.ss[1] += r * r;
                 w.n[1] += 1;
                 w.r.push(weight[1] * r);
                 w.j.push([&0.0, &0.0, sc, &rate, &(rate * (e.s - s_mid))].map(|v| weight[1] * v));
             }
             demean(&mut w, from);
+            w.ss[1] = w.r[from..].iter().map(|r| (r / weight[1]).powi(2)).sum();
         }
         out.push(w);
     }

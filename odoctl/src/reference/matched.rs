@@ -6,6 +6,7 @@ use std::path::Path;
 
 use anyhow::Result;
 
+use super::clock::ClockFit;
 use super::{load, Reference, ReferenceOptions, TimeScale};
 use crate::csvio::{self, RefPoint, Sample};
 
@@ -13,12 +14,20 @@ use crate::csvio::{self, RefPoint, Sample};
 /// samples' time (refused when they do not overlap); a trajectory interpolated at the sample
 /// instants ([`Reference::points_for`]); with a summary of what was used on stdout.
 pub fn reference_for_samples(r: &Reference, samples: &[Sample]) -> Result<Vec<RefPoint>> {
-    let (points, matching) = r.points_for(samples)?;
+    reference_and_clock_for_samples(r, samples).map(|(p, _)| p)
+}
+
+/// [`reference_for_samples`] with a trajectory's clock, when the reference is one.
+pub fn reference_and_clock_for_samples(
+    r: &Reference,
+    samples: &[Sample],
+) -> Result<(Vec<RefPoint>, Option<ClockFit>)> {
+    let (points, matching, clock) = r.points_and_clock(samples)?;
     print_summary(r);
     if let Some(m) = matching {
         crate::outln!("  {m}");
     }
-    Ok(points)
+    Ok((points, clock))
 }
 
 /// What of a receiver log was used, on stdout (nothing for a REFERENCE CSV).

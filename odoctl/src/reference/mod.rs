@@ -879,12 +879,20 @@ impl Reference {
     /// ([`trajectory::resample`]), with a line saying what was matched; any other reference
     /// as [`Reference::ref_points`] gives it, with no line.
     pub fn points_for(&self, samples: &[Sample]) -> Result<(Vec<RefPoint>, Option<String>)> {
+        self.points_and_clock(samples).map(|(p, line, _)| (p, line))
+    }
+
+    /// [`Reference::points_for`] with a trajectory's clock ([`Reference::clock`]).
+    pub fn points_and_clock(
+        &self,
+        samples: &[Sample],
+    ) -> Result<(Vec<RefPoint>, Option<String>, Option<clock::ClockFit>)> {
         let span = (
             samples.first().map_or(f64::NAN, |s| s.t),
             samples.last().map_or(f64::NAN, |s| s.t),
         );
         if self.time != TimeScale::Trajectory {
-            return Ok((self.ref_points(span)?, None));
+            return Ok((self.ref_points(span)?, None, None));
         }
         let (clock, how) = self.clock(samples, span)?;
         let times: Vec<f64> = samples.iter().map(|s| s.t).collect();
@@ -897,7 +905,7 @@ impl Reference {
             r.in_gaps,
             r.gaps
         );
-        Ok((points, Some(line)))
+        Ok((points, Some(line), Some(clock)))
     }
 
     /// The epochs as the calibration's reference rows, on the samples' time base, given the

@@ -14,7 +14,8 @@ use crate::calib::{self, Calibration};
 use crate::cli::{CalibrateArgs, ReferenceArgs};
 use crate::config as cfg;
 use crate::csvio::{self, RefPoint, Sample};
-use crate::reference::matched::reference_for_samples;
+use crate::reference::clock::ClockFit;
+use crate::reference::matched::reference_and_clock_for_samples;
 use crate::stats::{coverage, summarize, Summary};
 
 use super::recording::{check_recording_times, reference_for};
@@ -82,7 +83,7 @@ pub fn run(a: &CalibrateArgs) -> Result<ExitCode> {
     let started = Instant::now();
     let timer = calib::PhaseTimer::new();
     let (reference_path, own) = reference_for(&a.samples, a.reference.as_deref())?;
-    let (samples, reference) = read_run(&a.samples, &reference_path, &a.reference_input)?;
+    let (samples, reference, clock) = read_run(&a.samples, &reference_path, &a.reference_input)?;
     if own {
         check_recording_times(&samples, &reference)?;
     }
@@ -93,7 +94,10 @@ pub fn run(a: &CalibrateArgs) -> Result<ExitCode> {
         reference_path.display().to_string(),
     );
     let opts = &options::calibration_options(a)?;
-    let c = calib::calibrate(&samples, &reference, (&names.0, &names.1), &initial, opts)?;
+    let mut c = calib::calibrate(&samples, &reference, (&names.0, &names.1), &initial, opts)?;
+    if let Some(k) = &clock {
+        add_clock_rate_uncertainty(&mut c, k);
+    }
     timer.lap("calibration");
     let noise = calib::ReferenceNoise {
         horizontal: opts.reference_sigma,
@@ -101,20 +105,38 @@ pub fn run(a: &CalibrateArgs) -> Result<ExitCode> {
     };
     let errors = ErrorSummary::of(&c, &noise);
     report::print(&c, &initial, opts, &errors);
-    write::write_result(a, &reference_path, &c, opts, &errors)?;
+    write::write_result(a, &reference_path, &c, opts, &errors, clock.as_ref())?;
     timer.lap("report");
     crate::outln!("done in {:.2} s", started.elapsed().as_secs_f64());
     export_ros(a, &reference_path)?;
     Ok(ExitCode::SUCCESS)
 }
 
+/// Adds what an estimated clock rate contributes to the diameters' standard errors: a rate
+/// error scales the reference's distances per sample time, and so both diameters, by as
+/// much (`D ppm_se 1e-6`, in quadrature); the track width, fitted from the heading change
+/// per count difference and the diameters, keeps its own.
+fn add_clock_rate_uncertainty(c: &mut Calibration, clock: &ClockFit) {
+    let g = &mut c.geometry;
+    let d = [g.params.left_diameter, g.params.right_diameter];
+    for (k, d) in d.iter().enumerate() {
+        let extra = d * clock.ppm_se * 1e-6;
+        for v in [&mut g.std_errors[k], &mut g.robust_std_errors[k]]
+            .into_iter()
+            .flatten()
+        {
+            *v = v.hypot(extra);
+        }
+    }
+}
+
 /// Reads the samples and the reference (on two cores: the files are independent), the
-/// reference aligned to the samples.
+/// reference aligned to the samples, and a trajectory reference's clock.
 fn read_run(
     samples: &Path,
     reference: &Path,
     input: &ReferenceArgs,
-) -> Result<(Vec<Sample>, Vec<RefPoint>)> {
+) -> Result<(Vec<Sample>, Vec<RefPoint>, Option<ClockFit>)> {
     let (samples, reference) = std::thread::scope(|scope| {
         let reference = scope
             .spawn(|| reference_options(input).and_then(|o| crate::reference::load(reference, &o)));
@@ -122,8 +144,8 @@ fn read_run(
         (samples, reference.join().expect("CSV reader panicked"))
     });
     let (samples, reference) = (samples?, reference?);
-    let reference = reference_for_samples(&reference, &samples)?;
-    Ok((samples, reference))
+    let (reference, clock) = reference_and_clock_for_samples(&reference, &samples)?;
+    Ok((samples, reference, clock))
 }
 
 /// The first estimate: `--initial` (or the designed values) with the `--set`s over it.

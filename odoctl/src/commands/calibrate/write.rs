@@ -12,6 +12,7 @@ use crate::cli::CalibrateArgs;
 use crate::commands::create;
 use crate::config::{self as cfg, FitValue};
 use crate::csvio;
+use crate::reference::clock::ClockFit;
 
 /// The files asked for, in this order: the stability study's CSV, the result, the figures.
 pub fn write_result(
@@ -20,6 +21,7 @@ pub fn write_result(
     c: &Calibration,
     opts: &CalibrationOptions,
     e: &ErrorSummary,
+    clock: Option<&ClockFit>,
 ) -> Result<()> {
     if !c.windows.is_empty() {
         if let Some(p) = &a.windows_out {
@@ -27,7 +29,7 @@ pub fn write_result(
         }
     }
     if let Some(p) = &a.out {
-        write_params(p, a, reference, c, opts, e)?;
+        write_params(p, a, reference, c, opts, e, clock)?;
     }
     if let Some(dir) = &a.plots {
         write_plots(dir, c)?;
@@ -43,9 +45,11 @@ fn write_params(
     c: &Calibration,
     opts: &CalibrationOptions,
     e: &ErrorSummary,
+    clock: Option<&ClockFit>,
 ) -> Result<()> {
     let per_model = model_fit(c, opts);
     let mut fit: Vec<(&str, FitValue)> = geometry_fit(a, reference, c, opts);
+    fit.extend(clock.map_or_else(Vec::new, clock_fit));
     fit.extend(error_fit(c, e));
     fit.extend(uncertainty_fit(c, opts));
     fit.extend(per_model.iter().map(|(k, v)| (k.as_str(), v.clone())));
@@ -67,6 +71,19 @@ fn write_params(
     std::fs::write(p, text).with_context(|| format!("{}: cannot write", p.display()))?;
     crate::outln!("wrote {}", p.display());
     Ok(())
+}
+
+/// `[fit]`: a trajectory reference's clock, samples' `t` = stamp + `clock_offset` +
+/// `clock_ppm` 1e-6 (stamp - `clock_stamp_mid`): offset (s), rate (ppm), their standard errors
+/// (0 when given).
+fn clock_fit(k: &ClockFit) -> Vec<(&'static str, FitValue)> {
+    vec![
+        ("clock_offset", FitValue::Num(k.offset)),
+        ("clock_offset_se", FitValue::Num(k.offset_se)),
+        ("clock_ppm", FitValue::Num(k.ppm)),
+        ("clock_ppm_se", FitValue::Num(k.ppm_se)),
+        ("clock_stamp_mid", FitValue::Num(k.s_mid)),
+    ]
 }
 
 /// `[fit]`: the files, the start, the geometry method and its figures.
