@@ -1,19 +1,16 @@
 //! The `delta_diff` fit of the paper's model by the heading-change coverage.
 
-use std::cell::RefCell;
-use std::rc::Rc;
-
 use anyhow::Result;
 use indicatif::ProgressBar;
 use odo_unit::odometry::{ChassisParams, UncertaintyModel};
 
-use crate::calib::evaluation::Evaluation;
 use crate::calib::run::Run;
+use crate::optim::norm2;
 
-use super::coefficients::{DeltaMode, DiffFit, UncertaintyFit};
+use super::coefficients::{set_coefficient, DeltaMode, DiffFit, UncertaintyFit};
 use super::coverage::{
     covering_rank, fit_coefficient, heading_coverage, heading_points, horizontal_coverage,
-    known_coverage, smallest_covering, DIFF_LOG_TOL, ONE_SIGMA_COVERAGE,
+    reference_sigma_at, smallest_covering, DIFF_LOG_TOL, ONE_SIGMA_COVERAGE,
 };
 use super::restarts::Restarts;
 
@@ -79,13 +76,11 @@ pub fn fit_delta_diff(
         progress.set_length(40);
         let base = fit.params;
         let hi = f64::from(ChassisParams::MAX_DELTA);
-        let search = JointSearch::new(run, restarts, base, initial, o);
-        search.bracket(hi)?;
-        let (dd, w) = smallest_covering(hi, true, DIFF_LOG_TOL, |v| search.coverage(v), progress)?;
+        let search = RatioSearch::new(run, restarts, base, initial, o);
         // Joint only when delta stays identifiable (not pushed to zero by delta_diff).
-        let joint_fit = match w {
-            None => Some(search.refit(dd)?).filter(|f| f.warning.is_none()),
-            Some(_) => None,
+        let joint_fit = match search.smallest(hi, progress)? {
+            Some(dd) => Some(search.refit(dd)?).filter(|f| f.warning.is_none()),
+            None => None,
         };
         if let Some(f) = joint_fit {
             fit = f;
@@ -135,26 +130,40 @@ fn with_delta_diff(p: &ChassisParams, v: f64) -> ChassisParams {
     }
 }
 
-/// Most trials of [`JointSearch::bracket`].
-const BRACKET_STEPS: usize = 12;
+/// The range of the ratio `delta_diff / delta` the joint search spans.
+const RATIO_RANGE: (f64, f64) = (1e-6, 1e8);
 
-/// A trial of the joint search: `delta_diff`, the heading 1-sigma coverage at delta refitted
-/// there, and that refit's evaluation.
-type Trial = (f64, f64, Rc<Evaluation>);
+/// One trial of [`RatioSearch`]: at the ratio `r = delta_diff / delta`, delta refitted by the
+/// horizontal criterion and the heading 1-sigma coverage there.
+#[derive(Debug, Clone, Copy)]
+struct RatioTrial {
+    /// delta of the horizontal criterion at this ratio.
+    delta: f64,
+    /// `r * delta`.
+    delta_diff: f64,
+    /// Heading 1-sigma coverage at `(delta, delta_diff)`.
+    heading: f64,
+}
 
-/// The search for the smallest `delta_diff` of the joint criterion (delta refitted at every
-/// trial): every trial remembered, and the bisection fed the coverages they decide.
-struct JointSearch<'a> {
+/// The joint search for the smallest `delta_diff` (delta refitted by the horizontal criterion
+/// at every trial) along the ratio `r = delta_diff / delta`. The paper's sigmas are
+/// homogeneous of degree one in `(delta_left, delta_right, delta_diff)` (every input enters
+/// each sample's quadrature sum linearly, and the sums add), so one evaluation at
+/// `(delta_0, r delta_0)` gives every point's sigmas at `(delta, r delta)` as `delta /
+/// delta_0` times its own: the delta that meets the horizontal criterion at that ratio is a
+/// quantile of the points' thresholds, and the heading coverage there follows, with no
+/// further evaluation. A bisection in `ln r` then takes one evaluation per step instead of a
+/// refit of delta per step; the result is refitted once by the horizontal criterion
+/// ([`fit_coefficient`]) as before.
+struct RatioSearch<'a> {
     run: &'a Run<'a>,
     restarts: &'a Restarts,
     base: ChassisParams,
     initial: &'a ChassisParams,
     o: DiffOptions,
-    refits: RefCell<Vec<(f64, UncertaintyFit)>>,
-    trials: RefCell<Vec<Trial>>,
 }
 
-impl<'a> JointSearch<'a> {
+impl<'a> RatioSearch<'a> {
     fn new(
         run: &'a Run<'a>,
         restarts: &'a Restarts,
@@ -168,155 +177,119 @@ impl<'a> JointSearch<'a> {
             base,
             initial,
             o,
-            refits: RefCell::default(),
-            trials: RefCell::default(),
         }
     }
 
-    /// delta refitted by the horizontal criterion at `delta_diff = v` (remembered).
-    fn refit(&self, v: f64) -> Result<UncertaintyFit> {
-        if let Some((_, f)) = self.refits.borrow().iter().find(|(u, _)| *u == v) {
-            return Ok(f.clone());
-        }
-        // Started from the delta of the nearest refit: the same result, fewer evaluations.
-        let start = {
-            let refits = self.refits.borrow();
-            let nearest = refits
-                .iter()
-                .filter(|(u, _)| *u > 0.0 && v > 0.0)
-                .min_by(|a, b| (a.0 / v).ln().abs().total_cmp(&(b.0 / v).ln().abs()));
-            match nearest {
-                Some((_, f)) => ChassisParams {
-                    delta_left: f.params.delta_left,
-                    delta_right: f.params.delta_right,
-                    ..self.base
-                },
-                None => self.base,
-            }
+    /// delta of the horizontal fit: where the search evaluates while `delta_diff` stays in
+    /// range.
+    fn delta0(&self) -> f64 {
+        f64::from(self.base.delta_left)
+    }
+
+    /// The trial at ratio `r` (one evaluation); `None` when no delta meets the horizontal
+    /// criterion there.
+    fn at(&self, r: f64) -> Result<Option<RatioTrial>> {
+        // Evaluated where delta_diff stays in range (any delta serves: the sigmas scale).
+        let d0 = self
+            .delta0()
+            .min(0.5 * f64::from(ChassisParams::MAX_DELTA) / r.max(1e-300));
+        let p = with_delta_diff(
+            &set_coefficient(&self.base, self.o.mode, self.initial, d0),
+            r * d0,
+        );
+        let ev = self.restarts.evaluate_memo(self.run, &p)?;
+        // Each point's smallest delta inside the widened band: |e| <= hypot(s delta / d0, rho).
+        let mut need: Vec<f64> = (0..ev.horizontal.len())
+            .map(|i| {
+                let e = ev.horizontal[i];
+                let rho = reference_sigma_at(&ev, i, self.o.ref_sigma);
+                let excess = (e * e - rho * rho).max(0.0).sqrt();
+                let s = ev.sigma_h[i] / d0;
+                if excess == 0.0 {
+                    0.0
+                } else if s > 0.0 {
+                    excess / s
+                } else {
+                    f64::INFINITY
+                }
+            })
+            .collect();
+        let Some(k) = covering_rank(need.len()) else {
+            return Ok(None);
         };
-        let f = fit_coefficient(
+        let (_, &mut delta, _) = need.select_nth_unstable_by(k - 1, f64::total_cmp);
+        if !delta.is_finite() {
+            return Ok(None);
+        }
+        let scale = delta / d0;
+        let rh = self.o.ref_heading_sigma;
+        let (mut n, mut inside) = (0usize, 0usize);
+        for i in 0..ev.heading_change_err.len() {
+            if let Some(e) = ev.heading_change_err[i] {
+                let m = ev.start_headings[i].max(1) as f64;
+                let band = norm2(scale * ev.sigma_heading[i], rh * (1.0 + 1.0 / m).sqrt());
+                n += 1;
+                inside += usize::from(e.abs() <= band);
+            }
+        }
+        Ok(Some(RatioTrial {
+            delta,
+            delta_diff: r * delta,
+            heading: inside as f64 / n.max(1) as f64,
+        }))
+    }
+
+    /// Whether the trial's heading band covers, delta identifiable.
+    fn covers(&self, t: Option<RatioTrial>, hi: f64) -> bool {
+        t.is_some_and(|t| t.heading >= ONE_SIGMA_COVERAGE && t.delta > hi * 1e-12)
+    }
+
+    /// The smallest `delta_diff` of the joint criterion: 0 when the horizontal fit already
+    /// covers the heading changes, else a bisection in `ln r` over [`RATIO_RANGE`] to a
+    /// relative width [`DIFF_LOG_TOL`] (`delta_diff` grows with the ratio: delta falls more
+    /// slowly, held up by the straights); `None` when even the largest ratio does not cover
+    /// (then delta would have to fall to zero) or `delta_diff` would exceed `hi`.
+    fn smallest(&self, hi: f64, progress: &ProgressBar) -> Result<Option<f64>> {
+        if self
+            .at(0.0)?
+            .is_some_and(|t| t.heading >= ONE_SIGMA_COVERAGE)
+        {
+            return Ok(Some(0.0));
+        }
+        let (mut l, mut h) = (RATIO_RANGE.0.ln(), RATIO_RANGE.1.ln());
+        let mut best = self.at(h.exp())?;
+        if !self.covers(best, hi) {
+            return Ok(None);
+        }
+        if self.covers(self.at(l.exp())?, hi) {
+            return Ok(self.at(l.exp())?.map(|t| t.delta_diff));
+        }
+        while h - l > DIFF_LOG_TOL {
+            let m = 0.5 * (l + h);
+            let t = self.at(m.exp())?;
+            if self.covers(t, hi) {
+                h = m;
+                best = t;
+            } else {
+                l = m;
+            }
+            progress.inc(1);
+        }
+        Ok(best.map(|t| t.delta_diff).filter(|&dd| dd <= hi))
+    }
+
+    /// delta refitted by the horizontal criterion at `delta_diff = v`.
+    fn refit(&self, v: f64) -> Result<UncertaintyFit> {
+        fit_coefficient(
             self.run,
             self.restarts,
-            &with_delta_diff(&start, v),
+            &with_delta_diff(&self.base, v),
             self.initial,
             self.o.ref_sigma,
             self.o.mode,
             DIFF_LOG_TOL,
             &ProgressBar::hidden(),
-        )?;
-        self.refits.borrow_mut().push((v, f.clone()));
-        Ok(f)
-    }
-
-    /// The heading 1-sigma coverage at the refit for `v`, evaluated.
-    fn trial(&self, v: f64) -> Result<f64> {
-        let f = self.refit(v)?;
-        let ev = self.restarts.evaluate_memo(self.run, &f.params)?;
-        let c = heading_coverage(&ev, self.o.ref_heading_sigma, 1.0, 0);
-        self.trials.borrow_mut().push((v, c, ev));
-        Ok(c)
-    }
-
-    fn facts(&self) -> Vec<(f64, f64)> {
-        self.trials.borrow().iter().map(|t| (t.0, t.1)).collect()
-    }
-
-    /// The heading 1-sigma coverage at `v` as the bisection needs it: decided by the trials
-    /// when they decide it (the coverage being non-decreasing in `v`), else evaluated.
-    fn coverage(&self, v: f64) -> Result<f64> {
-        match known_coverage(&self.facts(), v) {
-            Some(c) => Ok(c),
-            None => self.trial(v),
-        }
-    }
-
-    /// Brackets the threshold before the bisection, as the coefficient fits do: the trials
-    /// nearest below and above it predict it (each point's `sigma_heading^2` taken as
-    /// `alpha + beta delta_diff^2` through them: each sample adds `delta_diff`'s term in
-    /// quadrature to delta's) while it halves the bracket (else the bracket's middle, as
-    /// Brent's method guards a secant); trials a bisection width either side of the
-    /// prediction then leave the bisection all but its last steps decided.
-    /// Evaluations only; never decides anything.
-    fn bracket(&self, hi: f64) -> Result<()> {
-        let lo = hi * 1e-12;
-        if self.coverage(0.0)? >= ONE_SIGMA_COVERAGE || self.coverage(hi)? < ONE_SIGMA_COVERAGE {
-            return Ok(());
-        }
-        let mut last_width = f64::INFINITY;
-        for _ in 0..BRACKET_STEPS {
-            let (Some(below), Some(above)) = (self.next_below(f64::INFINITY), self.first_above())
-            else {
-                return Ok(());
-            };
-            let floor = below.0.max(lo);
-            let width = (above.0 / floor).ln();
-            if width <= 2.5 * DIFF_LOG_TOL {
-                return Ok(());
-            }
-            // The prediction while it halves the bracket, else the bracket's middle (log scale).
-            let middle = (floor * above.0).sqrt();
-            let pred = self
-                .predict(&below, &above)
-                .filter(|&v| v > floor && v < above.0 && width <= 0.5 * last_width);
-            last_width = width;
-            let Some(pred) = pred else {
-                self.coverage(middle)?;
-                continue;
-            };
-            // A bisection width either side of the prediction: both when it is right.
-            let (l, h) = (pred * (-DIFF_LOG_TOL).exp(), pred * DIFF_LOG_TOL.exp());
-            if self.coverage(h.min(above.0))? >= ONE_SIGMA_COVERAGE {
-                self.coverage(l.max(floor))?;
-            }
-        }
-        Ok(())
-    }
-
-    /// The trial with the smallest `delta_diff` that covers.
-    fn first_above(&self) -> Option<Trial> {
-        self.trials
-            .borrow()
-            .iter()
-            .filter(|t| t.1 >= ONE_SIGMA_COVERAGE)
-            .min_by(|a, b| a.0.total_cmp(&b.0))
-            .cloned()
-    }
-
-    /// The trial with the largest `delta_diff` below `v` (not covering).
-    fn next_below(&self, v: f64) -> Option<Trial> {
-        self.trials
-            .borrow()
-            .iter()
-            .filter(|t| t.0 < v && t.1 < ONE_SIGMA_COVERAGE)
-            .max_by(|a, b| a.0.total_cmp(&b.0))
-            .cloned()
-    }
-
-    /// The `delta_diff` at which the heading band covers 68.27 % of the points, each point's
-    /// `sigma_heading^2` being `alpha + beta delta_diff^2` through the trials `a` and `b`.
-    fn predict(&self, a: &Trial, b: &Trial) -> Option<f64> {
-        let (ea, eb) = (&a.2, &b.2);
-        let r = self.o.ref_heading_sigma;
-        let mut need: Vec<f64> = (0..ea.heading_change_err.len())
-            .filter_map(|i| {
-                let e = ea.heading_change_err[i]?;
-                let m = ea.start_headings[i].max(1) as f64;
-                let target2 = e * e - r * r * (1.0 + 1.0 / m);
-                if target2 <= 0.0 {
-                    return Some(0.0);
-                }
-                let (sa, sb) = (ea.sigma_heading[i], eb.sigma_heading[i]);
-                let beta = (sb * sb - sa * sa) / (b.0 * b.0 - a.0 * a.0);
-                if beta.is_nan() || beta <= 0.0 {
-                    return Some(f64::INFINITY);
-                }
-                let alpha = sa * sa - beta * a.0 * a.0;
-                Some(((target2 - alpha) / beta).max(0.0).sqrt())
-            })
-            .collect();
-        let k = covering_rank(need.len())?;
-        let (_, &mut v, _) = need.select_nth_unstable_by(k - 1, f64::total_cmp);
-        (v.is_finite() && v > 0.0).then_some(v)
+        )
     }
 }
 
@@ -326,14 +299,17 @@ mod tests {
     use crate::csvio::match_times;
     use crate::simulate::{self, default_truth, PathKind, SimSettings};
 
-    /// The bracketed joint search gives the plain bisection's `delta_diff` (every trial
-    /// evaluated) with fewer trials, on runs whose wheels slip in opposite phase when turning.
+    /// The ratio search finds the plain joint bisection's `delta_diff` (delta refitted by
+    /// the horizontal criterion at every trial), on runs whose wheels slip in opposite phase
+    /// when turning.
     #[test]
-    fn bracketed_joint_search_matches_the_plain_bisection() {
-        for seed in [1, 2, 3] {
+    fn ratio_search_matches_the_plain_joint_bisection() {
+        let mut joint = 0;
+        let cases = (1..=6).flat_map(|seed| [(seed, 0.01), (seed, 0.02)]);
+        for (seed, slip_turn) in cases {
             let settings = SimSettings {
                 seed,
-                slip_turn: 0.03,
+                slip_turn,
                 ..Default::default()
             };
             let s = simulate::simulate_path(PathKind::Estimation, 70.0, default_truth(), settings);
@@ -353,28 +329,54 @@ mod tests {
                 mode: DeltaMode::Equal,
             };
             let hi = f64::from(ChassisParams::MAX_DELTA);
-            let h0 = run.heading_guess(0);
             let hidden = ProgressBar::hidden();
-            let search = |bracket: bool| {
-                let restarts = Restarts::new(&run, &base, h0, 10.0).unwrap();
-                let js = JointSearch::new(&run, &restarts, base, &base, o);
-                if bracket {
-                    js.bracket(hi).unwrap();
-                }
-                let (v, w) =
-                    smallest_covering(hi, true, DIFF_LOG_TOL, |v| js.coverage(v), &hidden).unwrap();
-                let trials = js.trials.borrow().len();
-                (v, w, trials)
+            let restarts = Restarts::new(&run, &base, run.heading_guess(0), 10.0).unwrap();
+            let plain_cover = |v: f64| -> Result<f64> {
+                let f = fit_coefficient(
+                    &run,
+                    &restarts,
+                    &with_delta_diff(&base, v),
+                    &base,
+                    o.ref_sigma,
+                    o.mode,
+                    DIFF_LOG_TOL,
+                    &hidden,
+                )?;
+                let ev = restarts.evaluate(&run, &f.params)?;
+                Ok(heading_coverage(&ev, o.ref_heading_sigma, 1.0, 0))
             };
-            let (plain, fast) = (search(false), search(true));
-            assert_eq!((plain.0, &plain.1), (fast.0, &fast.1), "seed {seed}");
-            assert!(plain.0 > 0.0, "seed {seed}: delta_diff {}", plain.0);
-            assert!(
-                fast.2 < plain.2,
-                "seed {seed}: {} trials, plain {}",
-                fast.2,
-                plain.2
-            );
+            let (plain, w) =
+                smallest_covering(hi, true, DIFF_LOG_TOL, plain_cover, &hidden).unwrap();
+            assert!(w.is_none() && plain > 0.0, "seed {seed}: {plain} {w:?}");
+            // The plain search's result is joint only when delta stays identifiable there.
+            let refit = fit_coefficient(
+                &run,
+                &restarts,
+                &with_delta_diff(&base, plain),
+                &base,
+                o.ref_sigma,
+                o.mode,
+                DIFF_LOG_TOL,
+                &hidden,
+            )
+            .unwrap();
+            let fast = RatioSearch::new(&run, &restarts, base, &base, o)
+                .smallest(hi, &hidden)
+                .unwrap();
+            match (refit.warning.is_none(), fast) {
+                (true, Some(fast)) => {
+                    joint += 1;
+                    assert!(
+                        (fast / plain).ln().abs() < 0.01,
+                        "{slip_turn} seed {seed}: ratio search {fast:e}, plain bisection {plain:e}"
+                    );
+                }
+                (false, None) => {}
+                (ok, fast) => panic!(
+                    "{slip_turn} seed {seed}: plain {plain:e} (joint {ok}), ratio search {fast:?}"
+                ),
+            }
         }
+        assert!(joint >= 2, "{joint} joint fits");
     }
 }
