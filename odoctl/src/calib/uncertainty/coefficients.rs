@@ -58,7 +58,7 @@ pub struct UncertaintyFit {
     /// `exp(ln_se)` (1 sigma).
     pub ln_se: Option<f64>,
     /// The coefficient of the largest likelihood, where the unit is told another: its mean over
-    /// the likelihood (likelihood criterion; see [`crate::calib::uncertainty::likelihood`]).
+    /// the likelihood (likelihood criterion; `fit_kappa_filter`).
     pub most_likely: Option<f64>,
 }
 
