@@ -5,43 +5,7 @@
 
 mod common;
 
-/// `calibrate --out` of a run: (left, right, track, forward, left antenna) estimates and their
-/// standard errors (the antenna's 0 when held), and stdout.
-fn calibrate(samples: &str, reference: &str, out: &str, extra: &[&str]) -> ([f64; 5], [f64; 5]) {
-    let mut args = vec![
-        "calibrate",
-        "--samples",
-        samples,
-        "--reference",
-        reference,
-        "--out",
-        out,
-        "--no-delta",
-        "--quiet",
-    ];
-    args.extend_from_slice(extra);
-    common::success_stdout(&common::odoctl(&args));
-    let t: toml::Table = common::read(std::path::Path::new(out)).parse().unwrap();
-    let fit = t["fit"].as_table().unwrap();
-    let get = |tab: &toml::Table, k: &str| tab.get(k).and_then(|v| v.as_float()).unwrap_or(0.0);
-    (
-        [
-            get(&t, "left_diameter"),
-            get(&t, "right_diameter"),
-            get(&t, "track_width"),
-            get(fit, "antenna_forward"),
-            get(fit, "antenna_left"),
-        ],
-        [
-            "left_diameter_se",
-            "right_diameter_se",
-            "track_width_se",
-            "antenna_forward_se",
-            "antenna_left_se",
-        ]
-        .map(|k| get(fit, k)),
-    )
-}
+use common::calibrate_result as calibrate;
 
 #[test]
 fn lever_arm_recovered_from_nmea_and_pos_as_well_as_from_the_csv_without_it() {

@@ -9,42 +9,11 @@ mod common;
 
 use std::process::Command;
 
-/// (left, right, track, marker forward, marker left) estimates and standard errors.
+/// `calibrate --fit-antenna` ([`common::calibrate_result`]): the geometry and the marker offset.
 fn calibrate(samples: &str, reference: &str, out: &str, extra: &[&str]) -> ([f64; 5], [f64; 5]) {
-    let mut args = vec![
-        "calibrate",
-        "--samples",
-        samples,
-        "--reference",
-        reference,
-        "--out",
-        out,
-        "--no-delta",
-        "--quiet",
-        "--fit-antenna",
-    ];
+    let mut args = vec!["--fit-antenna"];
     args.extend_from_slice(extra);
-    common::success_stdout(&common::odoctl(&args));
-    let t: toml::Table = common::read(std::path::Path::new(out)).parse().unwrap();
-    let fit = t["fit"].as_table().unwrap();
-    let get = |tab: &toml::Table, k: &str| tab.get(k).and_then(|v| v.as_float()).unwrap_or(0.0);
-    (
-        [
-            get(&t, "left_diameter"),
-            get(&t, "right_diameter"),
-            get(&t, "track_width"),
-            get(fit, "antenna_forward"),
-            get(fit, "antenna_left"),
-        ],
-        [
-            "left_diameter_se",
-            "right_diameter_se",
-            "track_width_se",
-            "antenna_forward_se",
-            "antenna_left_se",
-        ]
-        .map(|k| get(fit, k)),
-    )
+    common::calibrate_result(samples, reference, out, &args)
 }
 
 /// Simulates seed `seed` with a TUM reference: marker (0.25, -0.08) m, the frame turned and

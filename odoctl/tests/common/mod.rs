@@ -326,3 +326,46 @@ pub fn calibrate_covariance(sim: &SimRun) -> (Calibration, UncertaintyFit) {
         .clone();
     (c, u)
 }
+
+/// `odoctl calibrate --no-delta --quiet EXTRA` of a run into `out`: (left, right, track, antenna
+/// forward, antenna left) estimates and their standard errors (the antenna's 0 when held).
+pub fn calibrate_result(
+    samples: &str,
+    reference: &str,
+    out: &str,
+    extra: &[&str],
+) -> ([f64; 5], [f64; 5]) {
+    let mut args = vec![
+        "calibrate",
+        "--samples",
+        samples,
+        "--reference",
+        reference,
+        "--out",
+        out,
+        "--no-delta",
+        "--quiet",
+    ];
+    args.extend_from_slice(extra);
+    success_stdout(&odoctl(&args));
+    let t: toml::Table = read(std::path::Path::new(out)).parse().unwrap();
+    let fit = t["fit"].as_table().unwrap();
+    let get = |tab: &toml::Table, k: &str| tab.get(k).and_then(|v| v.as_float()).unwrap_or(0.0);
+    (
+        [
+            get(&t, "left_diameter"),
+            get(&t, "right_diameter"),
+            get(&t, "track_width"),
+            get(fit, "antenna_forward"),
+            get(fit, "antenna_left"),
+        ],
+        [
+            "left_diameter_se",
+            "right_diameter_se",
+            "track_width_se",
+            "antenna_forward_se",
+            "antenna_left_se",
+        ]
+        .map(|k| get(fit, k)),
+    )
+}
