@@ -56,12 +56,7 @@ fn odoctl_against_the_qemu_image() {
     let d = scratch("qemu");
     let started = Instant::now();
     let o = run(&["config", "--port", &addr, "set", "track_width", "0.57"]);
-    assert!(
-        o.status.success(),
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    );
+    common::success_stdout(&o);
     let o = run(&["config", "--port", &addr, "set", "track_width", "nan"]);
     assert!(
         !o.status.success(),
@@ -139,7 +134,7 @@ fn calibration_drive_in_one_command_against_the_qemu_image() {
     let run = |args: &[&str]| run_retrying(&addr, args);
     let d = scratch("qemu_calibration_drive");
     let o = run(&["config", "--port", &addr, "set", "mode", "pps"]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stdout));
+    common::success_stdout(&o);
     let csv = d.join("drive.csv");
     let result = d.join("chassis.toml");
     let started = Instant::now();
@@ -192,12 +187,7 @@ fn calibration_drive_in_one_command_against_the_qemu_image() {
         "--out",
         again.to_str().unwrap(),
     ]);
-    let text = String::from_utf8_lossy(&o.stdout);
-    assert!(
-        o.status.success(),
-        "{text}{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    common::success_stdout(&o);
     assert_eq!(
         common::lengths(
             &odoctl::config::read_params(&again, odo_unit::odometry::ChassisParams::DESIGNED)
@@ -213,10 +203,5 @@ fn calibration_drive_in_one_command_against_the_qemu_image() {
         result.to_str().unwrap(),
         "--no-save",
     ]);
-    assert!(
-        o.status.success(),
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    );
+    common::success_stdout(&o);
 }
