@@ -44,6 +44,27 @@ pub fn qemu_binary() -> Option<PathBuf> {
         .find(|p| p.is_file())
 }
 
+/// Ports handed to QEMU by this test process.
+static PORTS: std::sync::Mutex<Vec<u16>> = std::sync::Mutex::new(Vec::new());
+
+/// A free local port that no other test of this process was given: the port of a listener
+/// bound to port 0 and closed again. Tests run in parallel threads, and a port one of them
+/// has just closed for its QEMU can come back from the next bind; a second test given it
+/// would connect to the other's short-lived listener (or QEMU) instead of its own.
+fn free_port() -> u16 {
+    let mut given = PORTS.lock().unwrap_or_else(|e| e.into_inner());
+    loop {
+        let port = TcpListener::bind("127.0.0.1:0")
+            .and_then(|l| l.local_addr())
+            .expect("a free local port")
+            .port();
+        if !given.contains(&port) {
+            given.push(port);
+            return port;
+        }
+    }
+}
+
 /// Boots the image of `repo` on `netduinoplus2` with `-icount shift=0,sleep=off`
 /// (deterministic, faster than real time), or returns `None` after saying why `test` is
 /// skipped; panics instead when `ODO_QEMU_REQUIRED=1`.
@@ -64,10 +85,7 @@ pub fn boot(repo: &Path, test: &str) -> Option<Qemu> {
         return None;
     }
     let qemu = qemu_binary()?;
-    let port = TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .expect("a free local port")
-        .port();
+    let port = free_port();
     let child = Command::new(qemu)
         .args([
             "-machine",
