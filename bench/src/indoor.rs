@@ -25,6 +25,8 @@ use odoctl::commands::umbmark;
 use odoctl::csvio;
 use odoctl::simulate::{default_truth, simulate, Rng, Segment, SimOptions, SimSettings};
 
+use crate::odoctl_binary::odoctl;
+
 /// The marker's lever arm from the axle centre of every trajectory run: forward, left (m).
 const MARKER: (f64, f64) = (0.25, -0.08);
 
@@ -138,17 +140,6 @@ fn seeds(default: u64) -> u64 {
         .and_then(|s| s.parse().ok())
         .filter(|&n| n > 0)
         .unwrap_or(default)
-}
-
-fn odoctl() -> PathBuf {
-    std::env::var_os("ODOCTL").map_or_else(
-        || {
-            std::env::current_exe()
-                .expect("the path of odo-bench")
-                .with_file_name("odoctl")
-        },
-        PathBuf::from,
-    )
 }
 
 /// Runs `odoctl ARGS`; its stdout, or the failure's stderr.

@@ -10,7 +10,7 @@
 //! binary, the recording's NMEA log as the reference); the live estimate against the batch's
 //! sub-trajectory fit and its default (filter-refined) result, in their standard errors.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
@@ -23,6 +23,7 @@ use odoctl::reference::stream::NmeaStream;
 use odoctl::simulate::{default_truth, simulate_path, PathKind, SimSettings};
 
 use crate::markdown::{number, thousands};
+use crate::odoctl_binary::odoctl;
 
 /// Length of the drive (m).
 const LENGTH: f64 = 3000.0;
@@ -55,17 +56,6 @@ pub fn run(dir: &Path) {
     );
     print_section(&samples, &costs, finish, batch_time);
     print_agreement(&live, &csv, &result);
-}
-
-fn odoctl() -> PathBuf {
-    std::env::var_os("ODOCTL").map_or_else(
-        || {
-            std::env::current_exe()
-                .expect("the path of odo-bench")
-                .with_file_name("odoctl")
-        },
-        PathBuf::from,
-    )
 }
 
 /// The drive: samples (t GPS time of week) and the receiver's sentences, each with the

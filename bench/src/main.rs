@@ -28,6 +28,8 @@ mod indoor;
 mod live;
 #[cfg(not(target_os = "none"))]
 mod markdown;
+#[cfg(not(target_os = "none"))]
+mod odoctl_binary;
 
 /// `odo-bench` prints the fidelity table; `odo-bench calibrate [accuracy|speed]` the
 /// calibration's accuracy and speed tables (both without a second argument); `odo-bench
