@@ -73,20 +73,26 @@ pub(crate) fn largest_likelihood(nll: impl Fn(f64) -> f64, lo: f64, hi: f64) -> 
 }
 
 /// The mean of a rate `x` over its likelihood rather than its most likely value, `x` given by
-/// `nll(ln x)`: `ln x` is about normal there, of the variance `v` that the curvature of `nll`
-/// gives, and the mean of a log-normal is `exp(v / 2)` times its median (`v` capped at 4, at
-/// most `hi`). A variance that few events measure (the opposite-phase slip of one run's few
-/// turns: within a factor of 10 on 70 m) is more often under- than overestimated by its most
-/// likely value, and the sigma it gives is then too narrow; the mean is what the errors' spread
-/// over the likelihood's uncertainty has. Under turning slip it took the ensemble test's
-/// coverage from 54-67 % inside 1 sigma (92.5 % inside 3) to 57.5-68.5 % (94 %).
+/// `nll(ln x)`: [`mean_from_ln_se`] with the standard error of `ln x` that the curvature of
+/// `nll` gives (none where it is not positive).
 pub(crate) fn posterior_mean(nll: impl Fn(f64) -> f64, x: f64, hi: f64) -> f64 {
     let (l, h) = (x.ln(), 0.3);
     let curvature = (nll(l + h) - 2.0 * nll(l) + nll(l - h)) / (h * h);
-    if curvature.is_finite() && curvature > 0.0 {
-        (x * (0.5 / curvature).min(2.0).exp()).min(hi)
-    } else {
-        x
+    let ln_se = (curvature.is_finite() && curvature > 0.0).then(|| curvature.sqrt().recip());
+    mean_from_ln_se(x, ln_se, hi)
+}
+
+/// The mean of a rate over its likelihood from its most likely value `x` and the standard
+/// error `ln_se` of `ln x`: `ln x` is about normal there, and the mean of a log-normal is
+/// `exp(ln_se^2 / 2)` times its median (the exponent capped at 2, the mean at most `hi`);
+/// `x` itself without a standard error. A variance that few events measure (the
+/// opposite-phase slip of one run's few turns: within a factor of 10 on 70 m) is more often
+/// under- than overestimated by its most likely value, and the sigma it gives is then too
+/// narrow; the mean is what the errors' spread over the likelihood's uncertainty has.
+pub(crate) fn mean_from_ln_se(x: f64, ln_se: Option<f64>, hi: f64) -> f64 {
+    match ln_se {
+        Some(s) => (x * (0.5 * s * s).min(2.0).exp()).min(hi),
+        None => x,
     }
 }
 

@@ -4,7 +4,7 @@
 use odo_unit::odometry::{ChassisParams, UncertaintyModel};
 
 use crate::calib::filter::innovations::Innovations;
-use crate::calib::filter::search::{posterior_mean, slip_rate_range};
+use crate::calib::filter::search::{mean_from_ln_se, slip_rate_range};
 
 use super::coefficients::{set_coefficient, DeltaMode, UncertaintyCriterion, UncertaintyFit};
 
@@ -12,7 +12,7 @@ use super::coefficients::{set_coefficient, DeltaMode, UncertaintyCriterion, Unce
 /// the long-range wheel-distance variance per metre, with the slip's correlation length fitted
 /// beside it (the unit's model has white slip; over the tens of metres a sigma is used for,
 /// the long-range rate is what it must carry), and the opposite-phase slip. The unit is told
-/// kappa's mean over the likelihood ([`posterior_mean`]: `exp(ln_se^2 / 2)` times the most
+/// kappa's mean over the likelihood ([`mean_from_ln_se`]: `exp(ln_se^2 / 2)` times the most
 /// likely value), not the most likely value: its variances are linear in kappa, so the mean is
 /// what the errors' spread over kappa's own uncertainty has, and one drive that happened to read
 /// kappa low does not leave the unit's bands too narrow. Returns the fit and the wheel slip's
@@ -27,7 +27,7 @@ pub fn fit_kappa_filter(
     let (most_likely, corr, turning) = innovations.fit_with_turning(lo, hi);
     let nll = |k: f64| innovations.score_with(k, corr, turning).nll;
     let ln_se = ln_standard_error(nll, most_likely);
-    let kappa = posterior_mean(|l| nll(l.exp()), most_likely, hi);
+    let kappa = mean_from_ln_se(most_likely, ln_se, hi);
     let mut params = set_coefficient(
         &ChassisParams {
             uncertainty_model: UncertaintyModel::Covariance,
