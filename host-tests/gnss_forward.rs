@@ -12,6 +12,9 @@ use odo_unit::unit::forward::{
 };
 use odo_unit::unit::{GnssCounters, Processor};
 
+mod support;
+use support::budget::assert_budget_row;
+
 /// Sample timer ticks per second.
 const HZ: u32 = 84_000_000;
 /// The firmware's transmit ring and the room pose records leave for replies (src/host_link.rs).
@@ -299,13 +302,7 @@ fn the_documented_budget_table_is_the_settings_check() {
         (460_800, 364, 1, 3),
         (921_600, 768, 1, 2),
     ] {
-        assert!(fits(baud, most, 1) && !fits(baud, most + 1, 1), "{baud}");
-        assert!(fits(baud, 50, at50), "{baud}");
-        assert!(at50 == 1 || !fits(baud, 50, at50 - 1), "{baud}");
-        assert!(
-            fits(baud, 1000, at1000) && !fits(baud, 1000, at1000 - 1),
-            "{baud}"
-        );
+        assert_budget_row(fits, (baud, most, at50, at1000));
         let row = if at50 == 1 && baud != 115_200 {
             format!("| {baud} | {most} | 1 | {at1000} |")
         } else {
