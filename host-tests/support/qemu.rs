@@ -6,7 +6,6 @@
 //! `$QEMU_SYSTEM_ARM` or `qemu-system-arm` on the PATH. Without either the test is skipped
 //! with a message, unless `ODO_QEMU_REQUIRED=1` (as in CI), which makes it fail.
 
-use std::net::TcpListener;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 
@@ -44,25 +43,34 @@ pub fn qemu_binary() -> Option<PathBuf> {
         .find(|p| p.is_file())
 }
 
-/// Ports handed to QEMU by this test process.
-static PORTS: std::sync::Mutex<Vec<u16>> = std::sync::Mutex::new(Vec::new());
-
-/// A free local port that no other test of this process was given: the port of a listener
-/// bound to port 0 and closed again. Tests run in parallel threads, and a port one of them
-/// has just closed for its QEMU can come back from the next bind; a second test given it
-/// would connect to the other's short-lived listener (or QEMU) instead of its own.
-fn free_port() -> u16 {
-    let mut given = PORTS.lock().unwrap_or_else(|e| e.into_inner());
-    loop {
-        let port = TcpListener::bind("127.0.0.1:0")
-            .and_then(|l| l.local_addr())
-            .expect("a free local port")
-            .port();
-        if !given.contains(&port) {
-            given.push(port);
-            return port;
+/// The port QEMU reports in its `waiting for connection on: disconnected:tcp:127.0.0.1:PORT,...`
+/// line, once it listens; every other line of its standard error is passed on.
+///
+/// QEMU binds port 0 and names the port the kernel gave it, so no port is chosen before
+/// QEMU holds it: a port probed by a test and closed again can be probed (briefly listened
+/// on) by a parallel test, whose connection attempts would land there.
+fn listening_port(stderr: std::process::ChildStderr) -> Option<u16> {
+    use std::io::{BufRead, BufReader};
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let mut tx = Some(tx);
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            let port = line
+                .split_once("disconnected:tcp:127.0.0.1:")
+                .and_then(|(_, rest)| rest.split(',').next())
+                .and_then(|p| p.parse::<u16>().ok());
+            match (port, tx.take()) {
+                (Some(port), Some(t)) => {
+                    let _ = t.send(port);
+                }
+                (_, t) => {
+                    eprintln!("{line}");
+                    tx = t;
+                }
+            }
         }
-    }
+    });
+    rx.recv_timeout(std::time::Duration::from_secs(20)).ok()
 }
 
 /// Boots the image of `repo` on `netduinoplus2` with `-icount shift=0,sleep=off`
@@ -85,8 +93,7 @@ pub fn boot(repo: &Path, test: &str) -> Option<Qemu> {
         return None;
     }
     let qemu = qemu_binary()?;
-    let port = free_port();
-    let child = Command::new(qemu)
+    let mut child = Command::new(qemu)
         .args([
             "-machine",
             "netduinoplus2",
@@ -97,14 +104,19 @@ pub fn boot(repo: &Path, test: &str) -> Option<Qemu> {
         .args(["-icount", "shift=0,sleep=off"])
         .args(["-semihosting-config", "enable=on,target=native"])
         .args(["-serial", "null", "-serial"])
-        .arg(format!("tcp:127.0.0.1:{port},server=on,wait=on"))
+        .arg("tcp:127.0.0.1:0,server=on,wait=on")
         .arg("-kernel")
         .arg(&image)
         .stdin(Stdio::null())
         .stdout(Stdio::null()) // defmt frames over semihosting (binary)
-        .stderr(Stdio::inherit())
+        .stderr(Stdio::piped())
         .spawn()
         .expect("start QEMU");
+    let stderr = child.stderr.take().expect("QEMU's standard error");
+    let Some(port) = listening_port(stderr) else {
+        let _ = child.kill();
+        panic!("QEMU named no listening port within 20 s: {:?}", child.wait());
+    };
     Some(Qemu { child, port })
 }
 
