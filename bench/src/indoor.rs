@@ -12,8 +12,9 @@
 //!   headings to 0.5 degrees, read and fitted as `odoctl umbmark` reads and fits them.
 //!
 //! Per estimate: the mean error to the truth with its standard error (the errors' standard
-//! deviation over the square root of the seed count: a mean beyond about three of them is a
-//! bias, one of one or two is what a few seeds give by chance), the RMS error, the RMS
+//! deviation over the square root of the seed count: a mean within two of them is what that
+//! many seeds give by chance, one beyond three asks for more seeds before it is called a
+//! bias), the RMS error, the RMS
 //! reported standard error (SE), and the share of the seeds whose error is within 2 and within
 //! 3 reported SE. `BENCH_INDOOR_SEEDS` sets one seed count for every table.
 
