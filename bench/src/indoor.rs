@@ -1,8 +1,8 @@
 //! Indoor calibration accuracy, as Markdown tables for docs/RESULTS.md (`bench/run`):
 //! `odo-bench indoor DIR`. Figures only: nothing here fails on noise.
 //!
-//! - Trajectory references ([`CASES`]: motion capture, SLAM, and RTK on the same runs for
-//!   comparison): runs of the release `odoctl` (`$ODOCTL`, else the `odoctl` beside this
+//! - Trajectory references ([`CASES`]: motion capture, with the default 10 m sub-trajectories
+//!   and with 3 m ones, SLAM at 10 and 20 Hz, and RTK on the same runs for comparison): runs of the release `odoctl` (`$ODOCTL`, else the `odoctl` beside this
 //!   binary), `simulate --path room --tum` (laps within 8 x 8 m) then `calibrate
 //!   --fit-antenna` with the clock estimated (RTK: against the run's reference CSV), files in
 //!   DIR; per seed the path's laps, the reference frame, the marker's yaw, the clock offset and
@@ -11,10 +11,12 @@
 //!   straight simulated in-process, end positions measured to 2 mm and the squares' end
 //!   headings to 0.5 degrees, read and fitted as `odoctl umbmark` reads and fits them.
 //!
-//! Per estimate: the mean and the RMS error to the truth (a mean beyond the RMS SE over the
-//! square root of the seed count is a bias), the RMS reported standard error (SE), and the
-//! share of the seeds whose error is within 2 and within 3 reported SE. `BENCH_INDOOR_SEEDS`
-//! sets one seed count for every table.
+//! Per estimate: the mean error to the truth with its standard error (the errors' standard
+//! deviation over the square root of the seed count: a mean within two of them is what that
+//! many seeds give by chance, one beyond three asks for more seeds before it is called a
+//! bias), the RMS error, the RMS
+//! reported standard error (SE), and the share of the seeds whose error is within 2 and within
+//! 3 reported SE. `BENCH_INDOOR_SEEDS` sets one seed count for every table.
 
 use std::f64::consts::FRAC_PI_2;
 use std::io::Write as _;
@@ -33,7 +35,8 @@ const MARKER: (f64, f64) = (0.25, -0.08);
 /// A simulated trajectory reference: its label, whether the run is calibrated against the
 /// simulator's RTK reference CSV instead (8 mm, 0.5 degrees, the unit's clock) for comparison,
 /// the samples' rate (Hz), a pose every this many samples, position noise (m), yaw noise
-/// (degrees), drift (m/sqrt(s), `simulate --trajectory-drift`), length (m), seeds by default.
+/// (degrees), drift (m/sqrt(s), `simulate --trajectory-drift`), length (m), seeds by default,
+/// and `calibrate --subtrajectory-length` (m).
 struct Case {
     label: &'static str,
     rtk: bool,
@@ -44,10 +47,11 @@ struct Case {
     drift: f64,
     length: f64,
     seeds: u64,
+    subtrajectory: f64,
 }
 
 /// The trajectory references of the tables.
-const CASES: [Case; 4] = [
+const CASES: [Case; 6] = [
     Case {
         label: "RTK",
         rtk: true,
@@ -58,6 +62,7 @@ const CASES: [Case; 4] = [
         drift: 0.0,
         length: 300.0,
         seeds: 20,
+        subtrajectory: 10.0,
     },
     Case {
         label: "motion capture",
@@ -69,6 +74,19 @@ const CASES: [Case; 4] = [
         drift: 0.0,
         length: 300.0,
         seeds: 20,
+        subtrajectory: 10.0,
+    },
+    Case {
+        label: "motion capture, 3 m sub-trajectories",
+        rtk: false,
+        rate: 100.0,
+        every: 1,
+        sigma: 0.0005,
+        yaw_sigma_deg: 0.1,
+        drift: 0.0,
+        length: 300.0,
+        seeds: 20,
+        subtrajectory: 3.0,
     },
     Case {
         label: "SLAM without drift",
@@ -80,6 +98,7 @@ const CASES: [Case; 4] = [
         drift: 0.0,
         length: 300.0,
         seeds: 8,
+        subtrajectory: 10.0,
     },
     Case {
         label: "SLAM with drift",
@@ -91,6 +110,19 @@ const CASES: [Case; 4] = [
         drift: 0.001,
         length: 300.0,
         seeds: 8,
+        subtrajectory: 10.0,
+    },
+    Case {
+        label: "SLAM with drift at 20 Hz",
+        rtk: false,
+        rate: 100.0,
+        every: 5,
+        sigma: 0.01,
+        yaw_sigma_deg: 0.5,
+        drift: 0.001,
+        length: 300.0,
+        seeds: 8,
+        subtrajectory: 10.0,
     },
 ];
 
@@ -120,12 +152,16 @@ impl Stat {
         self.n += 1;
     }
 
-    /// `| mean error | RMS error | RMS SE | within 2 SE | within 3 SE |` with `decimals`.
+    /// `| mean error | SE of the mean | RMS error | RMS SE | within 2 SE | within 3 SE |` with
+    /// `decimals`; the mean's SE is the errors' sample standard deviation over `sqrt(n)`.
     fn cells(&self, decimals: usize) -> String {
         let n = self.n.max(1) as f64;
+        let mean = self.sum / n;
+        let variance = (self.sq - n * mean * mean).max(0.0) / (n - 1.0).max(1.0);
         format!(
-            "{:+.decimals$} | {:.decimals$} | {:.decimals$} | {:.0} % | {:.0} %",
-            self.sum / n,
+            "{:+.decimals$} | {:.decimals$} | {:.decimals$} | {:.decimals$} | {:.0} % | {:.0} %",
+            mean,
+            (variance / n).sqrt(),
             (self.sq / n).sqrt(),
             (self.sq_se / n).sqrt(),
             100.0 * self.within2 as f64 / n,
@@ -185,6 +221,7 @@ fn trajectory_seed(case: &Case, dir: &Path, seed: u64) -> Result<([f64; 7], [f64
         case.length.to_string(),
     );
     let (offset_s, ppm_s, seed_s) = (offset.to_string(), ppm.to_string(), seed.to_string());
+    let subtrajectory = case.subtrajectory.to_string();
     let marker = format!("{},{}", MARKER.0, MARKER.1);
     let (samples, reference, tum, out) = (s("run.csv"), s("ref.csv"), s("run.tum"), s("out.toml"));
     run_odoctl(&[
@@ -232,6 +269,8 @@ fn trajectory_seed(case: &Case, dir: &Path, seed: u64) -> Result<([f64; 7], [f64
         &out,
         "--no-delta",
         "--fit-antenna",
+        "--subtrajectory-length",
+        &subtrajectory,
     ])?;
     let [eo, so, er, sr] = if case.rtk {
         [offset, 0.0, ppm, 0.0].map(|v| v + f64::NAN)
@@ -321,7 +360,7 @@ fn trajectory_table(case: &Case, root: &Path) {
         );
     } else {
         println!(
-            "{}: {} m of laps within 8 x 8 m (`simulate --path room`) at 0.5 m/s, samples at {} Hz, poses at {} Hz, position noise {} mm RMS, yaw noise {} degrees, {}; seeds 1 to {n}{failed}.",
+            "{}: {} m of laps within 8 x 8 m (`simulate --path room`) at 0.5 m/s, samples at {} Hz, poses at {} Hz, position noise {} mm RMS, yaw noise {} degrees, {}; sub-trajectories of {} m; seeds 1 to {n}{failed}.",
             capitalised(case.label),
             case.length,
             case.rate,
@@ -337,13 +376,14 @@ fn trajectory_table(case: &Case, root: &Path) {
             } else {
                 "no drift".into()
             },
+            case.subtrajectory,
         );
     }
     println!();
-    println!("| estimate | mean error | RMS error | RMS reported SE | within 2 SE | within 3 SE | target (RMS error) |");
-    println!("| --- | ---: | ---: | ---: | ---: | ---: | --- |");
+    println!("| estimate | mean error | SE of the mean | RMS error | RMS reported SE | within 2 SE | within 3 SE | target (RMS error) |");
+    println!("| --- | ---: | ---: | ---: | ---: | ---: | ---: | --- |");
     for ((label, unit, decimals, target), s) in TRAJECTORY_ROWS.iter().zip(&stats) {
-        let target = if case.label == "motion capture" {
+        let target = if case.label.starts_with("motion capture") {
             target
         } else {
             "-"
@@ -477,8 +517,8 @@ fn square_table(root: &Path) {
         n as usize - failed
     );
     println!();
-    println!("| estimate | mean error | RMS error | RMS reported SE | within 2 SE | within 3 SE | target (RMS error) |");
-    println!("| --- | ---: | ---: | ---: | ---: | ---: | --- |");
+    println!("| estimate | mean error | SE of the mean | RMS error | RMS reported SE | within 2 SE | within 3 SE | target (RMS error) |");
+    println!("| --- | ---: | ---: | ---: | ---: | ---: | ---: | --- |");
     for ((label, decimals, target), s) in [
         ("left diameter (mm)", 4, "-"),
         ("right diameter (mm)", 4, "-"),

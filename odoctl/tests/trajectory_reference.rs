@@ -323,3 +323,52 @@ fn a_poorly_determined_clock_rate_is_named() {
     assert!(!fixed.contains("poorly determined"), "{fixed}");
     assert!(fixed.contains("+0.000 ppm (se 0.000 ppm)"), "{fixed}");
 }
+
+/// An estimated clock offset's error is carried into the standard errors: on a SLAM-like
+/// trajectory (10 Hz, 10 mm) the lever arm forward's standard error with the offset estimated
+/// exceeds the one with the offset given (at the estimate, so the geometry is the same), and
+/// `calibrate` prints the share; with the offset given it prints none.
+#[test]
+fn an_estimated_clock_offset_widens_the_lever_arms_standard_error() {
+    let d = common::scratch("trajectory_offset_share");
+    let noisy = [
+        "--trajectory-every",
+        "10",
+        "--trajectory-sigma",
+        "0.01",
+        "--trajectory-yaw-sigma-deg",
+        "0.5",
+    ];
+    simulate(&d, 2, "150", &noisy);
+    let s = |n: &str| d.join(n).to_str().unwrap().to_string();
+    let run = |out: &str, extra: &[&str]| {
+        let (samples, tum, out) = (s("run.csv"), s("run.tum"), s(out));
+        let mut args = vec![
+            "calibrate",
+            "--samples",
+            samples.as_str(),
+            "--reference",
+            tum.as_str(),
+            "--out",
+            out.as_str(),
+            "--no-delta",
+            "--fit-antenna",
+        ];
+        args.extend_from_slice(extra);
+        let stdout = common::success_stdout(&common::odoctl(&args));
+        let text = std::fs::read_to_string(&out).unwrap();
+        let fit: toml::Table = text.parse::<toml::Table>().unwrap()["fit"]
+            .as_table()
+            .unwrap()
+            .clone();
+        (stdout, fit["antenna_forward_se"].as_float().unwrap())
+    };
+    let (estimated, se_estimated) = run("estimated.toml", &[]);
+    let share = "the clock offset's share of the standard errors";
+    assert!(estimated.contains(share), "{estimated}");
+    let [offset, ..] = clock_line(&estimated);
+    let (given, se_given) = run("given.toml", &["--time-offset", &offset.to_string()]);
+    assert!(!given.contains(share), "{given}");
+    eprintln!("lever arm forward se: {se_estimated:.2e} m estimated, {se_given:.2e} m given");
+    assert!(se_estimated > 1.05 * se_given, "{se_estimated} {se_given}");
+}

@@ -882,6 +882,17 @@ impl Reference {
         self.points_and_clock(samples).map(|(p, line, _)| (p, line))
     }
 
+    /// A trajectory's rows at the sample instants on the clock `clock` rather than its own
+    /// estimate ([`trajectory::resample`] as [`Reference::points_and_clock`] uses it); empty
+    /// for any other reference.
+    pub fn points_on_clock(&self, samples: &[Sample], clock: &clock::ClockFit) -> Vec<RefPoint> {
+        if self.time != TimeScale::Trajectory {
+            return Vec::new();
+        }
+        let times: Vec<f64> = samples.iter().map(|s| s.t).collect();
+        trajectory::resample(&self.epochs, |s| clock.map(s), &times).0
+    }
+
     /// [`Reference::points_for`] with a trajectory's clock ([`Reference::clock`]).
     pub fn points_and_clock(
         &self,

@@ -21,6 +21,7 @@ use crate::stats::{coverage, summarize, Summary};
 use super::recording::{check_recording_times, reference_for};
 use super::reference_options;
 
+pub mod clock_offset;
 pub mod options;
 pub mod report;
 pub mod write;
@@ -83,7 +84,8 @@ pub fn run(a: &CalibrateArgs) -> Result<ExitCode> {
     let started = Instant::now();
     let timer = calib::PhaseTimer::new();
     let (reference_path, own) = reference_for(&a.samples, a.reference.as_deref())?;
-    let (samples, reference, clock) = read_run(&a.samples, &reference_path, &a.reference_input)?;
+    let (samples, reference, clock, moved) =
+        read_run(&a.samples, &reference_path, &a.reference_input)?;
     if own {
         check_recording_times(&samples, &reference)?;
     }
@@ -97,6 +99,9 @@ pub fn run(a: &CalibrateArgs) -> Result<ExitCode> {
     let mut c = calib::calibrate(&samples, &reference, (&names.0, &names.1), &initial, opts)?;
     if let Some(k) = &clock {
         add_clock_rate_uncertainty(&mut c, k);
+    }
+    if let Some(moved) = &moved {
+        add_clock_offset_uncertainty(&mut c, &samples, moved, opts);
     }
     timer.lap("calibration");
     let noise = calib::ReferenceNoise {
@@ -130,22 +135,64 @@ fn add_clock_rate_uncertainty(c: &mut Calibration, clock: &ClockFit) {
     }
 }
 
+/// Adds what an estimated clock offset contributes to the geometry's standard errors
+/// ([`clock_offset`]), with a line saying how much; on a failure of the repeated fit, a line
+/// saying that it was not added.
+fn add_clock_offset_uncertainty(
+    c: &mut Calibration,
+    samples: &[Sample],
+    moved: &[RefPoint],
+    opts: &calib::CalibrationOptions,
+) {
+    match clock_offset::offset_shares(c, samples, moved, opts) {
+        Ok(Some(d)) => {
+            clock_offset::add_offset_shares(c, d);
+            crate::outln!(
+                "  the clock offset's share of the standard errors (the sub-trajectory fit with the offset moved by its standard error), added: diameters {:.2e} {:.2e} m, track width {:.2e} m, lever arm {:.2e} {:.2e} m",
+                d[0].abs(),
+                d[1].abs(),
+                d[2].abs(),
+                d[3].abs(),
+                d[4].abs()
+            );
+        }
+        Ok(None) => {}
+        Err(e) => crate::outln!(
+            "  the clock offset's share of the standard errors is not added: the repeated fit failed: {e}"
+        ),
+    }
+}
+
+/// What [`read_run`] returns: the samples, the reference rows, a trajectory's clock, and the
+/// trajectory on the clock with the offset moved by its standard error.
+type RunInputs = (
+    Vec<Sample>,
+    Vec<RefPoint>,
+    Option<ClockFit>,
+    Option<Vec<RefPoint>>,
+);
+
 /// Reads the samples and the reference (on two cores: the files are independent), the
-/// reference aligned to the samples, and a trajectory reference's clock.
-fn read_run(
-    samples: &Path,
-    reference: &Path,
-    input: &ReferenceArgs,
-) -> Result<(Vec<Sample>, Vec<RefPoint>, Option<ClockFit>)> {
+/// reference aligned to the samples, a trajectory reference's clock, and, when the clock's
+/// offset was estimated, the trajectory resampled with the offset moved by its standard error
+/// ([`clock_offset`]).
+fn read_run(samples: &Path, reference: &Path, input: &ReferenceArgs) -> Result<RunInputs> {
     let (samples, reference) = std::thread::scope(|scope| {
         let reference = scope
             .spawn(|| reference_options(input).and_then(|o| crate::reference::load(reference, &o)));
         let samples = csvio::read_samples(samples);
         (samples, reference.join().expect("CSV reader panicked"))
     });
-    let (samples, reference) = (samples?, reference?);
-    let (reference, clock) = reference_and_clock_for_samples(&reference, &samples)?;
-    Ok((samples, reference, clock))
+    let (samples, source) = (samples?, reference?);
+    let (reference, clock) = reference_and_clock_for_samples(&source, &samples)?;
+    let moved = clock.filter(|k| k.offset_se > 0.0).map(|k| {
+        let moved = ClockFit {
+            offset: k.offset + k.offset_se,
+            ..k
+        };
+        source.points_on_clock(&samples, &moved)
+    });
+    Ok((samples, reference, clock, moved))
 }
 
 /// The first estimate: `--initial` (or the designed values) with the `--set`s over it.
