@@ -18,6 +18,7 @@ pub mod matched;
 pub mod mcap_pose;
 pub mod nmea;
 pub mod rtklib;
+pub mod scatter;
 pub mod simulated;
 pub mod simulated_trajectory;
 pub mod stream;
