@@ -487,7 +487,13 @@ pub struct Reference {
 /// Reads a reference file of any format.
 pub fn load(path: &Path, o: &ReferenceOptions) -> Result<Reference> {
     let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
-    let r = parse(&path.display().to_string(), &bytes, o)?;
+    load_bytes(path, &bytes, o)
+}
+
+/// Reads the content `bytes` of the reference file `path` (already in memory) as [`load`]
+/// reads the file: the same reference, the same warnings.
+pub fn load_bytes(path: &Path, bytes: &[u8], o: &ReferenceOptions) -> Result<Reference> {
+    let r = parse(&path.display().to_string(), bytes, o)?;
     for w in &r.report.read.warnings {
         eprintln!("warning: {w}");
     }

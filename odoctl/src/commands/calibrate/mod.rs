@@ -3,6 +3,7 @@
 //! TOML, the stability study's CSV, the figures, and with `--export-ros`, `--mcap` its ROS
 //! forms.
 
+use std::borrow::Cow;
 use std::path::Path;
 use std::process::ExitCode;
 use std::time::Instant;
@@ -80,36 +81,78 @@ pub fn filter_refined(c: &Calibration) -> bool {
 
 /// `odoctl calibrate`.
 pub fn run(a: &CalibrateArgs) -> Result<ExitCode> {
+    run_from(a, None)
+}
+
+/// A recording already in memory (`record --calibrate`): the SAMPLES rows of `--samples` as
+/// the reader gives them back from the file, and the bytes of the NMEA log beside it.
+#[derive(Clone, Copy)]
+pub struct Recorded<'r> {
+    /// The rows of the SAMPLES file.
+    pub samples: &'r [Sample],
+    /// The content of the NMEA log beside it.
+    pub nmea: &'r [u8],
+}
+
+/// `odoctl calibrate`, with the recording's files taken from `recorded` when given and the
+/// reference is the recording's own NMEA log: the same result, printed and written, as
+/// from the files.
+pub fn run_from(a: &CalibrateArgs, recorded: Option<Recorded>) -> Result<ExitCode> {
     let started = Instant::now();
     let timer = calib::PhaseTimer::new();
     let (reference_path, own) = reference_for(&a.samples, a.reference.as_deref())?;
-    let (samples, reference, clock) = read_run(&a.samples, &reference_path, &a.reference_input)?;
+    let (samples, reference, clock) = match recorded.filter(|_| own) {
+        Some(r) => {
+            let o = reference_options(&a.reference_input)?;
+            let source = crate::reference::load_bytes(&reference_path, r.nmea, &o)?;
+            let (reference, clock) = reference_and_clock_for_samples(&source, r.samples)?;
+            (Cow::Borrowed(r.samples), reference, clock)
+        }
+        None => {
+            let (s, r, c) = read_run(&a.samples, &reference_path, &a.reference_input)?;
+            (Cow::Owned(s), r, c)
+        }
+    };
     if own {
         check_recording_times(&samples, &reference)?;
     }
     timer.lap("read CSV");
-    let initial = initial_estimate(a)?;
     let names = (
         a.samples.display().to_string(),
         reference_path.display().to_string(),
     );
-    let opts = &options::calibration_options(a)?;
-    let mut c = calib::calibrate(&samples, &reference, (&names.0, &names.1), &initial, opts)?;
-    if let Some(k) = &clock {
-        add_clock_rate_uncertainty(&mut c, k);
-    }
+    let (c, opts, initial) = calibration(a, &samples, &reference, clock.as_ref(), &names)?;
     timer.lap("calibration");
     let noise = calib::ReferenceNoise {
         horizontal: opts.reference_sigma,
         heading: opts.reference_heading_sigma,
     };
     let errors = ErrorSummary::of(&c, &noise);
-    report::print(&c, &initial, opts, &errors);
-    write::write_result(a, &reference_path, &c, opts, &errors, clock.as_ref())?;
+    report::print(&c, &initial, &opts, &errors);
+    write::write_result(a, &reference_path, &c, &opts, &errors, clock.as_ref())?;
     timer.lap("report");
     crate::outln!("done in {:.2} s", started.elapsed().as_secs_f64());
     export_ros(a, &reference_path)?;
     Ok(ExitCode::SUCCESS)
+}
+
+/// The calibration `a` asks for of `samples` against `reference` (with `clock`, a
+/// trajectory reference's clock fit), `names` the two inputs' names for messages; with its
+/// options and initial estimate. Prints nothing.
+pub fn calibration(
+    a: &CalibrateArgs,
+    samples: &[Sample],
+    reference: &[RefPoint],
+    clock: Option<&ClockFit>,
+    names: &(String, String),
+) -> Result<(Calibration, calib::CalibrationOptions, ChassisParams)> {
+    let initial = initial_estimate(a)?;
+    let opts = options::calibration_options(a)?;
+    let mut c = calib::calibrate(samples, reference, (&names.0, &names.1), &initial, &opts)?;
+    if let Some(k) = clock {
+        add_clock_rate_uncertainty(&mut c, k);
+    }
+    Ok((c, opts, initial))
 }
 
 /// Adds what an estimated clock rate contributes to the diameters' standard errors: a rate

@@ -1,0 +1,172 @@
+//! `record --calibrate`'s batch calibration in the background: a thread of the lowest
+//! priority (nice 19 on Linux, so that the recording, the live updates and the final
+//! calibration come first) runs the batch calibration of the drive's end (`odoctl calibrate`
+//! with the same command line, [`calibration`]) again and again, each time on every row and
+//! sentence handed to it by its start, and keeps the latest result. Nothing it does is
+//! printed; a batch that fails (too little data yet) is counted and the next one tried.
+
+use std::sync::mpsc::{channel, Receiver, Sender};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use anyhow::Result;
+use clap::Parser;
+use odo_unit::odometry::ChassisParams;
+
+use super::calibrate::calibration;
+use super::reference_options;
+use crate::cli::{Cli, Cmd};
+use crate::csvio::Sample;
+use crate::reference::matched::reference_and_clock_for_samples;
+
+/// The latest batch calibration of the drive so far.
+#[derive(Debug, Clone, Copy)]
+pub struct BatchResult {
+    /// Time of the last sample it saw (s, the samples' time base).
+    pub until: f64,
+    /// The sub-trajectory fit's left diameter, right diameter, track width (m).
+    pub subtrajectory: [f64; 3],
+    /// The result's (filter-refined where the refinement applied) (m).
+    pub result: [f64; 3],
+    /// The result's cluster-robust standard errors (m).
+    pub std_errors: [Option<f64>; 3],
+    /// The result's parameters (the uncertainty model's coefficients among them).
+    pub params: ChassisParams,
+    /// Wall time the batch took.
+    pub took: Duration,
+    /// Batches done, and failed, so far.
+    pub done: usize,
+    /// See `done`.
+    pub failed: usize,
+}
+
+impl BatchResult {
+    /// What the batch adds to its own sub-trajectory fit: result - sub-trajectory fit (m).
+    pub fn correction(&self) -> [f64; 3] {
+        [0, 1, 2].map(|i| self.result[i] - self.subtrajectory[i])
+    }
+}
+
+/// Rows (as read back) and log bytes since the last hand-over.
+type Chunk = (Vec<Sample>, Vec<u8>);
+
+/// The background batch calibration (module documentation).
+pub struct BatchWorker {
+    tx: Option<Sender<Chunk>>,
+    latest: Arc<Mutex<Option<BatchResult>>>,
+    /// Rows and log bytes handed on so far.
+    sent: (usize, usize),
+}
+
+impl BatchWorker {
+    /// Starts the thread; `args` is the `odoctl calibrate` command line of the final
+    /// calibration (its `--out` is not written).
+    pub fn start(args: Vec<String>) -> Result<Self> {
+        // Refused here, not on the thread.
+        Cli::try_parse_from(&args)?;
+        let (tx, rx) = channel();
+        let latest = Arc::new(Mutex::new(None));
+        let slot = Arc::clone(&latest);
+        std::thread::Builder::new()
+            .name("batch calibration".into())
+            .spawn(move || work(&args, &rx, &slot))?;
+        Ok(Self {
+            tx: Some(tx),
+            latest,
+            sent: (0, 0),
+        })
+    }
+
+    /// Hands on what of `samples` (every row so far) and `nmea` (the log so far) is new.
+    pub fn feed(&mut self, samples: &[Sample], nmea: &[u8]) {
+        let (s, b) = self.sent;
+        if s >= samples.len() && b >= nmea.len() {
+            return;
+        }
+        let chunk = (samples[s..].to_vec(), nmea[b.min(nmea.len())..].to_vec());
+        self.sent = (samples.len(), nmea.len().max(b));
+        if let Some(tx) = &self.tx {
+            if tx.send(chunk).is_err() {
+                self.tx = None;
+            }
+        }
+    }
+
+    /// The latest result, if a batch has succeeded.
+    pub fn latest(&self) -> Option<BatchResult> {
+        *self.latest.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// No batch starts after this (the one running ends on its own, at its low priority).
+    pub fn stop(&mut self) {
+        self.tx = None;
+    }
+}
+
+/// The thread: waits for data, takes in all that has come, calibrates, keeps the result;
+/// ends when the sender is gone.
+fn work(args: &[String], rx: &Receiver<Chunk>, slot: &Mutex<Option<BatchResult>>) {
+    lowest_priority();
+    let Ok(cli) = Cli::try_parse_from(args) else {
+        return;
+    };
+    let Cmd::Calibrate(a) = &cli.cmd else {
+        return;
+    };
+    let (mut samples, mut nmea) = (Vec::new(), Vec::new());
+    let (mut done, mut failed) = (0, 0);
+    while let Ok(first) = rx.recv() {
+        for (s, b) in std::iter::once(first).chain(rx.try_iter()) {
+            samples.extend(s);
+            nmea.extend(b);
+        }
+        let started = Instant::now();
+        match batch(a, &samples, &nmea) {
+            Ok(mut r) => {
+                done += 1;
+                r.took = started.elapsed();
+                (r.done, r.failed) = (done, failed);
+                *slot.lock().unwrap_or_else(|e| e.into_inner()) = Some(r);
+            }
+            Err(_) => failed += 1,
+        }
+    }
+}
+
+/// One batch calibration of `samples` against the NMEA log `nmea`, as `a` asks.
+fn batch(a: &crate::cli::CalibrateArgs, samples: &[Sample], nmea: &[u8]) -> Result<BatchResult> {
+    let until = samples.last().map_or(f64::NAN, |s| s.t);
+    let source = crate::reference::parse("live", nmea, &reference_options(&a.reference_input)?)?;
+    let (reference, clock) = reference_and_clock_for_samples(&source, samples)?;
+    let names = ("samples".to_string(), "live".to_string());
+    let (c, _, _) = calibration(a, samples, &reference, clock.as_ref(), &names)?;
+    let geometry = |p: &ChassisParams| [p.left_diameter, p.right_diameter, p.track_width];
+    Ok(BatchResult {
+        until,
+        subtrajectory: c
+            .subtrajectories
+            .as_ref()
+            .map_or(geometry(&c.params), |s| geometry(&s.params)),
+        result: geometry(&c.params),
+        std_errors: [0, 1, 2].map(|i| c.geometry.robust_std_errors[i]),
+        params: c.params,
+        took: Duration::ZERO,
+        done: 0,
+        failed: 0,
+    })
+}
+
+/// Lowers the calling thread (and the threads it starts) to nice 19 on Linux, where the
+/// nice value is a thread's; elsewhere nothing.
+fn lowest_priority() {
+    #[cfg(target_os = "linux")]
+    {
+        // Note(unsafe): gettid and setpriority take no pointers and change only this
+        // thread's scheduling weight; a failure leaves the priority as it was.
+        #[allow(unsafe_code)]
+        unsafe {
+            let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
+            libc::setpriority(libc::PRIO_PROCESS, tid, 19);
+        }
+    }
+}
