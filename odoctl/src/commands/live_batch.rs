@@ -10,14 +10,11 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use anyhow::Result;
-use clap::Parser;
 use odo_unit::odometry::ChassisParams;
 
-use super::calibrate::calibration;
+use super::calibrate::{calibration, parse_command_line};
 use super::reference_options;
-use crate::cli::{Cli, Cmd};
 use crate::csvio::Sample;
-use crate::reference::matched::reference_and_clock_for_samples;
 
 /// The latest batch calibration of the drive so far.
 #[derive(Debug, Clone, Copy)]
@@ -63,7 +60,7 @@ impl BatchWorker {
     /// calibration (its `--out` is not written).
     pub fn start(args: Vec<String>) -> Result<Self> {
         // Refused here, not on the thread.
-        Cli::try_parse_from(&args)?;
+        parse_command_line(&args)?;
         let (tx, rx) = channel();
         let latest = Arc::new(Mutex::new(None));
         let slot = Arc::clone(&latest);
@@ -107,10 +104,7 @@ impl BatchWorker {
 /// ends when the sender is gone.
 fn work(args: &[String], rx: &Receiver<Chunk>, slot: &Mutex<Option<BatchResult>>) {
     lowest_priority();
-    let Ok(cli) = Cli::try_parse_from(args) else {
-        return;
-    };
-    let Cmd::Calibrate(a) = &cli.cmd else {
+    let Ok(a) = parse_command_line(args) else {
         return;
     };
     let (mut samples, mut nmea) = (Vec::new(), Vec::new());
@@ -121,7 +115,7 @@ fn work(args: &[String], rx: &Receiver<Chunk>, slot: &Mutex<Option<BatchResult>>
             nmea.extend(b);
         }
         let started = Instant::now();
-        match batch(a, &samples, &nmea) {
+        match batch(&a, &samples, &nmea) {
             Ok(mut r) => {
                 done += 1;
                 r.took = started.elapsed();
@@ -137,7 +131,7 @@ fn work(args: &[String], rx: &Receiver<Chunk>, slot: &Mutex<Option<BatchResult>>
 fn batch(a: &crate::cli::CalibrateArgs, samples: &[Sample], nmea: &[u8]) -> Result<BatchResult> {
     let until = samples.last().map_or(f64::NAN, |s| s.t);
     let source = crate::reference::parse("live", nmea, &reference_options(&a.reference_input)?)?;
-    let (reference, clock) = reference_and_clock_for_samples(&source, samples)?;
+    let (reference, _, clock) = source.points_and_clock(samples)?;
     let names = ("samples".to_string(), "live".to_string());
     let (c, _, _) = calibration(a, samples, &reference, clock.as_ref(), &names)?;
     let geometry = |p: &ChassisParams| [p.left_diameter, p.right_diameter, p.track_width];

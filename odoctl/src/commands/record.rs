@@ -7,7 +7,6 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Result};
-use clap::Parser;
 use odo_unit::protocol::{Frame, GnssSentence, Message, PoseRecord};
 
 use super::live::LiveSession;
@@ -67,12 +66,9 @@ fn final_calibration(a: &RecordArgs, session: &mut LiveSession) -> Result<()> {
         "final calibration (the batch one on the whole recording): {}",
         args[1..].join(" ")
     );
-    let cli = crate::cli::Cli::try_parse_from(&args)?;
-    let crate::cli::Cmd::Calibrate(c) = &cli.cmd else {
-        unreachable!("a calibrate command line");
-    };
+    let c = super::calibrate::parse_command_line(&args)?;
     // The files' content is in memory: the same calibration without reading them again.
-    super::calibrate::run_from(c, session.recorded())?;
+    super::calibrate::run_from(&c, session.recorded())?;
     crate::outln!(
         "final calibration printed {:.3} s after the drive's end (slowest live update {:.1} ms)",
         ended.elapsed().as_secs_f64(),

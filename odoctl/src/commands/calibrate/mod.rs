@@ -84,6 +84,15 @@ pub fn run(a: &CalibrateArgs) -> Result<ExitCode> {
     run_from(a, None)
 }
 
+/// The arguments of an `odoctl calibrate` command line (`args[0]` the program's name).
+pub fn parse_command_line(args: &[String]) -> Result<CalibrateArgs> {
+    use clap::Parser;
+    match crate::cli::Cli::try_parse_from(args)?.cmd {
+        crate::cli::Cmd::Calibrate(c) => Ok(c),
+        _ => anyhow::bail!("not a calibrate command line: {}", args.join(" ")),
+    }
+}
+
 /// A recording already in memory (`record --calibrate`): the SAMPLES rows of `--samples` as
 /// the reader gives them back from the file, and the bytes of the NMEA log beside it.
 #[derive(Clone, Copy)]
