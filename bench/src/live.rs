@@ -26,7 +26,9 @@ use odoctl::calib::{fit_subtrajectories, Run, SubtrajectoryOptions, SUBTRAJECTOR
 use odoctl::commands::calibrate::{parse_command_line, run_from, Recorded};
 use odoctl::commands::live::refined;
 use odoctl::commands::live_batch::{BatchResult, BatchWorker};
+use odoctl::commands::recording::nmea_path;
 use odoctl::csvio::{self, Sample, SamplesLayout};
+use odoctl::reference::nmea::LogLines;
 use odoctl::reference::simulated::{drive_with_sentences, ReceiverSim};
 use odoctl::reference::stream::NmeaStream;
 use odoctl::simulate::{default_truth, simulate_path, PathKind, SimSettings};
@@ -113,7 +115,7 @@ fn drive() -> (Vec<Sample>, Vec<(usize, String)>) {
 
 /// What the drive's feed leaves: the cost of each update (distance driven then, whole
 /// update, the fit alone), the live fit, the streaming reader, the background batch, the
-/// rows and the log handed on.
+/// rows and the log handed on, the log's lines read as they came.
 struct Fed {
     costs: Vec<(f64, Duration, Duration)>,
     live: LiveCalibration,
@@ -121,6 +123,7 @@ struct Fed {
     batch: BatchWorker,
     rows: Vec<Sample>,
     log: Vec<u8>,
+    lines: Option<LogLines>,
 }
 
 /// One update per second of drive (its rows and sentences), one every [`PACE`], the
@@ -133,6 +136,7 @@ fn feed(rows: &[Sample], sentences: &[(usize, String)], args: &[String]) -> Fed 
         batch: BatchWorker::start(args.to_vec()).expect("the background batch"),
         rows: Vec::with_capacity(rows.len()),
         log: Vec::new(),
+        lines: Some(LogLines::new(&nmea_path(Path::new(&args[4])).display().to_string(), None)),
     };
     let per_second = 50;
     let mut next = 0;
@@ -156,6 +160,9 @@ fn feed(rows: &[Sample], sentences: &[(usize, String)], args: &[String]) -> Fed 
             f.stream.push(rows[*k].t, text);
             f.log.extend_from_slice(text.as_bytes());
             f.log.extend_from_slice(b"\r\n");
+            if let Some(l) = &mut f.lines {
+                l.line(text);
+            }
             next += 1;
         }
         let span = (rows[0].t, chunk[chunk.len() - 1].t);
@@ -200,6 +207,7 @@ fn drive_end(f: &mut Fed, args: &[String], report: &Path) -> End {
     let recorded = Recorded {
         samples: &f.rows,
         nmea: &f.log,
+        lines: f.lines.take().expect("the log's lines"),
     };
     stdout_to(report, || run_from(&c, Some(recorded))).expect("the final calibration");
     End {

@@ -6,17 +6,20 @@
 //! otherwise.
 
 use std::io::{IsTerminal, Write};
+use std::path::Path;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Result};
 use odo_unit::odometry::ChassisParams;
 
-use super::calibrate::Recorded;
+use super::calibrate::{parse_command_line, Recorded};
+use super::reference_options;
 use super::live_batch::{BatchResult, BatchWorker};
 use crate::calib::live::{LiveCalibration, LiveEstimate, MIN_TURNING_DEG};
 use crate::calib::SUBTRAJECTORY_LENGTH;
 use crate::cli::values::Targets;
 use crate::csvio::Sample;
+use crate::reference::nmea::LogLines;
 use crate::reference::stream::NmeaStream;
 
 /// Sub-trajectories before the hints project how much more driving the targets need.
@@ -164,6 +167,8 @@ pub struct LiveSession {
     /// The rows of the first SAMPLES file as the reader gives them back, and the NMEA log's
     /// bytes as written: the final calibration's input.
     recording: (Vec<Sample>, Vec<u8>),
+    /// The NMEA log's lines read as they come (taken by the final calibration).
+    log_lines: Option<LogLines>,
     batch: BatchWorker,
     /// Largest cost of one update so far.
     pub slowest_update: Duration,
@@ -172,9 +177,16 @@ pub struct LiveSession {
 impl LiveSession {
     /// A session from the initial estimate `initial`, against `targets`; `calibrate` is the
     /// `odoctl calibrate` command line of the final calibration, which the background batch
-    /// runs along the drive.
-    pub fn new(initial: &ChassisParams, targets: Targets, calibrate: Vec<String>) -> Result<Self> {
+    /// runs along the drive; `log` the NMEA log's path.
+    pub fn new(
+        initial: &ChassisParams,
+        targets: Targets,
+        calibrate: Vec<String>,
+        log: &Path,
+    ) -> Result<Self> {
+        let leap = reference_options(&parse_command_line(&calibrate)?.reference_input)?.leap_seconds;
         Ok(Self {
+            log_lines: Some(LogLines::new(&log.display().to_string(), leap)),
             live: LiveCalibration::new(initial, SUBTRAJECTORY_LENGTH),
             stream: NmeaStream::new(),
             targets,
@@ -202,6 +214,9 @@ impl LiveSession {
         self.stream.push(at, text);
         self.recording.1.extend_from_slice(text.as_bytes());
         self.recording.1.extend_from_slice(b"\r\n");
+        if let Some(l) = &mut self.log_lines {
+            l.line(text);
+        }
     }
 
     /// Updates and shows the estimate when a second has passed.
@@ -237,11 +252,13 @@ impl LiveSession {
         self.live.time_span().map_or(f64::NAN, |s| s.1)
     }
 
-    /// The recording as the two files hold it, for the final calibration.
-    pub fn recorded(&self) -> Option<Recorded<'_>> {
+    /// The recording as the two files hold it, for the final calibration (once).
+    pub fn recorded(&mut self) -> Option<Recorded<'_>> {
+        let lines = self.log_lines.take()?;
         (!self.recording.0.is_empty()).then_some(Recorded {
             samples: &self.recording.0,
             nmea: &self.recording.1,
+            lines,
         })
     }
 

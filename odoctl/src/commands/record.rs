@@ -26,6 +26,7 @@ pub fn run(a: &RecordArgs) -> Result<ExitCode> {
             &initial,
             a.target_se.unwrap_or(DEFAULT_TARGETS),
             calibrate_args(a, false),
+            &nmea_path(&a.out),
         )?)
     } else {
         None

@@ -500,6 +500,30 @@ pub fn load_bytes(path: &Path, bytes: &[u8], o: &ReferenceOptions) -> Result<Ref
     Ok(r)
 }
 
+/// [`load_bytes`] of an NMEA log whose lines `read` has read as they were appended to
+/// `bytes` ([`nmea::LogLines`]): the same reference and warnings, with only the dating of
+/// the epochs left to do. Another format is read whole.
+pub fn load_read(
+    path: &Path,
+    bytes: &[u8],
+    read: nmea::LogLines,
+    o: &ReferenceOptions,
+) -> Result<Reference> {
+    let Ok(text) = std::str::from_utf8(bytes) else {
+        return load_bytes(path, bytes, o);
+    };
+    if o.format.unwrap_or_else(|| detect_format(bytes, text)) != Format::Nmea {
+        return load_bytes(path, bytes, o);
+    }
+    let file = path.display().to_string();
+    let log = read.finish(&file, text, o.leap_seconds)?;
+    let r = Reference::from_log(&file, Format::Nmea, log, o)?;
+    for w in &r.report.read.warnings {
+        eprintln!("warning: {w}");
+    }
+    Ok(r)
+}
+
 /// Parses a reference file's content; `file` names it in messages.
 pub fn parse(file: &str, bytes: &[u8], o: &ReferenceOptions) -> Result<Reference> {
     // NMEA logs may carry binary messages between the sentences: those lines are counted

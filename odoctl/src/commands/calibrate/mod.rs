@@ -16,6 +16,7 @@ use crate::cli::{CalibrateArgs, ReferenceArgs};
 use crate::config as cfg;
 use crate::csvio::{self, RefPoint, Sample};
 use crate::reference::clock::ClockFit;
+use crate::reference::nmea::LogLines;
 use crate::reference::matched::reference_and_clock_for_samples;
 use crate::stats::{coverage, summarize, Summary};
 
@@ -94,13 +95,16 @@ pub fn parse_command_line(args: &[String]) -> Result<CalibrateArgs> {
 }
 
 /// A recording already in memory (`record --calibrate`): the SAMPLES rows of `--samples` as
-/// the reader gives them back from the file, and the bytes of the NMEA log beside it.
-#[derive(Clone, Copy)]
+/// the reader gives them back from the file, and the bytes of the NMEA log beside it with
+/// their lines read as they came.
 pub struct Recorded<'r> {
     /// The rows of the SAMPLES file.
     pub samples: &'r [Sample],
     /// The content of the NMEA log beside it.
     pub nmea: &'r [u8],
+    /// Its lines read as they were appended (named as the log beside `--samples`, with the
+    /// reference options' leap seconds; else it is read whole).
+    pub lines: LogLines,
 }
 
 /// `odoctl calibrate`, with the recording's files taken from `recorded` when given and the
@@ -113,7 +117,7 @@ pub fn run_from(a: &CalibrateArgs, recorded: Option<Recorded>) -> Result<ExitCod
     let (samples, reference, clock) = match recorded.filter(|_| own) {
         Some(r) => {
             let o = reference_options(&a.reference_input)?;
-            let source = crate::reference::load_bytes(&reference_path, r.nmea, &o)?;
+            let source = crate::reference::load_read(&reference_path, r.nmea, r.lines, &o)?;
             let (reference, clock) = reference_and_clock_for_samples(&source, r.samples)?;
             (Cow::Borrowed(r.samples), reference, clock)
         }
