@@ -136,7 +136,10 @@ fn feed(rows: &[Sample], sentences: &[(usize, String)], args: &[String]) -> Fed 
         batch: BatchWorker::start(args.to_vec()).expect("the background batch"),
         rows: Vec::with_capacity(rows.len()),
         log: Vec::new(),
-        lines: Some(LogLines::new(&nmea_path(Path::new(&args[4])).display().to_string(), None)),
+        lines: Some(LogLines::new(
+            &nmea_path(Path::new(&args[4])).display().to_string(),
+            None,
+        )),
     };
     let per_second = 50;
     let mut next = 0;

@@ -13,8 +13,8 @@ use anyhow::{bail, Result};
 use odo_unit::odometry::ChassisParams;
 
 use super::calibrate::{parse_command_line, Recorded};
-use super::reference_options;
 use super::live_batch::{BatchResult, BatchWorker};
+use super::reference_options;
 use crate::calib::live::{LiveCalibration, LiveEstimate, MIN_TURNING_DEG};
 use crate::calib::SUBTRAJECTORY_LENGTH;
 use crate::cli::values::Targets;
@@ -184,7 +184,8 @@ impl LiveSession {
         calibrate: Vec<String>,
         log: &Path,
     ) -> Result<Self> {
-        let leap = reference_options(&parse_command_line(&calibrate)?.reference_input)?.leap_seconds;
+        let leap =
+            reference_options(&parse_command_line(&calibrate)?.reference_input)?.leap_seconds;
         Ok(Self {
             log_lines: Some(LogLines::new(&log.display().to_string(), leap)),
             live: LiveCalibration::new(initial, SUBTRAJECTORY_LENGTH),

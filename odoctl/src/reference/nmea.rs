@@ -290,7 +290,11 @@ impl HdtScan {
                         self.boundary = Some((p_kind, kind.to_string()));
                     }
                 }
-                if self.last_timed.as_ref().is_none_or(|(k, lt)| k != kind || lt != t) {
+                if self
+                    .last_timed
+                    .as_ref()
+                    .is_none_or(|(k, lt)| k != kind || lt != t)
+                {
                     self.last_timed = Some((kind.to_string(), t.to_string()));
                 }
             }
@@ -1239,11 +1243,7 @@ mod tests {
             }
             let whole = parse("g.nmea", &text, Some(18));
             let got = grown.finish("g.nmea", &text, Some(18));
-            assert_eq!(
-                format!("{:?}", got),
-                format!("{:?}", whole),
-                "log {k}"
-            );
+            assert_eq!(format!("{:?}", got), format!("{:?}", whole), "log {k}");
         }
         let mut grown = LogLines::new("g.nmea", None);
         grown.line(&gga("GP", "120000.10", "4912.0", "N", "01636.0", "E", 4));

@@ -16,8 +16,8 @@ use crate::cli::{CalibrateArgs, ReferenceArgs};
 use crate::config as cfg;
 use crate::csvio::{self, RefPoint, Sample};
 use crate::reference::clock::ClockFit;
-use crate::reference::nmea::LogLines;
 use crate::reference::matched::reference_and_clock_for_samples;
+use crate::reference::nmea::LogLines;
 use crate::stats::{coverage, summarize, Summary};
 
 use super::recording::{check_recording_times, reference_for};
