@@ -6,6 +6,7 @@
 //! printed; a batch that fails (too little data yet) is counted and the next one tried.
 
 use std::sync::mpsc::{channel, Receiver, Sender};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -51,6 +52,8 @@ type Chunk = (Vec<Sample>, Vec<u8>);
 pub struct BatchWorker {
     tx: Option<Sender<Chunk>>,
     latest: Arc<Mutex<Option<BatchResult>>>,
+    /// Set at the drive's end: no batch starts after it.
+    stopped: Arc<AtomicBool>,
     /// Rows and log bytes handed on so far.
     sent: (usize, usize),
 }
@@ -64,12 +67,15 @@ impl BatchWorker {
         let (tx, rx) = channel();
         let latest = Arc::new(Mutex::new(None));
         let slot = Arc::clone(&latest);
+        let stopped = Arc::new(AtomicBool::new(false));
+        let stop = Arc::clone(&stopped);
         std::thread::Builder::new()
             .name("batch calibration".into())
-            .spawn(move || work(&args, &rx, &slot))?;
+            .spawn(move || work(&args, &rx, &slot, &stop))?;
         Ok(Self {
             tx: Some(tx),
             latest,
+            stopped,
             sent: (0, 0),
         })
     }
@@ -96,13 +102,25 @@ impl BatchWorker {
 
     /// No batch starts after this (the one running ends on its own, at its low priority).
     pub fn stop(&mut self) {
+        self.stopped.store(true, Ordering::Relaxed);
         self.tx = None;
     }
 }
 
+impl Drop for BatchWorker {
+    fn drop(&mut self) {
+        self.stop();
+    }
+}
+
 /// The thread: waits for data, takes in all that has come, calibrates, keeps the result;
-/// ends when the sender is gone.
-fn work(args: &[String], rx: &Receiver<Chunk>, slot: &Mutex<Option<BatchResult>>) {
+/// ends when `stopped` is set or the sender is gone.
+fn work(
+    args: &[String],
+    rx: &Receiver<Chunk>,
+    slot: &Mutex<Option<BatchResult>>,
+    stopped: &AtomicBool,
+) {
     lowest_priority();
     let Ok(a) = parse_command_line(args) else {
         return;
@@ -113,6 +131,9 @@ fn work(args: &[String], rx: &Receiver<Chunk>, slot: &Mutex<Option<BatchResult>>
         for (s, b) in std::iter::once(first).chain(rx.try_iter()) {
             samples.extend(s);
             nmea.extend(b);
+        }
+        if stopped.load(Ordering::Relaxed) {
+            return;
         }
         let started = Instant::now();
         match batch(&a, &samples, &nmea) {
