@@ -5,8 +5,8 @@
 //! sentence handed to it by its start, and keeps the latest result. Nothing it does is
 //! printed; a batch that fails (too little data yet) is counted and the next one tried.
 
-use std::sync::mpsc::{channel, Receiver, Sender};
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{channel, Receiver, Sender};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -183,5 +183,57 @@ fn lowest_priority() {
             let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
             libc::setpriority(libc::PRIO_PROCESS, tid, 19);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::reference::simulated::{drive_with_sentences, ReceiverSim};
+    use crate::simulate::{default_truth, simulate_path, PathKind, SimSettings};
+
+    /// The background batch's result is the calibration of the data handed to it, and its
+    /// correction is its result minus its own sub-trajectory fit.
+    #[test]
+    fn batch_is_the_calibration_of_what_it_was_given() {
+        let settings = SimSettings {
+            rate: 10.0,
+            seed: 5,
+            ..Default::default()
+        };
+        let sim = simulate_path(PathKind::Estimation, 40.0, default_truth(), settings);
+        let receiver = ReceiverSim {
+            heading_sigma: Some(0.5f64.to_radians()),
+            ..Default::default()
+        };
+        let (samples, sentences) = drive_with_sentences(sim, &receiver, 18).unwrap();
+        let log: String = sentences.iter().map(|(_, s)| format!("{s}\r\n")).collect();
+        let args: Vec<String> = ["odoctl", "calibrate", "--quiet", "--samples", "x.csv"]
+            .map(String::from)
+            .to_vec();
+        let mut worker = BatchWorker::start(args.clone()).unwrap();
+        let half = samples.len() / 2;
+        worker.feed(&samples[..half], &log.as_bytes()[..log.len() / 2]);
+        worker.feed(&samples, log.as_bytes());
+        let started = Instant::now();
+        let got = loop {
+            match worker.latest() {
+                Some(b) if b.until == samples[samples.len() - 1].t => break b,
+                _ if started.elapsed() > Duration::from_secs(120) => panic!("no batch"),
+                _ => std::thread::sleep(Duration::from_millis(20)),
+            }
+        };
+        let a = parse_command_line(&args).unwrap();
+        let want = batch(&a, &samples, log.as_bytes()).unwrap();
+        assert_eq!(got.result, want.result);
+        assert_eq!(got.subtrajectory, want.subtrajectory);
+        assert_eq!(got.std_errors, want.std_errors);
+        let c = got.correction();
+        assert!((0..3).all(|i| c[i] == got.result[i] - got.subtrajectory[i]));
+        assert!(
+            got.subtrajectory != got.result,
+            "the filter refined nothing"
+        );
+        worker.stop();
     }
 }
