@@ -252,12 +252,15 @@ fn print_section(samples: &[Sample], f: &Fed, end: &End, process: (Duration, boo
     println!();
     print_costs(&f.costs);
     println!(
-        "An update: the second's samples and sentences taken in, the sentences of the last 3 s"
+        "An update: the second's samples and sentences taken in (each sentence also read by the"
     );
     println!(
-        "read (the streaming NMEA reader), the new rows and sentences handed to the background"
+        "log's reader for the final calibration, `LogLines`), the sentences of the last 3 s read"
     );
-    println!("batch, then the fit's update (`LiveCalibration::update`: matching, a sub-trajectory");
+    println!(
+        "(the streaming NMEA reader), the new rows and sentences handed to the background batch,"
+    );
+    println!("then the fit's update (`LiveCalibration::update`: matching, a sub-trajectory");
     println!("closed about every 20 s, relinearisations, the estimate and its jackknife when they");
     println!(
         "changed). The machine is shared (other builds and the background batch run beside the"
