@@ -322,7 +322,7 @@ fn print_end(end: &End, (process, same): (Duration, bool)) {
         number(ms(end.last_update))
     );
     println!(
-        "| the final calibration printed and written (`calibrate` in process, on the rows and log in memory) | {} ms |",
+        "| the final calibration printed and written, the last update included (`calibrate` in process, on the rows and log in memory) | {} ms |",
         number(ms(end.final_printed))
     );
     println!(
