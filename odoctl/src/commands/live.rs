@@ -2,8 +2,10 @@
 //! records and the forwarded sentences feed the live sub-trajectory fit
 //! ([`LiveCalibration`]) through the streaming NMEA reader ([`NmeaStream`]); once a second
 //! the estimates, their standard errors, the distance and turning so far and what is still
-//! missing against the targets are shown: redrawn in place on a terminal, as log lines
-//! otherwise.
+//! missing against the targets are shown, and once the background batch calibration
+//! ([`BatchWorker`]) has a result the refined estimate ([`refined`]) and that batch's kappa:
+//! redrawn in place on a terminal, as log lines otherwise. The session keeps the rows and
+//! the log as written for the final calibration ([`LiveSession::recorded`]).
 
 use std::io::{IsTerminal, Write};
 use std::path::Path;
