@@ -2,13 +2,19 @@
 //! (`bench/run`): `odo-bench live DIR`. Figures only: nothing here fails on noise.
 //!
 //! A simulated 3 km random drive at 50 Hz with a 10 Hz receiver (GGA, GST, HDT, RMC, ZDA as
-//! `simulate --nmea` writes them) is fed as `record --calibrate` feeds it: one update per
-//! second of drive, the second's samples and sentences, through the streaming NMEA reader
-//! and the live sub-trajectory fit. Measured: the cost of each update along the drive; at the
-//! drive's end the live fit's last update and the batch calibration as `record` runs it
-//! (the release `odoctl calibrate --samples run.csv`, `$ODOCTL` or the `odoctl` beside this
-//! binary, the recording's NMEA log as the reference); the live estimate against the batch's
-//! sub-trajectory fit and its default (filter-refined) result, in their standard errors.
+//! `simulate --nmea` writes them) is fed as `record --calibrate` feeds it, one second of drive
+//! every [`PACE`] of wall time: one update per second of drive, the second's rows (as the
+//! reader gives them back from the CSV) and sentences through the streaming NMEA reader and
+//! the live sub-trajectory fit, and handed to the background batch calibration
+//! ([`BatchWorker`], on its own thread beside the updates). Measured: the cost of each
+//! update; at the drive's end, as `record` does it, the live fit's last update and the
+//! final batch calibration in this process on the rows and the log in memory
+//! (`calibrate::run_from`, its report sent to DIR/final.txt), from the last data to the
+//! result printed and written; that result against the release `odoctl calibrate --samples
+//! live.csv` on the files (`$ODOCTL` or the `odoctl` beside this binary); the live estimate
+//! and the refined one (the live fit + the latest background batch's refinement) against
+//! the batch calibration's sub-trajectory fit and its default (filter-refined) result, in
+//! their standard errors.
 
 use std::path::Path;
 use std::process::Command;
@@ -17,22 +23,36 @@ use std::time::{Duration, Instant};
 use odo_unit::odometry::ChassisParams;
 use odoctl::calib::live::LiveCalibration;
 use odoctl::calib::{fit_subtrajectories, Run, SubtrajectoryOptions, SUBTRAJECTORY_LENGTH};
+use odoctl::commands::calibrate::{parse_command_line, run_from, Recorded};
+use odoctl::commands::live::refined;
+use odoctl::commands::live_batch::{BatchResult, BatchWorker};
+use odoctl::commands::recording::nmea_path;
 use odoctl::csvio::{self, Sample, SamplesLayout};
+use odoctl::reference::nmea::LogLines;
 use odoctl::reference::simulated::{drive_with_sentences, ReceiverSim};
 use odoctl::reference::stream::NmeaStream;
 use odoctl::simulate::{default_truth, simulate_path, PathKind, SimSettings};
 
 use crate::markdown::{number, thousands};
 use crate::odoctl_binary::odoctl;
+use crate::stdout_capture::stdout_to;
 
 /// Length of the drive (m).
 const LENGTH: f64 = 3000.0;
+
+/// Wall time of one second of drive: the drive is replayed 200 times as fast as driven (the
+/// background batch falls about 200 times as far behind, in drive seconds, as on a real
+/// drive) but for its last [`REAL_TIME_END`] seconds.
+const PACE: Duration = Duration::from_millis(5);
+
+/// Seconds at the drive's end replayed at the pace driven: the background batch catches up
+/// to where it is at the end of a real drive.
+const REAL_TIME_END: usize = 10;
 
 /// Runs the drive in `dir` and prints the section.
 pub fn run(dir: &Path) {
     std::fs::create_dir_all(dir).expect("the bench directory");
     let (samples, sentences) = drive();
-    let (costs, live, finish) = feed(&samples, &sentences);
     let csv = dir.join("live.csv");
     let mut w = std::io::BufWriter::new(std::fs::File::create(&csv).expect("live.csv"));
     csvio::write_samples(&mut w, &samples, SamplesLayout::Counts).expect("live.csv");
@@ -40,22 +60,42 @@ pub fn run(dir: &Path) {
     let log: String = sentences.iter().map(|(_, s)| format!("{s}\r\n")).collect();
     std::fs::write(dir.join("live.nmea"), log).expect("live.nmea");
     let result = dir.join("live.toml");
+    let args = calibrate_args(&csv, &result);
+    let rows: Vec<Sample> = samples
+        .iter()
+        .map(|s| SamplesLayout::Counts.read_back(s, None))
+        .collect();
+    let mut fed = feed(&rows, &sentences, &args);
+    let end = drive_end(&mut fed, &args, &dir.join("final.txt"));
+    let files = dir.join("live_files.toml");
     let started = Instant::now();
     let o = Command::new(odoctl())
-        .args(["calibrate", "--quiet", "--samples"])
-        .arg(&csv)
-        .arg("--out")
-        .arg(&result)
+        .args(&args[1..args.len() - 1])
+        .arg(&files)
         .output()
         .expect("odoctl runs");
-    let batch_time = started.elapsed();
+    let process = started.elapsed();
     assert!(
         o.status.success(),
         "odoctl calibrate: {}",
         String::from_utf8_lossy(&o.stderr)
     );
-    print_section(&samples, &costs, finish, batch_time);
-    print_agreement(&live, &csv, &result);
+    let same = std::fs::read(&result).ok() == std::fs::read(&files).ok();
+    print_section(&samples, &fed, &end, (process, same));
+    print_agreement(&fed.live, &end, &csv, &result);
+}
+
+/// `odoctl calibrate --quiet --samples CSV --out RESULT`, as `record --calibrate` builds it.
+fn calibrate_args(csv: &Path, result: &Path) -> Vec<String> {
+    ["odoctl", "calibrate", "--quiet", "--samples"]
+        .map(String::from)
+        .into_iter()
+        .chain([
+            csv.display().to_string(),
+            "--out".into(),
+            result.display().to_string(),
+        ])
+        .collect()
 }
 
 /// The drive: samples (t GPS time of week) and the receiver's sentences, each with the
@@ -73,52 +113,117 @@ fn drive() -> (Vec<Sample>, Vec<(usize, String)>) {
     drive_with_sentences(sim, &receiver, 18).expect("NMEA in memory")
 }
 
-/// One update per second of drive (its samples and sentences); the cost of each (with the
-/// distance driven then), the live fit, and the cost of its last update at the end.
-fn feed(
-    samples: &[Sample],
-    sentences: &[(usize, String)],
-) -> (Vec<(f64, Duration, Duration)>, LiveCalibration, Duration) {
-    let mut live = LiveCalibration::new(&ChassisParams::DESIGNED, SUBTRAJECTORY_LENGTH);
-    let mut stream = NmeaStream::new();
+/// What the drive's feed leaves: the cost of each update (distance driven then, whole
+/// update, the fit alone), the live fit, the streaming reader, the background batch, the
+/// rows and the log handed on, the log's lines read as they came.
+struct Fed {
+    costs: Vec<(f64, Duration, Duration)>,
+    live: LiveCalibration,
+    stream: NmeaStream,
+    batch: BatchWorker,
+    rows: Vec<Sample>,
+    log: Vec<u8>,
+    lines: Option<LogLines>,
+}
+
+/// One update per second of drive (its rows and sentences), one every [`PACE`], the
+/// background batch (`args`, the final's command line) running beside.
+fn feed(rows: &[Sample], sentences: &[(usize, String)], args: &[String]) -> Fed {
+    let mut f = Fed {
+        costs: Vec::new(),
+        live: LiveCalibration::new(&ChassisParams::DESIGNED, SUBTRAJECTORY_LENGTH),
+        stream: NmeaStream::new(),
+        batch: BatchWorker::start(args.to_vec()).expect("the background batch"),
+        rows: Vec::with_capacity(rows.len()),
+        log: Vec::new(),
+        lines: Some(LogLines::new(
+            &nmea_path(Path::new(&args[4])).display().to_string(),
+            None,
+        )),
+    };
     let per_second = 50;
     let mut next = 0;
-    let mut costs = Vec::new();
-    for (c, chunk) in samples.chunks(per_second).enumerate() {
+    let seconds = rows.len().div_ceil(per_second);
+    let mut due = Instant::now();
+    for (c, chunk) in rows.chunks(per_second).enumerate() {
+        due += if c + REAL_TIME_END >= seconds {
+            Duration::from_secs(1)
+        } else {
+            PACE
+        };
+        std::thread::sleep(due.saturating_duration_since(Instant::now()));
         let last = c * per_second + chunk.len() - 1;
         let started = Instant::now();
         for s in chunk {
-            live.push_sample(*s);
+            f.live.push_sample(*s);
+            f.rows.push(*s);
         }
         while next < sentences.len() && sentences[next].0 <= last {
-            stream.push(samples[sentences[next].0].t, &sentences[next].1);
+            let (k, text) = &sentences[next];
+            f.stream.push(rows[*k].t, text);
+            f.log.extend_from_slice(text.as_bytes());
+            f.log.extend_from_slice(b"\r\n");
+            if let Some(l) = &mut f.lines {
+                l.line(text);
+            }
             next += 1;
         }
-        let span = (samples[0].t, chunk[chunk.len() - 1].t);
-        for p in stream.take(span, false) {
-            live.push_reference(p);
+        let span = (rows[0].t, chunk[chunk.len() - 1].t);
+        for p in f.stream.take(span, false) {
+            f.live.push_reference(p);
         }
+        f.batch.feed(&f.rows, &f.log);
         let fit = Instant::now();
-        live.update();
-        costs.push((live.estimate().distance, started.elapsed(), fit.elapsed()));
+        f.live.update();
+        f.costs
+            .push((f.live.estimate().distance, started.elapsed(), fit.elapsed()));
     }
-    let started = Instant::now();
-    let span = (samples[0].t, samples[samples.len() - 1].t);
-    for p in stream.take(span, true) {
-        live.push_reference(p);
-    }
-    live.finish();
-    (costs, live, started.elapsed())
+    f
 }
 
-/// The cost table by tenth of the drive and the end-to-final figures.
-fn print_section(
-    samples: &[Sample],
-    costs: &[(f64, Duration, Duration)],
-    finish: Duration,
-    batch: Duration,
-) {
-    let ms = |d: Duration| d.as_secs_f64() * 1e3;
+/// The drive's end as `record --calibrate` meets it: the times from the last data to the
+/// live fit's last update and to the final calibration printed and written; the refined
+/// live estimate then, with its batch.
+struct End {
+    last_update: Duration,
+    final_printed: Duration,
+    refined: Option<([f64; 3], BatchResult)>,
+    last_t: f64,
+}
+
+/// The drive's end of `f`: the live fit's last update, then the final calibration `args`
+/// in this process on the rows and the log in memory, its report sent to `report`.
+fn drive_end(f: &mut Fed, args: &[String], report: &Path) -> End {
+    let ended = Instant::now();
+    let last_t = f.rows[f.rows.len() - 1].t;
+    for p in f.stream.take((f.rows[0].t, last_t), true) {
+        f.live.push_reference(p);
+    }
+    f.batch.stop();
+    f.live.finish();
+    let last_update = ended.elapsed();
+    let refined = f
+        .batch
+        .latest()
+        .map(|b| (refined(&f.live.estimate(), &b), b));
+    let c = parse_command_line(args).expect("a calibrate command line");
+    let recorded = Recorded {
+        samples: &f.rows,
+        nmea: &f.log,
+        lines: f.lines.take().expect("the log's lines"),
+    };
+    stdout_to(report, || run_from(&c, Some(recorded))).expect("the final calibration");
+    End {
+        last_update,
+        final_printed: ended.elapsed(),
+        refined,
+        last_t,
+    }
+}
+
+/// The cost table by tenth of the drive and the end-to-final figures; `process` the time
+/// of `odoctl calibrate` on the files and whether its result file is the same.
+fn print_section(samples: &[Sample], f: &Fed, end: &End, process: (Duration, bool)) {
     println!(
         "Harness: `cargo run --release --target x86_64-unknown-linux-gnu -p odo-bench -- live DIR`"
     );
@@ -130,15 +235,44 @@ fn print_section(
         "10 Hz receiver's GGA, GST, HDT, RMC (and ZDA once a second), fed as `record --calibrate`"
     );
     println!(
-        "feeds them: one update per second of drive through the streaming NMEA reader and the"
+        "feeds them, one second of drive every {} ms of wall time (the drive replayed {:.0} times",
+        PACE.as_millis(),
+        1.0 / PACE.as_secs_f64()
     );
-    println!("live sub-trajectory fit; from the designed geometry. Then the batch calibration as");
     println!(
-        "`record --calibrate` runs it at the drive's end: the release `odoctl calibrate --samples"
+        "as fast as driven): one update per second of drive through the streaming NMEA reader and"
     );
-    println!("live.csv` with the NMEA log beside it (the CSV read, the default calibration, the");
-    println!("report and the result file).");
+    println!(
+        "the live sub-trajectory fit, from the designed geometry, the rows and the log handed to"
+    );
+    println!(
+        "the background batch calibration, which runs the final's calibration again and again on"
+    );
+    println!("its own thread (nice 19) beside the updates.");
     println!();
+    print_costs(&f.costs);
+    println!(
+        "An update: the second's samples and sentences taken in (each sentence also read by the"
+    );
+    println!(
+        "log's reader for the final calibration, `LogLines`), the sentences of the last 3 s read"
+    );
+    println!(
+        "(the streaming NMEA reader), the new rows and sentences handed to the background batch,"
+    );
+    println!("then the fit's update (`LiveCalibration::update`: matching, a sub-trajectory");
+    println!("closed about every 20 s, relinearisations, the estimate and its jackknife when they");
+    println!(
+        "changed). The machine is shared (other builds and the background batch run beside the"
+    );
+    println!("updates): the slowest updates are the operating system's as much as the code's.");
+    println!();
+    print_end(end, process);
+}
+
+/// The update costs by tenth of the drive.
+fn print_costs(costs: &[(f64, Duration, Duration)]) {
+    let ms = |d: Duration| d.as_secs_f64() * 1e3;
     println!("| part of the drive | updates | median update | 99 % of updates within | slowest update | median of the fit alone | slowest of the fit alone |");
     println!("| --- | ---: | ---: | ---: | ---: | ---: | ---: |");
     let n = costs.len();
@@ -164,37 +298,48 @@ fn print_section(
         );
     }
     println!();
-    println!(
-        "An update: the second's samples and sentences taken in, the sentences of the last 3 s"
-    );
-    println!("read (the streaming NMEA reader), then the fit's update (`LiveCalibration::update`:");
-    println!(
-        "matching, a sub-trajectory closed about every 20 s, relinearisations, the estimate and"
-    );
-    println!(
-        "its jackknife when they changed). The machine is shared (other builds run beside the"
-    );
-    println!("benchmark): the slowest updates are the operating system's as much as the code's.");
-    println!();
-    println!("| at the drive's end | wall time |");
+}
+
+/// The drive's end: the background batch so far, the times to the final calibration.
+fn print_end(end: &End, (process, same): (Duration, bool)) {
+    let ms = |d: Duration| d.as_secs_f64() * 1e3;
+    if let Some((_, b)) = &end.refined {
+        println!(
+            "The background batch calibration: {} batches done along the drive ({} failed, too",
+            b.done, b.failed
+        );
+        println!(
+            "little data yet), the last on the drive up to {:.0} s before its end, which took {} ms.",
+            end.last_t - b.until,
+            number(ms(b.took))
+        );
+        println!();
+    }
+    println!("| at the drive's end (from the last sample and sentence taken in) | wall time |");
     println!("| --- | ---: |");
     println!(
         "| the live fit's last update (relinearised to the end) | {} ms |",
-        number(ms(finish))
+        number(ms(end.last_update))
     );
     println!(
-        "| the batch calibration printed (`odoctl calibrate`, a separate process) | {} ms |",
-        number(ms(batch))
+        "| the final calibration printed and written, the last update included (`calibrate` in process, on the rows and log in memory) | {} ms |",
+        number(ms(end.final_printed))
     );
     println!(
-        "| drive's end to the final calibration printed | {} ms |",
-        number(ms(finish + batch))
+        "| for comparison: `odoctl calibrate --samples live.csv` on the files (a separate process) | {} ms |",
+        number(ms(process))
+    );
+    println!();
+    println!(
+        "The in-process result file and the one of `odoctl calibrate` on the files are {}.",
+        if same { "identical" } else { "NOT identical" }
     );
     println!();
 }
 
-/// The live estimate against the batch's sub-trajectory fit and its default result.
-fn print_agreement(live: &LiveCalibration, csv: &Path, result: &Path) {
+/// The live estimate and the refined one against the batch's sub-trajectory fit and its
+/// default result.
+fn print_agreement(live: &LiveCalibration, end: &End, csv: &Path, result: &Path) {
     let samples = csvio::read_samples(csv).expect("live.csv");
     let source = odoctl::reference::load(
         &csv.with_extension("nmea"),
@@ -224,18 +369,22 @@ fn print_agreement(live: &LiveCalibration, csv: &Path, result: &Path) {
         sub.params.track_width,
     ];
     println!(
-        "The live estimate after the last update ({} sub-trajectories, {:.0} m) against the batch",
+        "The live estimate after the last update ({} sub-trajectories, {:.0} m) and the refined one",
         e.subtrajectories, e.distance
     );
-    println!("calibration of the same recording, in the batch's standard errors (SE):");
+    println!(
+        "(the live fit + the filter refinement's correction of the latest background batch) against"
+    );
+    println!("the batch calibration of the same recording, in the batch's standard errors (SE):");
     println!();
-    println!("| unknown | live | batch sub-trajectory fit (SE) | live - batch | default result, filter-refined (SE) | live - default |");
-    println!("| --- | ---: | ---: | ---: | ---: | ---: |");
+    println!("| unknown | live | batch sub-trajectory fit (SE) | live - batch | default result, filter-refined (SE) | live - default | refined | refined - default |");
+    println!("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |");
     for i in 0..3 {
         let se = sub.std_errors[i].unwrap_or(f64::NAN);
         let (v, d_se) = (key(names[i]), key(&format!("{}_se", names[i])));
+        let r = end.refined.as_ref().map_or(f64::NAN, |r| r.0[i]);
         println!(
-            "| {} | {:.7} m | {:.7} m ({}) | {} SE | {:.7} m ({}) | {} SE |",
+            "| {} | {:.7} m | {:.7} m ({}) | {} SE | {:.7} m ({}) | {} SE | {:.7} m | {} SE |",
             names[i],
             e.values[i],
             sub_values[i],
@@ -243,7 +392,9 @@ fn print_agreement(live: &LiveCalibration, csv: &Path, result: &Path) {
             number((e.values[i] - sub_values[i]) / se),
             v,
             number(d_se),
-            number((e.values[i] - v) / d_se)
+            number((e.values[i] - v) / d_se),
+            r,
+            number((r - v) / d_se)
         );
     }
     println!();

@@ -30,6 +30,8 @@ mod live;
 mod markdown;
 #[cfg(not(target_os = "none"))]
 mod odoctl_binary;
+#[cfg(not(target_os = "none"))]
+mod stdout_capture;
 
 /// `odo-bench` prints the fidelity table; `odo-bench calibrate [accuracy|speed]` the
 /// calibration's accuracy and speed tables (both without a second argument); `odo-bench

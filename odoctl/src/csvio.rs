@@ -130,6 +130,33 @@ impl SamplesLayout {
         }
         buf.push('\n');
     }
+
+    /// The sample [`read_samples`] gives back from the row [`Self::push_row`] writes of `s`
+    /// with `extra`: the time as [`fmt_t`] writes it; without the pose columns no pose and no
+    /// flags, with them the flags only beside a pose; the record's time tag from `extra`.
+    pub fn read_back(self, s: &Sample, extra: Option<&RecordFields>) -> Sample {
+        let mut out = Sample {
+            t: fmt_t(s.t).parse().unwrap_or(s.t),
+            unit: None,
+            ..*s
+        };
+        if self == Self::Counts || s.unit.is_none() {
+            out.flags = None;
+            return out;
+        }
+        out.unit = s.unit.map(|u| UnitPose {
+            time: match (self, extra) {
+                (Self::Record, Some(e)) => Some(RecordTime {
+                    mcu_time_us: e[0],
+                    gps_week: e[1].try_into().unwrap_or(u16::MAX),
+                    gps_tow_ms: e[2].try_into().unwrap_or(u32::MAX),
+                }),
+                _ => None,
+            },
+            ..u
+        });
+        out
+    }
 }
 
 /// The unit's own pose record carried in a SAMPLES row (as `record` writes it).
@@ -834,6 +861,52 @@ mod tests {
         let back = parse_samples("x", std::str::from_utf8(&out).unwrap()).unwrap();
         assert_eq!(back[1], s[1]);
         assert_eq!(back[0].unit, None);
+    }
+
+    /// [`SamplesLayout::read_back`] is what the reader gives back from the written rows, in
+    /// every layout, with and without a pose and the record's clocks.
+    #[test]
+    fn read_back_is_what_the_reader_gives() {
+        let unit = UnitPose {
+            seq: Some(9),
+            x: 0.1,
+            y: -1.0 / 3.0,
+            heading: 1e-300,
+            sigma_x: 1.5e-7,
+            cov_xy: -2.5e-9,
+            ..Default::default()
+        };
+        let rows = [
+            (123_456.789_012_345_6, None, None),
+            (123_456.809_012_345_6, Some(unit), None),
+            (
+                123_456.829_999_999_9,
+                Some(unit),
+                Some([7, 2345, 123_456_000, 41, 0]),
+            ),
+        ];
+        for layout in [
+            SamplesLayout::Counts,
+            SamplesLayout::Pose,
+            SamplesLayout::Record,
+        ] {
+            let mut text = layout.header() + "\n";
+            let mut want = Vec::new();
+            for (k, (t, unit, extra)) in rows.iter().enumerate() {
+                let s = Sample {
+                    t: *t,
+                    left: -3 + k as i64,
+                    right: 1 << 40,
+                    left_index: Some(7),
+                    right_index: None,
+                    flags: Some(3),
+                    unit: *unit,
+                };
+                layout.push_row(&mut text, &s, extra.as_ref());
+                want.push(layout.read_back(&s, extra.as_ref()));
+            }
+            assert_eq!(parse_samples("x", &text).unwrap(), want, "{layout:?}");
+        }
     }
 
     /// A file with the older header name of the covariance column reads as one with

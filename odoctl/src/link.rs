@@ -475,7 +475,7 @@ impl<W: Write> RecordWriter<W> {
         ];
         self.buf.clear();
         SamplesLayout::Record.push_row(&mut self.buf, &sample, Some(&clocks));
-        self.last_row = Some(sample);
+        self.last_row = Some(SamplesLayout::Record.read_back(&sample, Some(&clocks)));
         self.w.write_all(self.buf.as_bytes())?;
         self.rows += 1;
         Ok(())
@@ -608,9 +608,15 @@ impl<'a> SegmentWriter<'a> {
         self.current.as_mut().expect("open segment").row(r)
     }
 
-    /// The SAMPLES row of the last record written to the current segment.
+    /// The SAMPLES row of the last record written to the current segment, as the reader
+    /// gives it back from the file.
     pub fn last_row(&self) -> Option<Sample> {
         self.current.as_ref()?.last_row
+    }
+
+    /// The current segment (1 for the first file, 0 before any) and the rows written to it.
+    pub fn position(&self) -> (usize, u64) {
+        (self.segments, self.current.as_ref().map_or(0, |w| w.rows))
     }
 
     fn finish_segment(&mut self) -> Result<()> {

@@ -233,4 +233,27 @@ fn record_calibrate_shows_log_lines_and_ends_with_the_batch_result() {
     assert!(tail.contains("final calibration printed"), "{tail}");
     let toml = std::fs::read_to_string(&result).unwrap();
     assert!(toml.contains("left_diameter"), "{toml}");
+    // The final calibration, run on the rows and sentences kept in memory, prints and
+    // writes what `calibrate` on the two recorded files does.
+    let from_files = d.join("from_files.toml");
+    let o = odoctl(&[
+        "calibrate",
+        "--quiet",
+        "--samples",
+        out.to_str().unwrap(),
+        "--out",
+        from_files.to_str().unwrap(),
+    ]);
+    let files_stdout = common::success_stdout(&o);
+    assert_eq!(toml, std::fs::read_to_string(&from_files).unwrap());
+    let report = |text: &str| -> Vec<String> {
+        text.lines()
+            .filter(|l| !l.starts_with("done in ") && !l.starts_with("wrote "))
+            .map(String::from)
+            .collect()
+    };
+    let header = tail.find("final calibration (the batch one").unwrap();
+    let from = header + tail[header..].find('\n').unwrap() + 1;
+    let printed = &tail[from..tail.find("final calibration printed").unwrap()];
+    assert_eq!(report(printed), report(&files_stdout));
 }

@@ -2,19 +2,26 @@
 //! records and the forwarded sentences feed the live sub-trajectory fit
 //! ([`LiveCalibration`]) through the streaming NMEA reader ([`NmeaStream`]); once a second
 //! the estimates, their standard errors, the distance and turning so far and what is still
-//! missing against the targets are shown: redrawn in place on a terminal, as log lines
-//! otherwise.
+//! missing against the targets are shown, and once the background batch calibration
+//! ([`BatchWorker`]) has a result the refined estimate ([`refined`]) and that batch's kappa:
+//! redrawn in place on a terminal, as log lines otherwise. The session keeps the rows and
+//! the log as written for the final calibration ([`LiveSession::recorded`]).
 
 use std::io::{IsTerminal, Write};
+use std::path::Path;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Result};
 use odo_unit::odometry::ChassisParams;
 
+use super::calibrate::{parse_command_line, Recorded};
+use super::live_batch::{BatchResult, BatchWorker};
+use super::reference_options;
 use crate::calib::live::{LiveCalibration, LiveEstimate, MIN_TURNING_DEG};
 use crate::calib::SUBTRAJECTORY_LENGTH;
 use crate::cli::values::Targets;
 use crate::csvio::Sample;
+use crate::reference::nmea::LogLines;
 use crate::reference::stream::NmeaStream;
 
 /// Sub-trajectories before the hints project how much more driving the targets need.
@@ -115,6 +122,42 @@ pub fn render(e: &LiveEstimate, t: &Targets) -> Vec<String> {
     lines
 }
 
+/// The live estimate refined: the live sub-trajectory fit plus what the batch calibration
+/// `b` (of the drive up to `b.until`) adds to its own sub-trajectory fit, the filter
+/// refinement's correction (m).
+pub fn refined(e: &LiveEstimate, b: &BatchResult) -> [f64; 3] {
+    let c = b.correction();
+    [0, 1, 2].map(|i| e.values[i] + c[i])
+}
+
+/// The display's lines for the refined estimate ([`refined`]) and the batch's uncertainty
+/// model, once a batch has succeeded; `last` is the time of the last sample (s).
+pub fn render_refined(e: &LiveEstimate, b: Option<BatchResult>, last: f64) -> Vec<String> {
+    let Some(b) = b else {
+        return Vec::new();
+    };
+    let mm = |v: f64| v * 1e3;
+    let v = refined(e, &b);
+    let se = |s: Option<f64>| s.map_or("-".to_string(), |s| format!("{:.4}", mm(s)));
+    vec![
+        format!(
+            "  refined: d_left {:.4} mm, d_right {:.4} mm, track {:.4} mm: the live fit + the filter refinement's correction from the batch calibration of the drive up to {:.0} s before its last sample (se {} / {} / {} mm, took {:.2} s)",
+            mm(v[0]),
+            mm(v[1]),
+            mm(v[2]),
+            last - b.until,
+            se(b.std_errors[0]),
+            se(b.std_errors[1]),
+            se(b.std_errors[2]),
+            b.took.as_secs_f64()
+        ),
+        format!(
+            "  uncertainty (that batch): kappa_left {:.3e}, kappa_right {:.3e} m^2/m, kappa_diff {:.3e}",
+            b.params.kappa_left, b.params.kappa_right, b.params.kappa_diff
+        ),
+    ]
+}
+
 /// The live calibration of one recording and its display.
 pub struct LiveSession {
     live: LiveCalibration,
@@ -123,32 +166,60 @@ pub struct LiveSession {
     next: Instant,
     tty: bool,
     drawn: usize,
+    /// The rows of the first SAMPLES file as the reader gives them back, and the NMEA log's
+    /// bytes as written: the final calibration's input.
+    recording: (Vec<Sample>, Vec<u8>),
+    /// The NMEA log's lines read as they come (taken by the final calibration).
+    log_lines: Option<LogLines>,
+    batch: BatchWorker,
     /// Largest cost of one update so far.
     pub slowest_update: Duration,
 }
 
 impl LiveSession {
-    /// A session from the initial estimate `initial`, against `targets`.
-    pub fn new(initial: &ChassisParams, targets: Targets) -> Self {
-        Self {
+    /// A session from the initial estimate `initial`, against `targets`; `calibrate` is the
+    /// `odoctl calibrate` command line of the final calibration, which the background batch
+    /// runs along the drive; `log` the NMEA log's path.
+    pub fn new(
+        initial: &ChassisParams,
+        targets: Targets,
+        calibrate: Vec<String>,
+        log: &Path,
+    ) -> Result<Self> {
+        let leap =
+            reference_options(&parse_command_line(&calibrate)?.reference_input)?.leap_seconds;
+        Ok(Self {
+            log_lines: Some(LogLines::new(&log.display().to_string(), leap)),
             live: LiveCalibration::new(initial, SUBTRAJECTORY_LENGTH),
             stream: NmeaStream::new(),
             targets,
             next: Instant::now() + REFRESH,
             tty: std::io::stdout().is_terminal(),
             drawn: 0,
+            recording: (Vec::new(), Vec::new()),
+            batch: BatchWorker::start(calibrate)?,
             slowest_update: Duration::ZERO,
+        })
+    }
+
+    /// A recorded sample (a row as read back), of the first SAMPLES file or not
+    /// (`first_file`).
+    pub fn on_sample(&mut self, s: Sample, first_file: bool) {
+        self.live.push_sample(s);
+        if first_file {
+            self.recording.0.push(s);
         }
     }
 
-    /// A recorded sample.
-    pub fn on_sample(&mut self, s: Sample) {
-        self.live.push_sample(s);
-    }
-
-    /// A forwarded sentence (checksum held), received at unit time `at` (s).
+    /// A forwarded sentence (checksum held, written to the log with CR LF), received at unit
+    /// time `at` (s).
     pub fn on_sentence(&mut self, at: f64, text: &str) {
         self.stream.push(at, text);
+        self.recording.1.extend_from_slice(text.as_bytes());
+        self.recording.1.extend_from_slice(b"\r\n");
+        if let Some(l) = &mut self.log_lines {
+            l.line(text);
+        }
     }
 
     /// Updates and shows the estimate when a second has passed.
@@ -170,15 +241,37 @@ impl LiveSession {
             self.live.push_reference(p);
         }
         if end {
+            self.batch.stop();
             self.live.finish();
         } else {
+            self.batch.feed(&self.recording.0, &self.recording.1);
             self.live.update();
         }
         self.slowest_update = self.slowest_update.max(started.elapsed());
     }
 
+    /// Time of the last sample (s).
+    fn last_t(&self) -> f64 {
+        self.live.time_span().map_or(f64::NAN, |s| s.1)
+    }
+
+    /// The recording as the two files hold it, for the final calibration (once).
+    pub fn recorded(&mut self) -> Option<Recorded<'_>> {
+        let lines = self.log_lines.take()?;
+        (!self.recording.0.is_empty()).then_some(Recorded {
+            samples: &self.recording.0,
+            nmea: &self.recording.1,
+            lines,
+        })
+    }
+
     fn show(&mut self) {
-        let lines = render(&self.live.estimate(), &self.targets);
+        let mut lines = render(&self.live.estimate(), &self.targets);
+        lines.extend(render_refined(
+            &self.live.estimate(),
+            self.batch.latest(),
+            self.last_t(),
+        ));
         let mut out = std::io::stdout().lock();
         if self.tty && self.drawn > 0 {
             // Back to the first line drawn, and clear to the end of the screen.
@@ -201,7 +294,17 @@ impl LiveSession {
         for l in render(&e, &self.targets) {
             crate::outln!("{l}");
         }
+        for l in render_refined(&e, self.batch.latest(), self.last_t()) {
+            crate::outln!("{l}");
+        }
         e
+    }
+
+    /// The live estimate with the latest background batch's refinement added
+    /// ([`refined`]), and that batch.
+    pub fn refined(&self) -> Option<([f64; 3], BatchResult)> {
+        let b = self.batch.latest()?;
+        Some((refined(&self.live.estimate(), &b), b))
     }
 
     /// Refuses to calibrate a drive without reference epochs.

@@ -18,6 +18,7 @@ pub mod calibrate;
 pub mod config;
 pub mod decode;
 pub mod live;
+pub mod live_batch;
 pub mod monitor;
 pub mod pool;
 pub mod record;

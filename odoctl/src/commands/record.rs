@@ -7,7 +7,6 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Result};
-use clap::Parser;
 use odo_unit::protocol::{Frame, GnssSentence, Message, PoseRecord};
 
 use super::live::LiveSession;
@@ -26,7 +25,9 @@ pub fn run(a: &RecordArgs) -> Result<ExitCode> {
         Some(LiveSession::new(
             &initial,
             a.target_se.unwrap_or(DEFAULT_TARGETS),
-        ))
+            calibrate_args(a, false),
+            &nmea_path(&a.out),
+        )?)
     } else {
         None
     };
@@ -55,11 +56,31 @@ pub fn run(a: &RecordArgs) -> Result<ExitCode> {
 
 /// The batch calibration of the recording at the drive's end, printed at once and written
 /// to `--result`: `odoctl calibrate --samples OUT` (the NMEA log beside it as the reference)
-/// with `--config` as `--initial` and the `--set`s.
+/// with `--config` as `--initial` and the `--set`s, run on the rows and sentences the
+/// session kept as written to the two files (the files are not read again).
 fn final_calibration(a: &RecordArgs, session: &mut LiveSession) -> Result<()> {
     let ended = Instant::now();
     session.finish();
     session.check()?;
+    let args = calibrate_args(a, true);
+    crate::outln!(
+        "final calibration (the batch one on the whole recording): {}",
+        args[1..].join(" ")
+    );
+    let c = super::calibrate::parse_command_line(&args)?;
+    // The files' content is in memory: the same calibration without reading them again.
+    super::calibrate::run_from(&c, session.recorded())?;
+    crate::outln!(
+        "final calibration printed {:.3} s after the drive's end (slowest live update {:.1} ms)",
+        ended.elapsed().as_secs_f64(),
+        session.slowest_update.as_secs_f64() * 1e3
+    );
+    Ok(())
+}
+
+/// The `odoctl calibrate` command line of the final calibration: `--samples OUT` with
+/// `--config` as `--initial`, the `--set`s and, with `result`, `--result` as `--out`.
+fn calibrate_args(a: &RecordArgs, result: bool) -> Vec<String> {
     let mut args: Vec<String> = vec![
         "odoctl".into(),
         "calibrate".into(),
@@ -73,24 +94,10 @@ fn final_calibration(a: &RecordArgs, session: &mut LiveSession) -> Result<()> {
     for s in &a.params.sets {
         args.extend(["--set".into(), s.clone()]);
     }
-    if let Some(r) = &a.result {
+    if let (true, Some(r)) = (result, &a.result) {
         args.extend(["--out".into(), r.display().to_string()]);
     }
-    crate::outln!(
-        "final calibration (the batch one on the whole recording): {}",
-        args[1..].join(" ")
-    );
-    let cli = crate::cli::Cli::try_parse_from(&args)?;
-    let crate::cli::Cmd::Calibrate(c) = &cli.cmd else {
-        unreachable!("a calibrate command line");
-    };
-    super::calibrate::run(c)?;
-    crate::outln!(
-        "final calibration printed {:.3} s after the drive's end (slowest live update {:.1} ms)",
-        ended.elapsed().as_secs_f64(),
-        session.slowest_update.as_secs_f64() * 1e3
-    );
-    Ok(())
+    args
 }
 
 /// When the recording ends (besides Ctrl-C and the end of the link).
@@ -246,10 +253,16 @@ impl Sink<'_, '_> {
                 r.sequence, self.before_time
             );
         }
+        let before = self.writer.position();
         self.writer.push(r)?;
         self.received += 1;
+        let (segment, rows) = self.writer.position();
+        if (segment, rows) == before {
+            // Left out (a duplicate): no row.
+            return Ok(());
+        }
         if let (Some(live), Some(row)) = (self.live.as_deref_mut(), self.writer.last_row()) {
-            live.on_sample(row);
+            live.on_sample(row, segment == 1);
         }
         Ok(())
     }

@@ -31,7 +31,7 @@ pub fn reference_and_clock_for_samples(
 }
 
 /// What of a receiver log was used, on stdout (nothing for a REFERENCE CSV).
-fn print_summary(r: &Reference) {
+pub fn print_summary(r: &Reference) {
     if r.time == TimeScale::Gps {
         crate::outln!("reference {} ({}): {}", r.file, r.format, r.report);
         if let Some(o) = r.origin {

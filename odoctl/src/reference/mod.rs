@@ -488,7 +488,37 @@ pub struct Reference {
 /// Reads a reference file of any format.
 pub fn load(path: &Path, o: &ReferenceOptions) -> Result<Reference> {
     let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
-    let r = parse(&path.display().to_string(), &bytes, o)?;
+    load_bytes(path, &bytes, o)
+}
+
+/// Reads the content `bytes` of the reference file `path` (already in memory) as [`load`]
+/// reads the file: the same reference, the same warnings.
+pub fn load_bytes(path: &Path, bytes: &[u8], o: &ReferenceOptions) -> Result<Reference> {
+    let r = parse(&path.display().to_string(), bytes, o)?;
+    for w in &r.report.read.warnings {
+        eprintln!("warning: {w}");
+    }
+    Ok(r)
+}
+
+/// [`load_bytes`] of an NMEA log whose lines `read` has read as they were appended to
+/// `bytes` ([`nmea::LogLines`]): the same reference and warnings, with only the dating of
+/// the epochs left to do. Another format is read whole.
+pub fn load_read(
+    path: &Path,
+    bytes: &[u8],
+    read: nmea::LogLines,
+    o: &ReferenceOptions,
+) -> Result<Reference> {
+    let Ok(text) = std::str::from_utf8(bytes) else {
+        return load_bytes(path, bytes, o);
+    };
+    if o.format.unwrap_or_else(|| detect_format(bytes, text)) != Format::Nmea {
+        return load_bytes(path, bytes, o);
+    }
+    let file = path.display().to_string();
+    let log = read.finish(&file, text, o.leap_seconds)?;
+    let r = Reference::from_log(&file, Format::Nmea, log, o)?;
     for w in &r.report.read.warnings {
         eprintln!("warning: {w}");
     }

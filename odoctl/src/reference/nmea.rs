@@ -33,6 +33,8 @@
 //! went with the repeat goes to that epoch. A date sentence before the GPS epoch
 //! (1980-01-06) is counted and skipped like a corrupt one.
 
+use std::sync::Arc;
+
 use anyhow::{bail, Result};
 use chrono::Timelike;
 use odo_unit::timing::nmea::{days_from_civil, parse_sentence, NmeaError, TimeMessage};
@@ -114,6 +116,67 @@ pub fn parse(file: &str, text: &str, leap_seconds: Option<i32>) -> Result<Geodet
     reader.finish(leap_seconds)
 }
 
+/// An NMEA log read as it grows, line by line (`record --calibrate`), by the reader of
+/// [`parse`], so that at the end only the dating of the epochs is left. HDT is read as sent
+/// last in each epoch; a log whose ends show HDT sent first, a line with a line end inside
+/// it, or a text that is not the lines given, is read again whole at the end
+/// ([`LogLines::finish`]).
+pub struct LogLines {
+    reader: LogReader,
+    scan: HdtScan,
+    /// Lines given.
+    lines: usize,
+    /// Their bytes with a CR LF each.
+    bytes: usize,
+    /// Read again whole at the end.
+    whole: bool,
+}
+
+impl LogLines {
+    /// An empty log named `file` in messages, with `leap_seconds` as [`parse`] takes them.
+    pub fn new(file: &str, leap_seconds: Option<i32>) -> Self {
+        Self {
+            reader: LogReader::new(file, leap_seconds),
+            scan: HdtScan::default(),
+            lines: 0,
+            bytes: 0,
+            whole: false,
+        }
+    }
+
+    /// The next line of the log (without its line end).
+    pub fn line(&mut self, raw: &str) {
+        if self.whole || raw.contains(['\r', '\n']) {
+            self.whole = true;
+            return;
+        }
+        self.lines += 1;
+        self.bytes += raw.len() + 2;
+        self.scan.line(raw);
+        self.reader.line(self.lines, raw);
+    }
+
+    /// What [`parse`]`(file, text, leap_seconds)` gives, where `text` is the lines given,
+    /// each with CR LF (a text of another length is read whole).
+    pub fn finish(self, file: &str, text: &str, leap_seconds: Option<i32>) -> Result<GeodeticLog> {
+        let given = !self.whole
+            && *self.reader.file == *file
+            && self.reader.leap_seconds == leap_seconds
+            && text.len() == self.bytes;
+        let order = self.scan.finish();
+        if !given || order.leads {
+            return parse(file, text, leap_seconds);
+        }
+        let mut reader = self.reader;
+        // As parse puts them: the order's note first.
+        let mut notes: Vec<String> = order.note.into_iter().collect();
+        notes.append(&mut reader.report.notes);
+        reader.report.notes = notes;
+        reader.report.talkers = order.talkers;
+        reader.finish(leap_seconds)
+    }
+}
+
 /// The sentences of a line (see the module doc): each `$` starts a candidate that runs to
 /// the next `$`; a candidate with an address (`$` + at least three letters or digits + `,`)
 /// is a sentence, cut after its `*hh`; the rest of the line is stray bytes. Gives the
@@ -162,65 +225,106 @@ struct HdtOrder {
 /// epoch's first timed sentence, or ends with an HDT, sends HDT last. Undecided: HDT is
 /// taken as sent last.
 fn hdt_order(text: &str) -> HdtOrder {
-    // (type, time field) of each checksum-valid sentence; HDT and untimed ones carry None.
-    let mut seq: Vec<(&str, Option<&str>)> = Vec::new();
-    let mut talkers = std::collections::BTreeMap::new();
+    let mut scan = HdtScan::default();
     for (_, raw) in lines(text) {
+        scan.line(raw);
+    }
+    scan.finish()
+}
+
+/// [`hdt_order`] line by line: the checksum-valid sentences' talkers, and the HDT and timed
+/// sentences (GGA, RMC, ZDA, GST with a time) as (type, time of day) in their order.
+#[derive(Default)]
+struct HdtScan {
+    talkers: std::collections::BTreeMap<String, usize>,
+    /// The type of the first HDT or timed sentence.
+    first: Option<String>,
+    /// The last of them is an HDT.
+    last_hdt: bool,
+    /// The last timed sentence: (type, time).
+    last_timed: Option<(String, String)>,
+    /// The timed sentence before an HDT that waits for the next timed one.
+    waiting: Option<(String, String)>,
+    /// The first HDT at a boundary: the types of the timed sentences before and after it.
+    boundary: Option<(String, String)>,
+}
+
+impl HdtScan {
+    /// The sentences of one line.
+    fn line(&mut self, raw: &str) {
         for s in split_sentences(raw.trim()).0 {
-            if !checksum_ok(s) {
-                continue;
-            }
-            *talkers.entry(talker(s)).or_default() += 1;
-            let kind = sentence_type(s);
-            let time = match kind {
-                "GGA" | "RMC" | "ZDA" | "GST" => s.split(',').nth(1).filter(|t| !t.is_empty()),
-                _ => None,
-            };
-            if kind == "HDT" || time.is_some() {
-                seq.push((kind, time));
+            if checksum_ok(s) {
+                self.sentence(s);
             }
         }
     }
-    // The first HDT at a boundary: the timed sentences before and after it.
-    let mut boundary = None;
-    let mut last_timed: Option<usize> = None;
-    for (i, (kind, time)) in seq.iter().enumerate() {
-        if *kind == "HDT" {
-            let next = seq[i + 1..].iter().find(|(_, t)| t.is_some());
-            if let (Some(p), Some(n)) = (last_timed, next) {
-                if seq[p].1 != n.1 {
-                    boundary = Some((seq[p].0, n.0));
-                    break;
+
+    /// One checksum-valid sentence.
+    fn sentence(&mut self, s: &str) {
+        *self.talkers.entry(talker(s)).or_default() += 1;
+        let kind = sentence_type(s);
+        let time = match kind {
+            "GGA" | "RMC" | "ZDA" | "GST" => s.split(',').nth(1).filter(|t| !t.is_empty()),
+            _ => None,
+        };
+        if kind != "HDT" && time.is_none() {
+            return;
+        }
+        if self.first.is_none() {
+            self.first = Some(kind.to_string());
+        }
+        self.last_hdt = kind == "HDT";
+        match time {
+            None => {
+                // An HDT: the first one after a timed sentence waits for the next.
+                if self.boundary.is_none() && self.waiting.is_none() {
+                    self.waiting.clone_from(&self.last_timed);
                 }
             }
-        } else if time.is_some() {
-            last_timed = Some(i);
+            Some(t) => {
+                if let Some((p_kind, p_time)) = self.waiting.take() {
+                    if p_time != t {
+                        self.boundary = Some((p_kind, kind.to_string()));
+                    }
+                }
+                if self
+                    .last_timed
+                    .as_ref()
+                    .is_none_or(|(k, lt)| k != kind || lt != t)
+                {
+                    self.last_timed = Some((kind.to_string(), t.to_string()));
+                }
+            }
         }
     }
-    let Some((closer, opener)) = boundary else {
-        return HdtOrder {
-            talkers,
-            leads: false,
-            note: None,
+
+    /// The order found.
+    fn finish(self) -> HdtOrder {
+        let talkers = self.talkers;
+        let Some((closer, opener)) = self.boundary else {
+            return HdtOrder {
+                talkers,
+                leads: false,
+                note: None,
+            };
         };
-    };
-    let first_hdt = matches!(seq.first(), Some(("HDT", _)));
-    let last_hdt = matches!(seq.last(), Some(("HDT", _)));
-    let first_opens = seq.first().is_some_and(|(k, _)| *k == opener);
-    let leads = first_hdt && !last_hdt;
-    let how = if leads {
-        "HDT first in each epoch, before its GGA (the log opens with an HDT)"
-    } else if first_opens || last_hdt {
-        "HDT last in each epoch, after its GGA"
-    } else {
-        "HDT order undecided by the log's ends: taken as last in each epoch"
-    };
-    HdtOrder {
-        talkers,
-        leads,
-        note: Some(format!(
-            "heading order: {how} (HDT between {closer} and {opener}, which carry different times)"
-        )),
+        let first_hdt = self.first.as_deref() == Some("HDT");
+        let first_opens = self.first.as_deref() == Some(opener.as_str());
+        let leads = first_hdt && !self.last_hdt;
+        let how = if leads {
+            "HDT first in each epoch, before its GGA (the log opens with an HDT)"
+        } else if first_opens || self.last_hdt {
+            "HDT last in each epoch, after its GGA"
+        } else {
+            "HDT order undecided by the log's ends: taken as last in each epoch"
+        };
+        HdtOrder {
+            talkers,
+            leads,
+            note: Some(format!(
+                "heading order: {how} (HDT between {closer} and {opener}, which carry different times)"
+            )),
+        }
     }
 }
 
@@ -243,9 +347,9 @@ fn checksum_ok(s: &str) -> bool {
 
 /// A log being read: the GGA epochs so far, the date sentences, and the GST and HDT
 /// sentences waiting for their epoch.
-struct LogReader<'a> {
+struct LogReader {
     /// The log's name in messages.
-    file: &'a str,
+    file: Arc<str>,
     /// GPS - UTC (s) when given, for the date sentences' check against the GPS epoch.
     leap_seconds: Option<i32>,
     report: ReadReport,
@@ -263,10 +367,10 @@ struct LogReader<'a> {
     hdt_leads: bool,
 }
 
-impl<'a> LogReader<'a> {
-    fn new(file: &'a str, leap_seconds: Option<i32>) -> Self {
+impl LogReader {
+    fn new(file: &str, leap_seconds: Option<i32>) -> Self {
         Self {
-            file,
+            file: file.into(),
             leap_seconds,
             report: ReadReport::default(),
             undated: Vec::new(),
@@ -281,7 +385,7 @@ impl<'a> LogReader<'a> {
 
     /// An HDT that found no epoch: counted as unusable.
     fn drop_hdt(&mut self, p: Option<(i64, f64, usize)>) {
-        let file = self.file;
+        let file = Arc::clone(&self.file);
         if let Some((_, _, l)) = p {
             self.report.unusable(format!(
                 "{file}:{l}: HDT without a GGA of its epoch (or a second HDT): skipped"
@@ -291,7 +395,7 @@ impl<'a> LogReader<'a> {
 
     /// Reads line number `line`: each of its sentences, counting the stray bytes.
     fn line(&mut self, line: usize, raw: &str) {
-        let file = self.file;
+        let file = Arc::clone(&self.file);
         let raw = raw.trim();
         if raw.is_empty() {
             return;
@@ -320,7 +424,7 @@ impl<'a> LogReader<'a> {
 
     /// Reads sentence `s` (from its `$`) of line `line`.
     fn sentence(&mut self, line: usize, s: &str) {
-        let file = self.file;
+        let file = Arc::clone(&self.file);
         let Some(kind) = self.checked(line, s) else {
             return;
         };
@@ -355,7 +459,7 @@ impl<'a> LogReader<'a> {
     /// The firmware's check of sentence `s`: its type when it is for the `nmea` crate to
     /// read; `None` when it is read here (a date and time: RMC, ZDA) or skipped (counted).
     fn checked<'s>(&mut self, line: usize, s: &'s str) -> Option<&'s str> {
-        let file = self.file;
+        let file = Arc::clone(&self.file);
         let report = &mut self.report;
         match parse_sentence(s.as_bytes()) {
             Ok(TimeMessage::Rmc { valid: false, .. }) => {
@@ -414,7 +518,7 @@ impl<'a> LogReader<'a> {
 
     /// A GGA: a new epoch, with the GST and HDT that came before it.
     fn gga(&mut self, line: usize, g: &nmea::sentences::GgaData) {
-        let file = self.file;
+        let file = Arc::clone(&self.file);
         let (Some(t), Some(lat), Some(lon), Some(alt)) =
             (g.fix_time, g.latitude, g.longitude, g.altitude)
         else {
@@ -470,7 +574,7 @@ impl<'a> LogReader<'a> {
 
     /// An HDT: the heading of the epoch being sent, or of the GGA still to come.
     fn hdt(&mut self, line: usize, h: &nmea::sentences::HdtData) {
-        let file = self.file;
+        let file = Arc::clone(&self.file);
         let Some(deg) = h.heading.map(f64::from).filter(|d| d.is_finite()) else {
             self.report
                 .unusable(format!("{file}:{line}: HDT without a heading"));
@@ -501,7 +605,7 @@ impl<'a> LogReader<'a> {
 
     /// A GST: the sigmas of the GGA of its time, before or after it.
     fn gst(&mut self, line: usize, g: &nmea::sentences::GstData) {
-        let file = self.file;
+        let file = Arc::clone(&self.file);
         let (Some(t), Some(n), Some(e)) = (g.time, g.lat_sd, g.long_sd) else {
             self.report.unusable(format!(
                 "{file}:{line}: GST without time or latitude/longitude sigmas"
@@ -534,11 +638,11 @@ impl<'a> LogReader<'a> {
 
     /// The dated epochs in GPS time, once every line is read.
     fn finish(mut self, leap_seconds: Option<i32>) -> Result<GeodeticLog> {
-        let file = self.file;
+        let file = Arc::clone(&self.file);
         let pending = self.pending_hdt.take();
         self.drop_hdt(pending);
         let mut report = self.report;
-        let epochs = date_epochs(file, self.undated, &self.dates, leap_seconds, &mut report)?;
+        let epochs = date_epochs(&file, self.undated, &self.dates, leap_seconds, &mut report)?;
         if epochs.is_empty() {
             bail!("{file}: no usable position (no GGA with a position): {report}");
         }
@@ -1106,6 +1210,47 @@ mod tests {
         // HDT between sentences of its own epoch needs no detection.
         let l = parse("n.nmea", &noon_log(1, 2, 2026), Some(18)).unwrap();
         assert!(l.report.notes.is_empty());
+    }
+
+    /// A log read line by line as it grows ([`LogLines`]) gives what [`parse`] gives of it
+    /// whole: HDT sent last, first (read again whole), undecided, none; corrupt lines;
+    /// another name or leap seconds, or another text (read again whole).
+    #[test]
+    fn log_read_as_it_grows_is_the_whole_logs() {
+        let ordered = ordered_log(true, 4);
+        let cut: Vec<&str> = ordered.split("\r\n").collect();
+        let mut corrupt = noon_log(1, 2, 2026);
+        corrupt.push_str("\n\u{1}\u{2}binary\nxx");
+        corrupt.push_str(&gga("GP", "120000.10", "4912.0", "N", "01636.0", "E", 4));
+        corrupt.push_str("\n\n$GPGGA,1*00");
+        let logs = [
+            ordered_log(false, 5),
+            ordered.clone(),
+            cut[2..cut.len() - 1].join("\n"),
+            noon_log(1, 2, 2026),
+            corrupt,
+        ];
+        for (k, log) in logs.iter().enumerate() {
+            let mut grown = LogLines::new("g.nmea", Some(18));
+            let mut text = String::new();
+            for (_, raw) in lines(log) {
+                grown.line(raw);
+                text.push_str(raw);
+                text.push_str("\r\n");
+            }
+            let whole = parse("g.nmea", &text, Some(18));
+            let got = grown.finish("g.nmea", &text, Some(18));
+            assert_eq!(format!("{:?}", got), format!("{:?}", whole), "log {k}");
+        }
+        let other = noon_log(1, 2, 2026);
+        for (file, leap) in [("o.nmea", None), ("g.nmea", Some(18)), ("g.nmea", None)] {
+            let mut grown = LogLines::new("g.nmea", None);
+            grown.line(&gga("GP", "120000.10", "4912.0", "N", "01636.0", "E", 4));
+            assert_eq!(
+                grown.finish(file, &other, leap).unwrap(),
+                parse(file, &other, leap).unwrap()
+            );
+        }
     }
 
     #[test]

@@ -3,6 +3,7 @@
 //! TOML, the stability study's CSV, the figures, and with `--export-ros`, `--mcap` its ROS
 //! forms.
 
+use std::borrow::Cow;
 use std::path::Path;
 use std::process::ExitCode;
 use std::time::Instant;
@@ -15,7 +16,9 @@ use crate::cli::{CalibrateArgs, ReferenceArgs};
 use crate::config as cfg;
 use crate::csvio::{self, RefPoint, Sample};
 use crate::reference::clock::ClockFit;
-use crate::reference::matched::reference_and_clock_for_samples;
+use crate::reference::matched::print_summary;
+use crate::reference::nmea::LogLines;
+use crate::reference::Reference;
 use crate::stats::{coverage, summarize, Summary};
 
 use super::recording::{check_recording_times, reference_for};
@@ -81,40 +84,140 @@ pub fn filter_refined(c: &Calibration) -> bool {
 
 /// `odoctl calibrate`.
 pub fn run(a: &CalibrateArgs) -> Result<ExitCode> {
+    run_from(a, None)
+}
+
+/// The arguments of an `odoctl calibrate` command line (`args[0]` the program's name).
+pub fn parse_command_line(args: &[String]) -> Result<CalibrateArgs> {
+    use clap::Parser;
+    match crate::cli::Cli::try_parse_from(args)?.cmd {
+        crate::cli::Cmd::Calibrate(c) => Ok(c),
+        _ => anyhow::bail!("not a calibrate command line: {}", args.join(" ")),
+    }
+}
+
+/// A recording already in memory (`record --calibrate`): the SAMPLES rows of `--samples` as
+/// the reader gives them back from the file, and the bytes of the NMEA log beside it with
+/// their lines read as they came.
+pub struct Recorded<'r> {
+    /// The rows of the SAMPLES file.
+    pub samples: &'r [Sample],
+    /// The content of the NMEA log beside it.
+    pub nmea: &'r [u8],
+    /// Its lines read as they were appended (named as the log beside `--samples`, with the
+    /// reference options' leap seconds; else it is read whole).
+    pub lines: LogLines,
+}
+
+/// `odoctl calibrate`, with the recording's files taken from `recorded` when given and the
+/// reference is the recording's own NMEA log: the same result, printed and written, as
+/// from the files.
+pub fn run_from(a: &CalibrateArgs, recorded: Option<Recorded>) -> Result<ExitCode> {
     let started = Instant::now();
     let timer = calib::PhaseTimer::new();
     let (reference_path, own) = reference_for(&a.samples, a.reference.as_deref())?;
-    let (samples, reference, clock, moved) =
-        read_run(&a.samples, &reference_path, &a.reference_input)?;
+    let (samples, source) = match recorded.filter(|_| own) {
+        Some(r) => {
+            let o = reference_options(&a.reference_input)?;
+            let source = crate::reference::load_read(&reference_path, r.nmea, r.lines, &o)?;
+            (Cow::Borrowed(r.samples), source)
+        }
+        None => {
+            let (s, source) = read_run(&a.samples, &reference_path, &a.reference_input)?;
+            (Cow::Owned(s), source)
+        }
+    };
+    let inputs = Inputs::of(&source, samples)?;
+    print_summary(&source);
+    if let Some(m) = &inputs.matching {
+        crate::outln!("  {m}");
+    }
     if own {
-        check_recording_times(&samples, &reference)?;
+        check_recording_times(&inputs.samples, &inputs.reference)?;
     }
     timer.lap("read CSV");
-    let initial = initial_estimate(a)?;
     let names = (
         a.samples.display().to_string(),
         reference_path.display().to_string(),
     );
-    let opts = &options::calibration_options(a)?;
-    let mut c = calib::calibrate(&samples, &reference, (&names.0, &names.1), &initial, opts)?;
-    if let Some(k) = &clock {
-        add_clock_rate_uncertainty(&mut c, k);
-    }
-    if let Some(moved) = &moved {
-        add_clock_offset_uncertainty(&mut c, &samples, moved, opts);
-    }
+    let (c, opts, initial) = calibration(a, &inputs, &names)?;
     timer.lap("calibration");
     let noise = calib::ReferenceNoise {
         horizontal: opts.reference_sigma,
         heading: opts.reference_heading_sigma,
     };
     let errors = ErrorSummary::of(&c, &noise);
-    report::print(&c, &initial, opts, &errors);
-    write::write_result(a, &reference_path, &c, opts, &errors, clock.as_ref())?;
+    report::print(&c, &initial, &opts, &errors);
+    write::write_result(
+        a,
+        &reference_path,
+        &c,
+        &opts,
+        &errors,
+        inputs.clock.as_ref(),
+    )?;
     timer.lap("report");
     crate::outln!("done in {:.2} s", started.elapsed().as_secs_f64());
     export_ros(a, &reference_path)?;
     Ok(ExitCode::SUCCESS)
+}
+
+/// What a calibration reads: the samples, the reference's rows at them, and what a
+/// trajectory reference adds.
+pub struct Inputs<'s> {
+    /// The SAMPLES rows.
+    pub samples: Cow<'s, [Sample]>,
+    /// The reference's rows aligned to the samples.
+    pub reference: Vec<RefPoint>,
+    /// A trajectory reference's clock fit.
+    pub clock: Option<ClockFit>,
+    /// How a trajectory was matched to the samples' clock, as printed.
+    pub matching: Option<String>,
+    /// The trajectory resampled on its clock with the offset moved by its standard error
+    /// ([`clock_offset`]), when the offset was estimated.
+    pub moved: Option<Vec<RefPoint>>,
+}
+
+impl<'s> Inputs<'s> {
+    /// The inputs of `samples` against `source`; prints nothing.
+    pub fn of(source: &Reference, samples: Cow<'s, [Sample]>) -> Result<Self> {
+        let (reference, matching, clock) = source.points_and_clock(&samples)?;
+        let moved = clock.filter(|k| k.offset_se > 0.0).map(|k| {
+            let moved = ClockFit {
+                offset: k.offset + k.offset_se,
+                ..k
+            };
+            source.points_on_clock(&samples, &moved)
+        });
+        Ok(Self {
+            samples,
+            reference,
+            clock,
+            matching: matching.map(|m| m.to_string()),
+            moved,
+        })
+    }
+}
+
+/// The calibration `a` asks for of `inputs`, `names` the two inputs' names for messages; with
+/// its options and initial estimate. Prints only what the clock offset adds to the standard
+/// errors.
+pub fn calibration(
+    a: &CalibrateArgs,
+    inputs: &Inputs,
+    names: &(String, String),
+) -> Result<(Calibration, calib::CalibrationOptions, ChassisParams)> {
+    let initial = initial_estimate(a)?;
+    let opts = options::calibration_options(a)?;
+    let (samples, reference) = (&inputs.samples, &inputs.reference);
+    let mut c = calib::calibrate(samples, reference, (&names.0, &names.1), &initial, &opts)?;
+    if let Some(k) = &inputs.clock {
+        add_clock_rate_uncertainty(&mut c, k);
+    }
+    if let Some(moved) = &inputs.moved {
+        add_clock_offset_uncertainty(&mut c, samples, moved, &opts);
+    }
+    Ok((c, opts, initial))
 }
 
 /// Adds what an estimated clock rate contributes to the diameters' standard errors: a rate
@@ -163,36 +266,19 @@ fn add_clock_offset_uncertainty(
     }
 }
 
-/// What [`read_run`] returns: the samples, the reference rows, a trajectory's clock, and the
-/// trajectory on the clock with the offset moved by its standard error.
-type RunInputs = (
-    Vec<Sample>,
-    Vec<RefPoint>,
-    Option<ClockFit>,
-    Option<Vec<RefPoint>>,
-);
-
-/// Reads the samples and the reference (on two cores: the files are independent), the
-/// reference aligned to the samples, a trajectory reference's clock, and, when the clock's
-/// offset was estimated, the trajectory resampled with the offset moved by its standard error
-/// ([`clock_offset`]).
-fn read_run(samples: &Path, reference: &Path, input: &ReferenceArgs) -> Result<RunInputs> {
+/// Reads the samples and the reference (on two cores: the files are independent).
+fn read_run(
+    samples: &Path,
+    reference: &Path,
+    input: &ReferenceArgs,
+) -> Result<(Vec<Sample>, Reference)> {
     let (samples, reference) = std::thread::scope(|scope| {
         let reference = scope
             .spawn(|| reference_options(input).and_then(|o| crate::reference::load(reference, &o)));
         let samples = csvio::read_samples(samples);
         (samples, reference.join().expect("CSV reader panicked"))
     });
-    let (samples, source) = (samples?, reference?);
-    let (reference, clock) = reference_and_clock_for_samples(&source, &samples)?;
-    let moved = clock.filter(|k| k.offset_se > 0.0).map(|k| {
-        let moved = ClockFit {
-            offset: k.offset + k.offset_se,
-            ..k
-        };
-        source.points_on_clock(&samples, &moved)
-    });
-    Ok((samples, reference, clock, moved))
+    Ok((samples?, reference?))
 }
 
 /// The first estimate: `--initial` (or the designed values) with the `--set`s over it.
