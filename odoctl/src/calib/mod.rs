@@ -78,8 +78,7 @@ pub use filter::innovations::{Innovations, MAX_OBSERVATIONS};
 pub use geometry::paper::{fit_geometry, GeomFit, GeomOptions};
 pub use geometry::refinement::{FilterRefinement, GeometryRefine};
 pub use geometry::subtrajectory::{
-    default_subtrajectory_length, fit_subtrajectories, Cuts, SubtrajectoryFit,
-    SubtrajectoryOptions, SUBTRAJECTORY_LENGTH,
+    fit_subtrajectories, Cuts, SubtrajectoryFit, SubtrajectoryOptions, SUBTRAJECTORY_LENGTH,
 };
 pub use geometry::wheel_harmonics::{fit_harmonics, HarmonicsFit, HARMONICS_SEGMENT};
 pub use heading_fit::fit_heading;

@@ -125,11 +125,9 @@ pub struct GeometryArgs {
     #[arg(long, value_enum, default_value_t = Method::Subtrajectory)]
     pub method: Method,
     /// Sub-trajectory length of the default method, and the stretches of the paper method's
-    /// cluster-robust standard errors (m of reference path). Default: 3 against a trajectory
-    /// reference (TUM, MCAP) whose poses scatter by less than 2 mm per axis (motion capture),
-    /// else 10.
-    #[arg(long)]
-    pub subtrajectory_length: Option<f64>,
+    /// cluster-robust standard errors (m of reference path).
+    #[arg(long, default_value_t = calib::SUBTRAJECTORY_LENGTH)]
+    pub subtrajectory_length: f64,
     /// Where the default method cuts the run: `distance` (exactly every
     /// --subtrajectory-length metres, the default) or `straights` (near every
     /// --subtrajectory-length metres, at the point farthest from any turning, so that no arc

@@ -18,7 +18,6 @@ pub mod matched;
 pub mod mcap_pose;
 pub mod nmea;
 pub mod rtklib;
-pub mod scatter;
 pub mod simulated;
 pub mod simulated_trajectory;
 pub mod stream;

@@ -59,25 +59,6 @@ use super::turning::turning;
 /// Default sub-trajectory length (m of reference path).
 pub const SUBTRAJECTORY_LENGTH: f64 = 10.0;
 
-/// Default sub-trajectory length (m) against a precise trajectory reference (motion
-/// capture): shorter restarts leave the slip less path to accumulate over, and sub-millimetre
-/// poses still fix each restart's start (docs/RESULTS.md, *Indoor calibration accuracy*).
-pub const PRECISE_SUBTRAJECTORY_LENGTH: f64 = 3.0;
-
-/// A trajectory reference whose epochs scatter by less than this per axis (m,
-/// [`crate::reference::scatter::position_scatter`]) is precise.
-pub const PRECISE_REFERENCE_SCATTER: f64 = 0.002;
-
-/// The sub-trajectory length (m) when none is asked for: [`PRECISE_SUBTRAJECTORY_LENGTH`]
-/// for a trajectory reference (not a receiver log) whose epochs scatter by less than
-/// [`PRECISE_REFERENCE_SCATTER`] per axis, else [`SUBTRAJECTORY_LENGTH`].
-pub fn default_subtrajectory_length(trajectory_scatter: Option<f64>) -> f64 {
-    match trajectory_scatter {
-        Some(s) if s < PRECISE_REFERENCE_SCATTER => PRECISE_SUBTRAJECTORY_LENGTH,
-        _ => SUBTRAJECTORY_LENGTH,
-    }
-}
-
 /// Common times a sub-trajectory needs after its start to be used.
 pub(crate) const MIN_POINTS: usize = 10;
 

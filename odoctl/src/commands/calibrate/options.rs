@@ -4,7 +4,7 @@
 use anyhow::Result;
 use odo_unit::odometry::UncertaintyModel;
 
-use crate::calib::{CalibrationOptions, LeverArm, SUBTRAJECTORY_LENGTH};
+use crate::calib::{CalibrationOptions, LeverArm};
 use crate::cli::{CalibrateArgs, GeometryArgs, ModelChoice, Models};
 
 /// The calibration's options from the command line's.
@@ -47,18 +47,18 @@ pub fn selected_model(choice: Option<ModelChoice>, models: Models) -> Option<Unc
 /// Sets the geometry method, its sub-trajectory length and cuts, the refinement and the
 /// antenna lever arm of `o`.
 pub fn apply_geometry(g: &GeometryArgs, o: &mut CalibrationOptions) -> Result<()> {
-    if let Some(l) = g
-        .subtrajectory_length
-        .filter(|l| !(*l > 0.0 && l.is_finite()))
-    {
-        anyhow::bail!("--subtrajectory-length {l}: must be a positive number of metres");
+    if !(g.subtrajectory_length > 0.0 && g.subtrajectory_length.is_finite()) {
+        anyhow::bail!(
+            "--subtrajectory-length {}: must be a positive number of metres",
+            g.subtrajectory_length
+        );
     }
     let (f, l) = match &g.antenna {
         Some(s) => crate::reference::parse_antenna(s)?,
         None => (0.0, 0.0),
     };
     o.method = g.method;
-    o.subtrajectory_length = g.subtrajectory_length.unwrap_or(SUBTRAJECTORY_LENGTH);
+    o.subtrajectory_length = g.subtrajectory_length;
     o.subtrajectory_cuts = g.subtrajectory_cuts;
     o.geometry_refine = g.geometry_refine;
     o.antenna = if g.fit_antenna {
