@@ -125,3 +125,48 @@ fn lever_arm_recovered_from_nmea_and_pos_as_well_as_from_the_csv_without_it() {
         "{with}\n{without}"
     );
 }
+
+/// The covariance model's kappa against an antenna on a lever arm is the axle centre's: the
+/// filter observes the antenna, its position turned with the heading error. Same run with
+/// the reference at the axle centre and at an antenna 0.3 m ahead and 0.1 m left, the lever
+/// arm given and fitted.
+#[test]
+fn kappa_through_a_lever_arm_is_the_kappa_at_the_axle_centre() {
+    let d = common::scratch("lever_arm_kappa");
+    let s = |n: &str| d.join(n).to_str().unwrap().to_string();
+    let kappa = |name: &str, extra: &[&str]| -> f64 {
+        let out = s(&format!("{name}{}.toml", extra.len()));
+        let mut args = vec!["calibrate", "--quiet", "--samples"];
+        let (samples, reference) = (s(&format!("{name}.csv")), s(&format!("{name}_ref.csv")));
+        args.extend([samples.as_str(), "--reference", &reference, "--out", &out]);
+        args.extend_from_slice(extra);
+        common::success_stdout(&common::odoctl(&args));
+        let t: toml::Table = common::read(std::path::Path::new(&out)).parse().unwrap();
+        t["kappa_left"].as_float().unwrap()
+    };
+    for (name, antenna) in [("centre", None), ("antenna", Some("0.3,0.1"))] {
+        let (samples, reference) = (s(&format!("{name}.csv")), s(&format!("{name}_ref.csv")));
+        let mut args = vec![
+            "simulate",
+            "--seed",
+            "3",
+            "--length",
+            "150",
+            "--samples",
+            &samples,
+            "--reference",
+            &reference,
+        ];
+        args.extend(antenna.map(|a| ["--antenna", a]).into_iter().flatten());
+        common::success_stdout(&common::odoctl(&args));
+    }
+    let centre = kappa("centre", &[]);
+    for extra in [&["--antenna", "0.3,0.1"][..], &["--fit-antenna"][..]] {
+        let k = kappa("antenna", extra);
+        eprintln!("kappa {k:e} with {extra:?}, {centre:e} at the axle centre");
+        assert!(
+            (k / centre).ln().abs() < 0.3,
+            "{extra:?}: {k:e} vs {centre:e}"
+        );
+    }
+}

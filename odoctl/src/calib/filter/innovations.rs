@@ -47,6 +47,7 @@
 use anyhow::{anyhow, Result};
 use odo_unit::odometry::{ChassisParams, Pose};
 
+use crate::calib::antenna::{antenna_offset, observed_point};
 use crate::calib::run::Run;
 use crate::replay::{counts, index_refs};
 use crate::stats::wrap_angle;
@@ -134,6 +135,8 @@ impl Turning {
 struct Epoch {
     dx: f64,
     dy: f64,
+    /// [`Obs::j`] at this epoch (m per rad).
+    j: [f64; 2],
     r: f64,
     dh: Option<f64>,
     step: usize,
@@ -163,6 +166,7 @@ impl Block {
         let o = Obs {
             dx: e.iter().map(|e| e.dx).sum::<f64>() / n,
             dy: e.iter().map(|e| e.dy).sum::<f64>() / n,
+            j: [0, 1].map(|a| e.iter().map(|e| e.j[a]).sum::<f64>() / n),
             r: e.iter().map(|e| e.r).sum::<f64>() / (n * n),
             dh: mid.dh,
             rh: rh2,
@@ -645,9 +649,11 @@ impl StepsTaken {
                 if block.is_empty() {
                     block_start = k;
                 }
+                let (ox, oy) = observed_point(&p, run.antenna, path.poses[0].heading);
                 block.add(Epoch {
-                    dx: r.x - p.x,
-                    dy: r.y - p.y,
+                    dx: r.x - ox,
+                    dy: r.y - oy,
+                    j: lever_turn(p.heading, run.antenna),
                     r: position_variance(run, k, ref_sigma),
                     dh: r.heading.map(|h| wrap_angle(h - p.heading)),
                     step: taken.steps.len(),
@@ -694,6 +700,17 @@ impl StepsTaken {
         self.observations += 1;
         anchor
     }
+}
+
+/// How a heading error at `heading` moves the point the reference observes at `antenna`
+/// (`(forward, left)` m from the axle centre): `R'(h) a`, the lever arm turned by a further
+/// quarter turn (m per rad, x and y); zero without a lever arm.
+fn lever_turn(heading: f64, antenna: (f64, f64)) -> [f64; 2] {
+    if antenna == (0.0, 0.0) {
+        return [0.0; 2];
+    }
+    let (x, y) = antenna_offset(heading + std::f64::consts::FRAC_PI_2, antenna);
+    [x, y]
 }
 
 /// A reference epoch's noise variance per axis (m^2): its own horizontal sigma, else

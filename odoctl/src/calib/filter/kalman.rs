@@ -24,6 +24,10 @@ const GEOMETRY_PRIOR: f64 = 1e-2;
 pub(super) struct Obs {
     pub(super) dx: f64,
     pub(super) dy: f64,
+    /// How a heading error moves the observed point (m per rad, x and y): the lever arm
+    /// turned by a further quarter turn, `R'(h) a`; zero when the reference observes the axle
+    /// centre.
+    pub(super) j: [f64; 2],
     pub(super) r: f64,
     pub(super) dh: Option<f64>,
     /// Noise variance of `dh` (rad^2).
@@ -261,8 +265,13 @@ impl<const N: usize> State<N> {
     /// innovation's covariance is not positive.
     fn update_position(&mut self, o: &Obs, tally: &mut Tally) -> bool {
         let (x, p) = (&mut self.x, &mut self.p);
-        let v = [o.dx - x[0], o.dy - x[1]];
-        let s = [[p[0][0] + o.r, p[0][1]], [p[1][0], p[1][1] + o.r]];
+        // H picks x, y and adds the heading error turned into position by the lever arm:
+        // rows (1, 0, jx, 0..) and (0, 1, jy, 0..); HP's rows, and S = H P H^T + R.
+        let j = o.j;
+        let hp: [[f64; N]; 2] = [0, 1].map(|i| std::array::from_fn(|c| p[i][c] + j[i] * p[2][c]));
+        let v = [o.dx - (x[0] + j[0] * x[2]), o.dy - (x[1] + j[1] * x[2])];
+        let s = [0, 1].map(|i| [0, 1].map(|k| hp[i][k] + hp[i][2] * j[k]));
+        let s = [[s[0][0] + o.r, s[0][1]], [s[1][0], s[1][1] + o.r]];
         let det = s[0][0] * s[1][1] - s[0][1] * s[1][0];
         if det.is_nan() || det <= 0.0 {
             return false;
@@ -279,20 +288,20 @@ impl<const N: usize> State<N> {
         let e = v[0].hypot(v[1]);
         tally.h1 += usize::from(e <= tr);
         tally.h3 += usize::from(e <= 3.0 * tr);
-        // K = P H^T S^-1 (H picks x, y).
+        // K = P H^T S^-1.
         let mut kg = [[0.0; 2]; N];
         for (r, kr) in kg.iter_mut().enumerate() {
+            let pht = [0, 1].map(|k| p[r][k] + p[r][2] * j[k]);
             for c in 0..2 {
-                kr[c] = p[r][0] * si[0][c] + p[r][1] * si[1][c];
+                kr[c] = pht[0] * si[0][c] + pht[1] * si[1][c];
             }
         }
         for r in 0..N {
             x[r] += kg[r][0] * v[0] + kg[r][1] * v[1];
         }
-        let prow = [p[0], p[1]];
         for r in 0..N {
             for c in 0..N {
-                p[r][c] -= kg[r][0] * prow[0][c] + kg[r][1] * prow[1][c];
+                p[r][c] -= kg[r][0] * hp[0][c] + kg[r][1] * hp[1][c];
             }
         }
         true

@@ -24,7 +24,8 @@
 //! error the refinement is not applied. (Linearised about the odometry integrated open-loop
 //! instead, the filter would keep the drift's error of `kappa (R_1 + R_2) / (8 W^2)`, `R_i` the
 //! distances the wheels rolled: it would refuse every log longer than a few hundred metres.)
-//! The filter observes the axle centre: a lever arm keeps the sub-trajectory estimate.
+//! The filter holds a lever arm exact (a fitted one is not): a lever arm keeps the
+//! sub-trajectory estimate.
 
 use anyhow::{anyhow, Result};
 use odo_unit::odometry::ChassisParams;
@@ -176,7 +177,7 @@ pub fn refine_subtrajectory_fit(
     ref_heading_sigma: f64,
 ) -> Result<FilterRefinement> {
     let reason = if s.antenna != (0.0, 0.0) || antenna.fitted() {
-        Some("the filter observes the axle centre, not a lever arm's antenna")
+        Some("the filter holds the lever arm exact, and a lever arm's refinement is not validated")
     } else if !s.track_estimated {
         Some("the track width is held")
     } else {
