@@ -45,6 +45,14 @@ pub enum Method {
     Paper,
 }
 
+/// The reference's horizontal RMS noise of one epoch where neither the log nor the options
+/// give one and the reference is not a trajectory (m): an RTK fix's.
+pub const DEFAULT_REFERENCE_SIGMA: f64 = 0.008;
+
+/// The reference heading's noise where neither the options nor a trajectory give one
+/// (degrees): a BD982-like dual antenna's, `simulate --heading-sigma-deg`'s default.
+pub const DEFAULT_REFERENCE_HEADING_SIGMA_DEG: f64 = 0.5;
+
 /// Options of the calibration (`odoctl calibrate`'s fitting options; the defaults are the
 /// command line's).
 #[derive(Debug, Clone, PartialEq)]
@@ -106,11 +114,11 @@ impl Default for CalibrationOptions {
     fn default() -> Self {
         Self {
             delta_window: 10.0,
-            reference_sigma: 0.008,
+            reference_sigma: DEFAULT_REFERENCE_SIGMA,
             delta_mode: DeltaMode::Equal,
             fit_delta: true,
             fit_delta_diff: true,
-            reference_heading_sigma: 0.5f64.to_radians(),
+            reference_heading_sigma: DEFAULT_REFERENCE_HEADING_SIGMA_DEG.to_radians(),
             models: Vec::new(),
             method: Method::Subtrajectory,
             subtrajectory_length: SUBTRAJECTORY_LENGTH,

@@ -72,7 +72,10 @@ pub mod uncertainty;
 mod testing;
 
 pub use antenna::{read_lever_arm, LeverArm};
-pub use calibration::{calibrate, Calibration, CalibrationOptions, Method, PhaseTimer};
+pub use calibration::{
+    calibrate, Calibration, CalibrationOptions, Method, PhaseTimer,
+    DEFAULT_REFERENCE_HEADING_SIGMA_DEG, DEFAULT_REFERENCE_SIGMA,
+};
 pub use evaluation::{evaluate, Evaluation};
 pub use filter::innovations::{Innovations, MAX_OBSERVATIONS};
 pub use geometry::paper::{fit_geometry, GeomFit, GeomOptions};

@@ -40,9 +40,10 @@ pub struct CalibrateArgs {
     /// Horizontal RMS noise of one reference epoch (m): `hypot(sigma_east, sigma_north)`, each
     /// axis carrying 1/sqrt(2) of it. Epochs whose log gives its own sigmas (GST, `.pos`
     /// `sdn`/`sde`, a `sigma_h` column) use those instead. The filter's likelihood and the
-    /// coverage criteria take it as the reference's noise.
-    #[arg(long, default_value_t = 0.008, allow_negative_numbers = true, value_parser = v::sigma_m)]
-    pub reference_sigma: f64,
+    /// coverage criteria take it as the reference's noise. Default: against a trajectory (TUM,
+    /// ROS 2 MCAP) its own noise from its poses' second differences, else 0.008.
+    #[arg(long, allow_negative_numbers = true, value_parser = v::sigma_m)]
+    pub reference_sigma: Option<f64>,
     /// How the left and right uncertainty coefficients relate.
     #[arg(long, value_enum, default_value_t = DeltaMode::Equal)]
     pub delta_mode: DeltaMode,
@@ -55,10 +56,11 @@ pub struct CalibrateArgs {
     #[arg(long)]
     pub no_fit_delta_diff: bool,
     /// Noise of one reference heading (degrees, 1 sigma), in the filter's likelihood and added
-    /// to sigma_heading in the `delta_diff` criterion; the default is `simulate
-    /// --heading-sigma-deg`'s (a BD982-like dual antenna).
-    #[arg(long, default_value_t = 0.5, allow_negative_numbers = true, value_parser = v::sigma_deg)]
-    pub reference_heading_sigma_deg: f64,
+    /// to sigma_heading in the `delta_diff` criterion. Default: against a trajectory with
+    /// headings its own heading noise from its poses' second differences, else 0.5 (`simulate
+    /// --heading-sigma-deg`'s, a BD982-like dual antenna).
+    #[arg(long, allow_negative_numbers = true, value_parser = v::sigma_deg)]
+    pub reference_heading_sigma_deg: Option<f64>,
     /// Which uncertainty models' coefficients to fit: both (`all`, the default), one, or the
     /// initial estimate's `uncertainty_model` (`config`).
     #[arg(long, value_enum, default_value_t = Models::All)]

@@ -289,13 +289,16 @@ pub struct ValidateArgs {
     /// Horizontal RMS noise of one reference epoch (m): `hypot(sigma_east, sigma_north)`, each
     /// axis carrying 1/sqrt(2) of it; epochs whose log gives its own sigmas use those. Also
     /// reported is the coverage of the bands widened by it, `k sqrt(sigma_h^2 +
-    /// sigma_ref^2)`, as the calibration's criterion uses.
-    #[arg(long, default_value_t = 0.008, allow_negative_numbers = true, value_parser = v::sigma_m)]
-    pub reference_sigma: f64,
+    /// sigma_ref^2)`, as the calibration's criterion uses. Default as `calibrate`'s: against
+    /// one trajectory (TUM, ROS 2 MCAP) its own noise from its poses' second differences, else
+    /// (and with `--ensemble`) 0.008.
+    #[arg(long, allow_negative_numbers = true, value_parser = v::sigma_m)]
+    pub reference_sigma: Option<f64>,
     /// Noise of one reference heading (degrees, 1 sigma): also reported is the coverage of
-    /// the heading bands widened by it, as `calibrate`'s `delta_diff` criterion uses.
-    #[arg(long, default_value_t = 0.5, allow_negative_numbers = true, value_parser = v::sigma_deg)]
-    pub reference_heading_sigma_deg: f64,
+    /// the heading bands widened by it, as `calibrate`'s `delta_diff` criterion uses. Default
+    /// as `calibrate`'s: a trajectory's own, else 0.5.
+    #[arg(long, allow_negative_numbers = true, value_parser = v::sigma_deg)]
+    pub reference_heading_sigma_deg: Option<f64>,
     /// Also write the reference track and the odometry path (`nav_msgs/Path`) to this
     /// MCAP file, for Foxglove (docs/ROS.md).
     #[arg(long)]

@@ -7,11 +7,14 @@ use std::process::ExitCode;
 use anyhow::{bail, Result};
 use odo_unit::odometry::{ChassisParams, UncertaintyModel};
 
-use crate::calib::{self, ReferenceNoise, Run};
+use crate::calib::{
+    self, ReferenceNoise, Run, DEFAULT_REFERENCE_HEADING_SIGMA_DEG, DEFAULT_REFERENCE_SIGMA,
+};
 use crate::cli::ValidateArgs;
 use crate::config::{self as cfg};
 use crate::csvio;
 use crate::reference::matched::{read_matched_run, MatchedRun, ReferenceSummary};
+use crate::reference::trajectory_noise::TrajectoryNoise;
 use crate::stats::{coverage, summarize};
 
 use super::recording::{check_recording_times, reference_for};
@@ -41,13 +44,6 @@ pub fn run(a: &ValidateArgs) -> Result<ExitCode> {
 /// One run evaluated with the parameters against `reference_path` (the recording's own
 /// log when `own`: its times checked): printed, and written as asked.
 fn validate(a: &ValidateArgs, reference_path: &Path, own: bool) -> Result<ExitCode> {
-    let noise = ReferenceNoise {
-        horizontal: a.reference_sigma,
-        heading: a.reference_heading_sigma_deg.to_radians(),
-    };
-    if !(noise.horizontal >= 0.0 && noise.heading >= 0.0) {
-        bail!("--reference-sigma and --reference-heading-sigma-deg must be non-negative");
-    }
     let config = a.params.config.as_deref();
     let models = a.models.list();
     let mut params = cfg::load(config, &a.params.sets)?;
@@ -58,12 +54,17 @@ fn validate(a: &ValidateArgs, reference_path: &Path, own: bool) -> Result<ExitCo
         samples,
         reference,
         matches,
+        noise: own_noise,
     } = read_matched_run(
         &a.samples[0],
         reference_path,
         &reference_options(&a.reference_input)?,
         ReferenceSummary::Print,
     )?;
+    let noise = reference_noise(a, own_noise.as_ref());
+    if !(noise.horizontal >= 0.0 && noise.heading >= 0.0) {
+        bail!("--reference-sigma and --reference-heading-sigma-deg must be non-negative");
+    }
     if own {
         check_recording_times(&samples, &reference)?;
     }
@@ -87,6 +88,33 @@ fn validate(a: &ValidateArgs, reference_path: &Path, own: bool) -> Result<ExitCo
         write_plots(dir, &ev, &compared)?;
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The reference's noise: the options' where given, else a trajectory's own (`own`), else
+/// the defaults; a line says what a trajectory's own noise set.
+fn reference_noise(a: &ValidateArgs, own: Option<&TrajectoryNoise>) -> ReferenceNoise {
+    let horizontal = a
+        .reference_sigma
+        .or(own.map(|n| n.horizontal))
+        .unwrap_or(DEFAULT_REFERENCE_SIGMA);
+    let heading = a
+        .reference_heading_sigma_deg
+        .map(f64::to_radians)
+        .or(own.and_then(|n| n.heading))
+        .unwrap_or(DEFAULT_REFERENCE_HEADING_SIGMA_DEG.to_radians());
+    if let Some(n) =
+        own.filter(|_| a.reference_sigma.is_none() || a.reference_heading_sigma_deg.is_none())
+    {
+        crate::outln!(
+            "  reference noise: the trajectory's own, from the second differences of {} poses, where the options give none: {horizontal:.5} m, {:.4} deg",
+            n.triples,
+            heading.to_degrees()
+        );
+    }
+    ReferenceNoise {
+        horizontal,
+        heading,
+    }
 }
 
 /// The run's errors against their bands, on stdout.

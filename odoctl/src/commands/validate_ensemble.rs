@@ -7,7 +7,10 @@ use std::process::ExitCode;
 use anyhow::{bail, Context, Result};
 use odo_unit::odometry::{ChassisParams, UncertaintyModel};
 
-use crate::calib::{self, CheckpointSample, Ensemble, Run};
+use crate::calib::{
+    self, CheckpointSample, Ensemble, Run, DEFAULT_REFERENCE_HEADING_SIGMA_DEG,
+    DEFAULT_REFERENCE_SIGMA,
+};
 use crate::cli::{ReferenceArgs, ValidateArgs};
 use crate::config as cfg;
 use crate::reference::matched::{read_matched_run, MatchedRun, ReferenceSummary};
@@ -60,8 +63,11 @@ pub fn run(a: &ValidateArgs) -> Result<ExitCode> {
             config: a.params.config.as_deref(),
             sets: &a.params.sets,
             models: &a.models.list(),
-            reference_sigma: a.reference_sigma,
-            reference_heading_sigma: a.reference_heading_sigma_deg.to_radians(),
+            reference_sigma: a.reference_sigma.unwrap_or(DEFAULT_REFERENCE_SIGMA),
+            reference_heading_sigma: a
+                .reference_heading_sigma_deg
+                .unwrap_or(DEFAULT_REFERENCE_HEADING_SIGMA_DEG)
+                .to_radians(),
             checkpoints: a.checkpoints.clone(),
             plots: a.plots.as_deref(),
         },
@@ -135,6 +141,7 @@ pub fn validate_ensemble(o: &EnsembleOptions, input: &ReferenceArgs) -> Result<E
             samples,
             reference,
             matches,
+            ..
         } = read_matched_run(sp, rp, &options, ReferenceSummary::Print)?;
         let run = Run::new(&samples, &reference, matches).with_antenna(antenna);
         if add_run(&run, &params, &models, &mut ensembles, o)? {

@@ -7,6 +7,7 @@ use std::path::Path;
 use anyhow::Result;
 
 use super::clock::ClockFit;
+use super::trajectory_noise::TrajectoryNoise;
 use super::{load, Reference, ReferenceOptions, TimeScale};
 use crate::csvio::{self, RefPoint, Sample};
 
@@ -67,6 +68,8 @@ pub struct MatchedRun {
     pub reference: Vec<RefPoint>,
     /// (sample index, reference index) at common times, at least two.
     pub matches: Vec<(usize, usize)>,
+    /// A trajectory reference's own noise ([`TrajectoryNoise`]).
+    pub noise: Option<TrajectoryNoise>,
 }
 
 /// Whether [`read_matched_run`] prints what of a receiver log it used.
@@ -100,9 +103,13 @@ pub fn read_matched_run(
         &reference_path.display().to_string(),
         2,
     )?;
+    let noise = (source.time == TimeScale::Trajectory)
+        .then(|| TrajectoryNoise::of(&source.epochs))
+        .flatten();
     Ok(MatchedRun {
         samples,
         reference,
         matches,
+        noise,
     })
 }

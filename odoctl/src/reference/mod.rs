@@ -23,6 +23,7 @@ pub mod simulated_trajectory;
 pub mod stream;
 pub mod summary;
 pub mod trajectory;
+pub mod trajectory_noise;
 pub mod tum;
 pub mod ubx;
 

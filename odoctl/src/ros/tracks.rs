@@ -87,6 +87,7 @@ pub fn validate_hook(
         samples,
         reference,
         matches,
+        ..
     } = read_matched_run(
         samples_path,
         reference_path,

@@ -18,8 +18,10 @@
 //! where they have headings, the middle epoch's `dalpha` (`--reference-heading-sigma-deg`):
 //! the heading error is a random walk, whose block means are smoother than its values (their
 //! steps have 2/3 of the variance), so a filter that takes the means for values at the middle
-//! reads the slip 13 % (q 0.001) to 26 % (q 0.003) low on 70 m runs with the true geometry;
-//! the position error, an integral of it, is smooth over a metre. The
+//! reads the slip 13 % (q 0.001) to 26 % (q 0.003) low on 70 m runs with the true geometry.
+//! The lateral position error, an integral of it, is smooth over a metre, but the along-track
+//! error is a random walk of its own: against a precise reference the positions are averaged
+//! over a shorter span about the middle epoch ([`position_span`]). The
 //! log-likelihood is `-1/2 sum (ln det S_k + v_k^T S_k^-1 v_k)` over the innovations `v_k`:
 //! each is scored on a prediction from the observations before it only, so nothing a point is
 //! judged on was fitted to it, neither a start heading nor the geometry (the filter carries
@@ -140,6 +142,8 @@ struct Epoch {
     r: f64,
     dh: Option<f64>,
     step: usize,
+    /// Reference path from the run's first match (m).
+    dist: f64,
 }
 
 /// The reference epochs of one block.
@@ -157,11 +161,17 @@ impl Block {
         self.epochs.is_empty()
     }
 
-    /// The block's observation at its middle step: the mean of its epochs' positions (noise
-    /// divided by their number) and the middle epoch's heading. Empties the block.
-    fn take(&mut self, rh2: f64) -> (usize, Obs) {
+    /// The block's observation at its middle step: the mean of the positions of its epochs
+    /// within `span / 2` metres of path of the middle epoch (all of them when `span` is
+    /// `None`; noise divided by their number) and the middle epoch's heading. Empties the
+    /// block.
+    fn take(&mut self, rh2: f64, span: Option<f64>) -> (usize, Obs) {
+        let mid = self.epochs[self.epochs.len() / 2];
+        if let Some(span) = span {
+            self.epochs
+                .retain(|e| (e.dist - mid.dist).abs() <= 0.5 * span);
+        }
         let e = &self.epochs;
-        let mid = e[e.len() / 2];
         let n = e.len() as f64;
         let o = Obs {
             dx: e.iter().map(|e| e.dx).sum::<f64>() / n,
@@ -209,6 +219,9 @@ struct Settings {
     sigmas: (f64, f64),
     /// [`OBSERVATION_BLOCK`] or another (m).
     block_length: f64,
+    /// Path around each block's middle epoch whose positions are averaged (m; `None`: the
+    /// whole block); see [`position_span`].
+    span: Option<f64>,
 }
 
 impl Step {
@@ -284,6 +297,7 @@ impl Innovations {
             heading0,
             sigmas: (ref_sigma, ref_heading_sigma),
             block_length,
+            span: None,
         };
         let path = OpenLoop::new(run, geometry, settings)?;
         let open_loop = Self::anchored(run, geometry, settings, &path, None)?;
@@ -310,7 +324,11 @@ impl Innovations {
         kappa: f64,
     ) -> Result<Self> {
         let anchors = self.anchors(kappa);
-        Self::anchored(run, geometry, self.settings, path, anchors.as_deref())
+        let settings = Settings {
+            span: position_span(run, self.settings, kappa),
+            ..self.settings
+        };
+        Self::anchored(run, geometry, settings, path, anchors.as_deref())
     }
 
     /// The filter's estimate of the pose at the end of each observed block, at white slip
@@ -657,6 +675,7 @@ impl StepsTaken {
                     r: position_variance(run, k, ref_sigma),
                     dh: r.heading.map(|h| wrap_angle(h - p.heading)),
                     step: taken.steps.len(),
+                    dist: run.dist[k],
                 });
                 block_done = k + 1 >= run.len()
                     || run.dist[k + 1] - run.dist[block_start] > block_length
@@ -671,7 +690,7 @@ impl StepsTaken {
                 (rolled, rolled_diff) = ([0.0; 2], 0.0);
             }
             if block_done {
-                let (at, o) = block.take(rh2);
+                let (at, o) = block.take(rh2, settings.span);
                 blocks += 1;
                 if blocks.is_multiple_of(stride) || k >= run.len() {
                     if let Some(a) = taken.observe(at, o, p, anchors) {
@@ -711,6 +730,36 @@ fn lever_turn(heading: f64, antenna: (f64, f64)) -> [f64; 2] {
     }
     let (x, y) = antenna_offset(heading + std::f64::consts::FRAC_PI_2, antenna);
     [x, y]
+}
+
+/// Share of the slip's along-track variance over one block that the averaged reference noise
+/// of an observation may reach when [`position_span`] shortens the averaging.
+const SPAN_NOISE_SHARE: f64 = 0.1;
+
+/// The path around a block's middle epoch over which its positions are averaged (m; `None`:
+/// the whole block). The along-track error is a random walk (`kappa / 2` per metre, the
+/// mean of the wheels'), and the mean of a random walk over a span `s` is smoother than its
+/// values: the steps between the means of consecutive blocks of length `d` have `1 - s /
+/// (3 d)` of its variance, which the filter, taking the mean for the value at the middle,
+/// reads as that much less slip. Against a noisy reference (RTK, SLAM) the whole block's mean
+/// is what keeps its noise below the slip and the smoothing is buried in it; against a precise
+/// one (motion capture) the span is shortened until the averaged noise `sigma^2 / (rho s)`
+/// (per axis; `rho` epochs per metre) reaches [`SPAN_NOISE_SHARE`] of the slip's along-track
+/// variance over a block, `kappa d / 2`, and no further than one epoch.
+fn position_span(run: &Run, settings: Settings, kappa: f64) -> Option<f64> {
+    let d = settings.block_length;
+    let distance = run.dist[run.len() - 1] - run.dist[0];
+    if !(kappa > 0.0 && distance > 0.0 && d > 0.0) {
+        return None;
+    }
+    let rho = run.len() as f64 / distance;
+    let mut variances: Vec<f64> = (0..run.len())
+        .map(|k| position_variance(run, k, settings.sigmas.0))
+        .collect();
+    variances.sort_by(f64::total_cmp);
+    let sigma2 = variances[variances.len() / 2];
+    let span = sigma2 / (rho * SPAN_NOISE_SHARE * 0.5 * kappa * d);
+    (span < d).then(|| span.max(1.0 / rho))
 }
 
 /// A reference epoch's noise variance per axis (m^2): its own horizontal sigma, else
@@ -858,6 +907,7 @@ mod tests {
             heading0,
             sigmas: (0.008, 0.5f64.to_radians()),
             block_length: OBSERVATION_BLOCK,
+            span: None,
         }
     }
 

@@ -24,13 +24,14 @@
 //! error the refinement is not applied. (Linearised about the odometry integrated open-loop
 //! instead, the filter would keep the drift's error of `kappa (R_1 + R_2) / (8 W^2)`, `R_i` the
 //! distances the wheels rolled: it would refuse every log longer than a few hundred metres.)
-//! The filter holds a lever arm exact (a fitted one is not): a lever arm keeps the
-//! sub-trajectory estimate.
+//! The filter holds a lever arm exact: a given one is the user's measurement, as in the
+//! sub-trajectory fit; a fitted one's share is added to the covariance
+//! ([`add_lever_arm_share`]).
 
 use anyhow::{anyhow, Result};
 use odo_unit::odometry::ChassisParams;
 
-use crate::calib::antenna::LeverArm;
+use crate::calib::antenna::{LeverArm, ANTENNA_FORWARD, ANTENNA_LEFT};
 use crate::calib::filter::innovations::{Innovations, Turning, OBSERVATION_BLOCK};
 use crate::calib::filter::search::{
     largest_likelihood, posterior_mean, slip_rate_range, EVIDENCE_PER_PARAMETER,
@@ -167,8 +168,9 @@ pub fn refine_geometry(
 }
 
 /// The filter's refinement of a sub-trajectory fit `s` ([`refine_geometry`]) with the
-/// reference's sigmas (m, rad): not run with a lever arm (`antenna`: the filter observes the
-/// axle centre) nor with the track width held; then `skipped` says why.
+/// reference's sigmas (m, rad), the run's lever arm the fit's; with a fitted lever arm
+/// (`antenna`) its share added to the covariance. Not run with the track width held; then
+/// `skipped` says why.
 pub fn refine_subtrajectory_fit(
     run: &Run,
     s: &SubtrajectoryFit,
@@ -176,14 +178,7 @@ pub fn refine_subtrajectory_fit(
     ref_sigma: f64,
     ref_heading_sigma: f64,
 ) -> Result<FilterRefinement> {
-    let reason = if s.antenna != (0.0, 0.0) || antenna.fitted() {
-        Some("the filter holds the lever arm exact, and a lever arm's refinement is not validated")
-    } else if !s.track_estimated {
-        Some("the track width is held")
-    } else {
-        None
-    };
-    if let Some(why) = reason {
+    if !s.track_estimated {
         return Ok(FilterRefinement {
             params: s.params,
             covariance: [[f64::NAN; 3]; 3],
@@ -191,12 +186,75 @@ pub fn refine_subtrajectory_fit(
             kappa_diff: f64::NAN,
             linearisation: f64::NAN,
             observations: 0,
-            skipped: Some(why.to_string()),
+            skipped: Some("the track width is held".to_string()),
             innovations: None,
         });
     }
     // The start heading (the filter's without reference headings): the first
     // sub-trajectory's fitted one.
     let heading0 = s.blocks.first().map_or(0.0, |b| b.heading);
-    refine_geometry(run, &s.params, heading0, ref_sigma, ref_heading_sigma)
+    let mut r = refine_geometry(run, &s.params, heading0, ref_sigma, ref_heading_sigma)?;
+    if r.skipped.is_none() && antenna.fitted() {
+        add_lever_arm_share(run, s, heading0, (ref_sigma, ref_heading_sigma), &mut r)?;
+    }
+    Ok(r)
+}
+
+/// Adds a fitted lever arm's share to `r.covariance`: the filter holds the lever arm at the
+/// sub-trajectory fit's estimate, so its estimate is taken again (at `r.kappa`) with each
+/// coordinate of the lever arm moved by its standard error, and `J C J^T` is added, `J` the
+/// refined lengths' change per metre of lever arm and `C` the sub-trajectory fit's covariance
+/// of the lever arm.
+fn add_lever_arm_share(
+    run: &Run,
+    s: &SubtrajectoryFit,
+    heading0: f64,
+    (ref_sigma, ref_heading_sigma): (f64, f64),
+    r: &mut FilterRefinement,
+) -> Result<()> {
+    let unknowns = [ANTENNA_FORWARD - 1, ANTENNA_LEFT - 1];
+    let lengths = |p: &ChassisParams| [p.left_diameter, p.right_diameter, p.track_width];
+    let (base, refined) = (lengths(&s.params), lengths(&r.params));
+    let mut columns = [[0.0; 3]; 2];
+    for (column, (k, &u)) in columns.iter_mut().zip(unknowns.iter().enumerate()) {
+        let Some(se) = s.covariance_of(u, u).map(f64::sqrt).filter(|v| *v > 0.0) else {
+            return Ok(());
+        };
+        let mut antenna = s.antenna;
+        if k == 0 {
+            antenna.0 += se;
+        } else {
+            antenna.1 += se;
+        }
+        let moved = Run {
+            samples: run.samples,
+            reference: run.reference,
+            matches: run.matches.clone(),
+            dist: run.dist.clone(),
+            antenna,
+        };
+        let inn = Innovations::new(
+            &moved,
+            &s.params,
+            heading0,
+            ref_sigma,
+            ref_heading_sigma,
+            OBSERVATION_BLOCK,
+        )?;
+        let g = inn.score_with(r.kappa, 0.0, Turning::NONE).geometry;
+        for i in 0..3 {
+            column[i] = (base[i] * (1.0 + g[i]) - refined[i]) / se;
+        }
+    }
+    for (a, &ua) in unknowns.iter().enumerate() {
+        for (b, &ub) in unknowns.iter().enumerate() {
+            let c = s.covariance_of(ua, ub).unwrap_or(0.0);
+            for i in 0..3 {
+                for j in 0..3 {
+                    r.covariance[i][j] += columns[a][i] * c * columns[b][j];
+                }
+            }
+        }
+    }
+    Ok(())
 }

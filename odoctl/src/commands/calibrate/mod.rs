@@ -18,7 +18,8 @@ use crate::csvio::{self, RefPoint, Sample};
 use crate::reference::clock::ClockFit;
 use crate::reference::matched::print_summary;
 use crate::reference::nmea::LogLines;
-use crate::reference::Reference;
+use crate::reference::trajectory_noise::TrajectoryNoise;
+use crate::reference::{Reference, TimeScale};
 use crate::stats::{coverage, summarize, Summary};
 
 use super::recording::{check_recording_times, reference_for};
@@ -132,6 +133,13 @@ pub fn run_from(a: &CalibrateArgs, recorded: Option<Recorded>) -> Result<ExitCod
     if let Some(m) = &inputs.matching {
         crate::outln!("  {m}");
     }
+    if let Some(line) = inputs
+        .noise
+        .as_ref()
+        .and_then(|n| trajectory_noise_line(n, a))
+    {
+        crate::outln!("  {line}");
+    }
     if own {
         check_recording_times(&inputs.samples, &inputs.reference)?;
     }
@@ -162,6 +170,28 @@ pub fn run_from(a: &CalibrateArgs, recorded: Option<Recorded>) -> Result<ExitCod
     Ok(ExitCode::SUCCESS)
 }
 
+/// The line saying which of the reference's sigmas a trajectory's own noise `n` sets (those
+/// the options do not give), `None` when the options give both.
+pub fn trajectory_noise_line(n: &TrajectoryNoise, a: &CalibrateArgs) -> Option<String> {
+    let mut set = Vec::new();
+    if a.reference_sigma.is_none() {
+        set.push(format!("--reference-sigma {:.5} m", n.horizontal));
+    }
+    if let (None, Some(h)) = (a.reference_heading_sigma_deg, n.heading) {
+        set.push(format!(
+            "--reference-heading-sigma-deg {:.4}",
+            h.to_degrees()
+        ));
+    }
+    (!set.is_empty()).then(|| {
+        format!(
+            "reference noise: the trajectory's own, from the second differences of {} poses: {}",
+            n.triples,
+            set.join(", ")
+        )
+    })
+}
+
 /// What a calibration reads: the samples, the reference's rows at them, and what a
 /// trajectory reference adds.
 pub struct Inputs<'s> {
@@ -176,6 +206,8 @@ pub struct Inputs<'s> {
     /// The trajectory resampled on its clock with the offset moved by its standard error
     /// ([`clock_offset`]), when the offset was estimated.
     pub moved: Option<Vec<RefPoint>>,
+    /// A trajectory reference's own noise, the default of the reference's sigmas.
+    pub noise: Option<TrajectoryNoise>,
 }
 
 impl<'s> Inputs<'s> {
@@ -189,12 +221,16 @@ impl<'s> Inputs<'s> {
             };
             source.points_on_clock(&samples, &moved)
         });
+        let noise = (source.time == TimeScale::Trajectory)
+            .then(|| TrajectoryNoise::of(&source.epochs))
+            .flatten();
         Ok(Self {
             samples,
             reference,
             clock,
             matching: matching.map(|m| m.to_string()),
             moved,
+            noise,
         })
     }
 }
@@ -208,7 +244,15 @@ pub fn calibration(
     names: &(String, String),
 ) -> Result<(Calibration, calib::CalibrationOptions, ChassisParams)> {
     let initial = initial_estimate(a)?;
-    let opts = options::calibration_options(a)?;
+    let mut opts = options::calibration_options(a)?;
+    if let Some(n) = &inputs.noise {
+        if a.reference_sigma.is_none() {
+            opts.reference_sigma = n.horizontal;
+        }
+        if let (None, Some(h)) = (a.reference_heading_sigma_deg, n.heading) {
+            opts.reference_heading_sigma = h;
+        }
+    }
     let (samples, reference) = (&inputs.samples, &inputs.reference);
     let mut c = calib::calibrate(samples, reference, (&names.0, &names.1), &initial, &opts)?;
     if let Some(k) = &inputs.clock {

@@ -4,18 +4,23 @@
 use anyhow::Result;
 use odo_unit::odometry::UncertaintyModel;
 
-use crate::calib::{CalibrationOptions, LeverArm};
+use crate::calib::{
+    CalibrationOptions, LeverArm, DEFAULT_REFERENCE_HEADING_SIGMA_DEG, DEFAULT_REFERENCE_SIGMA,
+};
 use crate::cli::{CalibrateArgs, GeometryArgs, ModelChoice, Models};
 
 /// The calibration's options from the command line's.
 pub fn calibration_options(a: &CalibrateArgs) -> Result<CalibrationOptions> {
     let mut o = CalibrationOptions {
         delta_window: a.delta_window,
-        reference_sigma: a.reference_sigma,
+        reference_sigma: a.reference_sigma.unwrap_or(DEFAULT_REFERENCE_SIGMA),
         delta_mode: a.delta_mode,
         fit_delta: !a.no_delta,
         fit_delta_diff: !a.no_fit_delta_diff,
-        reference_heading_sigma: a.reference_heading_sigma_deg.to_radians(),
+        reference_heading_sigma: a
+            .reference_heading_sigma_deg
+            .unwrap_or(DEFAULT_REFERENCE_HEADING_SIGMA_DEG)
+            .to_radians(),
         models: a.models.list(),
         select: selected_model(a.uncertainty_model, a.models),
         criterion: a.uncertainty_criterion,
