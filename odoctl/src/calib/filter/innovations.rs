@@ -901,6 +901,41 @@ mod tests {
         )
     }
 
+    /// The span of [`position_span`] at the boundaries: the whole block (`None`) where the
+    /// averaged noise stays above a tenth of the slip's along-track variance over a block,
+    /// one epoch at no noise, the balance between (m).
+    #[test]
+    fn the_averaging_span_shortens_only_against_a_precise_reference() {
+        let sim = slipping_run(3);
+        let m = crate::csvio::match_or_fail(&sim.samples, "s", &sim.reference, "r", 10).unwrap();
+        let run = Run::new(&sim.samples, &sim.reference, m);
+        let rho = run.len() as f64 / (run.dist[run.len() - 1] - run.dist[0]);
+        let with = |sigma: f64| Settings {
+            sigmas: (sigma, 0.01),
+            ..settings(0.0)
+        };
+        // sigma^2 / 2 / (rho 0.1 kappa / 2) at the default 1 m blocks.
+        let balance = |sigma: f64, kappa: f64| sigma * sigma / (rho * 0.1 * kappa);
+        let kappa = 2e-7;
+        for (sigma, kappa, expected) in [
+            (0.008, kappa, None),
+            (0.003, kappa, None),
+            (0.0005, kappa, Some(balance(0.0005, kappa))),
+            (0.0002, kappa, Some(balance(0.0002, kappa).max(1.0 / rho))),
+            (0.0, kappa, Some(1.0 / rho)),
+            (0.0005, 0.0, None),
+            (0.0005, f64::NAN, None),
+        ] {
+            let got = position_span(&run, with(sigma), kappa);
+            match (got, expected) {
+                (None, None) => {}
+                (Some(g), Some(e)) => assert!((g / e - 1.0).abs() < 1e-9, "{sigma}: {g} {e}"),
+                _ => panic!("sigma {sigma}, kappa {kappa}: {got:?} against {expected:?}"),
+            }
+        }
+        assert!(balance(0.0005, kappa) < 1.0 && balance(0.003, kappa) > 1.0);
+    }
+
     /// The BD982's sigmas, 1 m blocks, start heading `heading0` (rad).
     fn settings(heading0: f64) -> Settings {
         Settings {
