@@ -125,7 +125,7 @@ impl NoiseCheck {
         let source = if self.from_log {
             "the log's own sigmas, median"
         } else {
-            "--reference-sigma"
+            "--reference-sigma, else a trajectory's own"
         };
         let mut s = format!(
             "reference noise: stated {:.4} m horizontal RMS ({source})",
