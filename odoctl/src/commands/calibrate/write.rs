@@ -248,7 +248,7 @@ fn uncertainty_fit(c: &Calibration, opts: &CalibrationOptions) -> Vec<(&'static 
         if opts.criterion == calib::UncertaintyCriterion::Likelihood {
             fit.push((
                 "kappa_criterion",
-                FitValue::Text("maximum likelihood of the reference's observations (1 m averages, at most 1000 per run) under an error-state Kalman filter of the odometry, the geometry's relative errors and the wheels' slip (white or Gauss-Markov; kappa = the long-range variance rate)".into()),
+                FitValue::Text("maximum likelihood of the reference's observations (one per metre: the mean over the metre, or over a shorter span about its middle against a precise reference; at most 1000 per run) under an error-state Kalman filter of the odometry, the geometry's relative errors and the wheels' slip (white or Gauss-Markov; kappa = the long-range variance rate)".into()),
             ));
         }
         fit.push(("uncertainty_window", FitValue::Num(opts.delta_window)));
