@@ -19,7 +19,7 @@ use super::geometry::paper::{
 };
 use super::geometry::refinement::{refine_subtrajectory_fit, FilterRefinement, GeometryRefine};
 use super::geometry::subtrajectory::{
-    fit_subtrajectories, Cuts, SubtrajectoryFit, SubtrajectoryOptions, SUBTRAJECTORY_LENGTH,
+    fit_subtrajectories_from, Cuts, SubtrajectoryFit, SubtrajectoryOptions, SUBTRAJECTORY_LENGTH,
 };
 use super::geometry::turning::track_width_warning;
 use super::geometry::wheel_harmonics::{fit_harmonics, HarmonicsFit, HARMONICS_SEGMENT};
@@ -27,18 +27,21 @@ use super::heading_fit::fit_restart_heading;
 use super::run::Run;
 use super::studies::stability::{windows_study, WindowEstimate, WindowStart};
 use super::uncertainty::coefficients::{
-    with_covariance_coefficients, DeltaMode, UncertaintyCriterion, UncertaintyFit,
+    set_coefficient, with_covariance_coefficients, DeltaMode, UncertaintyCriterion, UncertaintyFit,
 };
 use super::uncertainty::coverage::fit_uncertainty_on;
 use super::uncertainty::delta_diff::{fit_delta_diff, DiffOptions};
 use super::uncertainty::likelihood::fit_kappa_filter;
 use super::uncertainty::restarts::Restarts;
+use super::warm::{Extras, WarmStart};
 
 /// How the diameters and the track width are estimated.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
 pub enum Method {
     /// Sub-trajectories restarted every `subtrajectory_length` metres, their start position
-    /// and heading fitted, the chassis shared ([`fit_subtrajectories`]): the default.
+    /// and heading fitted, the chassis shared
+    /// ([`fit_subtrajectories`](super::geometry::subtrajectory::fit_subtrajectories)): the
+    /// default.
     #[default]
     Subtrajectory,
     /// The paper's eq (16) over the whole run ([`fit_geometry`]).
@@ -165,6 +168,30 @@ pub struct Calibration {
     pub harmonics: Option<HarmonicsFit>,
 }
 
+impl Calibration {
+    /// The warm start this calibration leaves for one of the same drive on more data;
+    /// `None` without a sub-trajectory fit.
+    pub fn warm_start(&self) -> Option<WarmStart> {
+        let s = self.subtrajectories.as_ref()?;
+        let p = &s.params;
+        let coefficient = |p: &ChassisParams| match p.uncertainty_model {
+            UncertaintyModel::Paper => f64::from(p.delta_left),
+            UncertaintyModel::Covariance => f64::from(p.kappa_left),
+        };
+        Some(WarmStart {
+            geometry: [p.left_diameter, p.right_diameter, p.track_width],
+            antenna: s.antenna,
+            headings: s.blocks.iter().map(|b| (b.a, b.heading)).collect(),
+            coefficients: self
+                .uncertainty
+                .iter()
+                .filter(|u| u.criterion == UncertaintyCriterion::Coverage)
+                .map(|u| (u.model, coefficient(&u.params)))
+                .collect(),
+        })
+    }
+}
+
 /// The geometry's calibration uncertainty as the unit's keys (`left_diameter_se`..
 /// `right_track_correlation`): the filter refinement's covariance when it was applied, else
 /// the sub-trajectory fit's cluster-robust covariance, or for the paper's method its robust
@@ -232,6 +259,19 @@ pub fn calibrate(
     initial: &ChassisParams,
     o: &CalibrationOptions,
 ) -> Result<Calibration> {
+    calibrate_with(samples, reference, names, initial, o, Extras::default())
+}
+
+/// [`calibrate`] with a warm start and a cancel flag ([`Extras`]): an error, once cancelled,
+/// at the next phase.
+pub fn calibrate_with(
+    samples: &[csvio::Sample],
+    reference: &[csvio::RefPoint],
+    names: (&str, &str),
+    initial: &ChassisParams,
+    o: &CalibrationOptions,
+    extras: Extras,
+) -> Result<Calibration> {
     if !(o.reference_sigma >= 0.0 && o.reference_heading_sigma >= 0.0) {
         bail!("--reference-sigma and --reference-heading-sigma-deg must be non-negative");
     }
@@ -247,7 +287,8 @@ pub fn calibrate(
         subtrajectories,
         refinement,
         early_filter,
-    } = fit_geometry_phase(&mut run, initial, o, filter_wanted, &timer)?;
+    } = fit_geometry_phase(&mut run, initial, o, (filter_wanted, extras), &timer)?;
+    extras.check()?;
     run.antenna = geometry.antenna;
     let mut params = geometry.params;
     params.geometry_uncertainty =
@@ -273,11 +314,13 @@ pub fn calibrate(
             initial,
             o,
             timer: &timer,
+            extras,
         };
         phase.fit_models(&mut params, &models, filter_wanted, early_filter)?
     } else {
         Vec::new()
     };
+    extras.check()?;
     let evaluation = evaluate(&run, &params, geometry.heading0)?;
     timer.lap("final evaluation");
     let windows = stability_study(&run, &geometry, initial, o)?;
@@ -311,7 +354,7 @@ fn fit_geometry_phase(
     run: &mut Run,
     initial: &ChassisParams,
     o: &CalibrationOptions,
-    filter_wanted: bool,
+    wanted: (bool, Extras),
     timer: &PhaseTimer,
 ) -> Result<GeometryPhase> {
     let h0 = run.heading_guess(0);
@@ -341,21 +384,22 @@ fn fit_geometry_phase(
                 early_filter: None,
             })
         }
-        Method::Subtrajectory => fit_subtrajectory_phase(run, initial, o, filter_wanted, timer),
+        Method::Subtrajectory => fit_subtrajectory_phase(run, initial, o, wanted, timer),
     }
 }
 
-/// [`fit_geometry_phase`] of [`Method::Subtrajectory`]: the sub-trajectory fit, the filter's
-/// refinement, the covariance model's kappa started beside the rest from the refinement's
-/// filter, and the whole-run summary.
+/// [`fit_geometry_phase`] of [`Method::Subtrajectory`]: the sub-trajectory fit (from
+/// `extras`' warm start when given), the filter's refinement, the covariance model's kappa
+/// started beside the rest from the refinement's filter when `filter_wanted`, and the
+/// whole-run summary.
 fn fit_subtrajectory_phase(
     run: &mut Run,
     initial: &ChassisParams,
     o: &CalibrationOptions,
-    filter_wanted: bool,
+    (filter_wanted, extras): (bool, Extras),
     timer: &PhaseTimer,
 ) -> Result<GeometryPhase> {
-    let s = fit_subtrajectories(
+    let s = fit_subtrajectories_from(
         run,
         initial,
         SubtrajectoryOptions {
@@ -364,8 +408,10 @@ fn fit_subtrajectory_phase(
             cuts: o.subtrajectory_cuts,
             ..Default::default()
         },
+        extras.warm,
     )?;
     timer.lap("sub-trajectory fit");
+    extras.check()?;
     run.antenna = s.antenna;
     let refinement = match o.geometry_refine {
         GeometryRefine::None => None,
@@ -378,6 +424,7 @@ fn fit_subtrajectory_phase(
                 o.reference_heading_sigma,
             )?;
             timer.lap("filter refinement");
+            extras.check()?;
             Some(r)
         }
     };
@@ -415,6 +462,8 @@ struct UncertaintyPhase<'a> {
     initial: &'a ChassisParams,
     o: &'a CalibrationOptions,
     timer: &'a PhaseTimer,
+    /// The warm start of the coverage criterion's bisections, and the cancel flag.
+    extras: Extras<'a>,
 }
 
 impl UncertaintyPhase<'_> {
@@ -446,6 +495,7 @@ impl UncertaintyPhase<'_> {
             // The restarted sub-trajectories of the coverage criterion, made when first needed.
             let mut restarts: Option<Restarts> = None;
             for &m in models {
+                self.extras.check()?;
                 let mut p = *params;
                 p.uncertainty_model = m;
                 if m == UncertaintyModel::Covariance
@@ -496,6 +546,12 @@ impl UncertaintyPhase<'_> {
         m: UncertaintyModel,
     ) -> Result<UncertaintyFit> {
         let (run, o, initial) = (self.run, self.o, self.initial);
+        // The earlier fit's coefficient, the bisection's first guess (`fit_uncertainty_on`
+        // takes the guess from the parameters and sets the coefficient itself).
+        let p = match self.extras.warm.and_then(|w| w.coefficient(m)) {
+            Some(v) => set_coefficient(&p, o.delta_mode, initial, v),
+            None => p,
+        };
         let pb = bar(o.quiet, &format!("{} model fit", cfg::model_name(m)));
         let mut u = fit_uncertainty_on(
             run,

@@ -67,12 +67,15 @@ pub mod run;
 pub mod sensitivity;
 pub mod studies;
 pub mod uncertainty;
+pub mod warm;
 
 #[cfg(test)]
 mod testing;
 
 pub use antenna::{read_lever_arm, LeverArm};
-pub use calibration::{calibrate, Calibration, CalibrationOptions, Method, PhaseTimer};
+pub use calibration::{
+    calibrate, calibrate_with, Calibration, CalibrationOptions, Method, PhaseTimer,
+};
 pub use evaluation::{evaluate, Evaluation};
 pub use filter::innovations::{Innovations, MAX_OBSERVATIONS};
 pub use geometry::paper::{fit_geometry, GeomFit, GeomOptions};
@@ -92,3 +95,4 @@ pub use studies::stability::{
 pub use uncertainty::coefficients::{DeltaMode, DiffFit, UncertaintyCriterion, UncertaintyFit};
 pub use uncertainty::coverage::{heading_coverage, heading_points, ONE_SIGMA_COVERAGE};
 pub use uncertainty::reference_noise::{NoiseCheck, ReferenceNoise};
+pub use warm::{Extras, WarmStart};

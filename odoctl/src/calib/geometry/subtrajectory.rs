@@ -51,6 +51,7 @@ use crate::calib::antenna::{
 use crate::calib::heading_fit::RESTART_TURN_EXACT;
 use crate::calib::pipeline::cores;
 use crate::calib::run::{windows, Run};
+use crate::calib::warm::WarmStart;
 use crate::optim::{self, NormalAccumulator, Objective};
 
 use super::covariance::{cluster_jackknife, diagonal_std_errors, independent, inverse};
@@ -548,6 +549,17 @@ pub fn fit_subtrajectories(
     start: &ChassisParams,
     opts: SubtrajectoryOptions,
 ) -> Result<SubtrajectoryFit> {
+    fit_subtrajectories_from(run, start, opts, None)
+}
+
+/// [`fit_subtrajectories`], its iterations started from `warm` when given (an earlier fit of
+/// the same drive on less data: [`WarmStart`]); the step limits stay `start`'s.
+pub fn fit_subtrajectories_from(
+    run: &Run,
+    start: &ChassisParams,
+    opts: SubtrajectoryOptions,
+    warm: Option<&WarmStart>,
+) -> Result<SubtrajectoryFit> {
     start
         .validate()
         .map_err(|e| anyhow!("initial parameters: {e}"))?;
@@ -569,7 +581,7 @@ pub fn fit_subtrajectories(
         cols: shared_columns(track_estimated, turned, &opts)?,
         blocks,
     };
-    let minimum = problem.minimise(opts.max_iter)?;
+    let minimum = problem.minimise(opts.max_iter, warm)?;
     problem.result(minimum, track_estimated, turned)
 }
 
@@ -652,22 +664,49 @@ impl SharedProblem<'_> {
         eval_all(self.run, &pp, aa, &self.cols, &self.blocks, headings)
     }
 
-    /// Levenberg-Marquardt on the reduced system from `start` and the sub-trajectories' first
-    /// headings, a step accepted when the cost falls, at most `max_iter` accepted.
-    fn minimise(&self, max_iter: usize) -> Result<Minimum> {
+    /// The first point of [`SharedProblem::minimise`]: the shared unknowns and the
+    /// sub-trajectories evaluated there; `warm`'s when given and admissible (the
+    /// sub-trajectories it has not fitted from their first headings), else `start`'s and the
+    /// sub-trajectories' first headings.
+    fn first_point(&self, warm: Option<&WarmStart>) -> Result<(Vec<f64>, Vec<BlockEval>)> {
         let (start, antenna0, run) = (self.start, self.antenna0, self.run);
+        let point = |g: [f64; 3], a: (f64, f64)| -> Vec<f64> {
+            self.cols
+                .iter()
+                .map(|&c| match c {
+                    0..=2 => g[c],
+                    ANTENNA_FORWARD => a.0,
+                    _ => a.1,
+                })
+                .collect()
+        };
+        let guess = |a: usize| run.heading_guess(a);
+        if let Some(w) = warm {
+            let x = point(w.geometry, w.antenna);
+            let headings: Vec<f64> = self
+                .blocks
+                .iter()
+                .map(|&(a, _)| w.heading_at(a).unwrap_or_else(|| guess(a)))
+                .collect();
+            if let Some(evals) = self.eval(&x, &headings) {
+                return Ok((x, evals));
+            }
+        }
+        let geometry = [start.left_diameter, start.right_diameter, start.track_width];
+        let x = point(geometry, antenna0);
+        let headings: Vec<f64> = self.blocks.iter().map(|&(a, _)| guess(a)).collect();
+        let evals = self.eval(&x, &headings).ok_or_else(|| {
+            anyhow!("initial parameters: a sub-trajectory could not be evaluated")
+        })?;
+        Ok((x, evals))
+    }
+
+    /// Levenberg-Marquardt on the reduced system from [`SharedProblem::first_point`], a step
+    /// accepted when the cost falls, at most `max_iter` accepted.
+    fn minimise(&self, max_iter: usize, warm: Option<&WarmStart>) -> Result<Minimum> {
+        let start = self.start;
         let p = self.cols.len();
-        let mut x: Vec<f64> = self
-            .cols
-            .iter()
-            .map(|&c| match c {
-                0 => start.left_diameter,
-                1 => start.right_diameter,
-                2 => start.track_width,
-                ANTENNA_FORWARD => antenna0.0,
-                _ => antenna0.1,
-            })
-            .collect();
+        let (mut x, mut evals) = self.first_point(warm)?;
         let scale: Vec<f64> = self
             .cols
             .iter()
@@ -678,14 +717,6 @@ impl SharedProblem<'_> {
                 _ => start.track_width,
             })
             .collect();
-        let headings: Vec<f64> = self
-            .blocks
-            .iter()
-            .map(|&(a, _)| run.heading_guess(a))
-            .collect();
-        let mut evals = self.eval(&x, &headings).ok_or_else(|| {
-            anyhow!("initial parameters: a sub-trajectory could not be evaluated")
-        })?;
         let mut evaluations = 1;
         let mut cost: f64 = evals.iter().map(|e| e.cost).sum();
         let mut lambda = 1e-6;
@@ -953,6 +984,61 @@ mod tests {
             }
         )
         .is_err());
+    }
+
+    /// Started warm from the fit of the run's first 90 %, the fit of the whole run reaches the
+    /// cold fit's minimum (within 0.01 of its standard errors, and its standard errors within
+    /// 1 %) in fewer evaluations; a warm start that cannot be evaluated falls back to the
+    /// cold one.
+    #[test]
+    fn a_warm_start_reaches_the_cold_minimum() {
+        let s = simulate::simulate_path(
+            PathKind::Random,
+            300.0,
+            default_truth(),
+            SimSettings::default(),
+        );
+        let matches = match_times(&s.samples, &s.reference);
+        let run = Run::new(&s.samples, &s.reference, matches.clone());
+        let part = &matches[..matches.len() * 9 / 10];
+        let first = Run::new(&s.samples, &s.reference, part.to_vec());
+        let start = ChassisParams::DESIGNED;
+        let opts = SubtrajectoryOptions::default();
+        let earlier = fit_subtrajectories(&first, &start, opts).unwrap();
+        let p = &earlier.params;
+        let warm = WarmStart {
+            geometry: [p.left_diameter, p.right_diameter, p.track_width],
+            antenna: earlier.antenna,
+            headings: earlier.blocks.iter().map(|b| (b.a, b.heading)).collect(),
+            coefficients: Vec::new(),
+        };
+        let cold = fit_subtrajectories(&run, &start, opts).unwrap();
+        let hot = fit_subtrajectories_from(&run, &start, opts, Some(&warm)).unwrap();
+        let values = |f: &SubtrajectoryFit| {
+            [
+                f.params.left_diameter,
+                f.params.right_diameter,
+                f.params.track_width,
+            ]
+        };
+        for i in 0..3 {
+            let se = cold.std_errors[i].unwrap();
+            let d = (values(&hot)[i] - values(&cold)[i]).abs() / se;
+            assert!(d < 0.01, "unknown {i}: {d} SE apart");
+            assert!((hot.std_errors[i].unwrap() / se - 1.0).abs() < 0.01);
+        }
+        assert!(
+            hot.evaluations < cold.evaluations,
+            "{} vs {}",
+            hot.evaluations,
+            cold.evaluations
+        );
+        let bad = WarmStart {
+            geometry: [-1.0, 0.26, 0.56],
+            ..warm
+        };
+        let fallback = fit_subtrajectories_from(&run, &start, opts, Some(&bad)).unwrap();
+        assert_eq!(values(&fallback), values(&cold));
     }
 
     /// First match `a <= b` whose path distance to match `b` is at most `length`.

@@ -4,14 +4,14 @@
 //! forms.
 
 use std::borrow::Cow;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::Result;
 use odo_unit::odometry::ChassisParams;
 
-use crate::calib::{self, Calibration};
+use crate::calib::{self, Calibration, Extras, WarmStart};
 use crate::cli::{CalibrateArgs, ReferenceArgs};
 use crate::config as cfg;
 use crate::csvio::{self, RefPoint, Sample};
@@ -21,7 +21,7 @@ use crate::reference::nmea::LogLines;
 use crate::reference::Reference;
 use crate::stats::{coverage, summarize, Summary};
 
-use super::recording::{check_recording_times, reference_for};
+use super::recording::{check_recording_times, resolve_reference, say_own_reference};
 use super::reference_options;
 
 pub mod clock_offset;
@@ -107,15 +107,43 @@ pub struct Recorded<'r> {
     /// Its lines read as they were appended (named as the log beside `--samples`, with the
     /// reference options' leap seconds; else it is read whole).
     pub lines: LogLines,
+    /// Where an earlier calibration of the recording's first part left the searches (the
+    /// last background batch's, [`WarmStart`]).
+    pub warm: Option<WarmStart>,
 }
 
 /// `odoctl calibrate`, with the recording's files taken from `recorded` when given and the
 /// reference is the recording's own NMEA log: the same result, printed and written, as
-/// from the files.
+/// from the files (its searches started from `recorded`'s warm start, when it has one: the
+/// same to their tolerances). [`read_inputs`], then [`run_read`].
 pub fn run_from(a: &CalibrateArgs, recorded: Option<Recorded>) -> Result<ExitCode> {
+    run_read(a, read_inputs(a, recorded)?)
+}
+
+/// A calibration's inputs, read and nothing printed yet ([`read_inputs`]).
+pub struct ReadInputs<'r> {
+    started: Instant,
+    reference_path: PathBuf,
+    own: bool,
+    source: Reference,
+    inputs: Inputs<'r>,
+    /// Where the calibration's searches start (a recording's warm start; else none).
+    pub warm: Option<WarmStart>,
+}
+
+/// The inputs of [`run_from`]: the recording in memory (`recorded`, when the reference is
+/// its own NMEA log: the epochs dated), else the files; prints nothing.
+pub fn read_inputs<'r>(
+    a: &CalibrateArgs,
+    mut recorded: Option<Recorded<'r>>,
+) -> Result<ReadInputs<'r>> {
     let started = Instant::now();
     let timer = calib::PhaseTimer::new();
-    let (reference_path, own) = reference_for(&a.samples, a.reference.as_deref())?;
+    let (reference_path, own) = resolve_reference(&a.samples, a.reference.as_deref())?;
+    let warm = recorded
+        .as_mut()
+        .and_then(|r| r.warm.take())
+        .filter(|_| own);
     let (samples, source) = match recorded.filter(|_| own) {
         Some(r) => {
             let o = reference_options(&a.reference_input)?;
@@ -128,6 +156,32 @@ pub fn run_from(a: &CalibrateArgs, recorded: Option<Recorded>) -> Result<ExitCod
         }
     };
     let inputs = Inputs::of(&source, samples)?;
+    timer.lap("read CSV");
+    Ok(ReadInputs {
+        started,
+        reference_path,
+        own,
+        source,
+        inputs,
+        warm,
+    })
+}
+
+/// [`run_from`] on the inputs `read`: what they are printed, checked, calibrated, the result
+/// printed and written.
+pub fn run_read(a: &CalibrateArgs, read: ReadInputs) -> Result<ExitCode> {
+    let ReadInputs {
+        started,
+        reference_path,
+        own,
+        source,
+        inputs,
+        warm,
+    } = read;
+    let timer = calib::PhaseTimer::new();
+    if own {
+        say_own_reference(&reference_path, &a.samples);
+    }
     print_summary(&source);
     if let Some(m) = &inputs.matching {
         crate::outln!("  {m}");
@@ -135,12 +189,15 @@ pub fn run_from(a: &CalibrateArgs, recorded: Option<Recorded>) -> Result<ExitCod
     if own {
         check_recording_times(&inputs.samples, &inputs.reference)?;
     }
-    timer.lap("read CSV");
     let names = (
         a.samples.display().to_string(),
         reference_path.display().to_string(),
     );
-    let (c, opts, initial) = calibration(a, &inputs, &names)?;
+    let extras = Extras {
+        warm: warm.as_ref(),
+        cancel: None,
+    };
+    let (c, opts, initial) = calibration_with(a, &inputs, &names, extras)?;
     timer.lap("calibration");
     let noise = calib::ReferenceNoise {
         horizontal: opts.reference_sigma,
@@ -207,10 +264,21 @@ pub fn calibration(
     inputs: &Inputs,
     names: &(String, String),
 ) -> Result<(Calibration, calib::CalibrationOptions, ChassisParams)> {
+    calibration_with(a, inputs, names, Extras::default())
+}
+
+/// [`calibration`] with a warm start and a cancel flag ([`Extras`]).
+pub fn calibration_with(
+    a: &CalibrateArgs,
+    inputs: &Inputs,
+    names: &(String, String),
+    extras: Extras,
+) -> Result<(Calibration, calib::CalibrationOptions, ChassisParams)> {
     let initial = initial_estimate(a)?;
     let opts = options::calibration_options(a)?;
     let (samples, reference) = (&inputs.samples, &inputs.reference);
-    let mut c = calib::calibrate(samples, reference, (&names.0, &names.1), &initial, &opts)?;
+    let names = (names.0.as_str(), names.1.as_str());
+    let mut c = calib::calibrate_with(samples, reference, names, &initial, &opts, extras)?;
     if let Some(k) = &inputs.clock {
         add_clock_rate_uncertainty(&mut c, k);
     }
