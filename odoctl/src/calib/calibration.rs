@@ -14,9 +14,7 @@ use crate::csvio;
 use super::antenna::LeverArm;
 use super::evaluation::{evaluate, Evaluation};
 use super::filter::innovations::{Innovations, OBSERVATION_BLOCK};
-use super::geometry::paper::{
-    fit_geometry, paper_cluster_errors, standard_errors, GeomFit, GeomOptions,
-};
+use super::geometry::paper::{fit_geometry, heading_errors, GeomFit, GeomOptions};
 use super::geometry::refinement::{refine_subtrajectory_fit, FilterRefinement, GeometryRefine};
 use super::geometry::subtrajectory::{
     fit_subtrajectories_from, Cuts, SubtrajectoryFit, SubtrajectoryOptions, SUBTRAJECTORY_LENGTH,
@@ -665,31 +663,15 @@ fn whole_run_summary(
             se[i] = se[i].map(|_| e[i]);
         }
     }
-    // The heading's errors with the geometry held (it is fitted with the geometry held); the
-    // three integrations of the whole run are independent: on three threads.
-    let heading_free = [false, false, false, true];
-    let (cost, formal, clustered) = std::thread::scope(|scope| {
-        let formal = scope.spawn(|| {
-            standard_errors(run, &params, 0, last, heading0, heading_free).and_then(|(e, _)| e[3])
-        });
-        let clustered = scope.spawn(|| {
-            paper_cluster_errors(
-                run,
-                &params,
-                run.antenna,
-                0,
-                last,
-                heading0,
-                &heading_free,
-                SUBTRAJECTORY_LENGTH,
-            )
-            .and_then(|(e, _)| e[3])
-        });
+    // The heading's errors with the geometry held (it is fitted with the geometry held), both
+    // from one integration, and eq (16) at the estimate: on two threads.
+    let (cost, (formal, clustered)) = std::thread::scope(|scope| {
+        let errors = scope.spawn(|| heading_errors(run, &params, heading0, SUBTRAJECTORY_LENGTH));
         let cost = run.eq16(&params, 0, last, heading0);
-        let joined = |h: std::thread::ScopedJoinHandle<'_, Option<f64>>| {
-            h.join().expect("a standard error's integration panicked")
-        };
-        (cost, joined(formal), joined(clustered))
+        let errors = errors
+            .join()
+            .expect("a standard error's integration panicked");
+        (cost, errors)
     });
     let cost = cost.ok_or_else(|| anyhow::anyhow!("the estimate is not admissible"))?;
     let robust = [se[0], se[1], se[2], clustered];
