@@ -7,10 +7,10 @@
 //! reader gives them back from the CSV) and sentences through the streaming NMEA reader and
 //! the live sub-trajectory fit, and handed to the background batch calibration
 //! ([`BatchWorker`], on its own thread beside the updates). Measured: the cost of each
-//! update; at the drive's end, as `record` does it, the live fit's last update (the log's
-//! epochs dated beside it, `calibrate::read_inputs`) and the final batch calibration in this
-//! process on the rows and the log in memory from the latest background batch's warm start
-//! (`calibrate::run_read`, its report sent to DIR/final.txt), from the last data to the
+//! update; at the drive's end, as `record` does it, the live fit's last update and beside it
+//! the final batch calibration in this process on the rows and the log in memory from the
+//! latest background batch's warm start (`calibrate::read_inputs`, `calibrate_inputs`), then
+//! its report (`calibrate::run_calibrated`, sent to DIR/final.txt), from the last data to the
 //! result printed and written, and for comparison the same final from the initial estimate
 //! (no warm start) after the drive; that result against the release `odoctl calibrate --samples
 //! live.csv` on the files (`$ODOCTL` or the `odoctl` beside this binary; from the initial
@@ -26,7 +26,9 @@ use std::time::{Duration, Instant};
 use odo_unit::odometry::ChassisParams;
 use odoctl::calib::live::LiveCalibration;
 use odoctl::calib::{fit_subtrajectories, Run, SubtrajectoryOptions, SUBTRAJECTORY_LENGTH};
-use odoctl::commands::calibrate::{parse_command_line, read_inputs, run_read, Recorded};
+use odoctl::commands::calibrate::{
+    calibrate_inputs, parse_command_line, read_inputs, run_calibrated, run_read, Recorded,
+};
 use odoctl::commands::live::refined;
 use odoctl::commands::live_batch::{agreement, Agreement, BatchResult, BatchWorker};
 use odoctl::commands::recording::nmea_path;
@@ -221,10 +223,11 @@ fn cold_final(f: &Fed, sentences: &[(usize, String)], csv: &Path, dir: &Path) ->
     started.elapsed()
 }
 
-/// The drive's end of `f`, as `record` meets it: the live fit's last update and, on a thread
-/// beside it, the dating of the log's epochs; then the final calibration `args` in this
-/// process on the rows and the log in memory, from the latest background batch's warm
-/// start, its report sent to `report`.
+/// The drive's end of `f`, as `record` meets it: the background batch stopped, the live
+/// fit's last update and, on a thread beside it, the dating of the log's epochs and the
+/// final calibration `args` in this process on the rows and the log in memory from the
+/// latest background batch's warm start; then its report printed (sent to `report`) and its
+/// result written.
 fn drive_end(f: &mut Fed, args: &[String], report: &Path) -> End {
     let ended = Instant::now();
     let last_t = f.rows[f.rows.len() - 1].t;
@@ -238,28 +241,28 @@ fn drive_end(f: &mut Fed, args: &[String], report: &Path) -> End {
         lines,
         ..
     } = f;
-    let (read, last_update) = std::thread::scope(|scope| {
-        let reading = scope.spawn(|| {
+    batch.stop();
+    let warm = batch.warm_start();
+    let (done, last_update) = std::thread::scope(|scope| {
+        let calibrating = scope.spawn(|| {
             let recorded = Recorded {
                 samples: rows,
                 nmea: log,
                 lines: lines.take().expect("the log's lines"),
-                warm: None,
+                warm,
             };
-            read_inputs(&c, Some(recorded))
+            read_inputs(&c, Some(recorded)).map(|read| calibrate_inputs(&c, read))
         });
         for p in stream.take((rows[0].t, last_t), true) {
             live.push_reference(p);
         }
-        batch.stop();
         live.finish();
         let last_update = ended.elapsed();
-        (reading.join().expect("the reading thread"), last_update)
+        (calibrating.join().expect("the final's thread"), last_update)
     });
     let refined = batch.latest().map(|b| (refined(&live.estimate(), &b), b));
-    let mut read = read.expect("the recording's inputs");
-    read.warm = batch.warm_start();
-    stdout_to(report, || run_read(&c, read)).expect("the final calibration");
+    let done = done.expect("the recording's inputs");
+    stdout_to(report, || run_calibrated(&c, done)).expect("the final calibration");
     End {
         last_update,
         final_printed: ended.elapsed(),

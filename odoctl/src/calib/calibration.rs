@@ -516,6 +516,7 @@ impl UncertaintyPhase<'_> {
                     None => {
                         let r = Restarts::new(run, params, heading0, o.delta_window)?;
                         self.timer.lap("restart headings");
+                        self.extras.check()?;
                         &*restarts.insert(r)
                     }
                 };
@@ -562,6 +563,7 @@ impl UncertaintyPhase<'_> {
         )?;
         pb.finish_and_clear();
         self.timer.lap("uncertainty fit");
+        self.extras.check()?;
         if m == UncertaintyModel::Paper {
             let pb = bar(o.quiet, "delta_diff fit");
             u = fit_delta_diff(

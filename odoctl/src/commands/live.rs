@@ -263,6 +263,12 @@ impl LiveSession {
         (!rows.is_empty()).then_some((rows, log, lines))
     }
 
+    /// Stops the background batch (the drive ended): none starts after it, the one under
+    /// way is cancelled.
+    pub fn stop_batch(&mut self) {
+        self.batch.stop();
+    }
+
     /// Where the latest background batch left its searches: the final calibration's warm
     /// start.
     pub fn warm_start(&self) -> Option<WarmStart> {

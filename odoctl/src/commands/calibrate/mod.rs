@@ -199,23 +199,77 @@ pub fn run_read(a: &CalibrateArgs, read: ReadInputs) -> Result<ExitCode> {
     };
     let (c, opts, initial) = calibration_with(a, &inputs, &names, extras)?;
     timer.lap("calibration");
+    report_and_write(a, &reference_path, &inputs, (&c, &opts, &initial), started)
+}
+
+/// The calibration of [`ReadInputs`] done, its printing left ([`calibrate_inputs`], then
+/// [`run_calibrated`]).
+pub struct Calibrated<'r> {
+    read: ReadInputs<'r>,
+    outcome: Result<(Calibration, calib::CalibrationOptions, ChassisParams)>,
+}
+
+/// [`run_read`]'s calibration of `read` alone, nothing printed (for the recording's own
+/// NMEA log, which has no clock whose offset's share would be printed); the rest is
+/// [`run_calibrated`]'s. `record --calibrate` runs it beside the live fit's last update.
+pub fn calibrate_inputs<'r>(a: &CalibrateArgs, read: ReadInputs<'r>) -> Calibrated<'r> {
+    let names = (
+        a.samples.display().to_string(),
+        read.reference_path.display().to_string(),
+    );
+    let extras = Extras {
+        warm: read.warm.as_ref(),
+        cancel: None,
+    };
+    let outcome = calibration_with(a, &read.inputs, &names, extras);
+    Calibrated { read, outcome }
+}
+
+/// [`run_read`] of a calibration done ([`calibrate_inputs`]): the inputs printed and checked,
+/// the result printed and written, as [`run_read`] does.
+pub fn run_calibrated(a: &CalibrateArgs, done: Calibrated) -> Result<ExitCode> {
+    let ReadInputs {
+        started,
+        reference_path,
+        own,
+        source,
+        inputs,
+        ..
+    } = done.read;
+    if own {
+        say_own_reference(&reference_path, &a.samples);
+    }
+    print_summary(&source);
+    if let Some(m) = &inputs.matching {
+        crate::outln!("  {m}");
+    }
+    if own {
+        check_recording_times(&inputs.samples, &inputs.reference)?;
+    }
+    let (c, opts, initial) = done.outcome?;
+    report_and_write(a, &reference_path, &inputs, (&c, &opts, &initial), started)
+}
+
+/// The result `c` (with its options and initial estimate) of `inputs` printed and written
+/// (`--out`, the ROS forms); `started` when the command started.
+fn report_and_write(
+    a: &CalibrateArgs,
+    reference_path: &Path,
+    inputs: &Inputs,
+    (c, opts, initial): (&Calibration, &calib::CalibrationOptions, &ChassisParams),
+    started: Instant,
+) -> Result<ExitCode> {
+    let timer = calib::PhaseTimer::new();
     let noise = calib::ReferenceNoise {
         horizontal: opts.reference_sigma,
         heading: opts.reference_heading_sigma,
     };
-    let errors = ErrorSummary::of(&c, &noise);
-    report::print(&c, &initial, &opts, &errors);
-    write::write_result(
-        a,
-        &reference_path,
-        &c,
-        &opts,
-        &errors,
-        inputs.clock.as_ref(),
-    )?;
+    let errors = ErrorSummary::of(c, &noise);
+    report::print(c, initial, opts, &errors);
+    write::write_result(a, reference_path, c, opts, &errors, inputs.clock.as_ref())?;
     timer.lap("report");
     crate::outln!("done in {:.2} s", started.elapsed().as_secs_f64());
-    export_ros(a, &reference_path)?;
+    export_ros(a, reference_path)?;
     Ok(ExitCode::SUCCESS)
 }
 
