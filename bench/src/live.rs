@@ -377,7 +377,7 @@ fn print_end(end: &End, (process, g): (Duration, Agreement)) {
         number(ms(end.last_update))
     );
     println!(
-        "| the final calibration printed and written, the last update included (`calibrate` in process, on the rows and log in memory, from the latest background batch's warm start) | {} ms |",
+        "| the final calibration printed and written (`calibrate` in process, on the rows and log in memory, from the latest background batch's warm start, beside the live fit's last update) | {} ms |",
         number(ms(end.final_printed))
     );
     println!(
