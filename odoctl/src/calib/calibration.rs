@@ -171,15 +171,12 @@ impl Calibration {
     /// `None` without a sub-trajectory fit.
     pub fn warm_start(&self) -> Option<WarmStart> {
         let s = self.subtrajectories.as_ref()?;
-        let p = &s.params;
         let coefficient = |p: &ChassisParams| match p.uncertainty_model {
             UncertaintyModel::Paper => f64::from(p.delta_left),
             UncertaintyModel::Covariance => f64::from(p.kappa_left),
         };
         Some(WarmStart {
-            geometry: [p.left_diameter, p.right_diameter, p.track_width],
-            antenna: s.antenna,
-            headings: s.blocks.iter().map(|b| (b.a, b.heading)).collect(),
+            subtrajectories: s.warm_start(),
             coefficients: self
                 .uncertainty
                 .iter()
@@ -406,7 +403,7 @@ fn fit_subtrajectory_phase(
             cuts: o.subtrajectory_cuts,
             ..Default::default()
         },
-        extras.warm,
+        extras.warm.map(|w| &w.subtrajectories),
     )?;
     timer.lap("sub-trajectory fit");
     extras.check()?;

@@ -6,7 +6,9 @@
 //! A warm start moves where the searches start, never what they look for: the sub-trajectory
 //! fit starts from the earlier fit's shared unknowns and its sub-trajectories' fitted start
 //! headings (matched by their first match: the drive is cut from its start, so the earlier
-//! sub-trajectories start where they did) and stops by the same rule, a predicted decrease of
+//! sub-trajectories start where they did), takes over the earlier fit's last evaluation of a
+//! sub-trajectory whose data are the same (a 64-bit fingerprint of its samples and reference
+//! points: what evaluating it again at that point would give) and stops by the same rule, a predicted decrease of
 //! the cost below 1e-10 of it, which leaves it within a few thousandths of a standard error
 //! of the minimum from any start; the coverage criterion's bisection takes the earlier
 //! coefficient as its first guess, and its answer does not depend on the guess.
@@ -16,30 +18,20 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use anyhow::{bail, Result};
 use odo_unit::odometry::UncertaintyModel;
 
+use super::geometry::subtrajectory::SubtrajectoryStart;
+
 /// Where an earlier calibration of the same drive left the searches
 /// ([`Calibration::warm_start`](super::Calibration::warm_start)).
 #[derive(Debug, Clone, PartialEq)]
 pub struct WarmStart {
-    /// The sub-trajectory fit's left diameter, right diameter and track width (m).
-    pub geometry: [f64; 3],
-    /// Its lever arm: forward, left (m, chassis frame).
-    pub antenna: (f64, f64),
-    /// Its sub-trajectories' first matches and fitted start headings (rad), by first match.
-    pub headings: Vec<(usize, f64)>,
+    /// The sub-trajectory fit's.
+    pub subtrajectories: SubtrajectoryStart,
     /// The coverage criterion's fitted coefficients: the model and its `delta_left` or
     /// `kappa_left` (m or m^2 per m).
     pub coefficients: Vec<(UncertaintyModel, f64)>,
 }
 
 impl WarmStart {
-    /// The fitted start heading (rad) of the sub-trajectory that started at match `a`.
-    pub fn heading_at(&self, a: usize) -> Option<f64> {
-        self.headings
-            .binary_search_by(|(first, _)| first.cmp(&a))
-            .ok()
-            .map(|i| self.headings[i].1)
-    }
-
     /// The coverage criterion's coefficient of model `m`, when it was fitted.
     pub fn coefficient(&self, m: UncertaintyModel) -> Option<f64> {
         self.coefficients
@@ -72,21 +64,6 @@ impl Extras<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn headings_by_first_match_and_coefficients_by_model() {
-        let w = WarmStart {
-            geometry: [0.26, 0.26, 0.56],
-            antenna: (0.0, 0.0),
-            headings: vec![(0, 0.1), (40, 0.2), (95, -0.3)],
-            coefficients: vec![(UncertaintyModel::Paper, 8e-9)],
-        };
-        assert_eq!(w.heading_at(0), Some(0.1));
-        assert_eq!(w.heading_at(95), Some(-0.3));
-        assert_eq!(w.heading_at(41), None);
-        assert_eq!(w.coefficient(UncertaintyModel::Paper), Some(8e-9));
-        assert_eq!(w.coefficient(UncertaintyModel::Covariance), None);
-    }
 
     #[test]
     fn a_set_flag_cancels() {

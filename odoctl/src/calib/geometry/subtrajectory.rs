@@ -51,7 +51,6 @@ use crate::calib::antenna::{
 use crate::calib::heading_fit::RESTART_TURN_EXACT;
 use crate::calib::pipeline::cores;
 use crate::calib::run::{windows, Run};
-use crate::calib::warm::WarmStart;
 use crate::optim::{self, NormalAccumulator, Objective};
 
 use super::covariance::{cluster_jackknife, diagonal_std_errors, independent, inverse};
@@ -168,6 +167,84 @@ pub struct SubtrajectoryFit {
     pub track_estimated: bool,
     /// Total absolute heading change of the run (rad, from the initial estimate).
     pub turning: f64,
+    /// Its last evaluation, for a warm start ([`SubtrajectoryFit::warm_start`]).
+    last: Kept,
+}
+
+/// Where a sub-trajectory fit left its iterations, for a fit of the same drive on more data
+/// ([`fit_subtrajectories_from`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SubtrajectoryStart {
+    /// The left diameter, right diameter and track width (m).
+    pub geometry: [f64; 3],
+    /// The lever arm: forward, left (m, chassis frame).
+    pub antenna: (f64, f64),
+    /// The sub-trajectories' first matches and fitted start headings (rad), by first match.
+    pub headings: Vec<(usize, f64)>,
+    last: Kept,
+}
+
+impl SubtrajectoryStart {
+    /// The fitted start heading (rad) of the sub-trajectory that started at match `a`.
+    pub fn heading_at(&self, a: usize) -> Option<f64> {
+        self.headings
+            .binary_search_by(|(first, _)| first.cmp(&a))
+            .ok()
+            .map(|i| self.headings[i].1)
+    }
+}
+
+/// A fit's last evaluation: the shared unknowns (their columns and values) and each
+/// sub-trajectory's first and last match, the start heading it was evaluated from, a
+/// fingerprint of its data ([`block_data`]) and its evaluation.
+#[derive(Debug, Clone, PartialEq, Default)]
+struct Kept {
+    cols: Vec<usize>,
+    x: Vec<f64>,
+    blocks: Vec<((usize, usize), f64, u64, BlockEval)>,
+}
+
+impl SubtrajectoryFit {
+    /// Where this fit left its iterations: its estimate, its sub-trajectories' start
+    /// headings and its last evaluation (taken over where a sub-trajectory and its data are
+    /// the same and the fit starts at this estimate).
+    pub fn warm_start(&self) -> SubtrajectoryStart {
+        let p = &self.params;
+        SubtrajectoryStart {
+            geometry: [p.left_diameter, p.right_diameter, p.track_width],
+            antenna: self.antenna,
+            headings: self.blocks.iter().map(|b| (b.a, b.heading)).collect(),
+            last: self.last.clone(),
+        }
+    }
+}
+
+/// A 64-bit fingerprint of what sub-trajectory `a..=b` is evaluated on: its samples, its
+/// matches and their reference points, the lever arm.
+fn block_data(run: &Run, (a, b): (usize, usize)) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut add = |v: u64| h = (h ^ v).wrapping_mul(0x0000_0100_0000_01b3);
+    let (sa, sb) = (run.matches[a].0, run.matches[b].0);
+    let opt = |v: Option<i64>| v.map_or(u64::MAX, |v| v as u64);
+    for s in &run.samples[sa..=sb] {
+        add(s.t.to_bits());
+        add(s.left as u64);
+        add(s.right as u64);
+        add(opt(s.left_index));
+        add(opt(s.right_index));
+        add(s.flags.unwrap_or(u64::MAX));
+    }
+    for k in a..=b {
+        let r = run.reference_at(k);
+        add((run.matches[k].0 - sa) as u64);
+        for v in [r.t, r.x, r.y, r.heading.unwrap_or(f64::NAN)] {
+            add(v.to_bits());
+        }
+        add(r.sigma_h.unwrap_or(f64::NAN).to_bits());
+    }
+    add(run.antenna.0.to_bits());
+    add(run.antenna.1.to_bits());
+    h
 }
 
 impl SubtrajectoryFit {
@@ -183,7 +260,7 @@ impl SubtrajectoryFit {
 
 /// One sub-trajectory's share at given shared unknowns: its cost, its reduced normal
 /// equations, and what a step of the shared unknowns does to its start heading.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub(crate) struct BlockEval {
     pub(crate) cost: f64,
     pub(crate) points: usize,
@@ -553,12 +630,13 @@ pub fn fit_subtrajectories(
 }
 
 /// [`fit_subtrajectories`], its iterations started from `warm` when given (an earlier fit of
-/// the same drive on less data: [`WarmStart`]); the step limits stay `start`'s.
+/// the same drive on less data: [`SubtrajectoryStart`]; its evaluations taken over where a
+/// sub-trajectory's data are the same); the step limits stay `start`'s.
 pub fn fit_subtrajectories_from(
     run: &Run,
     start: &ChassisParams,
     opts: SubtrajectoryOptions,
-    warm: Option<&WarmStart>,
+    warm: Option<&SubtrajectoryStart>,
 ) -> Result<SubtrajectoryFit> {
     start
         .validate()
@@ -648,6 +726,8 @@ struct Minimum {
     x: Vec<f64>,
     cost: f64,
     evals: Vec<BlockEval>,
+    /// The start headings `evals` were evaluated from.
+    guesses: Vec<f64>,
     iterations: usize,
     evaluations: usize,
 }
@@ -664,11 +744,15 @@ impl SharedProblem<'_> {
         eval_all(self.run, &pp, aa, &self.cols, &self.blocks, headings)
     }
 
-    /// The first point of [`SharedProblem::minimise`]: the shared unknowns and the
-    /// sub-trajectories evaluated there; `warm`'s when given and admissible (the
-    /// sub-trajectories it has not fitted from their first headings), else `start`'s and the
-    /// sub-trajectories' first headings.
-    fn first_point(&self, warm: Option<&WarmStart>) -> Result<(Vec<f64>, Vec<BlockEval>)> {
+    /// The first point of [`SharedProblem::minimise`]: the shared unknowns, the
+    /// sub-trajectories evaluated there and the start headings they were evaluated from;
+    /// `warm`'s when given and admissible (its evaluations taken over where the point, the
+    /// sub-trajectory and its data are the same; the other sub-trajectories from `warm`'s
+    /// fitted heading, else their first), else `start`'s and the first headings.
+    fn first_point(
+        &self,
+        warm: Option<&SubtrajectoryStart>,
+    ) -> Result<(Vec<f64>, Vec<BlockEval>, Vec<f64>)> {
         let (start, antenna0, run) = (self.start, self.antenna0, self.run);
         let point = |g: [f64; 3], a: (f64, f64)| -> Vec<f64> {
             self.cols
@@ -683,13 +767,8 @@ impl SharedProblem<'_> {
         let guess = |a: usize| run.heading_guess(a);
         if let Some(w) = warm {
             let x = point(w.geometry, w.antenna);
-            let headings: Vec<f64> = self
-                .blocks
-                .iter()
-                .map(|&(a, _)| w.heading_at(a).unwrap_or_else(|| guess(a)))
-                .collect();
-            if let Some(evals) = self.eval(&x, &headings) {
-                return Ok((x, evals));
+            if let Some(first) = self.warm_point(w, &x) {
+                return Ok(first);
             }
         }
         let geometry = [start.left_diameter, start.right_diameter, start.track_width];
@@ -698,15 +777,64 @@ impl SharedProblem<'_> {
         let evals = self.eval(&x, &headings).ok_or_else(|| {
             anyhow!("initial parameters: a sub-trajectory could not be evaluated")
         })?;
-        Ok((x, evals))
+        Ok((x, evals, headings))
+    }
+
+    /// [`SharedProblem::first_point`] at `warm`'s point `x`; `None` where a sub-trajectory
+    /// cannot be evaluated.
+    fn warm_point(
+        &self,
+        w: &SubtrajectoryStart,
+        x: &[f64],
+    ) -> Option<(Vec<f64>, Vec<BlockEval>, Vec<f64>)> {
+        let same_point = w.last.cols == self.cols && w.last.x == x;
+        let kept: std::collections::HashMap<(usize, usize), (f64, u64, &BlockEval)> = w
+            .last
+            .blocks
+            .iter()
+            .filter(|_| same_point)
+            .map(|(ab, g, d, e)| (*ab, (*g, *d, e)))
+            .collect();
+        let mut evals: Vec<Option<BlockEval>> = Vec::with_capacity(self.blocks.len());
+        let mut headings = Vec::with_capacity(self.blocks.len());
+        let (mut fresh, mut fresh_headings) = (Vec::new(), Vec::new());
+        for &ab in &self.blocks {
+            match kept.get(&ab) {
+                Some(&(g, d, e)) if d == block_data(self.run, ab) => {
+                    evals.push(Some(e.clone()));
+                    headings.push(g);
+                }
+                _ => {
+                    let g = w
+                        .heading_at(ab.0)
+                        .unwrap_or_else(|| self.run.heading_guess(ab.0));
+                    evals.push(None);
+                    headings.push(g);
+                    fresh.push(ab);
+                    fresh_headings.push(g);
+                }
+            }
+        }
+        let (pp, aa) = self.at(x);
+        let mut new = if fresh.is_empty() {
+            Vec::new()
+        } else {
+            eval_all(self.run, &pp, aa, &self.cols, &fresh, &fresh_headings)?
+        };
+        new.reverse();
+        let evals = evals
+            .into_iter()
+            .map(|e| e.or_else(|| new.pop()))
+            .collect::<Option<Vec<_>>>()?;
+        Some((x.to_vec(), evals, headings))
     }
 
     /// Levenberg-Marquardt on the reduced system from [`SharedProblem::first_point`], a step
     /// accepted when the cost falls, at most `max_iter` accepted.
-    fn minimise(&self, max_iter: usize, warm: Option<&WarmStart>) -> Result<Minimum> {
+    fn minimise(&self, max_iter: usize, warm: Option<&SubtrajectoryStart>) -> Result<Minimum> {
         let start = self.start;
         let p = self.cols.len();
-        let (mut x, mut evals) = self.first_point(warm)?;
+        let (mut x, mut evals, mut guesses) = self.first_point(warm)?;
         let scale: Vec<f64> = self
             .cols
             .iter()
@@ -769,6 +897,7 @@ impl SharedProblem<'_> {
                         x = xn;
                         cost = c;
                         evals = trial;
+                        guesses = hn;
                         lambda = (lambda / 3.0).max(1e-12);
                         accepted = true;
                         break;
@@ -788,6 +917,7 @@ impl SharedProblem<'_> {
             x,
             cost,
             evals,
+            guesses,
             iterations,
             evaluations,
         })
@@ -805,6 +935,7 @@ impl SharedProblem<'_> {
             x,
             cost,
             evals,
+            guesses,
             iterations,
             evaluations,
         } = minimum;
@@ -837,6 +968,13 @@ impl SharedProblem<'_> {
             std_errors[slot(c)] = Some(rse[j]);
             independent_std_errors[slot(c)] = Some(fse[j]);
         }
+        let last = Kept {
+            cols: cols.clone(),
+            x,
+            blocks: (self.blocks.iter().zip(guesses).zip(evals.iter()))
+                .map(|((&ab, g), e)| (ab, g, block_data(self.run, ab), e.clone()))
+                .collect(),
+        };
         Ok(SubtrajectoryFit {
             params,
             antenna,
@@ -862,6 +1000,7 @@ impl SharedProblem<'_> {
             residual_sigma: s2.sqrt(),
             track_estimated,
             turning: turned,
+            last,
         })
     }
 }
@@ -988,8 +1127,9 @@ mod tests {
 
     /// Started warm from the fit of the run's first 90 %, the fit of the whole run reaches the
     /// cold fit's minimum (within 0.01 of its standard errors, and its standard errors within
-    /// 1 %) in fewer evaluations; a warm start that cannot be evaluated falls back to the
-    /// cold one.
+    /// 1 %) in fewer evaluations; warm from its own fit, it takes over every evaluation and
+    /// stops where that fit did, to the bit; a warm start that cannot be evaluated falls back
+    /// to the cold one.
     #[test]
     fn a_warm_start_reaches_the_cold_minimum() {
         let s = simulate::simulate_path(
@@ -1005,13 +1145,7 @@ mod tests {
         let start = ChassisParams::DESIGNED;
         let opts = SubtrajectoryOptions::default();
         let earlier = fit_subtrajectories(&first, &start, opts).unwrap();
-        let p = &earlier.params;
-        let warm = WarmStart {
-            geometry: [p.left_diameter, p.right_diameter, p.track_width],
-            antenna: earlier.antenna,
-            headings: earlier.blocks.iter().map(|b| (b.a, b.heading)).collect(),
-            coefficients: Vec::new(),
-        };
+        let warm = earlier.warm_start();
         let cold = fit_subtrajectories(&run, &start, opts).unwrap();
         let hot = fit_subtrajectories_from(&run, &start, opts, Some(&warm)).unwrap();
         let values = |f: &SubtrajectoryFit| {
@@ -1033,7 +1167,12 @@ mod tests {
             hot.evaluations,
             cold.evaluations
         );
-        let bad = WarmStart {
+        let again = fit_subtrajectories_from(&run, &start, opts, Some(&cold.warm_start()));
+        let again = again.unwrap();
+        assert_eq!((again.iterations, again.evaluations), (0, 1));
+        assert_eq!(values(&again), values(&cold));
+        assert_eq!(again.std_errors, cold.std_errors);
+        let bad = SubtrajectoryStart {
             geometry: [-1.0, 0.26, 0.56],
             ..warm
         };
