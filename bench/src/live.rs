@@ -7,11 +7,14 @@
 //! reader gives them back from the CSV) and sentences through the streaming NMEA reader and
 //! the live sub-trajectory fit, and handed to the background batch calibration
 //! ([`BatchWorker`], on its own thread beside the updates). Measured: the cost of each
-//! update; at the drive's end, as `record` does it, the live fit's last update and the
-//! final batch calibration in this process on the rows and the log in memory
-//! (`calibrate::run_from`, its report sent to DIR/final.txt), from the last data to the
-//! result printed and written; that result against the release `odoctl calibrate --samples
-//! live.csv` on the files (`$ODOCTL` or the `odoctl` beside this binary); the live estimate
+//! update; at the drive's end, as `record` does it, the live fit's last update and beside it
+//! the final batch calibration in this process on the rows and the log in memory from the
+//! latest background batch's warm start (`calibrate::read_inputs`, `calibrate_inputs`), then
+//! its report (`calibrate::run_calibrated`, sent to DIR/final.txt), from the last data to the
+//! result printed and written, and for comparison the same final from the initial estimate
+//! (no warm start) after the drive; that result against the release `odoctl calibrate --samples
+//! live.csv` on the files (`$ODOCTL` or the `odoctl` beside this binary; from the initial
+//! estimate), in the standard errors ([`agreement`]); the live estimate
 //! and the refined one (the live fit + the latest background batch's refinement) against
 //! the batch calibration's sub-trajectory fit and its default (filter-refined) result, in
 //! their standard errors.
@@ -23,9 +26,11 @@ use std::time::{Duration, Instant};
 use odo_unit::odometry::ChassisParams;
 use odoctl::calib::live::LiveCalibration;
 use odoctl::calib::{fit_subtrajectories, Run, SubtrajectoryOptions, SUBTRAJECTORY_LENGTH};
-use odoctl::commands::calibrate::{parse_command_line, run_from, Recorded};
+use odoctl::commands::calibrate::{
+    calibrate_inputs, parse_command_line, read_inputs, run_calibrated, run_read, Recorded,
+};
 use odoctl::commands::live::refined;
-use odoctl::commands::live_batch::{BatchResult, BatchWorker};
+use odoctl::commands::live_batch::{agreement, Agreement, BatchResult, BatchWorker};
 use odoctl::commands::recording::nmea_path;
 use odoctl::csvio::{self, Sample, SamplesLayout};
 use odoctl::reference::nmea::LogLines;
@@ -66,7 +71,8 @@ pub fn run(dir: &Path) {
         .map(|s| SamplesLayout::Counts.read_back(s, None))
         .collect();
     let mut fed = feed(&rows, &sentences, &args);
-    let end = drive_end(&mut fed, &args, &dir.join("final.txt"));
+    let mut end = drive_end(&mut fed, &args, &dir.join("final.txt"));
+    end.cold = cold_final(&fed, &sentences, &csv, dir);
     let files = dir.join("live_files.toml");
     let started = Instant::now();
     let o = Command::new(odoctl())
@@ -80,8 +86,9 @@ pub fn run(dir: &Path) {
         "odoctl calibrate: {}",
         String::from_utf8_lossy(&o.stderr)
     );
-    let same = std::fs::read(&result).ok() == std::fs::read(&files).ok();
-    print_section(&samples, &fed, &end, (process, same));
+    let text = |p: &Path| std::fs::read_to_string(p).expect("a result file");
+    let g = agreement(&text(&result), &text(&files)).expect("result files");
+    print_section(&samples, &fed, &end, (process, g));
     print_agreement(&fed.live, &end, &csv, &result);
 }
 
@@ -189,41 +196,85 @@ struct End {
     final_printed: Duration,
     refined: Option<([f64; 3], BatchResult)>,
     last_t: f64,
+    /// The same final calibration in process from the initial estimate, after the drive.
+    cold: Duration,
 }
 
-/// The drive's end of `f`: the live fit's last update, then the final calibration `args`
-/// in this process on the rows and the log in memory, its report sent to `report`.
-fn drive_end(f: &mut Fed, args: &[String], report: &Path) -> End {
-    let ended = Instant::now();
-    let last_t = f.rows[f.rows.len() - 1].t;
-    for p in f.stream.take((f.rows[0].t, last_t), true) {
-        f.live.push_reference(p);
+/// The final calibration of `f`'s rows and log in process, as at the drive's end but from
+/// the initial estimate (no warm start) and after it (nothing beside it; the log's lines
+/// read again from `sentences` beforehand), written to DIR/live_cold.toml: the time from the
+/// dating of the epochs to the result printed and written.
+fn cold_final(f: &Fed, sentences: &[(usize, String)], csv: &Path, dir: &Path) -> Duration {
+    let args = calibrate_args(csv, &dir.join("live_cold.toml"));
+    let c = parse_command_line(&args).expect("a calibrate command line");
+    let mut lines = LogLines::new(&nmea_path(csv).display().to_string(), None);
+    for (_, text) in sentences {
+        lines.line(text);
     }
-    f.batch.stop();
-    f.live.finish();
-    let last_update = ended.elapsed();
-    let refined = f
-        .batch
-        .latest()
-        .map(|b| (refined(&f.live.estimate(), &b), b));
-    let c = parse_command_line(args).expect("a calibrate command line");
+    let started = Instant::now();
     let recorded = Recorded {
         samples: &f.rows,
         nmea: &f.log,
-        lines: f.lines.take().expect("the log's lines"),
+        lines,
+        warm: None,
     };
-    stdout_to(report, || run_from(&c, Some(recorded))).expect("the final calibration");
+    let read = read_inputs(&c, Some(recorded)).expect("the recording's inputs");
+    stdout_to(&dir.join("cold.txt"), || run_read(&c, read)).expect("the cold final");
+    started.elapsed()
+}
+
+/// The drive's end of `f`, as `record` meets it: the background batch stopped, the live
+/// fit's last update and, on a thread beside it, the dating of the log's epochs and the
+/// final calibration `args` in this process on the rows and the log in memory from the
+/// latest background batch's warm start; then its report printed (sent to `report`) and its
+/// result written.
+fn drive_end(f: &mut Fed, args: &[String], report: &Path) -> End {
+    let ended = Instant::now();
+    let last_t = f.rows[f.rows.len() - 1].t;
+    let c = parse_command_line(args).expect("a calibrate command line");
+    let Fed {
+        live,
+        stream,
+        batch,
+        rows,
+        log,
+        lines,
+        ..
+    } = f;
+    batch.stop();
+    let warm = batch.warm_start();
+    let (done, last_update) = std::thread::scope(|scope| {
+        let calibrating = scope.spawn(|| {
+            let recorded = Recorded {
+                samples: rows,
+                nmea: log,
+                lines: lines.take().expect("the log's lines"),
+                warm,
+            };
+            read_inputs(&c, Some(recorded)).map(|read| calibrate_inputs(&c, read))
+        });
+        for p in stream.take((rows[0].t, last_t), true) {
+            live.push_reference(p);
+        }
+        live.finish();
+        let last_update = ended.elapsed();
+        (calibrating.join().expect("the final's thread"), last_update)
+    });
+    let refined = batch.latest().map(|b| (refined(&live.estimate(), &b), b));
+    let done = done.expect("the recording's inputs");
+    stdout_to(report, || run_calibrated(&c, done)).expect("the final calibration");
     End {
         last_update,
         final_printed: ended.elapsed(),
         refined,
         last_t,
+        cold: Duration::ZERO,
     }
 }
 
 /// The cost table by tenth of the drive and the end-to-final figures; `process` the time
-/// of `odoctl calibrate` on the files and whether its result file is the same.
-fn print_section(samples: &[Sample], f: &Fed, end: &End, process: (Duration, bool)) {
+/// of `odoctl calibrate` on the files and how far its result file is from the final's.
+fn print_section(samples: &[Sample], f: &Fed, end: &End, process: (Duration, Agreement)) {
     println!(
         "Harness: `cargo run --release --target x86_64-unknown-linux-gnu -p odo-bench -- live DIR`"
     );
@@ -248,7 +299,10 @@ fn print_section(samples: &[Sample], f: &Fed, end: &End, process: (Duration, boo
     println!(
         "the background batch calibration, which runs the final's calibration again and again on"
     );
-    println!("its own thread (nice 19) beside the updates.");
+    println!(
+        "its own thread (nice 19) beside the updates, each run from where the one before left its"
+    );
+    println!("searches; at the drive's end the run under way is cancelled at its next phase.");
     println!();
     print_costs(&f.costs);
     println!(
@@ -300,8 +354,9 @@ fn print_costs(costs: &[(f64, Duration, Duration)]) {
     println!();
 }
 
-/// The drive's end: the background batch so far, the times to the final calibration.
-fn print_end(end: &End, (process, same): (Duration, bool)) {
+/// The drive's end: the background batch so far, the times to the final calibration, the
+/// final's result against `odoctl calibrate`'s on the files.
+fn print_end(end: &End, (process, g): (Duration, Agreement)) {
     let ms = |d: Duration| d.as_secs_f64() * 1e3;
     if let Some((_, b)) = &end.refined {
         println!(
@@ -322,17 +377,50 @@ fn print_end(end: &End, (process, same): (Duration, bool)) {
         number(ms(end.last_update))
     );
     println!(
-        "| the final calibration printed and written, the last update included (`calibrate` in process, on the rows and log in memory) | {} ms |",
+        "| the final calibration printed and written (`calibrate` in process, on the rows and log in memory, from the latest background batch's warm start, beside the live fit's last update) | {} ms |",
         number(ms(end.final_printed))
+    );
+    println!(
+        "| for comparison: the same in process from the initial estimate (no warm start; after the drive, nothing beside it; the epochs' dating included) | {} ms |",
+        number(ms(end.cold))
     );
     println!(
         "| for comparison: `odoctl calibrate --samples live.csv` on the files (a separate process) | {} ms |",
         number(ms(process))
     );
     println!();
+    print_agreement_with_files(&g);
+}
+
+/// The final's result file against the cold `odoctl calibrate`'s on the files.
+fn print_agreement_with_files(g: &Agreement) {
+    if g.identical {
+        println!(
+            "The in-process result file and the one of `odoctl calibrate` on the files are identical."
+        );
+        println!();
+        return;
+    }
     println!(
-        "The in-process result file and the one of `odoctl calibrate` on the files are {}.",
-        if same { "identical" } else { "NOT identical" }
+        "The final calibration's searches start where the latest background batch left them (the"
+    );
+    println!(
+        "warm start); `odoctl calibrate` on the files starts from the initial estimate. Its result"
+    );
+    println!(
+        "file against the final's: the largest difference of a value with a standard error {} of",
+        number(g.in_se.0)
+    );
+    println!(
+        "that standard error (`{}`), of any other number {} relative (`{}`){}.",
+        g.in_se.1,
+        number(g.relative.0),
+        g.relative.1,
+        if g.different.is_empty() {
+            String::new()
+        } else {
+            format!("; keys that differ otherwise: {}", g.different.join(", "))
+        }
     );
     println!();
 }

@@ -14,12 +14,10 @@ use crate::csvio;
 use super::antenna::LeverArm;
 use super::evaluation::{evaluate, Evaluation};
 use super::filter::innovations::{Innovations, OBSERVATION_BLOCK};
-use super::geometry::paper::{
-    fit_geometry, paper_cluster_errors, standard_errors, GeomFit, GeomOptions,
-};
+use super::geometry::paper::{fit_geometry, heading_errors, GeomFit, GeomOptions};
 use super::geometry::refinement::{refine_subtrajectory_fit, FilterRefinement, GeometryRefine};
 use super::geometry::subtrajectory::{
-    fit_subtrajectories, Cuts, SubtrajectoryFit, SubtrajectoryOptions, SUBTRAJECTORY_LENGTH,
+    fit_subtrajectories_from, Cuts, SubtrajectoryFit, SubtrajectoryOptions, SUBTRAJECTORY_LENGTH,
 };
 use super::geometry::turning::track_width_warning;
 use super::geometry::wheel_harmonics::{fit_harmonics, HarmonicsFit, HARMONICS_SEGMENT};
@@ -27,18 +25,21 @@ use super::heading_fit::fit_restart_heading;
 use super::run::Run;
 use super::studies::stability::{windows_study, WindowEstimate, WindowStart};
 use super::uncertainty::coefficients::{
-    with_covariance_coefficients, DeltaMode, UncertaintyCriterion, UncertaintyFit,
+    set_coefficient, with_covariance_coefficients, DeltaMode, UncertaintyCriterion, UncertaintyFit,
 };
 use super::uncertainty::coverage::fit_uncertainty_on;
 use super::uncertainty::delta_diff::{fit_delta_diff, DiffOptions};
 use super::uncertainty::likelihood::fit_kappa_filter;
 use super::uncertainty::restarts::Restarts;
+use super::warm::{Extras, WarmStart};
 
 /// How the diameters and the track width are estimated.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
 pub enum Method {
     /// Sub-trajectories restarted every `subtrajectory_length` metres, their start position
-    /// and heading fitted, the chassis shared ([`fit_subtrajectories`]): the default.
+    /// and heading fitted, the chassis shared
+    /// ([`fit_subtrajectories`](super::geometry::subtrajectory::fit_subtrajectories)): the
+    /// default.
     #[default]
     Subtrajectory,
     /// The paper's eq (16) over the whole run ([`fit_geometry`]).
@@ -173,6 +174,27 @@ pub struct Calibration {
     pub harmonics: Option<HarmonicsFit>,
 }
 
+impl Calibration {
+    /// The warm start this calibration leaves for one of the same drive on more data;
+    /// `None` without a sub-trajectory fit.
+    pub fn warm_start(&self) -> Option<WarmStart> {
+        let s = self.subtrajectories.as_ref()?;
+        let coefficient = |p: &ChassisParams| match p.uncertainty_model {
+            UncertaintyModel::Paper => f64::from(p.delta_left),
+            UncertaintyModel::Covariance => f64::from(p.kappa_left),
+        };
+        Some(WarmStart {
+            subtrajectories: s.warm_start(),
+            coefficients: self
+                .uncertainty
+                .iter()
+                .filter(|u| u.criterion == UncertaintyCriterion::Coverage)
+                .map(|u| (u.model, coefficient(&u.params)))
+                .collect(),
+        })
+    }
+}
+
 /// The geometry's calibration uncertainty as the unit's keys (`left_diameter_se`..
 /// `right_track_correlation`): the filter refinement's covariance when it was applied, else
 /// the sub-trajectory fit's cluster-robust covariance, or for the paper's method its robust
@@ -240,6 +262,19 @@ pub fn calibrate(
     initial: &ChassisParams,
     o: &CalibrationOptions,
 ) -> Result<Calibration> {
+    calibrate_with(samples, reference, names, initial, o, Extras::default())
+}
+
+/// [`calibrate`] with a warm start and a cancel flag ([`Extras`]): an error, once cancelled,
+/// at the next phase.
+pub fn calibrate_with(
+    samples: &[csvio::Sample],
+    reference: &[csvio::RefPoint],
+    names: (&str, &str),
+    initial: &ChassisParams,
+    o: &CalibrationOptions,
+    extras: Extras,
+) -> Result<Calibration> {
     if !(o.reference_sigma >= 0.0 && o.reference_heading_sigma >= 0.0) {
         bail!("--reference-sigma and --reference-heading-sigma-deg must be non-negative");
     }
@@ -255,7 +290,8 @@ pub fn calibrate(
         subtrajectories,
         refinement,
         early_filter,
-    } = fit_geometry_phase(&mut run, initial, o, filter_wanted, &timer)?;
+    } = fit_geometry_phase(&mut run, initial, o, (filter_wanted, extras), &timer)?;
+    extras.check()?;
     run.antenna = geometry.antenna;
     let mut params = geometry.params;
     params.geometry_uncertainty =
@@ -281,11 +317,13 @@ pub fn calibrate(
             initial,
             o,
             timer: &timer,
+            extras,
         };
         phase.fit_models(&mut params, &models, filter_wanted, early_filter)?
     } else {
         Vec::new()
     };
+    extras.check()?;
     let evaluation = evaluate(&run, &params, geometry.heading0)?;
     timer.lap("final evaluation");
     let windows = stability_study(&run, &geometry, initial, o)?;
@@ -319,7 +357,7 @@ fn fit_geometry_phase(
     run: &mut Run,
     initial: &ChassisParams,
     o: &CalibrationOptions,
-    filter_wanted: bool,
+    wanted: (bool, Extras),
     timer: &PhaseTimer,
 ) -> Result<GeometryPhase> {
     let h0 = run.heading_guess(0);
@@ -349,21 +387,22 @@ fn fit_geometry_phase(
                 early_filter: None,
             })
         }
-        Method::Subtrajectory => fit_subtrajectory_phase(run, initial, o, filter_wanted, timer),
+        Method::Subtrajectory => fit_subtrajectory_phase(run, initial, o, wanted, timer),
     }
 }
 
-/// [`fit_geometry_phase`] of [`Method::Subtrajectory`]: the sub-trajectory fit, the filter's
-/// refinement, the covariance model's kappa started beside the rest from the refinement's
-/// filter, and the whole-run summary.
+/// [`fit_geometry_phase`] of [`Method::Subtrajectory`]: the sub-trajectory fit (from
+/// `extras`' warm start when given), the filter's refinement, the covariance model's kappa
+/// started beside the rest from the refinement's filter when `filter_wanted`, and the
+/// whole-run summary.
 fn fit_subtrajectory_phase(
     run: &mut Run,
     initial: &ChassisParams,
     o: &CalibrationOptions,
-    filter_wanted: bool,
+    (filter_wanted, extras): (bool, Extras),
     timer: &PhaseTimer,
 ) -> Result<GeometryPhase> {
-    let s = fit_subtrajectories(
+    let s = fit_subtrajectories_from(
         run,
         initial,
         SubtrajectoryOptions {
@@ -372,8 +411,10 @@ fn fit_subtrajectory_phase(
             cuts: o.subtrajectory_cuts,
             ..Default::default()
         },
+        extras.warm.map(|w| &w.subtrajectories),
     )?;
     timer.lap("sub-trajectory fit");
+    extras.check()?;
     run.antenna = s.antenna;
     let refinement = match o.geometry_refine {
         GeometryRefine::None => None,
@@ -386,6 +427,7 @@ fn fit_subtrajectory_phase(
                 o.reference_heading_sigma,
             )?;
             timer.lap("filter refinement");
+            extras.check()?;
             Some(r)
         }
     };
@@ -423,6 +465,8 @@ struct UncertaintyPhase<'a> {
     initial: &'a ChassisParams,
     o: &'a CalibrationOptions,
     timer: &'a PhaseTimer,
+    /// The warm start of the coverage criterion's bisections, and the cancel flag.
+    extras: Extras<'a>,
 }
 
 impl UncertaintyPhase<'_> {
@@ -454,6 +498,7 @@ impl UncertaintyPhase<'_> {
             // The restarted sub-trajectories of the coverage criterion, made when first needed.
             let mut restarts: Option<Restarts> = None;
             for &m in models {
+                self.extras.check()?;
                 let mut p = *params;
                 p.uncertainty_model = m;
                 if m == UncertaintyModel::Covariance
@@ -476,6 +521,7 @@ impl UncertaintyPhase<'_> {
                     None => {
                         let r = Restarts::new(run, params, heading0, o.delta_window)?;
                         self.timer.lap("restart headings");
+                        self.extras.check()?;
                         &*restarts.insert(r)
                     }
                 };
@@ -504,6 +550,12 @@ impl UncertaintyPhase<'_> {
         m: UncertaintyModel,
     ) -> Result<UncertaintyFit> {
         let (run, o, initial) = (self.run, self.o, self.initial);
+        // The earlier fit's coefficient, the bisection's first guess (`fit_uncertainty_on`
+        // takes the guess from the parameters and sets the coefficient itself).
+        let p = match self.extras.warm.and_then(|w| w.coefficient(m)) {
+            Some(v) => set_coefficient(&p, o.delta_mode, initial, v),
+            None => p,
+        };
         let pb = bar(o.quiet, &format!("{} model fit", cfg::model_name(m)));
         let mut u = fit_uncertainty_on(
             run,
@@ -516,6 +568,7 @@ impl UncertaintyPhase<'_> {
         )?;
         pb.finish_and_clear();
         self.timer.lap("uncertainty fit");
+        self.extras.check()?;
         if m == UncertaintyModel::Paper {
             let pb = bar(o.quiet, "delta_diff fit");
             u = fit_delta_diff(
@@ -617,31 +670,15 @@ fn whole_run_summary(
             se[i] = se[i].map(|_| e[i]);
         }
     }
-    // The heading's errors with the geometry held (it is fitted with the geometry held); the
-    // three integrations of the whole run are independent: on three threads.
-    let heading_free = [false, false, false, true];
-    let (cost, formal, clustered) = std::thread::scope(|scope| {
-        let formal = scope.spawn(|| {
-            standard_errors(run, &params, 0, last, heading0, heading_free).and_then(|(e, _)| e[3])
-        });
-        let clustered = scope.spawn(|| {
-            paper_cluster_errors(
-                run,
-                &params,
-                run.antenna,
-                0,
-                last,
-                heading0,
-                &heading_free,
-                SUBTRAJECTORY_LENGTH,
-            )
-            .and_then(|(e, _)| e[3])
-        });
+    // The heading's errors with the geometry held (it is fitted with the geometry held), both
+    // from one integration, and eq (16) at the estimate: on two threads.
+    let (cost, (formal, clustered)) = std::thread::scope(|scope| {
+        let errors = scope.spawn(|| heading_errors(run, &params, heading0, SUBTRAJECTORY_LENGTH));
         let cost = run.eq16(&params, 0, last, heading0);
-        let joined = |h: std::thread::ScopedJoinHandle<'_, Option<f64>>| {
-            h.join().expect("a standard error's integration panicked")
-        };
-        (cost, joined(formal), joined(clustered))
+        let errors = errors
+            .join()
+            .expect("a standard error's integration panicked");
+        (cost, errors)
     });
     let cost = cost.ok_or_else(|| anyhow::anyhow!("the estimate is not admissible"))?;
     let robust = [se[0], se[1], se[2], clustered];

@@ -67,13 +67,14 @@ pub mod run;
 pub mod sensitivity;
 pub mod studies;
 pub mod uncertainty;
+pub mod warm;
 
 #[cfg(test)]
 mod testing;
 
 pub use antenna::{read_lever_arm, LeverArm};
 pub use calibration::{
-    calibrate, Calibration, CalibrationOptions, Method, PhaseTimer,
+    calibrate, calibrate_with, Calibration, CalibrationOptions, Method, PhaseTimer,
     DEFAULT_REFERENCE_HEADING_SIGMA_DEG, DEFAULT_REFERENCE_SIGMA,
 };
 pub use evaluation::{evaluate, Evaluation};
@@ -95,3 +96,4 @@ pub use studies::stability::{
 pub use uncertainty::coefficients::{DeltaMode, DiffFit, UncertaintyCriterion, UncertaintyFit};
 pub use uncertainty::coverage::{heading_coverage, heading_points, ONE_SIGMA_COVERAGE};
 pub use uncertainty::reference_noise::{NoiseCheck, ReferenceNoise};
+pub use warm::{Extras, WarmStart};

@@ -14,11 +14,11 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Result};
 use odo_unit::odometry::ChassisParams;
 
-use super::calibrate::{parse_command_line, Recorded};
+use super::calibrate::parse_command_line;
 use super::live_batch::{BatchResult, BatchWorker};
 use super::reference_options;
 use crate::calib::live::{LiveCalibration, LiveEstimate, MIN_TURNING_DEG};
-use crate::calib::SUBTRAJECTORY_LENGTH;
+use crate::calib::{WarmStart, SUBTRAJECTORY_LENGTH};
 use crate::cli::values::Targets;
 use crate::csvio::Sample;
 use crate::reference::nmea::LogLines;
@@ -255,14 +255,24 @@ impl LiveSession {
         self.live.time_span().map_or(f64::NAN, |s| s.1)
     }
 
-    /// The recording as the two files hold it, for the final calibration (once).
-    pub fn recorded(&mut self) -> Option<Recorded<'_>> {
+    /// The recording as the two files hold it, for the final calibration (once): the rows,
+    /// the log's bytes and its lines as read; `None` without a row.
+    pub fn take_recording(&mut self) -> Option<(Vec<Sample>, Vec<u8>, LogLines)> {
         let lines = self.log_lines.take()?;
-        (!self.recording.0.is_empty()).then_some(Recorded {
-            samples: &self.recording.0,
-            nmea: &self.recording.1,
-            lines,
-        })
+        let (rows, log) = std::mem::take(&mut self.recording);
+        (!rows.is_empty()).then_some((rows, log, lines))
+    }
+
+    /// Stops the background batch (the drive ended): none starts after it, the one under
+    /// way is cancelled.
+    pub fn stop_batch(&mut self) {
+        self.batch.stop();
+    }
+
+    /// Where the latest background batch left its searches: the final calibration's warm
+    /// start.
+    pub fn warm_start(&self) -> Option<WarmStart> {
+        self.batch.warm_start()
     }
 
     fn show(&mut self) {

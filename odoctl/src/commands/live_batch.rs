@@ -2,8 +2,11 @@
 //! priority (nice 19 on Linux, so that the recording, the live updates and the final
 //! calibration come first) runs the batch calibration of the drive's end (`odoctl calibrate`
 //! with the same command line, [`calibration`]) again and again, each time on every row and
-//! sentence handed to it by its start, and keeps the latest result. Nothing it does is
-//! printed; a batch that fails (too little data yet) is counted and the next one tried.
+//! sentence handed to it by its start, each from where the one before left its searches
+//! ([`WarmStart`]), and keeps the latest result and warm start (the final calibration's).
+//! Nothing it does is printed; a batch that fails (too little data yet) is counted and the
+//! next one tried. At the drive's end ([`BatchWorker::stop`]) the batch under way is cancelled
+//! at its next phase, so that it leaves the cores to the final calibration.
 
 use std::borrow::Cow;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -14,8 +17,9 @@ use std::time::{Duration, Instant};
 use anyhow::Result;
 use odo_unit::odometry::ChassisParams;
 
-use super::calibrate::{calibration, parse_command_line, Inputs};
+use super::calibrate::{calibration_with, parse_command_line, Inputs};
 use super::reference_options;
+use crate::calib::{Extras, WarmStart};
 use crate::csvio::Sample;
 
 /// The latest batch calibration of the drive so far.
@@ -49,11 +53,14 @@ impl BatchResult {
 /// Rows (as read back) and log bytes since the last hand-over.
 type Chunk = (Vec<Sample>, Vec<u8>);
 
+/// The latest batch's result and warm start.
+type Slot = Mutex<Option<(BatchResult, Option<WarmStart>)>>;
+
 /// The background batch calibration (module documentation).
 pub struct BatchWorker {
     tx: Option<Sender<Chunk>>,
-    latest: Arc<Mutex<Option<BatchResult>>>,
-    /// Set at the drive's end: no batch starts after it.
+    latest: Arc<Slot>,
+    /// Set at the drive's end: no batch starts after it, the one under way is cancelled.
     stopped: Arc<AtomicBool>,
     /// Rows and log bytes handed on so far.
     sent: (usize, usize),
@@ -98,10 +105,18 @@ impl BatchWorker {
 
     /// The latest result, if a batch has succeeded.
     pub fn latest(&self) -> Option<BatchResult> {
-        *self.latest.lock().unwrap_or_else(|e| e.into_inner())
+        let slot = self.latest.lock().unwrap_or_else(|e| e.into_inner());
+        slot.as_ref().map(|(r, _)| *r)
     }
 
-    /// No batch starts after this (the one running ends on its own, at its low priority).
+    /// Where the latest successful batch left its searches.
+    pub fn warm_start(&self) -> Option<WarmStart> {
+        let slot = self.latest.lock().unwrap_or_else(|e| e.into_inner());
+        slot.as_ref().and_then(|(_, w)| w.clone())
+    }
+
+    /// No batch starts after this, and the one under way ends at its next phase (a thread
+    /// it started for the covariance model's kappa ends on its own, at its low priority).
     pub fn stop(&mut self) {
         self.stopped.store(true, Ordering::Relaxed);
         self.tx = None;
@@ -116,18 +131,14 @@ impl Drop for BatchWorker {
 
 /// The thread: waits for data, takes in all that has come, calibrates, keeps the result;
 /// ends when `stopped` is set or the sender is gone.
-fn work(
-    args: &[String],
-    rx: &Receiver<Chunk>,
-    slot: &Mutex<Option<BatchResult>>,
-    stopped: &AtomicBool,
-) {
+fn work(args: &[String], rx: &Receiver<Chunk>, slot: &Slot, stopped: &AtomicBool) {
     lowest_priority();
     let Ok(a) = parse_command_line(args) else {
         return;
     };
     let (mut samples, mut nmea) = (Vec::new(), Vec::new());
     let (mut done, mut failed) = (0, 0);
+    let mut warm = None;
     while let Ok(first) = rx.recv() {
         for (s, b) in std::iter::once(first).chain(rx.try_iter()) {
             samples.extend(s);
@@ -137,27 +148,39 @@ fn work(
             return;
         }
         let started = Instant::now();
-        match batch(&a, &samples, &nmea) {
-            Ok(mut r) => {
+        let extras = Extras {
+            warm: warm.as_ref(),
+            cancel: Some(stopped),
+        };
+        match batch(&a, &samples, &nmea, extras) {
+            Ok((mut r, w)) => {
                 done += 1;
                 r.took = started.elapsed();
                 (r.done, r.failed) = (done, failed);
-                *slot.lock().unwrap_or_else(|e| e.into_inner()) = Some(r);
+                warm.clone_from(&w);
+                *slot.lock().unwrap_or_else(|e| e.into_inner()) = Some((r, w));
             }
+            Err(_) if stopped.load(Ordering::Relaxed) => return,
             Err(_) => failed += 1,
         }
     }
 }
 
-/// One batch calibration of `samples` against the NMEA log `nmea`, as `a` asks.
-fn batch(a: &crate::cli::CalibrateArgs, samples: &[Sample], nmea: &[u8]) -> Result<BatchResult> {
+/// One batch calibration of `samples` against the NMEA log `nmea`, as `a` asks, with
+/// `extras`; with the warm start it leaves.
+fn batch(
+    a: &crate::cli::CalibrateArgs,
+    samples: &[Sample],
+    nmea: &[u8],
+    extras: Extras,
+) -> Result<(BatchResult, Option<WarmStart>)> {
     let until = samples.last().map_or(f64::NAN, |s| s.t);
     let source = crate::reference::parse("live", nmea, &reference_options(&a.reference_input)?)?;
     let inputs = Inputs::of(&source, Cow::Borrowed(samples))?;
     let names = ("samples".to_string(), "live".to_string());
-    let (c, _, _) = calibration(a, &inputs, &names)?;
+    let (c, _, _) = calibration_with(a, &inputs, &names, extras)?;
     let geometry = |p: &ChassisParams| [p.left_diameter, p.right_diameter, p.track_width];
-    Ok(BatchResult {
+    let result = BatchResult {
         until,
         subtrajectory: c
             .subtrajectories
@@ -169,7 +192,70 @@ fn batch(a: &crate::cli::CalibrateArgs, samples: &[Sample], nmea: &[u8]) -> Resu
         took: Duration::ZERO,
         done: 0,
         failed: 0,
-    })
+    };
+    Ok((result, c.warm_start()))
+}
+
+/// How far two result files of one recording are apart (the final calibration's, from a
+/// warm start, against `odoctl calibrate`'s on the files, [`agreement`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Agreement {
+    /// The texts are the same.
+    pub identical: bool,
+    /// The largest difference of a value that has a standard error (`KEY` beside `KEY_se`
+    /// in the same table), in that standard error, and its key.
+    pub in_se: (f64, String),
+    /// The largest difference of any other number, relative to the larger of the two, and
+    /// its key.
+    pub relative: (f64, String),
+    /// Keys on one side only, or whose strings, integers or booleans differ.
+    pub different: Vec<String>,
+}
+
+/// The [`Agreement`] of the result files `a` and `b` (TOML text).
+pub fn agreement(a: &str, b: &str) -> Result<Agreement> {
+    let (ta, tb): (toml::Table, toml::Table) = (a.parse()?, b.parse()?);
+    let mut out = Agreement {
+        identical: a == b,
+        in_se: (0.0, String::new()),
+        relative: (0.0, String::new()),
+        different: Vec::new(),
+    };
+    compare_tables(&ta, &tb, "", &mut out);
+    Ok(out)
+}
+
+/// [`agreement`] of the tables `a` and `b` at `path` (`""` or `"table."`), into `out`.
+fn compare_tables(a: &toml::Table, b: &toml::Table, path: &str, out: &mut Agreement) {
+    use toml::Value;
+    let keys = a.keys().chain(b.keys().filter(|k| !a.contains_key(*k)));
+    for key in keys {
+        let name = format!("{path}{key}");
+        let (x, y) = match (a.get(key), b.get(key)) {
+            (Some(Value::Table(x)), Some(Value::Table(y))) => {
+                compare_tables(x, y, &format!("{name}."), out);
+                continue;
+            }
+            (Some(Value::Float(x)), Some(Value::Float(y))) => (*x, *y),
+            (Some(x), Some(y)) if x == y => continue,
+            _ => {
+                out.different.push(name);
+                continue;
+            }
+        };
+        let se = a.get(&format!("{key}_se")).and_then(Value::as_float);
+        let d = (x - y).abs();
+        let (worst, v) = match se {
+            Some(se) if se > 0.0 => (&mut out.in_se, d / se),
+            _ => (
+                &mut out.relative,
+                d / x.abs().max(y.abs()).max(f64::MIN_POSITIVE),
+            ),
+        };
+        if v > worst.0 || v.is_nan() {
+            *worst = (v, name);
+        }
+    }
 }
 
 /// Lowers the calling thread (and the threads it starts) to nice 19 on Linux, where the
@@ -193,8 +279,25 @@ mod tests {
     use crate::reference::simulated::{drive_with_sentences, ReceiverSim};
     use crate::simulate::{default_truth, simulate_path, PathKind, SimSettings};
 
-    /// The background batch's result is the calibration of the data handed to it, and its
-    /// correction is its result minus its own sub-trajectory fit.
+    /// The background batch's result is the calibration of the data handed to it (a second
+    /// batch warm-started from the first: within 0.01 of the standard errors of the cold
+    /// one), and its correction is its result minus its own sub-trajectory fit.
+    #[test]
+    fn agreement_in_standard_errors_and_relative() {
+        let a = "x = 1.0\nx_se = 0.1\nn = 3\n[fit]\ny = 2.0\ns = \"a\"\n";
+        let same = agreement(a, a).unwrap();
+        assert!(same.identical && same.different.is_empty());
+        assert_eq!((same.in_se.0, same.relative.0), (0.0, 0.0));
+        let b = "x = 1.002\nx_se = 0.1\nn = 4\n[fit]\ny = 2.2\ns = \"a\"\nz = 1.0\n";
+        let g = agreement(a, b).unwrap();
+        assert!(!g.identical);
+        assert!((g.in_se.0 - 0.02).abs() < 1e-9 && g.in_se.1 == "x", "{g:?}");
+        assert!((g.relative.0 - 0.2 / 2.2).abs() < 1e-9 && g.relative.1 == "fit.y");
+        let mut different = g.different;
+        different.sort();
+        assert_eq!(different, ["fit.z", "n"]);
+    }
+
     #[test]
     fn batch_is_the_calibration_of_what_it_was_given() {
         let settings = SimSettings {
@@ -225,10 +328,16 @@ mod tests {
             }
         };
         let a = parse_command_line(&args).unwrap();
-        let want = batch(&a, &samples, log.as_bytes()).unwrap();
-        assert_eq!(got.result, want.result);
-        assert_eq!(got.subtrajectory, want.subtrajectory);
-        assert_eq!(got.std_errors, want.std_errors);
+        let (want, _) = batch(&a, &samples, log.as_bytes(), Extras::default()).unwrap();
+        for i in 0..3 {
+            let se = want.std_errors[i].unwrap();
+            let near = |x: f64, y: f64| (x - y).abs() <= 0.01 * se;
+            assert!(near(got.result[i], want.result[i]), "{got:?} {want:?}");
+            assert!(near(got.subtrajectory[i], want.subtrajectory[i]));
+            let got_se = got.std_errors[i].unwrap();
+            assert!((got_se / se - 1.0).abs() < 0.01, "{got:?} {want:?}");
+        }
+        assert!(worker.warm_start().is_some());
         let c = got.correction();
         assert!((0..3).all(|i| c[i] == got.result[i] - got.subtrajectory[i]));
         assert!(
@@ -236,5 +345,12 @@ mod tests {
             "the filter refined nothing"
         );
         worker.stop();
+        // A batch whose flag is set ends with an error.
+        let cancelled = AtomicBool::new(true);
+        let extras = Extras {
+            warm: None,
+            cancel: Some(&cancelled),
+        };
+        assert!(batch(&a, &samples, log.as_bytes(), extras).is_err());
     }
 }

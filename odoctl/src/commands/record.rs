@@ -57,19 +57,42 @@ pub fn run(a: &RecordArgs) -> Result<ExitCode> {
 /// The batch calibration of the recording at the drive's end, printed at once and written
 /// to `--result`: `odoctl calibrate --samples OUT` (the NMEA log beside it as the reference)
 /// with `--config` as `--initial` and the `--set`s, run on the rows and sentences the
-/// session kept as written to the two files (the files are not read again).
+/// session kept as written to the two files (the files are not read again), its searches
+/// started from the latest background batch's warm start. The log's epochs are dated and
+/// the calibration runs on a thread beside the live fit's last update; its report follows
+/// the live estimate.
 fn final_calibration(a: &RecordArgs, session: &mut LiveSession) -> Result<()> {
+    use super::calibrate::Recorded;
+    use super::calibrate::{calibrate_inputs, parse_command_line, read_inputs, run_calibrated};
     let ended = Instant::now();
-    session.finish();
-    session.check()?;
     let args = calibrate_args(a, true);
+    let c = parse_command_line(&args)?;
+    session.stop_batch();
+    let warm = session.warm_start();
+    let (rows, log, lines) = match session.take_recording() {
+        Some((rows, log, lines)) => (rows, log, Some(lines)),
+        None => (Vec::new(), Vec::new(), None),
+    };
+    let done = std::thread::scope(|scope| {
+        let calibrating = scope.spawn(|| {
+            let recorded = lines.map(|lines| Recorded {
+                samples: &rows,
+                nmea: &log,
+                lines,
+                warm,
+            });
+            read_inputs(&c, recorded).map(|read| calibrate_inputs(&c, read))
+        });
+        session.finish();
+        calibrating.join()
+    });
+    session.check()?;
     crate::outln!(
         "final calibration (the batch one on the whole recording): {}",
         args[1..].join(" ")
     );
-    let c = super::calibrate::parse_command_line(&args)?;
-    // The files' content is in memory: the same calibration without reading them again.
-    super::calibrate::run_from(&c, session.recorded())?;
+    let done = done.map_err(|_| anyhow::anyhow!("the final calibration panicked"))??;
+    run_calibrated(&c, done)?;
     crate::outln!(
         "final calibration printed {:.3} s after the drive's end (slowest live update {:.1} ms)",
         ended.elapsed().as_secs_f64(),

@@ -206,19 +206,24 @@ fn kind(text: &str) -> &str {
 }
 
 /// The reference of `calibrate` / `validate`: `--reference` when given; else the
-/// recording's NMEA log beside `samples` ([`nmea_path`]) when it exists, said on stdout; else
-/// an error naming both. The flag says the reference is the recording's own.
+/// recording's NMEA log beside `samples` ([`nmea_path`]) when it exists, said on stdout
+/// ([`say_own_reference`]); else an error naming both. The flag says the reference is the
+/// recording's own.
 pub fn reference_for(samples: &Path, reference: Option<&Path>) -> Result<(PathBuf, bool)> {
+    let found = resolve_reference(samples, reference)?;
+    if found.1 {
+        say_own_reference(&found.0, samples);
+    }
+    Ok(found)
+}
+
+/// [`reference_for`] with nothing said.
+pub fn resolve_reference(samples: &Path, reference: Option<&Path>) -> Result<(PathBuf, bool)> {
     if let Some(r) = reference {
         return Ok((r.to_path_buf(), false));
     }
     let own = nmea_path(samples);
     if own.is_file() {
-        crate::outln!(
-            "reference: {} (the recording's NMEA log beside {})",
-            own.display(),
-            samples.display()
-        );
         return Ok((own, true));
     }
     bail!(
@@ -226,6 +231,16 @@ pub fn reference_for(samples: &Path, reference: Option<&Path>) -> Result<(PathBu
         own.display(),
         samples.display()
     )
+}
+
+/// The line on stdout saying that the reference is `log`, the recording's own beside
+/// `samples`.
+pub fn say_own_reference(log: &Path, samples: &Path) {
+    crate::outln!(
+        "reference: {} (the recording's NMEA log beside {})",
+        log.display(),
+        samples.display()
+    );
 }
 
 /// Refuses a recording whose reference epochs (on the samples' time base) and samples

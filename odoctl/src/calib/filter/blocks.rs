@@ -17,6 +17,8 @@
 // 3x3 and 4x4 matrix arithmetic reads best by index.
 #![allow(clippy::needless_range_loop)]
 
+use crate::calib::pipeline::cores;
+
 /// Symmetric 3x3 (pose) matrix.
 pub type Mat3 = [[f64; 3]; 3];
 
@@ -110,46 +112,76 @@ fn add3(a: &mut Mat3, b: &Mat3) {
     }
 }
 
+/// Fewest steps [`Composed::new`] spreads over two cores (below, the thread costs about what
+/// it saves).
+pub const PARALLEL_STEPS: usize = 20_000;
+
+/// The blocks ending at `ends` (the first starting at step `first`) composed from `steps`,
+/// each step's columns written to `columns[k - first]`.
+fn compose(
+    steps: &[StepTerms],
+    ends: &[usize],
+    mut first: usize,
+    columns: &mut [[[f64; 3]; 3]],
+) -> Vec<BlockBase> {
+    let offset = first;
+    let mut blocks = Vec::with_capacity(ends.len());
+    for &end in ends {
+        let mut b = BlockBase {
+            r: [0.0; 2],
+            g: [[0.0; 3]; 3],
+            qw: [[0.0; 3]; 3],
+            qt: [[0.0; 3]; 3],
+            first,
+            end,
+        };
+        // Backwards: `r` is the sum of the later steps' `m`.
+        let mut r = [0.0f64; 2];
+        for k in (first..end).rev() {
+            let s = &steps[k];
+            let cols = [
+                carry(r, s.wheel[0]),
+                carry(r, s.wheel[1]),
+                carry(r, s.track),
+            ];
+            for (c, col) in cols.iter().enumerate() {
+                for (row, v) in col.iter().enumerate() {
+                    b.g[row][c] += v;
+                }
+            }
+            add3(&mut b.qw, &carry_cov(r, &s.qw));
+            add3(&mut b.qt, &carry_cov(r, &s.qt));
+            columns[k - offset] = [cols[0], cols[1], carry(r, s.turn)];
+            r[0] += s.m[0];
+            r[1] += s.m[1];
+        }
+        b.r = r;
+        blocks.push(b);
+        first = end;
+    }
+    blocks
+}
+
 impl Composed {
     /// Composes `steps`; block `i` ends with step `ends[i] - 1` (ends increasing, the last at
-    /// most `steps.len()`), where its observation is.
+    /// most `steps.len()`), where its observation is. The blocks are independent: with two
+    /// cores and at least [`PARALLEL_STEPS`] steps, the first half of them is composed on
+    /// this thread and the second on another (the same results).
     pub fn new(steps: &[StepTerms], ends: &[usize]) -> Self {
         let mut columns = vec![[[0.0; 3]; 3]; steps.len()];
-        let mut blocks = Vec::with_capacity(ends.len());
-        let mut first = 0;
-        for &end in ends {
-            let mut b = BlockBase {
-                r: [0.0; 2],
-                g: [[0.0; 3]; 3],
-                qw: [[0.0; 3]; 3],
-                qt: [[0.0; 3]; 3],
-                first,
-                end,
-            };
-            // Backwards: `r` is the sum of the later steps' `m`.
-            let mut r = [0.0f64; 2];
-            for k in (first..end).rev() {
-                let s = &steps[k];
-                let cols = [
-                    carry(r, s.wheel[0]),
-                    carry(r, s.wheel[1]),
-                    carry(r, s.track),
-                ];
-                for (c, col) in cols.iter().enumerate() {
-                    for (row, v) in col.iter().enumerate() {
-                        b.g[row][c] += v;
-                    }
-                }
-                add3(&mut b.qw, &carry_cov(r, &s.qw));
-                add3(&mut b.qt, &carry_cov(r, &s.qt));
-                columns[k] = [cols[0], cols[1], carry(r, s.turn)];
-                r[0] += s.m[0];
-                r[1] += s.m[1];
-            }
-            b.r = r;
-            blocks.push(b);
-            first = end;
-        }
+        let half = ends.len() / 2;
+        let blocks = if cores() > 1 && steps.len() >= PARALLEL_STEPS && half > 0 {
+            let at = ends[half - 1];
+            let (early, late) = columns.split_at_mut(at);
+            std::thread::scope(|scope| {
+                let second = scope.spawn(|| compose(steps, &ends[half..], at, late));
+                let mut blocks = compose(steps, &ends[..half], 0, early);
+                blocks.extend(second.join().expect("composing the blocks panicked"));
+                blocks
+            })
+        } else {
+            compose(steps, ends, 0, &mut columns)
+        };
         Self {
             blocks,
             columns,
@@ -192,6 +224,34 @@ impl Composed {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Composed on two threads (at least [`PARALLEL_STEPS`] steps) as on one, to the bit.
+    #[test]
+    fn composed_on_two_threads_is_composed_on_one() {
+        let steps: Vec<StepTerms> = (0..PARALLEL_STEPS + 7)
+            .map(|i| {
+                let x = i as f64 * 1e-3;
+                StepTerms {
+                    m: [x.sin(), x.cos()],
+                    wheel: [[x, 1.0, x.sin()], [x.cos(), 2.0, x]],
+                    turn: [x, x * x, 1.0],
+                    track: [0.0, 0.0, -x],
+                    qw: [[x; 3]; 3],
+                    qt: [[1.0, x, 0.5]; 3],
+                    decay: [x, 2.0 * x, 1.0],
+                }
+            })
+            .collect();
+        let ends: Vec<usize> = (1..=steps.len() / 10).map(|k| 10 * k + k % 3).collect();
+        let two = Composed::new(&steps, &ends);
+        let mut columns = vec![[[0.0; 3]; 3]; steps.len()];
+        let one = Composed {
+            blocks: compose(&steps, &ends, 0, &mut columns),
+            columns,
+            decay: steps.iter().map(|s| s.decay).collect(),
+        };
+        assert_eq!(format!("{two:?}"), format!("{one:?}"));
+    }
 
     /// The full 9-state transition and noise of one step, as the filter ran it per step
     /// before the composition: `x <- A x`, then the noise.

@@ -50,11 +50,12 @@ use anyhow::{anyhow, Result};
 use odo_unit::odometry::{ChassisParams, Pose};
 
 use crate::calib::antenna::{antenna_offset, observed_point};
+use crate::calib::pipeline::cores;
 use crate::calib::run::Run;
 use crate::replay::{counts, index_refs};
 use crate::stats::wrap_angle;
 
-use super::blocks::{Composed, GaussMarkovBlock, StepTerms};
+use super::blocks::{Composed, GaussMarkovBlock, StepTerms, PARALLEL_STEPS};
 use super::kalman::{FilterRun, FilterScore, Obs, SlipModel};
 use super::search::{
     best_over_grid, largest_likelihood, posterior_mean, search_near, slip_rate_range,
@@ -392,17 +393,13 @@ impl Innovations {
         // The steps after the last observation are not observed.
         let mut ends = Vec::with_capacity(observations);
         let mut obs = Vec::with_capacity(observations);
-        let terms: Vec<StepTerms> = steps
-            .iter()
-            .enumerate()
-            .map(|(i, st)| {
-                if let Some(o) = st.obs {
-                    ends.push(i + 1);
-                    obs.push(o);
-                }
-                st.terms(w)
-            })
-            .collect();
+        for (i, st) in steps.iter().enumerate() {
+            if let Some(o) = st.obs {
+                ends.push(i + 1);
+                obs.push(o);
+            }
+        }
+        let terms = step_terms(&steps, w);
         let used = ends.last().copied().unwrap_or(0);
         // A re-anchoring by `d` before step `j` moves the truth-minus-odometry error by `-d`
         // there; at the next observation (the end of step `ends[b] - 1`) that is `-d` carried
@@ -828,6 +825,22 @@ impl OpenLoop {
             start_variances: (pos_var0, heading_var0),
         })
     }
+}
+
+/// Each of `steps`' terms on a track `w` (m); with two cores and at least
+/// [`PARALLEL_STEPS`] steps, the second half on another thread (the same results).
+fn step_terms(steps: &[Step], w: f64) -> Vec<StepTerms> {
+    if cores() < 2 || steps.len() < PARALLEL_STEPS {
+        return steps.iter().map(|st| st.terms(w)).collect();
+    }
+    let (early, late) = steps.split_at(steps.len() / 2);
+    std::thread::scope(|scope| {
+        let second = scope.spawn(|| late.iter().map(|st| st.terms(w)).collect::<Vec<_>>());
+        let mut terms: Vec<StepTerms> = Vec::with_capacity(steps.len());
+        terms.extend(early.iter().map(|st| st.terms(w)));
+        terms.extend(second.join().expect("a step's terms panicked"));
+        terms
+    })
 }
 
 /// Where a path restarted from `to` at its pose `at` goes: its later poses turned about `at`

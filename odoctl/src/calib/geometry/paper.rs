@@ -462,38 +462,106 @@ pub fn paper_cluster_errors(
     length: f64,
 ) -> Option<(Vec<Option<f64>>, usize)> {
     let idx: Vec<usize> = (0..free.len()).filter(|&i| free[i]).collect();
-    let p = idx.len();
-    if length.is_nan() || length <= 0.0 {
-        return None;
-    }
-    let mut clusters: Vec<NormalAccumulator> = Vec::new();
+    let mut clusters = Clusters::new(run.dist[a], length, idx.len())?;
     let (mut jx, mut jy) = ([0.0; MODEL_UNKNOWNS], [0.0; MODEL_UNKNOWNS]);
-    let start = run.dist[a];
     run.integrate_with_sensitivity(params, a, b, heading0, |k, pose, d| {
-        let c = ((run.dist[k] - start) / length) as usize;
-        while clusters.len() <= c {
-            clusters.push(NormalAccumulator::new(Objective::SumOfNorms, true, p));
-        }
         let r = run.reference_at(k);
         let (ox, oy) = observed_with_rows(pose, d, antenna, heading0, &idx, &mut jx, &mut jy);
-        clusters[c].add_pair(ox - r.x, oy - r.y, &jx, &jy);
+        clusters.add(run.dist[k], (ox - r.x, oy - r.y), &jx, &jy);
     })
     .ok()?;
-    clusters.retain(|c| c.residuals() > 0);
-    let mut h = vec![0.0; p * p];
-    let mut parts = Vec::with_capacity(clusters.len());
-    for c in &clusters {
-        let (hc, gc) = c.equations();
-        h.iter_mut().zip(&hc).for_each(|(a, b)| *a += b);
-        parts.push((hc, gc));
+    clusters.errors(&idx, free.len())
+}
+
+/// The stretches of [`paper_cluster_errors`]: one eq (16) accumulator per `length` metres of
+/// reference path from `start` (m), over `p` unknowns.
+struct Clusters {
+    start: f64,
+    length: f64,
+    p: usize,
+    clusters: Vec<NormalAccumulator>,
+}
+
+impl Clusters {
+    /// `None` when `length` is not positive.
+    fn new(start: f64, length: f64, p: usize) -> Option<Self> {
+        (length > 0.0).then_some(Self {
+            start,
+            length,
+            p,
+            clusters: Vec::new(),
+        })
     }
-    let cov = cluster_jackknife(&h, p, &parts)?;
-    let se = diagonal_std_errors(&cov, p);
-    let mut out = vec![None; free.len()];
-    for (j, &i) in idx.iter().enumerate() {
-        out[i] = Some(se[j]);
+
+    /// The residual `r` (m) and its rows at the point `dist` metres along the reference path.
+    fn add(&mut self, dist: f64, r: (f64, f64), jx: &[f64], jy: &[f64]) {
+        let c = ((dist - self.start) / self.length) as usize;
+        while self.clusters.len() <= c {
+            let acc = NormalAccumulator::new(Objective::SumOfNorms, true, self.p);
+            self.clusters.push(acc);
+        }
+        self.clusters[c].add_pair(r.0, r.1, jx, jy);
     }
-    Some((out, clusters.len()))
+
+    /// The standard errors of the unknowns `idx` (of `n`; `None` for the others) and the
+    /// number of stretches with residuals.
+    fn errors(mut self, idx: &[usize], n: usize) -> Option<(Vec<Option<f64>>, usize)> {
+        let p = self.p;
+        self.clusters.retain(|c| c.residuals() > 0);
+        let mut h = vec![0.0; p * p];
+        let mut parts = Vec::with_capacity(self.clusters.len());
+        for c in &self.clusters {
+            let (hc, gc) = c.equations();
+            h.iter_mut().zip(&hc).for_each(|(a, b)| *a += b);
+            parts.push((hc, gc));
+        }
+        let cov = cluster_jackknife(&h, p, &parts)?;
+        let se = diagonal_std_errors(&cov, p);
+        let mut out = vec![None; n];
+        for (j, &i) in idx.iter().enumerate() {
+            out[i] = Some(se[j]);
+        }
+        Some((out, self.clusters.len()))
+    }
+}
+
+/// The start heading's formal ([`standard_errors`]) and cluster-robust
+/// ([`paper_cluster_errors`], stretches of `length` m) standard errors (rad) at `params` and
+/// `heading0` over the whole run, the geometry held, from one integration (the two functions'
+/// results: the same points in the same order).
+pub fn heading_errors(
+    run: &Run,
+    params: &ChassisParams,
+    heading0: f64,
+    length: f64,
+) -> (Option<f64>, Option<f64>) {
+    let (idx, last, antenna) = ([3], run.len() - 1, run.antenna);
+    let mut acc = NormalAccumulator::new(Objective::Squares, false, idx.len());
+    let mut clusters = Clusters::new(run.dist[0], length, idx.len());
+    let (mut jx, mut jy) = ([0.0; MODEL_UNKNOWNS], [0.0; MODEL_UNKNOWNS]);
+    let mut finite = true;
+    let ok = run
+        .integrate_with_sensitivity(params, 0, last, heading0, |k, pose, d| {
+            let r = run.reference_at(k);
+            let (ox, oy) = observed_with_rows(pose, d, antenna, heading0, &idx, &mut jx, &mut jy);
+            let (rx, ry) = (ox - r.x, oy - r.y);
+            finite &= rx.is_finite() && ry.is_finite();
+            acc.add_pair(rx, ry, &jx, &jy);
+            if let Some(c) = &mut clusters {
+                c.add(run.dist[k], (rx, ry), &jx, &jy);
+            }
+        })
+        .is_ok();
+    if !ok {
+        return (None, None);
+    }
+    let formal = (finite && acc.cost().is_finite())
+        .then(|| formal_errors(&acc, &idx, 4).0[3])
+        .flatten();
+    let clustered = clusters
+        .and_then(|c| c.errors(&idx, 4))
+        .and_then(|(e, _)| e[3]);
+    (formal, clustered)
 }
 
 /// Standard errors of the geometry unknowns ([`GEOMETRY_UNKNOWNS`](crate::calib::sensitivity::GEOMETRY_UNKNOWNS)) at an eq (16) estimate
@@ -529,15 +597,22 @@ pub fn standard_errors_with(
     free: &[bool],
 ) -> Option<(Vec<Option<f64>>, f64)> {
     let idx: Vec<usize> = (0..free.len()).filter(|&i| free[i]).collect();
-    let p = idx.len();
-    let mut acc = NormalAccumulator::new(Objective::Squares, false, p);
+    let mut acc = NormalAccumulator::new(Objective::Squares, false, idx.len());
     if !run.accumulate_normal_with(params, antenna, a, b, heading0, &idx, &mut acc) {
         return None;
     }
+    Some(formal_errors(&acc, &idx, free.len()))
+}
+
+/// The standard errors of [`standard_errors_with`] from its accumulated normal equations
+/// `acc` over the unknowns `idx` (of `n`; `None` for the others), and the residual standard
+/// deviation (m).
+fn formal_errors(acc: &NormalAccumulator, idx: &[usize], n: usize) -> (Vec<Option<f64>>, f64) {
+    let p = idx.len();
     let (jtj, _) = acc.equations();
     let m = acc.residuals();
     let s2 = acc.cost() / (m.saturating_sub(p).max(1)) as f64;
-    let mut se = vec![None; free.len()];
+    let mut se = vec![None; n];
     for (j, &i) in idx.iter().enumerate() {
         let mut e = vec![0.0; p];
         e[j] = 1.0;
@@ -548,7 +623,7 @@ pub fn standard_errors_with(
             f64::INFINITY
         });
     }
-    Some((se, s2.sqrt()))
+    (se, s2.sqrt())
 }
 
 #[cfg(test)]
@@ -557,6 +632,27 @@ mod tests {
     use crate::calib::testing::sim;
     use crate::csvio::match_times;
     use crate::simulate::{default_truth, PathKind};
+
+    /// The start heading's two standard errors from one integration are those of the two
+    /// functions, to the bit (on a run long enough for the two-core pipeline too).
+    #[test]
+    fn heading_errors_are_those_of_the_two_functions() {
+        for length in [30.0, 400.0] {
+            let s = sim(PathKind::Random, length, 3);
+            let run = Run::new(
+                &s.samples,
+                &s.reference,
+                match_times(&s.samples, &s.reference),
+            );
+            let (p, last, h0) = (default_truth(), run.len() - 1, run.heading_guess(0));
+            let free = [false, false, false, true];
+            let formal = standard_errors(&run, &p, 0, last, h0, free).and_then(|(e, _)| e[3]);
+            let clustered = paper_cluster_errors(&run, &p, run.antenna, 0, last, h0, &free, 10.0)
+                .and_then(|(e, _)| e[3]);
+            assert!(formal.is_some() && clustered.is_some());
+            assert_eq!(heading_errors(&run, &p, h0, 10.0), (formal, clustered));
+        }
+    }
 
     #[test]
     fn standard_errors_and_the_track_width_warning() {

@@ -167,6 +167,84 @@ pub struct SubtrajectoryFit {
     pub track_estimated: bool,
     /// Total absolute heading change of the run (rad, from the initial estimate).
     pub turning: f64,
+    /// Its last evaluation, for a warm start ([`SubtrajectoryFit::warm_start`]).
+    last: Kept,
+}
+
+/// Where a sub-trajectory fit left its iterations, for a fit of the same drive on more data
+/// ([`fit_subtrajectories_from`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SubtrajectoryStart {
+    /// The left diameter, right diameter and track width (m).
+    pub geometry: [f64; 3],
+    /// The lever arm: forward, left (m, chassis frame).
+    pub antenna: (f64, f64),
+    /// The sub-trajectories' first matches and fitted start headings (rad), by first match.
+    pub headings: Vec<(usize, f64)>,
+    last: Kept,
+}
+
+impl SubtrajectoryStart {
+    /// The fitted start heading (rad) of the sub-trajectory that started at match `a`.
+    pub fn heading_at(&self, a: usize) -> Option<f64> {
+        self.headings
+            .binary_search_by(|(first, _)| first.cmp(&a))
+            .ok()
+            .map(|i| self.headings[i].1)
+    }
+}
+
+/// A fit's last evaluation: the shared unknowns (their columns and values) and each
+/// sub-trajectory's first and last match, the start heading it was evaluated from, a
+/// fingerprint of its data ([`block_data`]) and its evaluation.
+#[derive(Debug, Clone, PartialEq, Default)]
+struct Kept {
+    cols: Vec<usize>,
+    x: Vec<f64>,
+    blocks: Vec<((usize, usize), f64, u64, BlockEval)>,
+}
+
+impl SubtrajectoryFit {
+    /// Where this fit left its iterations: its estimate, its sub-trajectories' start
+    /// headings and its last evaluation (taken over where a sub-trajectory and its data are
+    /// the same and the fit starts at this estimate).
+    pub fn warm_start(&self) -> SubtrajectoryStart {
+        let p = &self.params;
+        SubtrajectoryStart {
+            geometry: [p.left_diameter, p.right_diameter, p.track_width],
+            antenna: self.antenna,
+            headings: self.blocks.iter().map(|b| (b.a, b.heading)).collect(),
+            last: self.last.clone(),
+        }
+    }
+}
+
+/// A 64-bit fingerprint of what sub-trajectory `a..=b` is evaluated on: its samples, its
+/// matches and their reference points, the lever arm.
+fn block_data(run: &Run, (a, b): (usize, usize)) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut add = |v: u64| h = (h ^ v).wrapping_mul(0x0000_0100_0000_01b3);
+    let (sa, sb) = (run.matches[a].0, run.matches[b].0);
+    let opt = |v: Option<i64>| v.map_or(u64::MAX, |v| v as u64);
+    for s in &run.samples[sa..=sb] {
+        add(s.t.to_bits());
+        add(s.left as u64);
+        add(s.right as u64);
+        add(opt(s.left_index));
+        add(opt(s.right_index));
+        add(s.flags.unwrap_or(u64::MAX));
+    }
+    for k in a..=b {
+        let r = run.reference_at(k);
+        add((run.matches[k].0 - sa) as u64);
+        for v in [r.t, r.x, r.y, r.heading.unwrap_or(f64::NAN)] {
+            add(v.to_bits());
+        }
+        add(r.sigma_h.unwrap_or(f64::NAN).to_bits());
+    }
+    add(run.antenna.0.to_bits());
+    add(run.antenna.1.to_bits());
+    h
 }
 
 impl SubtrajectoryFit {
@@ -182,7 +260,7 @@ impl SubtrajectoryFit {
 
 /// One sub-trajectory's share at given shared unknowns: its cost, its reduced normal
 /// equations, and what a step of the shared unknowns does to its start heading.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub(crate) struct BlockEval {
     pub(crate) cost: f64,
     pub(crate) points: usize,
@@ -548,6 +626,18 @@ pub fn fit_subtrajectories(
     start: &ChassisParams,
     opts: SubtrajectoryOptions,
 ) -> Result<SubtrajectoryFit> {
+    fit_subtrajectories_from(run, start, opts, None)
+}
+
+/// [`fit_subtrajectories`], its iterations started from `warm` when given (an earlier fit of
+/// the same drive on less data: [`SubtrajectoryStart`]; its evaluations taken over where a
+/// sub-trajectory's data are the same); the step limits stay `start`'s.
+pub fn fit_subtrajectories_from(
+    run: &Run,
+    start: &ChassisParams,
+    opts: SubtrajectoryOptions,
+    warm: Option<&SubtrajectoryStart>,
+) -> Result<SubtrajectoryFit> {
     start
         .validate()
         .map_err(|e| anyhow!("initial parameters: {e}"))?;
@@ -569,7 +659,7 @@ pub fn fit_subtrajectories(
         cols: shared_columns(track_estimated, turned, &opts)?,
         blocks,
     };
-    let minimum = problem.minimise(opts.max_iter)?;
+    let minimum = problem.minimise(opts.max_iter, warm)?;
     problem.result(minimum, track_estimated, turned)
 }
 
@@ -636,6 +726,8 @@ struct Minimum {
     x: Vec<f64>,
     cost: f64,
     evals: Vec<BlockEval>,
+    /// The start headings `evals` were evaluated from.
+    guesses: Vec<f64>,
     iterations: usize,
     evaluations: usize,
 }
@@ -652,22 +744,97 @@ impl SharedProblem<'_> {
         eval_all(self.run, &pp, aa, &self.cols, &self.blocks, headings)
     }
 
-    /// Levenberg-Marquardt on the reduced system from `start` and the sub-trajectories' first
-    /// headings, a step accepted when the cost falls, at most `max_iter` accepted.
-    fn minimise(&self, max_iter: usize) -> Result<Minimum> {
+    /// The first point of [`SharedProblem::minimise`]: the shared unknowns, the
+    /// sub-trajectories evaluated there and the start headings they were evaluated from;
+    /// `warm`'s when given and admissible (its evaluations taken over where the point, the
+    /// sub-trajectory and its data are the same; the other sub-trajectories from `warm`'s
+    /// fitted heading, else their first), else `start`'s and the first headings.
+    fn first_point(
+        &self,
+        warm: Option<&SubtrajectoryStart>,
+    ) -> Result<(Vec<f64>, Vec<BlockEval>, Vec<f64>)> {
         let (start, antenna0, run) = (self.start, self.antenna0, self.run);
-        let p = self.cols.len();
-        let mut x: Vec<f64> = self
-            .cols
+        let point = |g: [f64; 3], a: (f64, f64)| -> Vec<f64> {
+            self.cols
+                .iter()
+                .map(|&c| match c {
+                    0..=2 => g[c],
+                    ANTENNA_FORWARD => a.0,
+                    _ => a.1,
+                })
+                .collect()
+        };
+        let guess = |a: usize| run.heading_guess(a);
+        if let Some(w) = warm {
+            let x = point(w.geometry, w.antenna);
+            if let Some(first) = self.warm_point(w, &x) {
+                return Ok(first);
+            }
+        }
+        let geometry = [start.left_diameter, start.right_diameter, start.track_width];
+        let x = point(geometry, antenna0);
+        let headings: Vec<f64> = self.blocks.iter().map(|&(a, _)| guess(a)).collect();
+        let evals = self.eval(&x, &headings).ok_or_else(|| {
+            anyhow!("initial parameters: a sub-trajectory could not be evaluated")
+        })?;
+        Ok((x, evals, headings))
+    }
+
+    /// [`SharedProblem::first_point`] at `warm`'s point `x`; `None` where a sub-trajectory
+    /// cannot be evaluated.
+    fn warm_point(
+        &self,
+        w: &SubtrajectoryStart,
+        x: &[f64],
+    ) -> Option<(Vec<f64>, Vec<BlockEval>, Vec<f64>)> {
+        let same_point = w.last.cols == self.cols && w.last.x == x;
+        let kept: std::collections::HashMap<(usize, usize), (f64, u64, &BlockEval)> = w
+            .last
+            .blocks
             .iter()
-            .map(|&c| match c {
-                0 => start.left_diameter,
-                1 => start.right_diameter,
-                2 => start.track_width,
-                ANTENNA_FORWARD => antenna0.0,
-                _ => antenna0.1,
-            })
+            .filter(|_| same_point)
+            .map(|(ab, g, d, e)| (*ab, (*g, *d, e)))
             .collect();
+        let mut evals: Vec<Option<BlockEval>> = Vec::with_capacity(self.blocks.len());
+        let mut headings = Vec::with_capacity(self.blocks.len());
+        let (mut fresh, mut fresh_headings) = (Vec::new(), Vec::new());
+        for &ab in &self.blocks {
+            match kept.get(&ab) {
+                Some(&(g, d, e)) if d == block_data(self.run, ab) => {
+                    evals.push(Some(e.clone()));
+                    headings.push(g);
+                }
+                _ => {
+                    let g = w
+                        .heading_at(ab.0)
+                        .unwrap_or_else(|| self.run.heading_guess(ab.0));
+                    evals.push(None);
+                    headings.push(g);
+                    fresh.push(ab);
+                    fresh_headings.push(g);
+                }
+            }
+        }
+        let (pp, aa) = self.at(x);
+        let mut new = if fresh.is_empty() {
+            Vec::new()
+        } else {
+            eval_all(self.run, &pp, aa, &self.cols, &fresh, &fresh_headings)?
+        };
+        new.reverse();
+        let evals = evals
+            .into_iter()
+            .map(|e| e.or_else(|| new.pop()))
+            .collect::<Option<Vec<_>>>()?;
+        Some((x.to_vec(), evals, headings))
+    }
+
+    /// Levenberg-Marquardt on the reduced system from [`SharedProblem::first_point`], a step
+    /// accepted when the cost falls, at most `max_iter` accepted.
+    fn minimise(&self, max_iter: usize, warm: Option<&SubtrajectoryStart>) -> Result<Minimum> {
+        let start = self.start;
+        let p = self.cols.len();
+        let (mut x, mut evals, mut guesses) = self.first_point(warm)?;
         let scale: Vec<f64> = self
             .cols
             .iter()
@@ -678,14 +845,6 @@ impl SharedProblem<'_> {
                 _ => start.track_width,
             })
             .collect();
-        let headings: Vec<f64> = self
-            .blocks
-            .iter()
-            .map(|&(a, _)| run.heading_guess(a))
-            .collect();
-        let mut evals = self.eval(&x, &headings).ok_or_else(|| {
-            anyhow!("initial parameters: a sub-trajectory could not be evaluated")
-        })?;
         let mut evaluations = 1;
         let mut cost: f64 = evals.iter().map(|e| e.cost).sum();
         let mut lambda = 1e-6;
@@ -738,6 +897,7 @@ impl SharedProblem<'_> {
                         x = xn;
                         cost = c;
                         evals = trial;
+                        guesses = hn;
                         lambda = (lambda / 3.0).max(1e-12);
                         accepted = true;
                         break;
@@ -757,6 +917,7 @@ impl SharedProblem<'_> {
             x,
             cost,
             evals,
+            guesses,
             iterations,
             evaluations,
         })
@@ -774,6 +935,7 @@ impl SharedProblem<'_> {
             x,
             cost,
             evals,
+            guesses,
             iterations,
             evaluations,
         } = minimum;
@@ -806,6 +968,13 @@ impl SharedProblem<'_> {
             std_errors[slot(c)] = Some(rse[j]);
             independent_std_errors[slot(c)] = Some(fse[j]);
         }
+        let last = Kept {
+            cols: cols.clone(),
+            x,
+            blocks: (self.blocks.iter().zip(guesses).zip(evals.iter()))
+                .map(|((&ab, g), e)| (ab, g, block_data(self.run, ab), e.clone()))
+                .collect(),
+        };
         Ok(SubtrajectoryFit {
             params,
             antenna,
@@ -831,6 +1000,7 @@ impl SharedProblem<'_> {
             residual_sigma: s2.sqrt(),
             track_estimated,
             turning: turned,
+            last,
         })
     }
 }
@@ -953,6 +1123,61 @@ mod tests {
             }
         )
         .is_err());
+    }
+
+    /// Started warm from the fit of the run's first 90 %, the fit of the whole run reaches the
+    /// cold fit's minimum (within 0.01 of its standard errors, and its standard errors within
+    /// 1 %) in fewer evaluations; warm from its own fit, it takes over every evaluation and
+    /// stops where that fit did, to the bit; a warm start that cannot be evaluated falls back
+    /// to the cold one.
+    #[test]
+    fn a_warm_start_reaches_the_cold_minimum() {
+        let s = simulate::simulate_path(
+            PathKind::Random,
+            300.0,
+            default_truth(),
+            SimSettings::default(),
+        );
+        let matches = match_times(&s.samples, &s.reference);
+        let run = Run::new(&s.samples, &s.reference, matches.clone());
+        let part = &matches[..matches.len() * 9 / 10];
+        let first = Run::new(&s.samples, &s.reference, part.to_vec());
+        let start = ChassisParams::DESIGNED;
+        let opts = SubtrajectoryOptions::default();
+        let earlier = fit_subtrajectories(&first, &start, opts).unwrap();
+        let warm = earlier.warm_start();
+        let cold = fit_subtrajectories(&run, &start, opts).unwrap();
+        let hot = fit_subtrajectories_from(&run, &start, opts, Some(&warm)).unwrap();
+        let values = |f: &SubtrajectoryFit| {
+            [
+                f.params.left_diameter,
+                f.params.right_diameter,
+                f.params.track_width,
+            ]
+        };
+        for i in 0..3 {
+            let se = cold.std_errors[i].unwrap();
+            let d = (values(&hot)[i] - values(&cold)[i]).abs() / se;
+            assert!(d < 0.01, "unknown {i}: {d} SE apart");
+            assert!((hot.std_errors[i].unwrap() / se - 1.0).abs() < 0.01);
+        }
+        assert!(
+            hot.evaluations < cold.evaluations,
+            "{} vs {}",
+            hot.evaluations,
+            cold.evaluations
+        );
+        let again = fit_subtrajectories_from(&run, &start, opts, Some(&cold.warm_start()));
+        let again = again.unwrap();
+        assert_eq!((again.iterations, again.evaluations), (0, 1));
+        assert_eq!(values(&again), values(&cold));
+        assert_eq!(again.std_errors, cold.std_errors);
+        let bad = SubtrajectoryStart {
+            geometry: [-1.0, 0.26, 0.56],
+            ..warm
+        };
+        let fallback = fit_subtrajectories_from(&run, &start, opts, Some(&bad)).unwrap();
+        assert_eq!(values(&fallback), values(&cold));
     }
 
     /// First match `a <= b` whose path distance to match `b` is at most `length`.

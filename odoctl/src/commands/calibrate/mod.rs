@@ -4,14 +4,14 @@
 //! forms.
 
 use std::borrow::Cow;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::Result;
 use odo_unit::odometry::ChassisParams;
 
-use crate::calib::{self, Calibration};
+use crate::calib::{self, Calibration, Extras, WarmStart};
 use crate::cli::{CalibrateArgs, ReferenceArgs};
 use crate::config as cfg;
 use crate::csvio::{self, RefPoint, Sample};
@@ -22,7 +22,7 @@ use crate::reference::trajectory_noise::TrajectoryNoise;
 use crate::reference::{Reference, TimeScale};
 use crate::stats::{coverage, summarize, Summary};
 
-use super::recording::{check_recording_times, reference_for};
+use super::recording::{check_recording_times, resolve_reference, say_own_reference};
 use super::reference_options;
 
 pub mod clock_offset;
@@ -108,15 +108,43 @@ pub struct Recorded<'r> {
     /// Its lines read as they were appended (named as the log beside `--samples`, with the
     /// reference options' leap seconds; else it is read whole).
     pub lines: LogLines,
+    /// Where an earlier calibration of the recording's first part left the searches (the
+    /// last background batch's, [`WarmStart`]).
+    pub warm: Option<WarmStart>,
 }
 
 /// `odoctl calibrate`, with the recording's files taken from `recorded` when given and the
 /// reference is the recording's own NMEA log: the same result, printed and written, as
-/// from the files.
+/// from the files (its searches started from `recorded`'s warm start, when it has one: the
+/// same to their tolerances). [`read_inputs`], then [`run_read`].
 pub fn run_from(a: &CalibrateArgs, recorded: Option<Recorded>) -> Result<ExitCode> {
+    run_read(a, read_inputs(a, recorded)?)
+}
+
+/// A calibration's inputs, read and nothing printed yet ([`read_inputs`]).
+pub struct ReadInputs<'r> {
+    started: Instant,
+    reference_path: PathBuf,
+    own: bool,
+    source: Reference,
+    inputs: Inputs<'r>,
+    /// Where the calibration's searches start (a recording's warm start; else none).
+    pub warm: Option<WarmStart>,
+}
+
+/// The inputs of [`run_from`]: the recording in memory (`recorded`, when the reference is
+/// its own NMEA log: the epochs dated), else the files; prints nothing.
+pub fn read_inputs<'r>(
+    a: &CalibrateArgs,
+    mut recorded: Option<Recorded<'r>>,
+) -> Result<ReadInputs<'r>> {
     let started = Instant::now();
     let timer = calib::PhaseTimer::new();
-    let (reference_path, own) = reference_for(&a.samples, a.reference.as_deref())?;
+    let (reference_path, own) = resolve_reference(&a.samples, a.reference.as_deref())?;
+    let warm = recorded
+        .as_mut()
+        .and_then(|r| r.warm.take())
+        .filter(|_| own);
     let (samples, source) = match recorded.filter(|_| own) {
         Some(r) => {
             let o = reference_options(&a.reference_input)?;
@@ -129,6 +157,32 @@ pub fn run_from(a: &CalibrateArgs, recorded: Option<Recorded>) -> Result<ExitCod
         }
     };
     let inputs = Inputs::of(&source, samples)?;
+    timer.lap("read CSV");
+    Ok(ReadInputs {
+        started,
+        reference_path,
+        own,
+        source,
+        inputs,
+        warm,
+    })
+}
+
+/// [`run_from`] on the inputs `read`: what they are printed, checked, calibrated, the result
+/// printed and written.
+pub fn run_read(a: &CalibrateArgs, read: ReadInputs) -> Result<ExitCode> {
+    let ReadInputs {
+        started,
+        reference_path,
+        own,
+        source,
+        inputs,
+        warm,
+    } = read;
+    let timer = calib::PhaseTimer::new();
+    if own {
+        say_own_reference(&reference_path, &a.samples);
+    }
     print_summary(&source);
     if let Some(m) = &inputs.matching {
         crate::outln!("  {m}");
@@ -143,30 +197,87 @@ pub fn run_from(a: &CalibrateArgs, recorded: Option<Recorded>) -> Result<ExitCod
     if own {
         check_recording_times(&inputs.samples, &inputs.reference)?;
     }
-    timer.lap("read CSV");
     let names = (
         a.samples.display().to_string(),
         reference_path.display().to_string(),
     );
-    let (c, opts, initial) = calibration(a, &inputs, &names)?;
+    let extras = Extras {
+        warm: warm.as_ref(),
+        cancel: None,
+    };
+    let (c, opts, initial) = calibration_with(a, &inputs, &names, extras)?;
     timer.lap("calibration");
+    report_and_write(a, &reference_path, &inputs, (&c, &opts, &initial), started)
+}
+
+/// The calibration of [`ReadInputs`] done, its printing left ([`calibrate_inputs`], then
+/// [`run_calibrated`]).
+pub struct Calibrated<'r> {
+    read: ReadInputs<'r>,
+    outcome: Result<(Calibration, calib::CalibrationOptions, ChassisParams)>,
+}
+
+/// [`run_read`]'s calibration of `read` alone, nothing printed (for the recording's own
+/// NMEA log, which has no clock whose offset's share would be printed); the rest is
+/// [`run_calibrated`]'s. `record --calibrate` runs it beside the live fit's last update.
+pub fn calibrate_inputs<'r>(a: &CalibrateArgs, read: ReadInputs<'r>) -> Calibrated<'r> {
+    let names = (
+        a.samples.display().to_string(),
+        read.reference_path.display().to_string(),
+    );
+    let extras = Extras {
+        warm: read.warm.as_ref(),
+        cancel: None,
+    };
+    let outcome = calibration_with(a, &read.inputs, &names, extras);
+    Calibrated { read, outcome }
+}
+
+/// [`run_read`] of a calibration done ([`calibrate_inputs`]): the inputs printed and checked,
+/// the result printed and written, as [`run_read`] does.
+pub fn run_calibrated(a: &CalibrateArgs, done: Calibrated) -> Result<ExitCode> {
+    let ReadInputs {
+        started,
+        reference_path,
+        own,
+        source,
+        inputs,
+        ..
+    } = done.read;
+    if own {
+        say_own_reference(&reference_path, &a.samples);
+    }
+    print_summary(&source);
+    if let Some(m) = &inputs.matching {
+        crate::outln!("  {m}");
+    }
+    if own {
+        check_recording_times(&inputs.samples, &inputs.reference)?;
+    }
+    let (c, opts, initial) = done.outcome?;
+    report_and_write(a, &reference_path, &inputs, (&c, &opts, &initial), started)
+}
+
+/// The result `c` (with its options and initial estimate) of `inputs` printed and written
+/// (`--out`, the ROS forms); `started` when the command started.
+fn report_and_write(
+    a: &CalibrateArgs,
+    reference_path: &Path,
+    inputs: &Inputs,
+    (c, opts, initial): (&Calibration, &calib::CalibrationOptions, &ChassisParams),
+    started: Instant,
+) -> Result<ExitCode> {
+    let timer = calib::PhaseTimer::new();
     let noise = calib::ReferenceNoise {
         horizontal: opts.reference_sigma,
         heading: opts.reference_heading_sigma,
     };
-    let errors = ErrorSummary::of(&c, &noise);
-    report::print(&c, &initial, &opts, &errors);
-    write::write_result(
-        a,
-        &reference_path,
-        &c,
-        &opts,
-        &errors,
-        inputs.clock.as_ref(),
-    )?;
+    let errors = ErrorSummary::of(c, &noise);
+    report::print(c, initial, opts, &errors);
+    write::write_result(a, reference_path, c, opts, &errors, inputs.clock.as_ref())?;
     timer.lap("report");
     crate::outln!("done in {:.2} s", started.elapsed().as_secs_f64());
-    export_ros(a, &reference_path)?;
+    export_ros(a, reference_path)?;
     Ok(ExitCode::SUCCESS)
 }
 
@@ -243,6 +354,16 @@ pub fn calibration(
     inputs: &Inputs,
     names: &(String, String),
 ) -> Result<(Calibration, calib::CalibrationOptions, ChassisParams)> {
+    calibration_with(a, inputs, names, Extras::default())
+}
+
+/// [`calibration`] with a warm start and a cancel flag ([`Extras`]).
+pub fn calibration_with(
+    a: &CalibrateArgs,
+    inputs: &Inputs,
+    names: &(String, String),
+    extras: Extras,
+) -> Result<(Calibration, calib::CalibrationOptions, ChassisParams)> {
     let initial = initial_estimate(a)?;
     let mut opts = options::calibration_options(a)?;
     if let Some(n) = &inputs.noise {
@@ -254,7 +375,8 @@ pub fn calibration(
         }
     }
     let (samples, reference) = (&inputs.samples, &inputs.reference);
-    let mut c = calib::calibrate(samples, reference, (&names.0, &names.1), &initial, &opts)?;
+    let names = (names.0.as_str(), names.1.as_str());
+    let mut c = calib::calibrate_with(samples, reference, names, &initial, &opts, extras)?;
     if let Some(k) = &inputs.clock {
         add_clock_rate_uncertainty(&mut c, k);
     }
