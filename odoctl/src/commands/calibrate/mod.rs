@@ -180,10 +180,32 @@ pub fn run_read(a: &CalibrateArgs, read: ReadInputs) -> Result<ExitCode> {
         warm,
     } = read;
     let timer = calib::PhaseTimer::new();
+    print_inputs(a, (&reference_path, own), &source, &inputs)?;
+    let names = (
+        a.samples.display().to_string(),
+        reference_path.display().to_string(),
+    );
+    let extras = Extras {
+        warm: warm.as_ref(),
+        cancel: None,
+    };
+    let (c, opts, initial) = calibration_with(a, &inputs, &names, extras)?;
+    timer.lap("calibration");
+    report_and_write(a, &reference_path, &inputs, (&c, &opts, &initial), started)
+}
+
+/// What was read, printed: the recording's own reference (`own`) named, the reference's
+/// summary, the trajectory's matching and own noise; a recording's two clocks checked.
+fn print_inputs(
+    a: &CalibrateArgs,
+    (reference_path, own): (&Path, bool),
+    source: &Reference,
+    inputs: &Inputs,
+) -> Result<()> {
     if own {
-        say_own_reference(&reference_path, &a.samples);
+        say_own_reference(reference_path, &a.samples);
     }
-    print_summary(&source);
+    print_summary(source);
     if let Some(m) = &inputs.matching {
         crate::outln!("  {m}");
     }
@@ -197,17 +219,7 @@ pub fn run_read(a: &CalibrateArgs, read: ReadInputs) -> Result<ExitCode> {
     if own {
         check_recording_times(&inputs.samples, &inputs.reference)?;
     }
-    let names = (
-        a.samples.display().to_string(),
-        reference_path.display().to_string(),
-    );
-    let extras = Extras {
-        warm: warm.as_ref(),
-        cancel: None,
-    };
-    let (c, opts, initial) = calibration_with(a, &inputs, &names, extras)?;
-    timer.lap("calibration");
-    report_and_write(a, &reference_path, &inputs, (&c, &opts, &initial), started)
+    Ok(())
 }
 
 /// The calibration of [`ReadInputs`] done, its printing left ([`calibrate_inputs`], then
@@ -244,16 +256,7 @@ pub fn run_calibrated(a: &CalibrateArgs, done: Calibrated) -> Result<ExitCode> {
         inputs,
         ..
     } = done.read;
-    if own {
-        say_own_reference(&reference_path, &a.samples);
-    }
-    print_summary(&source);
-    if let Some(m) = &inputs.matching {
-        crate::outln!("  {m}");
-    }
-    if own {
-        check_recording_times(&inputs.samples, &inputs.reference)?;
-    }
+    print_inputs(a, (&reference_path, own), &source, &inputs)?;
     let (c, opts, initial) = done.outcome?;
     report_and_write(a, &reference_path, &inputs, (&c, &opts, &initial), started)
 }
