@@ -178,7 +178,8 @@ fn calibration_drive_in_one_command_against_the_qemu_image() {
             se[k]
         );
     }
-    // The recording alone calibrates as well (the log is found beside it).
+    // The recording alone calibrates as well (the log is found beside it), to within a
+    // hundredth of the standard errors of the final, which started warm from the last batch.
     let again = d.join("again.toml");
     let o = odoctl(&[
         "calibrate",
@@ -188,13 +189,18 @@ fn calibration_drive_in_one_command_against_the_qemu_image() {
         again.to_str().unwrap(),
     ]);
     common::success_stdout(&o);
-    assert_eq!(
-        common::lengths(
-            &odoctl::config::read_params(&again, odo_unit::odometry::ChassisParams::DESIGNED)
-                .unwrap()
-        ),
-        est
+    let files = common::lengths(
+        &odoctl::config::read_params(&again, odo_unit::odometry::ChassisParams::DESIGNED).unwrap(),
     );
+    for k in 0..3 {
+        assert!(
+            (files[k] - est[k]).abs() <= 0.01 * se[k],
+            "parameter {k}: {} from the files against {} recorded (standard error {})",
+            files[k],
+            est[k],
+            se[k]
+        );
+    }
     let o = run(&[
         "config",
         "--port",
