@@ -103,9 +103,7 @@ pub fn read_matched_run(
         &reference_path.display().to_string(),
         2,
     )?;
-    let noise = (source.time == TimeScale::Trajectory)
-        .then(|| TrajectoryNoise::of(&source.epochs))
-        .flatten();
+    let noise = TrajectoryNoise::of_reference(&source);
     Ok(MatchedRun {
         samples,
         reference,

@@ -14,7 +14,7 @@
 
 use crate::stats::wrap_angle;
 
-use super::LocalEpoch;
+use super::{LocalEpoch, Reference, TimeScale};
 
 /// Largest time between two poses whose second difference counts (s).
 pub const MAX_GAP: f64 = 0.25;
@@ -40,6 +40,14 @@ pub struct TrajectoryNoise {
 }
 
 impl TrajectoryNoise {
+    /// The noise of `r` when it is a trajectory (TUM, MCAP; [`TrajectoryNoise::of`] its
+    /// epochs), `None` for a receiver log or a REFERENCE CSV.
+    pub fn of_reference(r: &Reference) -> Option<Self> {
+        (r.time == TimeScale::Trajectory)
+            .then(|| Self::of(&r.epochs))
+            .flatten()
+    }
+
     /// The noise of `epochs` (times increasing); `None` with fewer than [`MIN_TRIPLES`]
     /// evenly spaced triples within [`MAX_GAP`].
     pub fn of(epochs: &[LocalEpoch]) -> Option<Self> {

@@ -19,7 +19,7 @@ use crate::reference::clock::ClockFit;
 use crate::reference::matched::print_summary;
 use crate::reference::nmea::LogLines;
 use crate::reference::trajectory_noise::TrajectoryNoise;
-use crate::reference::{Reference, TimeScale};
+use crate::reference::Reference;
 use crate::stats::{coverage, summarize, Summary};
 
 use super::recording::{check_recording_times, resolve_reference, say_own_reference};
@@ -335,9 +335,7 @@ impl<'s> Inputs<'s> {
             };
             source.points_on_clock(&samples, &moved)
         });
-        let noise = (source.time == TimeScale::Trajectory)
-            .then(|| TrajectoryNoise::of(&source.epochs))
-            .flatten();
+        let noise = TrajectoryNoise::of_reference(source);
         Ok(Self {
             samples,
             reference,
