@@ -21,6 +21,19 @@ pub struct Summary {
     pub max: f64,
 }
 
+/// Robust standard deviation of a normal sample from its median absolute value.
+pub const MAD_TO_SIGMA: f64 = 1.482_602_218_505_602;
+
+/// The median of `v` (reordered; the upper middle of an even count), `None` when empty.
+pub fn median(v: &mut [f64]) -> Option<f64> {
+    if v.is_empty() {
+        return None;
+    }
+    let mid = v.len() / 2;
+    let (_, m, _) = v.select_nth_unstable_by(mid, f64::total_cmp);
+    Some(*m)
+}
+
 /// The `q` quantile (0..=1) of sorted values, linearly interpolated.
 pub fn quantile_sorted(sorted: &[f64], q: f64) -> f64 {
     if sorted.is_empty() {

@@ -12,7 +12,7 @@
 //! a slow drift (a SLAM map's) hardly moves a second difference and is not in it (RTK
 //! receivers, whose errors are correlated over seconds, keep the stated `--reference-sigma`).
 
-use crate::stats::wrap_angle;
+use crate::stats::{median, wrap_angle, MAD_TO_SIGMA};
 
 use super::{LocalEpoch, Reference, TimeScale};
 
@@ -24,9 +24,6 @@ const EVEN_STEPS: f64 = 0.01;
 
 /// Fewest second differences for a figure.
 pub const MIN_TRIPLES: usize = 20;
-
-/// Robust standard deviation of a normal sample from its median absolute value.
-const MAD_TO_SIGMA: f64 = 1.482_602_218_505_602;
 
 /// A trajectory's noise as its second differences show it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -71,22 +68,17 @@ impl TrajectoryNoise {
         if triples < MIN_TRIPLES {
             return None;
         }
-        let per_axis = MAD_TO_SIGMA * median(&mut axes) / 6f64.sqrt();
+        let per_axis = MAD_TO_SIGMA * median(&mut axes)? / 6f64.sqrt();
         let heading = (headings.len() >= MIN_TRIPLES)
-            .then(|| MAD_TO_SIGMA * median(&mut headings) / 6f64.sqrt());
+            .then(|| median(&mut headings))
+            .flatten()
+            .map(|m| MAD_TO_SIGMA * m / 6f64.sqrt());
         Some(Self {
             horizontal: 2f64.sqrt() * per_axis,
             heading,
             triples,
         })
     }
-}
-
-/// The median of a non-empty `v` (reordered).
-fn median(v: &mut [f64]) -> f64 {
-    let mid = v.len() / 2;
-    let (_, m, _) = v.select_nth_unstable_by(mid, f64::total_cmp);
-    *m
 }
 
 #[cfg(test)]

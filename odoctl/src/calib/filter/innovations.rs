@@ -53,7 +53,7 @@ use crate::calib::antenna::{antenna_offset, observed_point};
 use crate::calib::pipeline::cores;
 use crate::calib::run::Run;
 use crate::replay::{counts, index_refs};
-use crate::stats::wrap_angle;
+use crate::stats::{median, wrap_angle};
 
 use super::blocks::{Composed, GaussMarkovBlock, StepTerms, PARALLEL_STEPS};
 use super::kalman::{FilterRun, FilterScore, Obs, SlipModel};
@@ -753,8 +753,7 @@ fn position_span(run: &Run, settings: Settings, kappa: f64) -> Option<f64> {
     let mut variances: Vec<f64> = (0..run.len())
         .map(|k| position_variance(run, k, settings.sigmas.0))
         .collect();
-    variances.sort_by(f64::total_cmp);
-    let sigma2 = variances[variances.len() / 2];
+    let sigma2 = median(&mut variances)?;
     let span = sigma2 / (rho * SPAN_NOISE_SHARE * 0.5 * kappa * d);
     (span < d).then(|| span.max(1.0 / rho))
 }

@@ -17,7 +17,7 @@
 //! scatter can show a stated noise too small, never too large.
 
 use crate::calib::evaluation::Evaluation;
-use crate::stats::wrap_angle;
+use crate::stats::{median, wrap_angle, MAD_TO_SIGMA};
 
 use super::coverage::{heading_coverage, horizontal_coverage, reference_sigma_at};
 
@@ -29,9 +29,6 @@ pub const SCATTER_RATIO_WARNING: f64 = 2.0;
 
 /// Fewest epoch pairs for a scatter figure.
 pub const SCATTER_MIN_PAIRS: usize = 20;
-
-/// Robust standard deviation of a normal sample from its median absolute value.
-const MAD_TO_SIGMA: f64 = 1.482_602_218_505_602;
 
 /// The reference's stated noise, where the log gives none per epoch.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -194,16 +191,6 @@ impl NoiseCheck {
             )
         })
     }
-}
-
-/// The median of `v` (reordered), `None` when empty.
-fn median(v: &mut [f64]) -> Option<f64> {
-    if v.is_empty() {
-        return None;
-    }
-    let mid = v.len() / 2;
-    let (_, m, _) = v.select_nth_unstable_by(mid, f64::total_cmp);
-    Some(*m)
 }
 
 #[cfg(test)]
