@@ -446,11 +446,17 @@ mod tests {
     /// The coefficient fits (predicted bracket, then the bisection on known coverages) give
     /// the plain bisection's coefficient, every coverage evaluated: paper model without and
     /// with `delta_diff` (sigma then not a power of delta), covariance model, on simulated
-    /// runs; also the refit's coarser width on a memo left by the finer fit.
+    /// runs; also the refit's coarser width on a memo left by the finer fit; and with epochs
+    /// that carry their own sigma (every third one 2 cm, as GST gives), which both take.
     #[test]
     fn fast_coefficient_fit_matches_the_plain_bisection() {
-        for seed in [1, 2] {
-            let s = sim(PathKind::Random, 150.0, seed);
+        for (seed, own_sigma) in [(1, false), (2, false), (3, true)] {
+            let mut s = sim(PathKind::Random, 150.0, seed);
+            if own_sigma {
+                for r in s.reference.iter_mut().step_by(3) {
+                    r.sigma_h = Some(0.02);
+                }
+            }
             let run = Run::new(
                 &s.samples,
                 &s.reference,

@@ -79,8 +79,8 @@ impl Restarts {
         self.memo_eval(run, p, true)
     }
 
-    /// The horizontal errors and sigmas only (`horizontal`, `sigma_h`; the other columns
-    /// may be empty), remembered with [`Restarts::evaluate_memo`]'s evaluations.
+    /// The horizontal errors and sigmas only (`horizontal`, `sigma_h`, `reference_sigma_h`;
+    /// the other columns may be empty), remembered with [`Restarts::evaluate_memo`]'s evaluations.
     pub(crate) fn horizontal_memo(&self, run: &Run, p: &ChassisParams) -> Result<Rc<Evaluation>> {
         self.memo_eval(run, p, false)
     }
@@ -138,8 +138,8 @@ impl Restarts {
         self.evaluate_parts(run, p, ev, true)
     }
 
-    /// [`Restarts::evaluate_into`], with only `horizontal` and `sigma_h` filled when not
-    /// `full` (what the coefficient searches need: a fraction of the memory traffic).
+    /// [`Restarts::evaluate_into`], with only `horizontal`, `sigma_h` and `reference_sigma_h`
+    /// filled when not `full` (what the coefficient searches need: a fraction of the memory traffic).
     fn evaluate_parts(
         &self,
         run: &Run,
@@ -163,6 +163,7 @@ impl Restarts {
             } else {
                 ev.horizontal.reserve(n);
                 ev.sigma_h.reserve(n);
+                ev.reference_sigma_h.reserve(n);
             }
         };
         // Room for every part's rows, which are appended to `ev`'s own.
@@ -178,6 +179,7 @@ impl Restarts {
                         let r = run.reference_at(k);
                         ev.horizontal.push(norm2(ox - r.x, oy - r.y));
                         ev.sigma_h.push(f64::from(integ.sigma().horizontal()));
+                        ev.reference_sigma_h.push(r.sigma_h);
                     })
                     .map_err(|e| anyhow!("parameters: {e}"))?;
                 }
