@@ -521,7 +521,7 @@ fn the_filter_likelihood_recovers_kappa_with_the_true_geometry() {
                 odoctl::csvio::match_or_fail(&run.samples, "s", &run.reference, "r", 10).unwrap();
             let r = Run::new(&run.samples, &run.reference, m);
             let inn = Innovations::new(&r, &truth, 0.3, sigma, 0.5f64.to_radians(), 1.0).unwrap();
-            let (kappa, _) = inn.fit_correlated(1e-14, 1e-2);
+            let (kappa, _) = inn.fit_correlated(1e-14, 1e-2, &Default::default());
             logs.push((kappa / (q * q)).ln());
         }
         let n = logs.len() as f64;

@@ -14,6 +14,7 @@ use crate::csvio;
 use super::antenna::LeverArm;
 use super::evaluation::{evaluate, Evaluation};
 use super::filter::innovations::{Innovations, OBSERVATION_BLOCK};
+use super::filter::search::Search;
 use super::geometry::paper::{fit_geometry, heading_errors, GeomFit, GeomOptions};
 use super::geometry::refinement::{refine_subtrajectory_fit, FilterRefinement, GeometryRefine};
 use super::geometry::subtrajectory::{
@@ -191,6 +192,12 @@ impl Calibration {
                 .filter(|u| u.criterion == UncertaintyCriterion::Coverage)
                 .map(|u| (u.model, coefficient(&u.params)))
                 .collect(),
+            likelihood: self
+                .uncertainty
+                .iter()
+                .find(|u| u.criterion == UncertaintyCriterion::Likelihood)
+                .map(|u| u.searches.clone())
+                .unwrap_or_default(),
         })
     }
 }
@@ -445,7 +452,10 @@ fn fit_subtrajectory_phase(
                 ..g
             };
             let (initial, mode) = (*initial, o.delta_mode);
-            std::thread::spawn(move || fit_kappa_filter(&innovations, &p, &initial, mode).0)
+            let earlier = WarmStart::likelihood_searches(extras.warm);
+            std::thread::spawn(move || {
+                fit_kappa_filter(&innovations, &p, &initial, mode, earlier).0
+            })
         });
     let g = whole_run_summary(run, &s, applied)?;
     timer.lap("whole-run heading");
@@ -486,7 +496,8 @@ impl UncertaintyPhase<'_> {
         // The likelihood fit of the covariance model needs only the geometry: without the
         // refinement's filter it is built here, on a thread of its own beside the paper
         // model's fits.
-        let filter_fit = |p: ChassisParams| fit_kappa_at(run, p, heading0, initial, o);
+        let earlier = WarmStart::likelihood_searches(self.extras.warm);
+        let filter_fit = |p: ChassisParams| fit_kappa_at(run, p, heading0, initial, o, &earlier);
         std::thread::scope(|scope| -> Result<()> {
             let mut filter = (filter_wanted && early_filter.is_none()).then(|| {
                 let p = ChassisParams {
@@ -592,13 +603,14 @@ impl UncertaintyPhase<'_> {
 }
 
 /// The covariance model's kappa at the geometry of `p` by the likelihood of a filter built
-/// along `run` from the start heading `heading0` (rad).
+/// along `run` from the start heading `heading0` (rad), its searches from `earlier`'s ends.
 fn fit_kappa_at(
     run: &Run,
     p: ChassisParams,
     heading0: f64,
     initial: &ChassisParams,
     o: &CalibrationOptions,
+    earlier: &[(Search, f64)],
 ) -> Result<UncertaintyFit> {
     let innovations = Innovations::new(
         run,
@@ -608,7 +620,8 @@ fn fit_kappa_at(
         o.reference_heading_sigma,
         OBSERVATION_BLOCK,
     )?;
-    Ok(fit_kappa_filter(&innovations, &p, initial, o.delta_mode).0)
+    let earlier = earlier.to_vec();
+    Ok(fit_kappa_filter(&innovations, &p, initial, o.delta_mode, earlier).0)
 }
 
 /// The stability study of [`calibrate`] (`o.windows`; none when empty).

@@ -3,21 +3,30 @@
 //! background batch's, for the next batch and for the final calibration), and a flag that
 //! cancels it between its phases (the background batch's at the drive's end).
 //!
-//! A warm start moves where the searches start, never what they look for: the sub-trajectory
-//! fit starts from the earlier fit's shared unknowns and its sub-trajectories' fitted start
-//! headings (matched by their first match: the drive is cut from its start, so the earlier
-//! sub-trajectories start where they did), takes over the earlier fit's last evaluation of a
-//! sub-trajectory whose data are the same (a 64-bit fingerprint of its samples and reference
-//! points: what evaluating it again at that point would give) and stops by the same rule, a predicted decrease of
-//! the cost below 1e-10 of it, which leaves it within a few thousandths of a standard error
-//! of the minimum from any start; the coverage criterion's bisection takes the earlier
-//! coefficient as its first guess, and its answer does not depend on the guess.
+//! A warm start moves where the searches start, never what they look for:
+//! - the sub-trajectory fit starts from the earlier fit's shared unknowns and its
+//!   sub-trajectories' fitted start headings (matched by their first match: the drive is cut
+//!   from its start, so the earlier sub-trajectories start where they did), takes over the
+//!   earlier fit's last evaluation of a sub-trajectory whose data are the same (a 64-bit
+//!   fingerprint of its samples and reference points: what evaluating it again at that point
+//!   would give) and stops by the same rule, a predicted decrease of the cost below 1e-10 of
+//!   it, which leaves it within a few thousandths of a standard error of the minimum from any
+//!   start;
+//! - the coverage criterion's bisection takes the earlier coefficient as its first guess, and
+//!   its answer does not depend on the guess;
+//! - the covariance model's likelihood fit tries each of its one-dimensional searches first
+//!   within [`WARM_REACH`] (in `ln`) of where the earlier fit's same search ended, and
+//!   searches as a cold fit does when the optimum is not inside; the kappa and `kappa_diff` it
+//!   reports are polished to 1e-6 in `ln` whatever the start.
+//!
+//! [`WARM_REACH`]: super::filter::search::WARM_REACH
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::{bail, Result};
 use odo_unit::odometry::UncertaintyModel;
 
+use super::filter::search::Search;
 use super::geometry::subtrajectory::SubtrajectoryStart;
 
 /// Where an earlier calibration of the same drive left the searches
@@ -29,6 +38,8 @@ pub struct WarmStart {
     /// The coverage criterion's fitted coefficients: the model and its `delta_left` or
     /// `kappa_left` (m or m^2 per m).
     pub coefficients: Vec<(UncertaintyModel, f64)>,
+    /// Where the covariance model's likelihood fit's searches ended.
+    pub likelihood: Vec<(Search, f64)>,
 }
 
 impl WarmStart {
@@ -38,6 +49,12 @@ impl WarmStart {
             .iter()
             .find(|(model, _)| *model == m)
             .map(|&(_, v)| v)
+    }
+
+    /// Where the likelihood fit's searches ended, for the next fit's (empty without a warm
+    /// start).
+    pub fn likelihood_searches(warm: Option<&Self>) -> Vec<(Search, f64)> {
+        warm.map(|w| w.likelihood.clone()).unwrap_or_default()
     }
 }
 

@@ -58,7 +58,7 @@ use crate::stats::{median, wrap_angle};
 use super::blocks::{Composed, GaussMarkovBlock, StepTerms, PARALLEL_STEPS};
 use super::kalman::{FilterRun, FilterScore, Obs, SlipModel};
 use super::search::{
-    best_over_grid, largest_likelihood, posterior_mean, search_near, slip_rate_range,
+    best_over_grid, largest_likelihood, polish, posterior_mean, slip_rate_range, Search, SearchLog,
     EVIDENCE_PER_PARAMETER,
 };
 
@@ -512,13 +512,15 @@ impl Innovations {
     /// correlation grid; the white fit is kept unless correlated slip raises the likelihood by
     /// more than [`EVIDENCE_PER_PARAMETER`] (it has one parameter more). Without that test a
     /// correlation length the data cannot tell won on nearly every run, and its long-range
-    /// kappa read q 0.001 slip 15 % high (20 calibrations of the ensemble test).
-    pub fn fit_correlated(&self, lo: f64, hi: f64) -> (f64, f64) {
-        let white = self.fit(lo, hi);
+    /// kappa read q 0.001 slip 15 % high (20 calibrations of the ensemble test). Each search
+    /// starts near `log`'s earlier end of it and is recorded there ([`SearchLog`]).
+    pub fn fit_correlated(&self, lo: f64, hi: f64, log: &SearchLog) -> (f64, f64) {
+        let white = log.largest(Search::White, |k| self.nll(k, None, 0.0, None), lo, hi);
         let white_nll = self.nll(white, None, 0.0, None);
-        let (corr, kappa, nll) = best_over_grid(|corr| {
+        let (corr, kappa, nll) = best_over_grid(|i, corr| {
             let gm = self.wheel_slip(corr);
-            search_near(|k| self.nll(k, Some((corr, &gm)), 0.0, None), white, lo, hi)
+            let nll = |k| self.nll(k, Some((corr, &gm)), 0.0, None);
+            log.near(Search::Correlated(i), nll, white, lo, hi)
         });
         if nll + EVIDENCE_PER_PARAMETER < white_nll {
             (kappa, corr)
@@ -531,21 +533,28 @@ impl Innovations {
     /// search over `kappa_diff`) and correlated (the profile over its correlation length),
     /// kept only when it raises the likelihood by more than [`EVIDENCE_PER_PARAMETER`] per
     /// parameter it adds, then kappa and `kappa_diff` fitted in turn, and `kappa_diff` taken as
-    /// its mean over the likelihood ([`posterior_mean`]). Returns `(kappa, corr, turning)`.
-    pub fn fit_with_turning(&self, lo: f64, hi: f64) -> (f64, f64, Turning) {
-        let (kappa, corr) = self.fit_correlated(lo, hi);
+    /// its mean over the likelihood ([`posterior_mean`]); the searches by `log` as there.
+    /// Returns `(kappa, corr, turning)`.
+    pub fn fit_with_turning(&self, lo: f64, hi: f64, log: &SearchLog) -> (f64, f64, Turning) {
+        let (kappa, corr) = self.fit_correlated(lo, hi, log);
         let gm = (corr > 0.0).then(|| self.wheel_slip(corr));
         let wheels = gm.as_ref().map(|g| (corr, g));
         let without = self.nll(kappa, wheels, 0.0, None);
-        let kd = largest_likelihood(|d| self.nll(kappa, wheels, d, None), lo, hi);
+        let kd = log.largest(
+            Search::TurningWhite,
+            |d| self.nll(kappa, wheels, d, None),
+            lo,
+            hi,
+        );
         let white = Turning {
             kappa_diff: kd,
             corr: 0.0,
         };
         let mut best = (white, self.nll(kappa, wheels, kd, None), 1.0);
-        let (tcorr, tkd, tnll) = best_over_grid(|tc| {
+        let (tcorr, tkd, tnll) = best_over_grid(|i, tc| {
             let gt = self.turning_slip(tc);
-            search_near(|d| self.nll(kappa, wheels, d, Some((tc, &gt))), kd, lo, hi)
+            let nll = |d| self.nll(kappa, wheels, d, Some((tc, &gt)));
+            log.near(Search::Turning(i), nll, kd, lo, hi)
         });
         if tnll + EVIDENCE_PER_PARAMETER < best.1 {
             let t = Turning {
@@ -563,14 +572,21 @@ impl Innovations {
         // Kappa took some of the turning slip for wheel slip before `kappa_diff` was there:
         // the two are fitted in turn until they settle.
         let mut kappa = kappa;
-        for _ in 0..JOINT_ROUNDS {
-            let (k, _) = search_near(
+        for round in 0..JOINT_ROUNDS {
+            let (k, _) = log.near(
+                Search::JointKappa(round),
                 |k| self.nll(k, wheels, turning.kappa_diff, turn),
                 kappa,
                 lo,
                 hi,
             );
-            let (d, _) = search_near(|d| self.nll(k, wheels, d, turn), turning.kappa_diff, lo, hi);
+            let (d, _) = log.near(
+                Search::JointDiff(round),
+                |d| self.nll(k, wheels, d, turn),
+                turning.kappa_diff,
+                lo,
+                hi,
+            );
             let settled =
                 (k / kappa).ln().abs() < 0.01 && (d / turning.kappa_diff).ln().abs() < 0.01;
             (kappa, turning.kappa_diff) = (k, d);
@@ -578,11 +594,13 @@ impl Innovations {
                 break;
             }
         }
-        turning.kappa_diff = posterior_mean(
-            |l| self.nll(kappa, wheels, l.exp(), turn),
+        let kd = polish(
+            |d| self.nll(kappa, wheels, d, turn),
             turning.kappa_diff,
+            lo,
             hi,
         );
+        turning.kappa_diff = posterior_mean(|l| self.nll(kappa, wheels, l.exp(), turn), kd, hi);
         (kappa, corr, turning)
     }
 }

@@ -9,7 +9,14 @@
 //! flat in it within such a factor), each with a one-dimensional search for kappa (Brent's,
 //! in `ln kappa`), the grid shared between the machine's cores.
 //!
+//! A fit of the same drive on more data (the background batches of `record --calibrate`, the
+//! final calibration) starts each search near where the earlier fit's same search ended
+//! ([`SearchLog`]): Brent's search within [`WARM_REACH`] of it, and the cold search when the
+//! optimum is not inside that bracket.
+//!
 //! [`Composed::gauss_markov`]: super::blocks::Composed::gauss_markov
+
+use std::sync::Mutex;
 
 use odo_unit::odometry::ChassisParams;
 
@@ -44,6 +51,128 @@ fn corr_grid() -> impl Iterator<Item = f64> {
 /// Tolerance of the searches in `ln kappa` (0.1 % of kappa; its standard error on a 70 m run
 /// is 10-20 %).
 const LN_TOL: f64 = 1e-3;
+
+/// Tolerance in `ln` of [`polish`].
+const POLISH_TOL: f64 = 1e-6;
+
+/// Half-width in `ln` of the bracket about an earlier fit's optimum that a warm-started
+/// search tries first.
+pub const WARM_REACH: f64 = 0.1;
+
+/// One of the one-dimensional searches of [`Innovations::fit_with_turning`].
+///
+/// [`Innovations::fit_with_turning`]: super::innovations::Innovations::fit_with_turning
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Search {
+    /// White wheel slip's kappa.
+    White,
+    /// Gauss-Markov wheel slip's kappa at the correlation grid's point `i`.
+    Correlated(usize),
+    /// White opposite-phase slip's `kappa_diff`.
+    TurningWhite,
+    /// Gauss-Markov opposite-phase slip's `kappa_diff` at the grid's point `i`.
+    Turning(usize),
+    /// Kappa in round `i` of kappa and `kappa_diff` fitted in turn.
+    JointKappa(usize),
+    /// `kappa_diff` in round `i` of the same.
+    JointDiff(usize),
+}
+
+/// Where each search of a likelihood fit ended (its optimum, by [`Search`]): an earlier fit's
+/// of the same drive, near which this fit's searches start, and this fit's own (shared between
+/// the threads of the correlation grid).
+#[derive(Debug, Default)]
+pub struct SearchLog {
+    earlier: Vec<(Search, f64)>,
+    ended: Mutex<Vec<(Search, f64)>>,
+}
+
+impl SearchLog {
+    /// A log whose searches start near `earlier`'s ends (none: cold).
+    pub fn after(earlier: Vec<(Search, f64)>) -> Self {
+        Self {
+            earlier,
+            ended: Mutex::default(),
+        }
+    }
+
+    /// Where this fit's searches ended.
+    pub fn ended(self) -> Vec<(Search, f64)> {
+        self.ended.into_inner().unwrap_or_else(|e| e.into_inner())
+    }
+
+    fn earlier(&self, s: Search) -> Option<f64> {
+        self.earlier.iter().find(|(k, _)| *k == s).map(|&(_, x)| x)
+    }
+
+    fn record(&self, s: Search, x: f64) {
+        let mut ended = self.ended.lock().unwrap_or_else(|e| e.into_inner());
+        ended.push((s, x));
+    }
+
+    /// Search `s`: [`largest_likelihood`], from the earlier end when there is one.
+    pub(crate) fn largest(&self, s: Search, nll: impl Fn(f64) -> f64, lo: f64, hi: f64) -> f64 {
+        let x = match self.earlier(s).and_then(|e| search_warm(&nll, e, lo, hi)) {
+            Some((x, _)) => x,
+            None => largest_likelihood(nll, lo, hi),
+        };
+        self.record(s, x);
+        x
+    }
+
+    /// Search `s`: [`search_near`] `around`, from the earlier end when there is one.
+    pub(crate) fn near(
+        &self,
+        s: Search,
+        nll: impl Fn(f64) -> f64,
+        around: f64,
+        lo: f64,
+        hi: f64,
+    ) -> (f64, f64) {
+        let found = match self.earlier(s).and_then(|e| search_warm(&nll, e, lo, hi)) {
+            Some(found) => found,
+            None => search_near(nll, around, lo, hi),
+        };
+        self.record(s, found.0);
+        found
+    }
+}
+
+/// A reported optimum `x` of `nll` (found to [`LN_TOL`]) to [`POLISH_TOL`]: Brent's search
+/// within 4 [`LN_TOL`] of it (the bracket its search ended in), inside `[lo, hi]`. A search
+/// ends anywhere within its tolerance of the optimum, by where it started (a warm start
+/// moved kappa by 0.008 of its standard error); polished, two starts agree.
+pub(crate) fn polish(nll: impl Fn(f64) -> f64, x: f64, lo: f64, hi: f64) -> f64 {
+    let c = x.ln();
+    let (a, b) = (
+        (c - 4.0 * LN_TOL).max(lo.ln()),
+        (c + 4.0 * LN_TOL).min(hi.ln()),
+    );
+    if !(a < b) {
+        return x;
+    }
+    let (l, v, _) = brent_min(|l| nll(l.exp()), a, b, POLISH_TOL);
+    if v <= nll(x) {
+        l.exp()
+    } else {
+        x
+    }
+}
+
+/// Brent's search of `ln x` within [`WARM_REACH`] of `earlier`, inside `[lo, hi]`: `(x, nll)`
+/// when the optimum is inside that bracket (not at an edge short of `lo` or `hi`).
+fn search_warm(nll: impl Fn(f64) -> f64, earlier: f64, lo: f64, hi: f64) -> Option<(f64, f64)> {
+    let c = earlier.ln();
+    let (wa, wb) = (lo.ln(), hi.ln());
+    let (a, b) = ((c - WARM_REACH).max(wa), (c + WARM_REACH).min(wb));
+    if !(a < b) {
+        return None;
+    }
+    let (l, v, _) = brent_min(|l| nll(l.exp()), a, b, LN_TOL);
+    let edge = 3.0 * LN_TOL;
+    let inside = (l - a > edge || a == wa) && (b - l > edge || b == wb);
+    (inside && v.is_finite()).then(|| (l.exp(), v))
+}
 
 /// How far a correlated fit's kappa is looked for from the white fit's: `ln` below, above.
 const LN_REACH: (f64, f64) = (3.0, 8.0);
@@ -104,10 +233,10 @@ pub(super) fn search_near(nll: impl Fn(f64) -> f64, around: f64, lo: f64, hi: f6
     (l.exp(), v)
 }
 
-/// The best of `profile(corr)` over the correlation grid, the grid split between two threads
-/// when there are two cores: `(corr, value, nll)`.
-pub(super) fn best_over_grid(profile: impl Fn(f64) -> (f64, f64) + Sync) -> (f64, f64, f64) {
-    let grid: Vec<f64> = corr_grid().collect();
+/// The best of `profile(i, corr)` over the correlation grid (`i` the point's index), the grid
+/// split between two threads when there are two cores: `(corr, value, nll)`.
+pub(super) fn best_over_grid(profile: impl Fn(usize, f64) -> (f64, f64) + Sync) -> (f64, f64, f64) {
+    let grid: Vec<(usize, f64)> = corr_grid().enumerate().collect();
     let results: Vec<(f64, f64, f64)> = std::thread::scope(|s| {
         let half = if cores() > 1 {
             grid.len() / 2
@@ -116,10 +245,10 @@ pub(super) fn best_over_grid(profile: impl Fn(f64) -> (f64, f64) + Sync) -> (f64
         };
         let (first, second) = grid.split_at(half);
         let profile = &profile;
-        let run = move |part: &[f64]| -> Vec<(f64, f64, f64)> {
+        let run = move |part: &[(usize, f64)]| -> Vec<(f64, f64, f64)> {
             part.iter()
-                .map(|&c| {
-                    let (v, nll) = profile(c);
+                .map(|&(i, c)| {
+                    let (v, nll) = profile(i, c);
                     (c, v, nll)
                 })
                 .collect()
@@ -133,4 +262,94 @@ pub(super) fn best_over_grid(profile: impl Fn(f64) -> (f64, f64) + Sync) -> (f64
         .into_iter()
         .min_by(|a, b| a.2.total_cmp(&b.2))
         .unwrap_or((0.0, 0.0, f64::INFINITY))
+}
+
+#[cfg(test)]
+mod tests {
+    use std::cell::Cell;
+
+    use super::*;
+
+    /// A likelihood whose `ln` optimum is `ln m`, quadratic in `ln x` with a standard error
+    /// `se`, counting its evaluations in `n`.
+    fn parabola(m: f64, se: f64, n: &Cell<usize>) -> impl Fn(f64) -> f64 + '_ {
+        move |x: f64| {
+            n.set(n.get() + 1);
+            (x.ln() - m.ln()).powi(2) / (2.0 * se * se)
+        }
+    }
+
+    /// A warm search from an earlier end near the optimum finds it in fewer evaluations than
+    /// the cold search; from an end too far off, the optimum still (the cold search); and it
+    /// is recorded under its name either way.
+    #[test]
+    fn warm_searches_start_near_the_earlier_end_and_fall_back() {
+        let (lo, hi) = slip_rate_range();
+        let n = Cell::new(0);
+        let m = 2.0e-7;
+        // earlier end (x m), what the search finds within (ln), evaluations at most.
+        let table: [(Option<f64>, f64, usize); 5] = [
+            (None, 2.0 * LN_TOL, 40),
+            (Some(1.0), 2.0 * LN_TOL, 12),
+            (Some(1.05), 2.0 * LN_TOL, 12),
+            (Some(0.95), 2.0 * LN_TOL, 12),
+            (Some(3.0), 2.0 * LN_TOL, 60),
+        ];
+        let mut warm_evals = 0;
+        let mut cold_evals = 0;
+        for (earlier, within, most) in table {
+            let earlier = earlier
+                .map(|f| vec![(Search::White, f * m)])
+                .unwrap_or_default();
+            let log = SearchLog::after(earlier.clone());
+            n.set(0);
+            let x = log.largest(Search::White, parabola(m, 0.05, &n), lo, hi);
+            assert!((x / m).ln().abs() < within, "{earlier:?}: {x:e}");
+            assert!(n.get() <= most, "{earlier:?}: {} evaluations", n.get());
+            match earlier.first() {
+                None => cold_evals = n.get(),
+                Some(&(_, e)) if (e / m).ln().abs() < WARM_REACH => warm_evals = n.get(),
+                _ => {}
+            }
+            assert_eq!(log.ended(), vec![(Search::White, x)]);
+        }
+        assert!(warm_evals < cold_evals / 2, "{warm_evals} vs {cold_evals}");
+    }
+
+    /// `near` keeps the earlier end's bracket for its own search and names its ends apart.
+    #[test]
+    fn near_searches_are_recorded_by_name() {
+        let (lo, hi) = slip_rate_range();
+        let n = Cell::new(0);
+        let log = SearchLog::after(vec![(Search::Correlated(3), 1e-6)]);
+        let (a, _) = log.near(
+            Search::Correlated(3),
+            parabola(1.02e-6, 0.1, &n),
+            1e-9,
+            lo,
+            hi,
+        );
+        let (b, _) = log.near(Search::Correlated(4), parabola(5e-8, 0.1, &n), 1e-9, lo, hi);
+        assert!((a / 1.02e-6).ln().abs() < 2.0 * LN_TOL);
+        assert!((b / 5e-8).ln().abs() < 2.0 * LN_TOL);
+        assert_eq!(
+            log.ended(),
+            vec![(Search::Correlated(3), a), (Search::Correlated(4), b)]
+        );
+    }
+
+    /// Polishing brings two ends of the same optimum, anywhere within the searches'
+    /// tolerance, to within its own; an optimum at a bound stays there.
+    #[test]
+    fn polishing_brings_ends_within_the_searches_tolerance_together() {
+        let (lo, hi) = slip_rate_range();
+        let n = Cell::new(0);
+        let m = 3.0e-7;
+        for offset in [-3.0 * LN_TOL, -LN_TOL, 0.0, 0.5 * LN_TOL, 3.0 * LN_TOL] {
+            let x = polish(parabola(m, 0.05, &n), m * offset.exp(), lo, hi);
+            assert!((x / m).ln().abs() < 10.0 * POLISH_TOL, "{offset}: {x:e}");
+        }
+        let at_bound = polish(|x: f64| -x.ln(), hi, lo, hi);
+        assert!((at_bound / hi).ln().abs() < 4.0 * LN_TOL + 1e-12);
+    }
 }

@@ -3,6 +3,8 @@
 
 use odo_unit::odometry::{ChassisParams, UncertaintyModel};
 
+use crate::calib::filter::search::Search;
+
 /// How the two wheels' coefficients are fitted.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum DeltaMode {
@@ -60,6 +62,9 @@ pub struct UncertaintyFit {
     /// The coefficient of the largest likelihood, where the unit is told another: its mean over
     /// the likelihood (likelihood criterion; `fit_kappa_filter`).
     pub most_likely: Option<f64>,
+    /// Where the likelihood fit's searches ended, where a later fit of the same drive on more
+    /// data starts them (likelihood criterion; else empty).
+    pub searches: Vec<(Search, f64)>,
 }
 
 /// `base` with the fitted coefficient `v` of its uncertainty model: `delta_left` or

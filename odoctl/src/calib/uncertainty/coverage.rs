@@ -268,6 +268,7 @@ pub(crate) fn fit_coefficient(
         heading_coverage: None,
         ln_se: None,
         most_likely: None,
+        searches: Vec::new(),
     })
 }
 

@@ -4,7 +4,7 @@
 use odo_unit::odometry::{ChassisParams, UncertaintyModel};
 
 use crate::calib::filter::innovations::Innovations;
-use crate::calib::filter::search::{mean_from_ln_se, slip_rate_range};
+use crate::calib::filter::search::{mean_from_ln_se, polish, slip_rate_range, Search, SearchLog};
 
 use super::coefficients::{set_coefficient, DeltaMode, UncertaintyCriterion, UncertaintyFit};
 
@@ -16,16 +16,20 @@ use super::coefficients::{set_coefficient, DeltaMode, UncertaintyCriterion, Unce
 /// likely value), not the most likely value: its variances are linear in kappa, so the mean is
 /// what the errors' spread over kappa's own uncertainty has, and one drive that happened to read
 /// kappa low does not leave the unit's bands too narrow. Returns the fit and the wheel slip's
-/// correlation length (m; 0: white).
+/// correlation length (m; 0: white). The searches start near where an earlier fit's ended
+/// (`earlier`, [`SearchLog`]; empty: cold).
 pub fn fit_kappa_filter(
     innovations: &Innovations,
     geometry: &ChassisParams,
     initial: &ChassisParams,
     mode: DeltaMode,
+    earlier: Vec<(Search, f64)>,
 ) -> (UncertaintyFit, f64) {
     let (lo, hi) = slip_rate_range();
-    let (most_likely, corr, turning) = innovations.fit_with_turning(lo, hi);
+    let log = SearchLog::after(earlier);
+    let (most_likely, corr, turning) = innovations.fit_with_turning(lo, hi, &log);
     let nll = |k: f64| innovations.score_with(k, corr, turning).nll;
+    let most_likely = polish(nll, most_likely, lo, hi);
     let ln_se = ln_standard_error(nll, most_likely);
     let kappa = mean_from_ln_se(most_likely, ln_se, hi);
     let mut params = set_coefficient(
@@ -67,6 +71,7 @@ pub fn fit_kappa_filter(
             heading_coverage: (!score.heading.0.is_nan()).then_some(score.heading),
             ln_se,
             most_likely: Some(most_likely),
+            searches: log.ended(),
         },
         corr,
     )
