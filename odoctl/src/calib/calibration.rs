@@ -192,6 +192,7 @@ impl Calibration {
                 .filter(|u| u.criterion == UncertaintyCriterion::Coverage)
                 .map(|u| (u.model, coefficient(&u.params)))
                 .collect(),
+            heading0: self.geometry.heading0,
             likelihood: self
                 .uncertainty
                 .iter()
@@ -297,6 +298,7 @@ pub fn calibrate_with(
         subtrajectories,
         refinement,
         early_filter,
+        headings,
     } = fit_geometry_phase(&mut run, initial, o, (filter_wanted, extras), &timer)?;
     extras.check()?;
     run.antenna = geometry.antenna;
@@ -321,6 +323,8 @@ pub fn calibrate_with(
         let phase = UncertaintyPhase {
             run: &run,
             heading0: geometry.heading0,
+            // Integrated at the geometry: the wheel functions change the path.
+            headings: headings.as_deref().filter(|_| harmonics.is_none()),
             initial,
             o,
             timer: &timer,
@@ -357,6 +361,9 @@ struct GeometryPhase {
     /// The covariance model's kappa, fitted on a thread of its own from the applied
     /// refinement's filter when the likelihood criterion wants it.
     early_filter: Option<JoinHandle<UncertaintyFit>>,
+    /// The odometry's heading at each match, integrated at the geometry from its start
+    /// heading (rad), when the method integrated it.
+    headings: Option<Vec<f64>>,
 }
 
 /// The geometry of [`calibrate`] by `o.method`; the run's lever arm becomes the fit's.
@@ -392,6 +399,7 @@ fn fit_geometry_phase(
                 subtrajectories: None,
                 refinement: None,
                 early_filter: None,
+                headings: None,
             })
         }
         Method::Subtrajectory => fit_subtrajectory_phase(run, initial, o, wanted, timer),
@@ -457,13 +465,14 @@ fn fit_subtrajectory_phase(
                 fit_kappa_filter(&innovations, &p, &initial, mode, earlier).0
             })
         });
-    let g = whole_run_summary(run, &s, applied)?;
+    let (g, headings) = whole_run_summary(run, &s, applied, extras.warm.map(|w| w.heading0))?;
     timer.lap("whole-run heading");
     Ok(GeometryPhase {
         geometry: g,
         subtrajectories: Some(s),
         refinement,
         early_filter,
+        headings: Some(headings),
     })
 }
 
@@ -472,6 +481,8 @@ fn fit_subtrajectory_phase(
 struct UncertaintyPhase<'a> {
     run: &'a Run<'a>,
     heading0: f64,
+    /// The odometry's heading at each match from `heading0`, when integrated already (rad).
+    headings: Option<&'a [f64]>,
     initial: &'a ChassisParams,
     o: &'a CalibrationOptions,
     timer: &'a PhaseTimer,
@@ -530,7 +541,10 @@ impl UncertaintyPhase<'_> {
                 let restarts = match &mut restarts {
                     Some(r) => &*r,
                     None => {
-                        let r = Restarts::new(run, params, heading0, o.delta_window)?;
+                        let r = match self.headings {
+                            Some(h) => Restarts::with_headings(run, params, h, o.delta_window)?,
+                            None => Restarts::new(run, params, heading0, o.delta_window)?,
+                        };
                         self.timer.lap("restart headings");
                         self.extras.check()?;
                         &*restarts.insert(r)
@@ -664,14 +678,17 @@ fn fitted_models(o: &CalibrationOptions, initial: &ChassisParams) -> Vec<Uncerta
 /// run's start minimising eq (16) over the whole run at the estimate (from the first
 /// sub-trajectory's), eq (16) there, and the sub-trajectory fit's robust errors (the
 /// heading's own, with the geometry held, over stretches of the sub-trajectory length). With
-/// an applied `refinement`, its geometry and standard errors.
+/// an applied `refinement`, its geometry and standard errors. The heading's search starts
+/// from `warm` (an earlier calibration's of the same drive) when given. With the odometry's
+/// heading at each match integrated from the start heading found (rad).
 fn whole_run_summary(
     run: &Run,
     s: &SubtrajectoryFit,
     refinement: Option<&FilterRefinement>,
-) -> Result<GeomFit> {
+    warm: Option<f64>,
+) -> Result<(GeomFit, Vec<f64>)> {
     let last = run.len() - 1;
-    let guess = s.blocks.first().map_or(0.0, |b| b.heading);
+    let guess = warm.unwrap_or_else(|| s.blocks.first().map_or(0.0, |b| b.heading));
     let params = refinement.map_or(s.params, |r| r.params);
     // One integration (two when it turns by more than 0.01 rad), the path turned about its
     // start: the heading a re-integrating fit would find.
@@ -687,16 +704,16 @@ fn whole_run_summary(
     // from one integration, and eq (16) at the estimate: on two threads.
     let (cost, (formal, clustered)) = std::thread::scope(|scope| {
         let errors = scope.spawn(|| heading_errors(run, &params, heading0, SUBTRAJECTORY_LENGTH));
-        let cost = run.eq16(&params, 0, last, heading0);
+        let cost = run.eq16_with_headings(&params, 0, last, heading0);
         let errors = errors
             .join()
             .expect("a standard error's integration panicked");
         (cost, errors)
     });
-    let cost = cost.ok_or_else(|| anyhow::anyhow!("the estimate is not admissible"))?;
+    let (cost, headings) = cost.ok_or_else(|| anyhow::anyhow!("the estimate is not admissible"))?;
     let robust = [se[0], se[1], se[2], clustered];
     let min_turning = SubtrajectoryOptions::default().min_turning;
-    Ok(GeomFit {
+    let g = GeomFit {
         params,
         heading0,
         cost,
@@ -725,7 +742,8 @@ fn whole_run_summary(
             &params,
             &robust,
         ),
-    })
+    };
+    Ok((g, headings))
 }
 
 /// Wall time of each calibration phase, printed to stderr when `ODOCTL_DEBUG` is set.

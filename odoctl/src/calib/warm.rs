@@ -12,6 +12,8 @@
 //!   would give) and stops by the same rule, a predicted decrease of the cost below 1e-10 of
 //!   it, which leaves it within a few thousandths of a standard error of the minimum from any
 //!   start;
+//! - the whole run's start heading is searched from the earlier one (one integration instead
+//!   of two when the first sub-trajectory's is more than 0.01 rad from the result);
 //! - the coverage criterion's bisection takes the earlier coefficient as its first guess, and
 //!   its answer does not depend on the guess;
 //! - the covariance model's likelihood fit tries each of its one-dimensional searches first
@@ -38,6 +40,8 @@ pub struct WarmStart {
     /// The coverage criterion's fitted coefficients: the model and its `delta_left` or
     /// `kappa_left` (m or m^2 per m).
     pub coefficients: Vec<(UncertaintyModel, f64)>,
+    /// The whole run's start heading (rad).
+    pub heading0: f64,
     /// Where the covariance model's likelihood fit's searches ended.
     pub likelihood: Vec<(Search, f64)>,
 }

@@ -33,10 +33,6 @@ impl Restarts {
     /// Cuts the run and fits the restart headings (eq 16 over each sub-trajectory, from the
     /// full-run odometry with `heading0`).
     pub fn new(run: &Run, geometry: &ChassisParams, heading0: f64, window: f64) -> Result<Self> {
-        let wins = windows(run, window, 3);
-        if wins.is_empty() {
-            bail!("the run is too short for the uncertainty fit (no sub-trajectory of {window} m with 3 points)");
-        }
         // The full-run odometry headings (the pose does not depend on the uncertainty model).
         let mut full = Vec::with_capacity(run.len());
         full.push(heading0);
@@ -44,6 +40,24 @@ impl Restarts {
             full.push(integ.pose().heading)
         })
         .map_err(|e| anyhow!("parameters: {e}"))?;
+        Self::with_headings(run, geometry, &full, window)
+    }
+
+    /// [`Restarts::new`] with the full-run odometry's headings at each match already
+    /// integrated (`full`, [`Run::eq16_with_headings`]).
+    pub fn with_headings(
+        run: &Run,
+        geometry: &ChassisParams,
+        full: &[f64],
+        window: f64,
+    ) -> Result<Self> {
+        let wins = windows(run, window, 3);
+        if wins.is_empty() {
+            bail!("the run is too short for the uncertainty fit (no sub-trajectory of {window} m with 3 points)");
+        }
+        if full.len() != run.len() {
+            bail!("{} headings for a run of {} matches", full.len(), run.len());
+        }
         // The sub-trajectories' fits are independent: spread over the cores (the same fits,
         // in the same order of results, as one after the other).
         let threads = cores().min(wins.len());
@@ -52,7 +66,6 @@ impl Restarts {
             let jobs: Vec<_> = wins
                 .chunks(chunk)
                 .map(|part| {
-                    let full = &full;
                     scope.spawn(move || {
                         part.iter()
                             .map(|&(a, b)| fit_restart_heading(run, geometry, a, b, full[a]))
