@@ -222,3 +222,32 @@ impl Restarts {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calib::testing::sim;
+    use crate::csvio::match_times;
+    use crate::simulate::{default_truth, PathKind};
+
+    /// Restarts from eq (16)'s integration's headings are the restarts that integrate their
+    /// own, bit for bit, and eq (16) is the same; headings of another run are refused.
+    #[test]
+    fn restarts_from_eq16_headings_are_the_restarts_that_integrate() {
+        let s = sim(PathKind::Random, 120.0, 4);
+        let run = Run::new(
+            &s.samples,
+            &s.reference,
+            match_times(&s.samples, &s.reference),
+        );
+        let g = default_truth();
+        let h0 = run.heading_guess(0);
+        let last = run.len() - 1;
+        let (cost, headings) = run.eq16_with_headings(&g, 0, last, h0).unwrap();
+        assert_eq!(Some(cost), run.eq16(&g, 0, last, h0));
+        let own = Restarts::new(&run, &g, h0, 10.0).unwrap();
+        let given = Restarts::with_headings(&run, &g, &headings, 10.0).unwrap();
+        assert_eq!((own.windows, own.headings), (given.windows, given.headings));
+        assert!(Restarts::with_headings(&run, &g, &headings[1..], 10.0).is_err());
+    }
+}
