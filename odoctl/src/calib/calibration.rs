@@ -15,14 +15,14 @@ use super::antenna::LeverArm;
 use super::evaluation::{evaluate, Evaluation};
 use super::filter::innovations::{Innovations, OBSERVATION_BLOCK};
 use super::filter::search::Search;
-use super::geometry::paper::{fit_geometry, heading_errors, GeomFit, GeomOptions};
+use super::geometry::paper::{fit_geometry, GeomFit, GeomOptions};
 use super::geometry::refinement::{refine_subtrajectory_fit, FilterRefinement, GeometryRefine};
 use super::geometry::subtrajectory::{
     fit_subtrajectories_from, Cuts, SubtrajectoryFit, SubtrajectoryOptions, SUBTRAJECTORY_LENGTH,
 };
 use super::geometry::turning::track_width_warning;
 use super::geometry::wheel_harmonics::{fit_harmonics, HarmonicsFit, HARMONICS_SEGMENT};
-use super::heading_fit::fit_restart_heading;
+use super::heading_fit::{fit_whole_run_heading, WholeRunHeading};
 use super::run::Run;
 use super::studies::stability::{windows_study, WindowEstimate, WindowStart};
 use super::uncertainty::coefficients::{
@@ -680,7 +680,7 @@ fn fitted_models(o: &CalibrationOptions, initial: &ChassisParams) -> Vec<Uncerta
 /// heading's own, with the geometry held, over stretches of the sub-trajectory length). With
 /// an applied `refinement`, its geometry and standard errors. The heading's search starts
 /// from `warm` (an earlier calibration's of the same drive) when given. With the odometry's
-/// heading at each match integrated from the start heading found (rad).
+/// heading at each match from the start heading found (rad).
 fn whole_run_summary(
     run: &Run,
     s: &SubtrajectoryFit,
@@ -691,8 +691,14 @@ fn whole_run_summary(
     let guess = warm.unwrap_or_else(|| s.blocks.first().map_or(0.0, |b| b.heading));
     let params = refinement.map_or(s.params, |r| r.params);
     // One integration (two when it turns by more than 0.01 rad), the path turned about its
-    // start: the heading a re-integrating fit would find.
-    let heading0 = fit_restart_heading(run, &params, 0, last, guess)?;
+    // start: the heading a re-integrating fit would find, eq (16) there and the heading's
+    // errors with the geometry held (it is fitted with the geometry held).
+    let WholeRunHeading {
+        heading0,
+        cost,
+        headings,
+        errors: (formal, clustered),
+    } = fit_whole_run_heading(run, &params, guess, SUBTRAJECTORY_LENGTH)?;
     let mut se = s.std_errors;
     if let Some(r) = refinement {
         let e = r.std_errors();
@@ -700,17 +706,6 @@ fn whole_run_summary(
             se[i] = se[i].map(|_| e[i]);
         }
     }
-    // The heading's errors with the geometry held (it is fitted with the geometry held), both
-    // from one integration, and eq (16) at the estimate: on two threads.
-    let (cost, (formal, clustered)) = std::thread::scope(|scope| {
-        let errors = scope.spawn(|| heading_errors(run, &params, heading0, SUBTRAJECTORY_LENGTH));
-        let cost = run.eq16_with_headings(&params, 0, last, heading0);
-        let errors = errors
-            .join()
-            .expect("a standard error's integration panicked");
-        (cost, errors)
-    });
-    let (cost, headings) = cost.ok_or_else(|| anyhow::anyhow!("the estimate is not admissible"))?;
     let robust = [se[0], se[1], se[2], clustered];
     let min_turning = SubtrajectoryOptions::default().min_turning;
     let g = GeomFit {

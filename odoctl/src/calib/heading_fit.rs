@@ -8,6 +8,7 @@ use odo_unit::odometry::ChassisParams;
 
 use crate::optim::{self, LmOptions, NormalAccumulator, Objective};
 
+use super::geometry::paper::HeadingErrors;
 use super::run::Run;
 
 /// The heading at match `a` minimising eq (16) over `a..=b` with the geometry fixed.
@@ -62,74 +63,214 @@ pub fn fit_restart_heading(
     b: usize,
     guess: f64,
 ) -> Result<f64> {
-    let (x0, y0) = run.anchor(a);
-    let mut path = Vec::with_capacity(b - a);
-    let mut heading = guess;
-    for pass in 0..RESTART_PASSES {
-        path.clear();
-        run.integrate_pose(params, a, b, heading, |k, integ| {
-            // The antenna turns with the path about the start, as the centre does.
-            let (px, py) = run.observed(&integ.pose(), heading);
-            let r = run.reference_at(k);
-            path.push([px - x0, py - y0, r.x - x0, r.y - y0]);
-        })
-        .map_err(|e| anyhow!("parameters: {e}"))?;
-        let at = heading;
-        // The first pass starts from the turn of the least squares (where `sum r . R(phi) d`
-        // is largest: one pass over the path), which is near the norms' least; a second
-        // from the heading the first found.
-        let start = if pass == 0 {
-            let (dot, cross) = path.iter().fold((0.0, 0.0), |(a, b), &[dx, dy, rx, ry]| {
-                (a + rx * dx + ry * dy, b + rx * dy - ry * dx)
-            });
-            if dot != 0.0 || cross != 0.0 {
-                at + cross.atan2(dot)
+    Ok(TurnedPath::fit(run, params, a, b, guess)?.heading)
+}
+
+/// The path of [`fit_restart_heading`]'s last integration and the heading it found.
+struct TurnedPath {
+    /// The heading found (rad).
+    heading: f64,
+    /// The start heading the path was integrated at (rad).
+    at: f64,
+    /// At each match after the start: the observed point and the reference point, both
+    /// relative to the start (m).
+    path: Vec<[f64; 4]>,
+    /// The odometry's heading at each match after the start (rad).
+    headings: Vec<f64>,
+}
+
+impl TurnedPath {
+    /// [`fit_restart_heading`] over `a..=b` from `guess`.
+    fn fit(run: &Run, params: &ChassisParams, a: usize, b: usize, guess: f64) -> Result<Self> {
+        let (x0, y0) = run.anchor(a);
+        let mut t = Self {
+            heading: guess,
+            at: guess,
+            path: Vec::with_capacity(b - a),
+            headings: Vec::with_capacity(b - a),
+        };
+        for pass in 0..RESTART_PASSES {
+            t.integrate(run, params, (a, b), (x0, y0))?;
+            let at = t.at;
+            // The first pass starts from the turn of the least squares (where `sum r . R(phi)
+            // d` is largest: one pass over the path), which is near the norms' least; a
+            // second from the heading the first found.
+            let start = if pass == 0 {
+                let (dot, cross) = t.path.iter().fold((0.0, 0.0), |(a, b), &[dx, dy, rx, ry]| {
+                    (a + rx * dx + ry * dy, b + rx * dy - ry * dx)
+                });
+                if dot != 0.0 || cross != 0.0 {
+                    at + cross.atan2(dot)
+                } else {
+                    at
+                }
             } else {
                 at
+            };
+            let path = &t.path;
+            let f = |x: &[f64], acc: &mut NormalAccumulator| {
+                let (sin, cos) = (x[0] - at).sin_cos();
+                for &[dx, dy, rx, ry] in path {
+                    let (px, py) = (dx * cos + dy * sin, dy * cos - dx * sin);
+                    acc.add_pair(px - rx, py - ry, &[py], &[-px]);
+                }
+                acc.cost().is_finite()
+            };
+            let res = optim::levenberg_marquardt_streamed(
+                f,
+                &[start],
+                &[1.0],
+                Objective::SumOfNorms,
+                LmOptions {
+                    // The Newton model of the norms converges quadratically: the heading is
+                    // the minimum of the turned path's eq (16) to 1e-10 rad, not where the
+                    // IRLS majoriser's linear convergence happens to stop (iterations cost no
+                    // integration here).
+                    newton: true,
+                    pred_tol: RESTART_PRED_TOL,
+                    ..LmOptions::default()
+                },
+            )
+            .ok_or_else(|| anyhow!("parameters: not admissible"))?;
+            t.heading = res.x[0];
+            if (t.heading - at).abs() <= RESTART_TURN_EXACT {
+                break;
             }
-        } else {
-            at
-        };
-        let f = |x: &[f64], acc: &mut NormalAccumulator| {
-            let (sin, cos) = (x[0] - at).sin_cos();
-            for &[dx, dy, rx, ry] in &path {
-                let (px, py) = (dx * cos + dy * sin, dy * cos - dx * sin);
-                acc.add_pair(px - rx, py - ry, &[py], &[-px]);
-            }
-            acc.cost().is_finite()
-        };
-        let res = optim::levenberg_marquardt_streamed(
-            f,
-            &[start],
-            &[1.0],
-            Objective::SumOfNorms,
-            LmOptions {
-                // The Newton model of the norms converges quadratically: the heading is the
-                // minimum of the turned path's eq (16) to 1e-10 rad, not where the IRLS
-                // majoriser's linear convergence happens to stop (iterations cost no
-                // integration here).
-                newton: true,
-                pred_tol: RESTART_PRED_TOL,
-                ..LmOptions::default()
-            },
-        )
-        .ok_or_else(|| anyhow!("parameters: not admissible"))?;
-        heading = res.x[0];
-        if (heading - at).abs() <= RESTART_TURN_EXACT {
-            break;
         }
+        Ok(t)
     }
-    Ok(heading)
+
+    /// Integrates `params` over `a..=b` from the heading found so far, which becomes `at`,
+    /// relative to the start `(x0, y0)`.
+    fn integrate(
+        &mut self,
+        run: &Run,
+        params: &ChassisParams,
+        (a, b): (usize, usize),
+        (x0, y0): (f64, f64),
+    ) -> Result<()> {
+        let heading = self.heading;
+        self.at = heading;
+        self.path.clear();
+        self.headings.clear();
+        let (path, headings) = (&mut self.path, &mut self.headings);
+        run.integrate_pose(params, a, b, heading, |k, integ| {
+            // The antenna turns with the path about the start, as the centre does.
+            let pose = integ.pose();
+            let (px, py) = run.observed(&pose, heading);
+            let r = run.reference_at(k);
+            path.push([px - x0, py - y0, r.x - x0, r.y - y0]);
+            headings.push(pose.heading);
+        })
+        .map_err(|e| anyhow!("parameters: {e}"))
+    }
+}
+
+/// The whole run's start heading at `params` and what its path gives (rad, m).
+#[derive(Debug, Clone, PartialEq)]
+pub struct WholeRunHeading {
+    /// The start heading of the least eq (16) (rad).
+    pub heading0: f64,
+    /// Eq (16) there (m).
+    pub cost: f64,
+    /// The odometry's heading at every match, `heading0` at the first (rad).
+    pub headings: Vec<f64>,
+    /// The start heading's formal and cluster-robust standard errors (rad), the geometry
+    /// held ([`HeadingErrors`]).
+    pub errors: (Option<f64>, Option<f64>),
+}
+
+/// [`fit_restart_heading`] over the whole run from `guess`, and from the same integration,
+/// the path turned to the heading found: eq (16) there, the odometry's heading at each match
+/// and the heading's standard errors (stretches of `length` m for the cluster-robust one),
+/// whose rows are the turn's derivative `(y - y0, -(x - x0))`, what the forward sensitivity
+/// gives to the integrator's rounding.
+pub fn fit_whole_run_heading(
+    run: &Run,
+    params: &ChassisParams,
+    guess: f64,
+    length: f64,
+) -> Result<WholeRunHeading> {
+    let last = run.len() - 1;
+    let t = TurnedPath::fit(run, params, 0, last, guess)?;
+    let phi = t.heading - t.at;
+    let (sin, cos) = phi.sin_cos();
+    let mut residuals = Vec::with_capacity(2 * t.path.len());
+    let mut errors = HeadingErrors::new(run.dist[0], length);
+    for (i, &[dx, dy, rx, ry]) in t.path.iter().enumerate() {
+        let (px, py) = (dx * cos + dy * sin, dy * cos - dx * sin);
+        let r = (px - rx, py - ry);
+        residuals.extend([r.0, r.1]);
+        errors.add(run.dist[i + 1], r, py, -px);
+    }
+    if residuals.iter().any(|v| !v.is_finite()) {
+        return Err(anyhow!("the estimate is not admissible"));
+    }
+    let mut headings = Vec::with_capacity(run.len());
+    headings.push(t.heading);
+    headings.extend(t.headings.iter().map(|h| h + phi));
+    Ok(WholeRunHeading {
+        heading0: t.heading,
+        cost: optim::objective(Objective::SumOfNorms, &residuals),
+        headings,
+        errors: errors.finish(),
+    })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::calib::geometry::paper::heading_errors;
     use crate::calib::run::windows;
     use crate::calib::testing::sim;
     use crate::csvio::match_times;
     use crate::optim::norm2;
     use crate::simulate::{default_truth, PathKind};
+
+    /// The whole-run heading fit's figures, from its path turned, are those of the
+    /// integrations at the heading it found (to the integrator's rounding): eq (16), the
+    /// headings at every match and the heading's two standard errors from the forward
+    /// sensitivities; with a lever arm too, and from a guess far enough for two integrations.
+    #[test]
+    fn whole_run_heading_figures_are_the_integrated_ones() {
+        let s = sim(PathKind::Random, 200.0, 5);
+        let mut run = Run::new(
+            &s.samples,
+            &s.reference,
+            match_times(&s.samples, &s.reference),
+        );
+        let p = default_truth();
+        for (antenna, off) in [((0.0, 0.0), 0.001), ((0.3, -0.1), 0.2)] {
+            run.antenna = antenna;
+            let guess = run.heading_guess(0) + off;
+            let w = fit_whole_run_heading(&run, &p, guess, 10.0).unwrap();
+            let last = run.len() - 1;
+            assert_eq!(
+                w.heading0,
+                fit_restart_heading(&run, &p, 0, last, guess).unwrap()
+            );
+            // Each point moves by the integrator's rounding of the turn, 2e-9 of its distance
+            // from the start (at most the path's length).
+            let cost = run.eq16(&p, 0, last, w.heading0).unwrap();
+            let bound = last as f64 * 2e-9 * (run.dist[last] - run.dist[0]);
+            assert!((w.cost - cost).abs() < bound, "{} {cost} {bound}", w.cost);
+            let mut headings = vec![w.heading0];
+            run.integrate_pose(&p, 0, last, w.heading0, |_, integ| {
+                headings.push(integ.pose().heading)
+            })
+            .unwrap();
+            assert_eq!(headings.len(), w.headings.len());
+            for (a, b) in headings.iter().zip(&w.headings) {
+                let d = (a - b).rem_euclid(std::f64::consts::TAU);
+                assert!(d.min(std::f64::consts::TAU - d) < 1e-9, "{a} {b}");
+            }
+            let (formal, clustered) = heading_errors(&run, &p, w.heading0, 10.0);
+            let near =
+                |a: Option<f64>, b: Option<f64>| (a.unwrap() / b.unwrap() - 1.0).abs() < 1e-6;
+            assert!(near(w.errors.0, formal), "{:?} {formal:?}", w.errors);
+            assert!(near(w.errors.1, clustered), "{:?} {clustered:?}", w.errors);
+        }
+    }
 
     /// The restarts' heading fit turns one integrated path about its start: the odometry
     /// integrated from another start heading is that path turned (to the integrator's

@@ -486,31 +486,6 @@ impl<'a> Run<'a> {
         ok && finite && acc.cost().is_finite()
     }
 
-    /// [`Run::eq16`] and the odometry's heading (rad) at each match of `a..=b` (`heading0` at
-    /// `a`), from the one integration.
-    pub fn eq16_with_headings(
-        &self,
-        params: &ChassisParams,
-        a: usize,
-        b: usize,
-        heading0: f64,
-    ) -> Option<(f64, Vec<f64>)> {
-        let mut r = Vec::with_capacity(2 * (b - a));
-        let mut headings = Vec::with_capacity(b - a + 1);
-        headings.push(heading0);
-        self.integrate_pose(params, a, b, heading0, |k, integ| {
-            let pose = integ.pose();
-            let (px, py) = self.observed(&pose, heading0);
-            let p = self.reference_at(k);
-            r.extend([px - p.x, py - p.y]);
-            headings.push(pose.heading);
-        })
-        .ok()?;
-        r.iter()
-            .all(|v| v.is_finite())
-            .then(|| (optim::objective(Objective::SumOfNorms, &r), headings))
-    }
-
     /// Eq (16) over matches `a..=b`.
     pub fn eq16(&self, params: &ChassisParams, a: usize, b: usize, heading0: f64) -> Option<f64> {
         let mut r = Vec::new();

@@ -536,32 +536,62 @@ pub fn heading_errors(
     length: f64,
 ) -> (Option<f64>, Option<f64>) {
     let (idx, last, antenna) = ([3], run.len() - 1, run.antenna);
-    let mut acc = NormalAccumulator::new(Objective::Squares, false, idx.len());
-    let mut clusters = Clusters::new(run.dist[0], length, idx.len());
+    let mut errors = HeadingErrors::new(run.dist[0], length);
     let (mut jx, mut jy) = ([0.0; MODEL_UNKNOWNS], [0.0; MODEL_UNKNOWNS]);
-    let mut finite = true;
     let ok = run
         .integrate_with_sensitivity(params, 0, last, heading0, |k, pose, d| {
             let r = run.reference_at(k);
             let (ox, oy) = observed_with_rows(pose, d, antenna, heading0, &idx, &mut jx, &mut jy);
-            let (rx, ry) = (ox - r.x, oy - r.y);
-            finite &= rx.is_finite() && ry.is_finite();
-            acc.add_pair(rx, ry, &jx, &jy);
-            if let Some(c) = &mut clusters {
-                c.add(run.dist[k], (rx, ry), &jx, &jy);
-            }
+            errors.add(run.dist[k], (ox - r.x, oy - r.y), jx[0], jy[0]);
         })
         .is_ok();
     if !ok {
         return (None, None);
     }
-    let formal = (finite && acc.cost().is_finite())
-        .then(|| formal_errors(&acc, &idx, 4).0[3])
-        .flatten();
-    let clustered = clusters
-        .and_then(|c| c.errors(&idx, 4))
-        .and_then(|(e, _)| e[3]);
-    (formal, clustered)
+    errors.finish()
+}
+
+/// The start heading's formal and cluster-robust standard errors (rad) accumulated from the
+/// residuals and their derivatives by the start heading, the geometry held
+/// ([`heading_errors`]).
+pub struct HeadingErrors {
+    acc: NormalAccumulator,
+    clusters: Option<Clusters>,
+    finite: bool,
+}
+
+impl HeadingErrors {
+    /// Stretches of `length` m of reference path from `start` (m).
+    pub fn new(start: f64, length: f64) -> Self {
+        Self {
+            acc: NormalAccumulator::new(Objective::Squares, false, 1),
+            clusters: Clusters::new(start, length, 1),
+            finite: true,
+        }
+    }
+
+    /// The residual `r` (m) at `dist` m along the reference path and its derivatives by the
+    /// start heading (m/rad).
+    pub fn add(&mut self, dist: f64, r: (f64, f64), dx: f64, dy: f64) {
+        self.finite &= r.0.is_finite() && r.1.is_finite();
+        self.acc.add_pair(r.0, r.1, &[dx], &[dy]);
+        if let Some(c) = &mut self.clusters {
+            c.add(dist, r, &[dx], &[dy]);
+        }
+    }
+
+    /// The formal and the cluster-robust standard error (rad).
+    pub fn finish(self) -> (Option<f64>, Option<f64>) {
+        let idx = [3];
+        let formal = (self.finite && self.acc.cost().is_finite())
+            .then(|| formal_errors(&self.acc, &idx, 4).0[3])
+            .flatten();
+        let clustered = self
+            .clusters
+            .and_then(|c| c.errors(&idx, 4))
+            .and_then(|(e, _)| e[3]);
+        (formal, clustered)
+    }
 }
 
 /// Standard errors of the geometry unknowns ([`GEOMETRY_UNKNOWNS`](crate::calib::sensitivity::GEOMETRY_UNKNOWNS)) at an eq (16) estimate

@@ -44,7 +44,9 @@ impl Restarts {
     }
 
     /// [`Restarts::new`] with the full-run odometry's headings at each match already
-    /// integrated (`full`, [`Run::eq16_with_headings`]).
+    /// integrated (`full`, [`fit_whole_run_heading`]).
+    ///
+    /// [`fit_whole_run_heading`]: crate::calib::heading_fit::fit_whole_run_heading
     pub fn with_headings(
         run: &Run,
         geometry: &ChassisParams,
@@ -226,14 +228,16 @@ impl Restarts {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::calib::heading_fit::fit_whole_run_heading;
     use crate::calib::testing::sim;
     use crate::csvio::match_times;
     use crate::simulate::{default_truth, PathKind};
 
-    /// Restarts from eq (16)'s integration's headings are the restarts that integrate their
-    /// own, bit for bit, and eq (16) is the same; headings of another run are refused.
+    /// Restarts from the whole-run heading fit's headings (its path turned to the heading
+    /// found) are the restarts that integrate their own from that heading, to the
+    /// integrator's rounding; headings of another run are refused.
     #[test]
-    fn restarts_from_eq16_headings_are_the_restarts_that_integrate() {
+    fn restarts_from_the_whole_run_headings_are_the_restarts_that_integrate() {
         let s = sim(PathKind::Random, 120.0, 4);
         let run = Run::new(
             &s.samples,
@@ -241,13 +245,13 @@ mod tests {
             match_times(&s.samples, &s.reference),
         );
         let g = default_truth();
-        let h0 = run.heading_guess(0);
-        let last = run.len() - 1;
-        let (cost, headings) = run.eq16_with_headings(&g, 0, last, h0).unwrap();
-        assert_eq!(Some(cost), run.eq16(&g, 0, last, h0));
-        let own = Restarts::new(&run, &g, h0, 10.0).unwrap();
-        let given = Restarts::with_headings(&run, &g, &headings, 10.0).unwrap();
-        assert_eq!((own.windows, own.headings), (given.windows, given.headings));
-        assert!(Restarts::with_headings(&run, &g, &headings[1..], 10.0).is_err());
+        let w = fit_whole_run_heading(&run, &g, run.heading_guess(0) + 0.05, 10.0).unwrap();
+        let own = Restarts::new(&run, &g, w.heading0, 10.0).unwrap();
+        let given = Restarts::with_headings(&run, &g, &w.headings, 10.0).unwrap();
+        assert_eq!(own.windows, given.windows);
+        for (a, b) in own.headings.iter().zip(&given.headings) {
+            assert!((a - b).abs() < 1e-8, "{a} {b}");
+        }
+        assert!(Restarts::with_headings(&run, &g, &w.headings[1..], 10.0).is_err());
     }
 }
