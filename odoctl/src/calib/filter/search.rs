@@ -16,6 +16,7 @@
 //!
 //! [`Composed::gauss_markov`]: super::blocks::Composed::gauss_markov
 
+use std::cmp::Ordering;
 use std::sync::Mutex;
 
 use odo_unit::odometry::ChassisParams;
@@ -148,7 +149,7 @@ pub(crate) fn polish(nll: impl Fn(f64) -> f64, x: f64, lo: f64, hi: f64) -> f64 
         (c - 4.0 * LN_TOL).max(lo.ln()),
         (c + 4.0 * LN_TOL).min(hi.ln()),
     );
-    if !(a < b) {
+    if a.partial_cmp(&b) != Some(Ordering::Less) {
         return x;
     }
     let (l, v, _) = brent_min(|l| nll(l.exp()), a, b, POLISH_TOL);
@@ -165,7 +166,7 @@ fn search_warm(nll: impl Fn(f64) -> f64, earlier: f64, lo: f64, hi: f64) -> Opti
     let c = earlier.ln();
     let (wa, wb) = (lo.ln(), hi.ln());
     let (a, b) = ((c - WARM_REACH).max(wa), (c + WARM_REACH).min(wb));
-    if !(a < b) {
+    if a.partial_cmp(&b) != Some(Ordering::Less) {
         return None;
     }
     let (l, v, _) = brent_min(|l| nll(l.exp()), a, b, LN_TOL);
