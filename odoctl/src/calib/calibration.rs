@@ -319,7 +319,7 @@ pub fn calibrate_with(
     } else {
         None
     };
-    let uncertainty = if o.fit_delta {
+    let (uncertainty, early_evaluation) = if o.fit_delta {
         let phase = UncertaintyPhase {
             run: &run,
             heading0: geometry.heading0,
@@ -332,10 +332,13 @@ pub fn calibrate_with(
         };
         phase.fit_models(&mut params, &models, filter_wanted, early_filter)?
     } else {
-        Vec::new()
+        (Vec::new(), None)
     };
     extras.check()?;
-    let evaluation = evaluate(&run, &params, geometry.heading0)?;
+    let evaluation = match early_evaluation.filter(|(p, _)| *p == params) {
+        Some((_, ev)) => ev,
+        None => evaluate(&run, &params, geometry.heading0)?,
+    };
     timer.lap("final evaluation");
     let windows = stability_study(&run, &geometry, initial, o)?;
     Ok(Calibration {
@@ -476,6 +479,9 @@ fn fit_subtrajectory_phase(
     })
 }
 
+/// An evaluation and the parameters it evaluated.
+type Evaluated = (ChassisParams, Evaluation);
+
 /// What the uncertainty phase of [`calibrate`] works on: the run with its fitted lever arm,
 /// the whole-run start heading (rad), the initial estimate and the options.
 struct UncertaintyPhase<'a> {
@@ -494,28 +500,48 @@ impl UncertaintyPhase<'_> {
     /// Fits the coefficients of every model of `models` into `params`, one fit each, and
     /// selects the result's model. The covariance model's likelihood fit runs on a thread of
     /// its own beside the paper model's fits (`early_filter` when the geometry phase started
-    /// it, else from here).
+    /// it, else from here). When the result selects that model, the final evaluation follows
+    /// it on that thread: returned with the parameters it evaluated, the paper model's
+    /// coefficients (which the covariance model does not read) those of the result.
     fn fit_models(
         &self,
         params: &mut ChassisParams,
         models: &[UncertaintyModel],
         filter_wanted: bool,
-        mut early_filter: Option<JoinHandle<UncertaintyFit>>,
-    ) -> Result<Vec<UncertaintyFit>> {
+        early_filter: Option<JoinHandle<UncertaintyFit>>,
+    ) -> Result<(Vec<UncertaintyFit>, Option<Evaluated>)> {
         let (run, heading0, initial, o) = (self.run, self.heading0, self.initial, self.o);
+        let selected = selected_model(o, initial, models);
         let mut uncertainty = Vec::new();
         // The likelihood fit of the covariance model needs only the geometry: without the
         // refinement's filter it is built here, on a thread of its own beside the paper
         // model's fits.
         let earlier = WarmStart::likelihood_searches(self.extras.warm);
         let filter_fit = |p: ChassisParams| fit_kappa_at(run, p, heading0, initial, o, &earlier);
+        let base = ChassisParams {
+            uncertainty_model: UncertaintyModel::Covariance,
+            ..*params
+        };
+        let mut evaluated = None;
         std::thread::scope(|scope| -> Result<()> {
-            let mut filter = (filter_wanted && early_filter.is_none()).then(|| {
-                let p = ChassisParams {
-                    uncertainty_model: UncertaintyModel::Covariance,
-                    ..*params
-                };
-                scope.spawn(move || filter_fit(p))
+            let wanted = filter_wanted && models.contains(&UncertaintyModel::Covariance);
+            let mut filter = wanted.then(|| {
+                scope.spawn(move || {
+                    let u = match early_filter {
+                        Some(early) => early
+                            .join()
+                            .map_err(|_| anyhow::anyhow!("the filter's fit failed"))?,
+                        None => filter_fit(base)?,
+                    };
+                    let p = ChassisParams {
+                        uncertainty_model: selected,
+                        ..with_covariance_coefficients(&base, &u.params)
+                    };
+                    let ev = (selected == UncertaintyModel::Covariance)
+                        .then(|| evaluate(run, &p, heading0).map(|ev| (p, ev)))
+                        .transpose()?;
+                    Ok::<_, anyhow::Error>((u, ev))
+                })
             });
             // The restarted sub-trajectories of the coverage criterion, made when first needed.
             let mut restarts: Option<Restarts> = None;
@@ -526,15 +552,16 @@ impl UncertaintyPhase<'_> {
                 if m == UncertaintyModel::Covariance
                     && o.criterion == UncertaintyCriterion::Likelihood
                 {
-                    let failed = |_| anyhow::anyhow!("the filter's fit failed");
-                    let mut u = match (early_filter.take(), filter.take()) {
-                        (Some(early), _) => early.join().map_err(failed)?,
-                        (None, Some(f)) => f.join().map_err(failed)??,
-                        (None, None) => filter_fit(p)?,
+                    let (mut u, ev) = match filter.take() {
+                        Some(f) => f
+                            .join()
+                            .map_err(|_| anyhow::anyhow!("the filter's fit failed"))??,
+                        None => (filter_fit(p)?, None),
                     };
                     self.timer.lap("uncertainty fit (filter)");
                     *params = with_covariance_coefficients(params, &u.params);
                     u.params = with_covariance_coefficients(&p, &u.params);
+                    evaluated = ev;
                     uncertainty.push(u);
                     continue;
                 }
@@ -556,14 +583,18 @@ impl UncertaintyPhase<'_> {
             }
             Ok(())
         })?;
-        params.uncertainty_model = if let Some(m) = o.select {
-            m
-        } else if models.contains(&initial.uncertainty_model) {
-            initial.uncertainty_model
-        } else {
-            *models.last().expect("one model")
-        };
-        Ok(uncertainty)
+        params.uncertainty_model = selected;
+        // The evaluation with the result's paper coefficients: the same evaluation.
+        let evaluated = evaluated.map(|(p, ev)| {
+            let p = ChassisParams {
+                delta_left: params.delta_left,
+                delta_right: params.delta_right,
+                delta_diff: params.delta_diff,
+                ..p
+            };
+            (p, ev)
+        });
+        Ok((uncertainty, evaluated))
     }
 
     /// The coefficients of model `m` of `p` by the coverage criterion on `restarts`, and for
@@ -655,6 +686,22 @@ fn stability_study(
     let w = windows_study(run, geometry, initial, &o.windows, o.window_start, &pb)?;
     pb.finish_and_clear();
     Ok(w)
+}
+
+/// The model the result selects: `o.select`, else the initial estimate's when it is among
+/// `models`, else the last of them.
+fn selected_model(
+    o: &CalibrationOptions,
+    initial: &ChassisParams,
+    models: &[UncertaintyModel],
+) -> UncertaintyModel {
+    if let Some(m) = o.select {
+        m
+    } else if models.contains(&initial.uncertainty_model) {
+        initial.uncertainty_model
+    } else {
+        *models.last().expect("one model")
+    }
 }
 
 /// The uncertainty models whose coefficients `calibrate` fits: `o.models` (empty: the
@@ -767,5 +814,42 @@ impl PhaseTimer {
             eprintln!("time: {phase}: {:.4} s", (now - last.get()).as_secs_f64());
             last.set(now);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calib::testing::sim;
+    use crate::simulate::{default_truth, PathKind};
+
+    /// The final evaluation, made beside the paper model's fits when the result selects the
+    /// covariance model, is the result's evaluation: the covariance model reads none of the
+    /// paper model's coefficients, so other ones evaluate the same.
+    #[test]
+    fn the_evaluation_beside_the_paper_fits_is_the_results() {
+        let s = sim(PathKind::Random, 150.0, 2);
+        let o = CalibrationOptions {
+            models: vec![UncertaintyModel::Paper, UncertaintyModel::Covariance],
+            select: Some(UncertaintyModel::Covariance),
+            ..Default::default()
+        };
+        let initial = default_truth();
+        let c = calibrate(&s.samples, &s.reference, ("s", "r"), &initial, &o).unwrap();
+        assert_eq!(c.params.uncertainty_model, UncertaintyModel::Covariance);
+        assert!(c.params.kappa_left > 0.0 && c.params.delta_left > 0.0);
+        let matches = csvio::match_or_fail(&s.samples, "s", &s.reference, "r", 10).unwrap();
+        let run = Run::new(&s.samples, &s.reference, matches).with_antenna(c.geometry.antenna);
+        let h0 = c.geometry.heading0;
+        let again = evaluate(&run, &c.params, h0).unwrap();
+        assert_eq!(format!("{:?}", c.evaluation), format!("{again:?}"));
+        let other = ChassisParams {
+            delta_left: 2.0 * c.params.delta_left,
+            delta_right: 3.0 * c.params.delta_right,
+            delta_diff: 1e-8,
+            ..c.params
+        };
+        let other = evaluate(&run, &other, h0).unwrap();
+        assert_eq!(format!("{other:?}"), format!("{again:?}"));
     }
 }
