@@ -180,11 +180,11 @@ pub struct WholeRunHeading {
     pub errors: (Option<f64>, Option<f64>),
 }
 
-/// [`fit_restart_heading`] over the whole run from `guess`, and from the same integration,
-/// the path turned to the heading found: eq (16) there, the odometry's heading at each match
-/// and the heading's standard errors (stretches of `length` m for the cluster-robust one),
-/// whose rows are the turn's derivative `(y - y0, -(x - x0))`, what the forward sensitivity
-/// gives to the integrator's rounding.
+/// [`fit_restart_heading`] over the whole run from `guess`, then one integration at the
+/// heading found, which gives eq (16) there (what a replay from that start reproduces), the
+/// odometry's heading at each match and the heading's standard errors (stretches of `length`
+/// m for the cluster-robust one), whose rows are the turn's derivative `(y - y0, -(x - x0))`:
+/// what the forward sensitivity gives, to the integrator's rounding.
 pub fn fit_whole_run_heading(
     run: &Run,
     params: &ChassisParams,
@@ -192,23 +192,21 @@ pub fn fit_whole_run_heading(
     length: f64,
 ) -> Result<WholeRunHeading> {
     let last = run.len() - 1;
-    let t = TurnedPath::fit(run, params, 0, last, guess)?;
-    let phi = t.heading - t.at;
-    let (sin, cos) = phi.sin_cos();
+    let mut t = TurnedPath::fit(run, params, 0, last, guess)?;
+    t.integrate(run, params, (0, last), run.anchor(0))?;
     let mut residuals = Vec::with_capacity(2 * t.path.len());
     let mut errors = HeadingErrors::new(run.dist[0], length);
     for (i, &[dx, dy, rx, ry]) in t.path.iter().enumerate() {
-        let (px, py) = (dx * cos + dy * sin, dy * cos - dx * sin);
-        let r = (px - rx, py - ry);
+        let r = (dx - rx, dy - ry);
         residuals.extend([r.0, r.1]);
-        errors.add(run.dist[i + 1], r, py, -px);
+        errors.add(run.dist[i + 1], r, dy, -dx);
     }
     if residuals.iter().any(|v| !v.is_finite()) {
         return Err(anyhow!("the estimate is not admissible"));
     }
     let mut headings = Vec::with_capacity(run.len());
     headings.push(t.heading);
-    headings.extend(t.headings.iter().map(|h| h + phi));
+    headings.extend(&t.headings);
     Ok(WholeRunHeading {
         heading0: t.heading,
         cost: optim::objective(Objective::SumOfNorms, &residuals),
@@ -227,10 +225,11 @@ mod tests {
     use crate::optim::norm2;
     use crate::simulate::{default_truth, PathKind};
 
-    /// The whole-run heading fit's figures, from its path turned, are those of the
-    /// integrations at the heading it found (to the integrator's rounding): eq (16), the
-    /// headings at every match and the heading's two standard errors from the forward
-    /// sensitivities; with a lever arm too, and from a guess far enough for two integrations.
+    /// The whole-run heading fit's figures are those of the integrations at the heading it
+    /// found: eq (16) (to the rounding of the positions relative to the start), the headings
+    /// at every match, and the heading's two standard errors from the forward sensitivities
+    /// (to the integrator's rounding); with a lever arm too, and from a guess far enough for
+    /// two integrations in the fit.
     #[test]
     fn whole_run_heading_figures_are_the_integrated_ones() {
         let s = sim(PathKind::Random, 200.0, 5);
@@ -249,21 +248,14 @@ mod tests {
                 w.heading0,
                 fit_restart_heading(&run, &p, 0, last, guess).unwrap()
             );
-            // Each point moves by the integrator's rounding of the turn, 2e-9 of its distance
-            // from the start (at most the path's length).
             let cost = run.eq16(&p, 0, last, w.heading0).unwrap();
-            let bound = last as f64 * 2e-9 * (run.dist[last] - run.dist[0]);
-            assert!((w.cost - cost).abs() < bound, "{} {cost} {bound}", w.cost);
+            assert!((w.cost - cost).abs() <= 1e-12 * cost, "{} {cost}", w.cost);
             let mut headings = vec![w.heading0];
             run.integrate_pose(&p, 0, last, w.heading0, |_, integ| {
                 headings.push(integ.pose().heading)
             })
             .unwrap();
-            assert_eq!(headings.len(), w.headings.len());
-            for (a, b) in headings.iter().zip(&w.headings) {
-                let d = (a - b).rem_euclid(std::f64::consts::TAU);
-                assert!(d.min(std::f64::consts::TAU - d) < 1e-9, "{a} {b}");
-            }
+            assert_eq!(headings, w.headings);
             let (formal, clustered) = heading_errors(&run, &p, w.heading0, 10.0);
             let near =
                 |a: Option<f64>, b: Option<f64>| (a.unwrap() / b.unwrap() - 1.0).abs() < 1e-6;
