@@ -7,9 +7,7 @@ use std::process::ExitCode;
 use anyhow::{bail, Result};
 use odo_unit::odometry::{ChassisParams, UncertaintyModel};
 
-use crate::calib::{
-    self, ReferenceNoise, Run, DEFAULT_REFERENCE_HEADING_SIGMA_DEG, DEFAULT_REFERENCE_SIGMA,
-};
+use crate::calib::{self, ReferenceNoise, Run};
 use crate::cli::ValidateArgs;
 use crate::config::{self as cfg};
 use crate::csvio;
@@ -93,28 +91,17 @@ fn validate(a: &ValidateArgs, reference_path: &Path, own: bool) -> Result<ExitCo
 /// The reference's noise: the options' where given, else a trajectory's own (`own`), else
 /// the defaults; a line says what a trajectory's own noise set.
 fn reference_noise(a: &ValidateArgs, own: Option<&TrajectoryNoise>) -> ReferenceNoise {
-    let horizontal = a
-        .reference_sigma
-        .or(own.map(|n| n.horizontal))
-        .unwrap_or(DEFAULT_REFERENCE_SIGMA);
-    let heading = a
-        .reference_heading_sigma_deg
-        .map(f64::to_radians)
-        .or(own.and_then(|n| n.heading))
-        .unwrap_or(DEFAULT_REFERENCE_HEADING_SIGMA_DEG.to_radians());
-    if let Some(n) =
-        own.filter(|_| a.reference_sigma.is_none() || a.reference_heading_sigma_deg.is_none())
-    {
+    let (sigma, heading) = (a.reference_sigma, a.reference_heading_sigma_deg);
+    let noise = ReferenceNoise::resolve(sigma, heading, own);
+    if let Some(n) = own.filter(|_| sigma.is_none() || heading.is_none()) {
         crate::outln!(
-            "  reference noise: the trajectory's own, from the second differences of {} poses, where the options give none: {horizontal:.5} m, {:.4} deg",
+            "  reference noise: the trajectory's own, from the second differences of {} poses, where the options give none: {:.5} m, {:.4} deg",
             n.triples,
-            heading.to_degrees()
+            noise.horizontal,
+            noise.heading.to_degrees()
         );
     }
-    ReferenceNoise {
-        horizontal,
-        heading,
-    }
+    noise
 }
 
 /// The run's errors against their bands, on stdout.

@@ -17,6 +17,8 @@
 //! scatter can show a stated noise too small, never too large.
 
 use crate::calib::evaluation::Evaluation;
+use crate::calib::{DEFAULT_REFERENCE_HEADING_SIGMA_DEG, DEFAULT_REFERENCE_SIGMA};
+use crate::reference::trajectory_noise::TrajectoryNoise;
 use crate::stats::{median, wrap_angle, MAD_TO_SIGMA};
 
 use super::coverage::{heading_coverage, horizontal_coverage, reference_sigma_at};
@@ -57,6 +59,25 @@ pub struct NoiseCheck {
 }
 
 impl ReferenceNoise {
+    /// The noise of a reference: `sigma` (m, horizontal RMS) and `heading_deg` where given
+    /// (the options), else a trajectory's own (`own`, [`TrajectoryNoise`]), else
+    /// [`DEFAULT_REFERENCE_SIGMA`] and [`DEFAULT_REFERENCE_HEADING_SIGMA_DEG`].
+    pub fn resolve(
+        sigma: Option<f64>,
+        heading_deg: Option<f64>,
+        own: Option<&TrajectoryNoise>,
+    ) -> Self {
+        Self {
+            horizontal: sigma
+                .or(own.map(|n| n.horizontal))
+                .unwrap_or(DEFAULT_REFERENCE_SIGMA),
+            heading: heading_deg
+                .map(f64::to_radians)
+                .or(own.and_then(|n| n.heading))
+                .unwrap_or(DEFAULT_REFERENCE_HEADING_SIGMA_DEG.to_radians()),
+        }
+    }
+
     /// Share of horizontal errors, the start left out, inside `k` sigma_h widened by the
     /// reference noise (each epoch's own where the log gives it).
     pub fn horizontal_coverage(&self, ev: &Evaluation, k: f64) -> f64 {
@@ -196,6 +217,48 @@ impl NoiseCheck {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The options where given, else a trajectory's own, else the defaults; each of the two
+    /// on its own.
+    #[test]
+    fn the_options_then_the_trajectorys_own_then_the_defaults() {
+        let own = TrajectoryNoise {
+            horizontal: 0.0004,
+            heading: Some(0.002),
+            triples: 100,
+        };
+        let positions_only = TrajectoryNoise {
+            heading: None,
+            ..own
+        };
+        let d = (
+            DEFAULT_REFERENCE_SIGMA,
+            DEFAULT_REFERENCE_HEADING_SIGMA_DEG.to_radians(),
+        );
+        // sigma option, heading option (deg), own noise: horizontal, heading.
+        type Row<'a> = (
+            Option<f64>,
+            Option<f64>,
+            Option<&'a TrajectoryNoise>,
+            (f64, f64),
+        );
+        let table: [Row; 6] = [
+            (None, None, None, d),
+            (Some(0.02), Some(1.0), None, (0.02, 1f64.to_radians())),
+            (None, None, Some(&own), (0.0004, 0.002)),
+            (Some(0.02), None, Some(&own), (0.02, 0.002)),
+            (None, Some(1.0), Some(&own), (0.0004, 1f64.to_radians())),
+            (None, None, Some(&positions_only), (0.0004, d.1)),
+        ];
+        for (sigma, heading, noise, want) in table {
+            let n = ReferenceNoise::resolve(sigma, heading, noise);
+            assert_eq!(
+                (n.horizontal, n.heading),
+                want,
+                "{sigma:?} {heading:?} {noise:?}"
+            );
+        }
+    }
 
     /// An evaluation with a perfect odometry and a reference with white noise of horizontal
     /// RMS `h` (m) and heading noise `a` (rad), epochs every `dt` s.

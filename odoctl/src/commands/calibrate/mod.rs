@@ -367,14 +367,9 @@ pub fn calibration_with(
 ) -> Result<(Calibration, calib::CalibrationOptions, ChassisParams)> {
     let initial = initial_estimate(a)?;
     let mut opts = options::calibration_options(a)?;
-    if let Some(n) = &inputs.noise {
-        if a.reference_sigma.is_none() {
-            opts.reference_sigma = n.horizontal;
-        }
-        if let (None, Some(h)) = (a.reference_heading_sigma_deg, n.heading) {
-            opts.reference_heading_sigma = h;
-        }
-    }
+    let (sigma, heading) = (a.reference_sigma, a.reference_heading_sigma_deg);
+    let noise = calib::ReferenceNoise::resolve(sigma, heading, inputs.noise.as_ref());
+    (opts.reference_sigma, opts.reference_heading_sigma) = (noise.horizontal, noise.heading);
     let (samples, reference) = (&inputs.samples, &inputs.reference);
     let names = (names.0.as_str(), names.1.as_str());
     let mut c = calib::calibrate_with(samples, reference, names, &initial, &opts, extras)?;
