@@ -72,25 +72,24 @@ struct TurnedPath {
     heading: f64,
     /// The start heading the path was integrated at (rad).
     at: f64,
+    /// The start position the path is relative to (m).
+    start: (f64, f64),
     /// At each match after the start: the observed point and the reference point, both
     /// relative to the start (m).
     path: Vec<[f64; 4]>,
-    /// The odometry's heading at each match after the start (rad).
-    headings: Vec<f64>,
 }
 
 impl TurnedPath {
     /// [`fit_restart_heading`] over `a..=b` from `guess`.
     fn fit(run: &Run, params: &ChassisParams, a: usize, b: usize, guess: f64) -> Result<Self> {
-        let (x0, y0) = run.anchor(a);
         let mut t = Self {
             heading: guess,
             at: guess,
+            start: run.anchor(a),
             path: Vec::with_capacity(b - a),
-            headings: Vec::with_capacity(b - a),
         };
         for pass in 0..RESTART_PASSES {
-            t.integrate(run, params, (a, b), (x0, y0))?;
+            t.integrate(run, params, (a, b), None)?;
             let at = t.at;
             // The first pass starts from the turn of the least squares (where `sum r . R(phi)
             // d` is largest: one pass over the path), which is near the norms' least; a
@@ -140,27 +139,29 @@ impl TurnedPath {
         Ok(t)
     }
 
-    /// Integrates `params` over `a..=b` from the heading found so far, which becomes `at`,
-    /// relative to the start `(x0, y0)`.
+    /// Integrates `params` over `a..=b` from the heading found so far, which becomes `at`;
+    /// the odometry's heading at each match after the start pushed to `headings` when given
+    /// (rad).
     fn integrate(
         &mut self,
         run: &Run,
         params: &ChassisParams,
         (a, b): (usize, usize),
-        (x0, y0): (f64, f64),
+        mut headings: Option<&mut Vec<f64>>,
     ) -> Result<()> {
-        let heading = self.heading;
+        let (heading, (x0, y0)) = (self.heading, self.start);
         self.at = heading;
         self.path.clear();
-        self.headings.clear();
-        let (path, headings) = (&mut self.path, &mut self.headings);
+        let path = &mut self.path;
         run.integrate_pose(params, a, b, heading, |k, integ| {
             // The antenna turns with the path about the start, as the centre does.
             let pose = integ.pose();
             let (px, py) = run.observed(&pose, heading);
             let r = run.reference_at(k);
             path.push([px - x0, py - y0, r.x - x0, r.y - y0]);
-            headings.push(pose.heading);
+            if let Some(h) = headings.as_deref_mut() {
+                h.push(pose.heading);
+            }
         })
         .map_err(|e| anyhow!("parameters: {e}"))
     }
@@ -193,7 +194,9 @@ pub fn fit_whole_run_heading(
 ) -> Result<WholeRunHeading> {
     let last = run.len() - 1;
     let mut t = TurnedPath::fit(run, params, 0, last, guess)?;
-    t.integrate(run, params, (0, last), run.anchor(0))?;
+    let mut headings = Vec::with_capacity(run.len());
+    headings.push(t.heading);
+    t.integrate(run, params, (0, last), Some(&mut headings))?;
     let mut residuals = Vec::with_capacity(2 * t.path.len());
     let mut errors = HeadingErrors::new(run.dist[0], length);
     for (i, &[dx, dy, rx, ry]) in t.path.iter().enumerate() {
@@ -204,9 +207,6 @@ pub fn fit_whole_run_heading(
     if residuals.iter().any(|v| !v.is_finite()) {
         return Err(anyhow!("the estimate is not admissible"));
     }
-    let mut headings = Vec::with_capacity(run.len());
-    headings.push(t.heading);
-    headings.extend(&t.headings);
     Ok(WholeRunHeading {
         heading0: t.heading,
         cost: optim::objective(Objective::SumOfNorms, &residuals),

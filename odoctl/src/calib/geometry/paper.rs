@@ -528,7 +528,9 @@ impl Clusters {
 /// The start heading's formal ([`standard_errors`]) and cluster-robust
 /// ([`paper_cluster_errors`], stretches of `length` m) standard errors (rad) at `params` and
 /// `heading0` over the whole run, the geometry held, from one integration (the two functions'
-/// results: the same points in the same order).
+/// results: the same points in the same order). The calibration takes them from the turned
+/// path (`fit_whole_run_heading`); this is what its test compares them with.
+#[cfg(test)]
 pub fn heading_errors(
     run: &Run,
     params: &ChassisParams,
