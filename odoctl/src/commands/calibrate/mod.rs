@@ -366,10 +366,9 @@ pub fn calibration_with(
     extras: Extras,
 ) -> Result<(Calibration, calib::CalibrationOptions, ChassisParams)> {
     let initial = initial_estimate(a)?;
-    let mut opts = options::calibration_options(a)?;
     let (sigma, heading) = (a.reference_sigma, a.reference_heading_sigma_deg);
     let noise = calib::ReferenceNoise::resolve(sigma, heading, inputs.noise.as_ref());
-    (opts.reference_sigma, opts.reference_heading_sigma) = (noise.horizontal, noise.heading);
+    let opts = options::calibration_options(a, noise)?;
     let (samples, reference) = (&inputs.samples, &inputs.reference);
     let names = (names.0.as_str(), names.1.as_str());
     let mut c = calib::calibrate_with(samples, reference, names, &initial, &opts, extras)?;

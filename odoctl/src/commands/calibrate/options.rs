@@ -4,23 +4,19 @@
 use anyhow::Result;
 use odo_unit::odometry::UncertaintyModel;
 
-use crate::calib::{
-    CalibrationOptions, LeverArm, DEFAULT_REFERENCE_HEADING_SIGMA_DEG, DEFAULT_REFERENCE_SIGMA,
-};
+use crate::calib::{CalibrationOptions, LeverArm, ReferenceNoise};
 use crate::cli::{CalibrateArgs, GeometryArgs, ModelChoice, Models};
 
-/// The calibration's options from the command line's.
-pub fn calibration_options(a: &CalibrateArgs) -> Result<CalibrationOptions> {
+/// The calibration's options from the command line's, with the reference's `noise`
+/// ([`ReferenceNoise::resolve`]: the options' where given).
+pub fn calibration_options(a: &CalibrateArgs, noise: ReferenceNoise) -> Result<CalibrationOptions> {
     let mut o = CalibrationOptions {
         delta_window: a.delta_window,
-        reference_sigma: a.reference_sigma.unwrap_or(DEFAULT_REFERENCE_SIGMA),
+        reference_sigma: noise.horizontal,
         delta_mode: a.delta_mode,
         fit_delta: !a.no_delta,
         fit_delta_diff: !a.no_fit_delta_diff,
-        reference_heading_sigma: a
-            .reference_heading_sigma_deg
-            .unwrap_or(DEFAULT_REFERENCE_HEADING_SIGMA_DEG)
-            .to_radians(),
+        reference_heading_sigma: noise.heading,
         models: a.models.list(),
         select: selected_model(a.uncertainty_model, a.models),
         criterion: a.uncertainty_criterion,
