@@ -33,11 +33,13 @@ use odoctl::commands::live::refined;
 use odoctl::commands::live_batch::{agreement, Agreement, BatchResult, BatchWorker};
 use odoctl::commands::recording::nmea_path;
 use odoctl::csvio::{self, Sample, SamplesLayout};
+use odoctl::memory::{for_drive, DRIVE_LOG_BYTES_PER_S, DRIVE_SAMPLES_PER_S};
 use odoctl::reference::nmea::LogLines;
 use odoctl::reference::simulated::{drive_with_sentences, ReceiverSim};
 use odoctl::reference::stream::NmeaStream;
 use odoctl::simulate::{default_truth, simulate_path, PathKind, SimSettings};
 
+use crate::cpu_time::{machine_ticks, stolen_share, thread_cpu, thread_run_delay};
 use crate::markdown::{number, thousands};
 use crate::odoctl_binary::odoctl;
 use crate::stdout_capture::stdout_to;
@@ -120,11 +122,24 @@ fn drive() -> (Vec<Sample>, Vec<(usize, String)>) {
     drive_with_sentences(sim, &receiver, 18).expect("NMEA in memory")
 }
 
-/// What the drive's feed leaves: the cost of each update (distance driven then, whole
-/// update, the fit alone), the live fit, the streaming reader, the background batch, the
+/// One update's cost.
+struct Cost {
+    /// Reference path driven then (m).
+    distance: f64,
+    /// Wall time of the whole update and of the fit alone.
+    whole: Duration,
+    fit: Duration,
+    /// The updating thread's CPU time in the whole update, and its wait for a core.
+    cpu: Duration,
+    waited: Option<Duration>,
+}
+
+/// What the drive's feed leaves: the cost of each update, the live fit, the streaming reader, the background batch, the
 /// rows and the log handed on, the log's lines read as they came.
 struct Fed {
-    costs: Vec<(f64, Duration, Duration)>,
+    costs: Vec<Cost>,
+    /// The share of the machine's CPU time stolen by the hypervisor during the drive.
+    stolen: Option<f64>,
     live: LiveCalibration,
     stream: NmeaStream,
     batch: BatchWorker,
@@ -138,11 +153,12 @@ struct Fed {
 fn feed(rows: &[Sample], sentences: &[(usize, String)], args: &[String]) -> Fed {
     let mut f = Fed {
         costs: Vec::new(),
+        stolen: None,
         live: LiveCalibration::new(&ChassisParams::DESIGNED, SUBTRAJECTORY_LENGTH),
         stream: NmeaStream::new(),
         batch: BatchWorker::start(args.to_vec()).expect("the background batch"),
-        rows: Vec::with_capacity(rows.len()),
-        log: Vec::new(),
+        rows: for_drive(DRIVE_SAMPLES_PER_S),
+        log: for_drive(DRIVE_LOG_BYTES_PER_S),
         lines: Some(LogLines::new(
             &nmea_path(Path::new(&args[4])).display().to_string(),
             None,
@@ -152,6 +168,7 @@ fn feed(rows: &[Sample], sentences: &[(usize, String)], args: &[String]) -> Fed 
     let mut next = 0;
     let seconds = rows.len().div_ceil(per_second);
     let mut due = Instant::now();
+    let ticks = machine_ticks();
     for (c, chunk) in rows.chunks(per_second).enumerate() {
         due += if c + REAL_TIME_END >= seconds {
             Duration::from_secs(1)
@@ -160,7 +177,8 @@ fn feed(rows: &[Sample], sentences: &[(usize, String)], args: &[String]) -> Fed 
         };
         std::thread::sleep(due.saturating_duration_since(Instant::now()));
         let last = c * per_second + chunk.len() - 1;
-        let started = Instant::now();
+        let delay = thread_run_delay();
+        let (started, cpu) = (Instant::now(), thread_cpu());
         for s in chunk {
             f.live.push_sample(*s);
             f.rows.push(*s);
@@ -182,9 +200,16 @@ fn feed(rows: &[Sample], sentences: &[(usize, String)], args: &[String]) -> Fed 
         f.batch.feed(&f.rows, &f.log);
         let fit = Instant::now();
         f.live.update();
-        f.costs
-            .push((f.live.estimate().distance, started.elapsed(), fit.elapsed()));
+        let (whole, fit, cpu) = (started.elapsed(), fit.elapsed(), thread_cpu() - cpu);
+        f.costs.push(Cost {
+            distance: f.live.estimate().distance,
+            whole,
+            fit,
+            cpu,
+            waited: delay.zip(thread_run_delay()).map(|(a, b)| b - a),
+        });
     }
+    f.stolen = stolen_share(ticks, machine_ticks());
     f
 }
 
@@ -317,36 +342,59 @@ fn print_section(samples: &[Sample], f: &Fed, end: &End, process: (Duration, Agr
     println!("then the fit's update (`LiveCalibration::update`: matching, a sub-trajectory");
     println!("closed about every 20 s, relinearisations, the estimate and its jackknife when they");
     println!(
-        "changed). The machine is shared (other builds and the background batch run beside the"
+        "changed). The CPU time is the updating thread's own (`CLOCK_THREAD_CPUTIME_ID`), its"
     );
-    println!("updates): the slowest updates are the operating system's as much as the code's.");
+    println!(
+        "wait for a core the time it was runnable on a run queue (/proc/thread-self/schedstat):"
+    );
+    println!("the rest of an update's wall time went to others (the background");
+    match f.stolen {
+        Some(share) => println!(
+            "batch, other processes, the hypervisor, which took {:.2} % of the machine's CPU time",
+            share * 100.0
+        ),
+        None => println!("batch, other processes, the hypervisor"),
+    }
+    println!("during the drive: steal in /proc/stat).");
     println!();
     print_end(end, process);
 }
 
 /// The update costs by tenth of the drive.
-fn print_costs(costs: &[(f64, Duration, Duration)]) {
+fn print_costs(costs: &[Cost]) {
     let ms = |d: Duration| d.as_secs_f64() * 1e3;
-    println!("| part of the drive | updates | median update | 99 % of updates within | slowest update | median of the fit alone | slowest of the fit alone |");
-    println!("| --- | ---: | ---: | ---: | ---: | ---: | ---: |");
+    println!("| part of the drive | updates | median update | 99 % of updates within | slowest update | its CPU time | its wait for a core | most CPU time of an update | median of the fit alone | slowest of the fit alone |");
+    println!("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |");
     let n = costs.len();
     let at = |v: &[f64], q: f64| number(v[((v.len() - 1) as f64 * q).round() as usize]);
+    let sorted = |part: &[Cost], of: fn(&Cost) -> Duration| {
+        let mut v: Vec<f64> = part.iter().map(|c| ms(of(c))).collect();
+        v.sort_by(f64::total_cmp);
+        v
+    };
     for tenth in 0..10 {
         let part = &costs[tenth * n / 10..(tenth + 1) * n / 10];
-        let mut whole: Vec<f64> = part.iter().map(|c| ms(c.1)).collect();
-        let mut fit: Vec<f64> = part.iter().map(|c| ms(c.2)).collect();
-        whole.sort_by(f64::total_cmp);
-        fit.sort_by(f64::total_cmp);
-        let (from, to) = (
-            part.first().map_or(0.0, |c| c.0),
-            part.last().map_or(0.0, |c| c.0),
+        let (whole, cpu, fit) = (
+            sorted(part, |c| c.whole),
+            sorted(part, |c| c.cpu),
+            sorted(part, |c| c.fit),
         );
+        let Some(slowest) = part.iter().max_by_key(|c| c.whole) else {
+            continue;
+        };
         println!(
-            "| {from:.0} .. {to:.0} m | {} | {} ms | {} ms | {} ms | {} ms | {} ms |",
+            "| {:.0} .. {:.0} m | {} | {} ms | {} ms | {} ms | {} ms | {} | {} ms | {} ms | {} ms |",
+            part[0].distance,
+            part[part.len() - 1].distance,
             part.len(),
             at(&whole, 0.5),
             at(&whole, 0.99),
-            at(&whole, 1.0),
+            number(ms(slowest.whole)),
+            number(ms(slowest.cpu)),
+            slowest
+                .waited
+                .map_or("-".into(), |w| format!("{} ms", number(ms(w)))),
+            at(&cpu, 1.0),
             at(&fit, 0.5),
             at(&fit, 1.0)
         );

@@ -21,6 +21,8 @@ mod naive;
 #[cfg(not(target_os = "none"))]
 mod calibration;
 #[cfg(not(target_os = "none"))]
+mod cpu_time;
+#[cfg(not(target_os = "none"))]
 mod fidelity;
 #[cfg(not(target_os = "none"))]
 mod indoor;

@@ -38,8 +38,47 @@ pub fn keep_freed_memory() -> bool {
     }
 }
 
+/// Length of drive (s) a vector of [`for_drive`] holds before it grows.
+pub const DRIVE_RESERVED_S: usize = 4 * 3600;
+
+/// Samples a second of a calibration drive (the PPS-locked rate).
+pub const DRIVE_SAMPLES_PER_S: usize = 50;
+
+/// Reference epochs a second of a calibration drive (a receiver at up to 20 Hz).
+pub const DRIVE_EPOCHS_PER_S: usize = 20;
+
+/// Bytes a second of a calibration drive's NMEA log (GGA, GST, HDT and RMC at 20 Hz).
+pub const DRIVE_LOG_BYTES_PER_S: usize = 6_000;
+
+/// An empty vector for what grows as long as a drive lasts (a recording's rows, its log, the
+/// live fit's matches), `per_second` items a second: its capacity holds [`DRIVE_RESERVED_S`]
+/// of them and is above [`MMAP_THRESHOLD`], so glibc maps it on its own. Its pages are
+/// touched only as written, and it grows, if ever, by remapping them. A vector in the heap
+/// copies all it holds whenever its capacity doubles: milliseconds at a few megabytes, inside
+/// one live update.
+pub fn for_drive<T>(per_second: usize) -> Vec<T> {
+    let size = std::mem::size_of::<T>().max(1);
+    Vec::with_capacity((per_second * DRIVE_RESERVED_S).max(MMAP_THRESHOLD / size + 1))
+}
+
 #[cfg(test)]
 mod tests {
+    use super::{for_drive, DRIVE_RESERVED_S, MMAP_THRESHOLD};
+
+    /// Above the mmap threshold whatever the rate, and the drive's length at its rate.
+    #[test]
+    fn a_drive_vector_is_mapped_and_holds_the_drive() {
+        fn bytes<T>(v: &Vec<T>) -> usize {
+            v.capacity() * std::mem::size_of::<T>()
+        }
+        assert!(bytes(&for_drive::<u8>(0)) > MMAP_THRESHOLD);
+        assert!(bytes(&for_drive::<u8>(1)) > MMAP_THRESHOLD);
+        assert!(bytes(&for_drive::<[u8; 3]>(1)) > MMAP_THRESHOLD);
+        assert_eq!(for_drive::<[u8; 152]>(50).capacity(), 50 * DRIVE_RESERVED_S);
+        assert_eq!(for_drive::<u8>(4_000).capacity(), 4_000 * DRIVE_RESERVED_S);
+        assert!(for_drive::<()>(50).is_empty());
+    }
+
     #[test]
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     fn glibc_takes_both_thresholds() {

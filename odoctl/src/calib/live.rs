@@ -13,11 +13,10 @@
 //!   `g_j(x) = g_j + S_j (x - x_j)` about its linearisation point `x_j`. The estimate solves
 //!   `sum_j g_j(x) = 0`, from running sums: a 3 x 3 system whatever the length of the drive.
 //! - Relinearisation: after each update, the sub-trajectories whose linearisation point is
-//!   farther than [`RELINEARISE_LIVE`] standard errors from the estimate are evaluated again
-//!   at it, at most [`RELINEARISE_PER_UPDATE`] per update (the farthest first);
-//!   [`LiveCalibration::finish`] relinearises until none is farther than [`RELINEARISE`], so
-//!   that the last estimate is the batch fit's minimum to within the linearisation's second
-//!   order.
+//!   farther than [`RELINEARISE`] standard errors from the estimate are evaluated again at
+//!   it, at most [`RELINEARISE_PER_UPDATE`] per update (the farthest first);
+//!   [`LiveCalibration::finish`] relinearises until none is farther, so that the last
+//!   estimate is the batch fit's minimum to within the linearisation's second order.
 //! - Standard errors: the batch's cluster jackknife over the sub-trajectories, from their
 //!   `S_j` and `g_j(x)` (a few microseconds per sub-trajectory), computed when a
 //!   sub-trajectory is added.
@@ -29,6 +28,7 @@
 use odo_unit::odometry::{ChassisParams, Integrator, Pose};
 
 use crate::csvio::{RefPoint, Sample, MATCH_TOLERANCE};
+use crate::memory::{for_drive, DRIVE_EPOCHS_PER_S, DRIVE_SAMPLES_PER_S};
 use crate::optim;
 use crate::replay::{counts, index_refs};
 
@@ -37,11 +37,11 @@ use super::geometry::subtrajectory::{eval_block, MIN_POINTS};
 use super::run::{Run, PATH_STEP};
 
 /// Distance (standard errors of the estimate) of a sub-trajectory's linearisation point from
-/// the estimate beyond which it is evaluated again at the drive's end.
-pub const RELINEARISE: f64 = 0.02;
-
-/// The same during the drive: the display's resolution.
-pub const RELINEARISE_LIVE: f64 = 0.1;
+/// the estimate beyond which it is evaluated again, during the drive and at its end. What it
+/// leaves in the estimate is of second order; a threshold within the estimate's own wander as
+/// sub-trajectories are added (a tenth of a standard error) would evaluate every
+/// sub-trajectory again every few new ones.
+pub const RELINEARISE: f64 = 1.0;
 
 /// Sub-trajectories evaluated again per update at most (the farthest first).
 pub const RELINEARISE_PER_UPDATE: usize = 2;
@@ -51,61 +51,6 @@ pub const MIN_TURNING_DEG: f64 = 30.0;
 
 /// Path step (m of reference path) over which the turning is summed, as in the batch fit.
 const TURNING_STEP: f64 = 0.25;
-
-/// Items of a chunk of [`Chunked`].
-const CHUNK: usize = 4096;
-
-/// A growing sequence stored in chunks of [`CHUNK`] items: appending never moves what is
-/// stored (a `Vec` of a long drive's samples copies megabytes when it grows).
-#[derive(Debug, Clone)]
-struct Chunked<T> {
-    chunks: Vec<Vec<T>>,
-    len: usize,
-}
-
-impl<T> Default for Chunked<T> {
-    fn default() -> Self {
-        Self {
-            chunks: Vec::new(),
-            len: 0,
-        }
-    }
-}
-
-impl<T: Copy> Chunked<T> {
-    fn push(&mut self, v: T) {
-        if self.len.is_multiple_of(CHUNK) {
-            self.chunks.push(Vec::with_capacity(CHUNK));
-        }
-        self.chunks.last_mut().expect("a chunk").push(v);
-        self.len += 1;
-    }
-
-    fn len(&self) -> usize {
-        self.len
-    }
-
-    fn first(&self) -> Option<&T> {
-        self.chunks.first()?.first()
-    }
-
-    fn last(&self) -> Option<&T> {
-        self.chunks.last()?.last()
-    }
-
-    /// Items `lo..=hi`, contiguous.
-    fn copy(&self, lo: usize, hi: usize) -> Vec<T> {
-        (lo..=hi).map(|i| self[i]).collect()
-    }
-}
-
-impl<T> std::ops::Index<usize> for Chunked<T> {
-    type Output = T;
-
-    fn index(&self, i: usize) -> &T {
-        &self.chunks[i / CHUNK][i % CHUNK]
-    }
-}
 
 /// One complete sub-trajectory and its linear model.
 #[derive(Debug, Clone)]
@@ -154,8 +99,8 @@ pub struct LiveEstimate {
 pub struct LiveCalibration {
     initial: ChassisParams,
     length: f64,
-    samples: Chunked<Sample>,
-    reference: Chunked<RefPoint>,
+    samples: Vec<Sample>,
+    reference: Vec<RefPoint>,
     out_of_order: usize,
     /// Next sample to match, and the reference cursor of the matching.
     next_sample: usize,
@@ -176,6 +121,8 @@ pub struct LiveCalibration {
     sum_rhs: [f64; 3],
     x: [f64; 3],
     se: [Option<f64>; 3],
+    /// Sub-trajectories evaluated again, in all.
+    relinearised: usize,
     finished: bool,
 }
 
@@ -186,13 +133,13 @@ impl LiveCalibration {
         Self {
             initial: *initial,
             length,
-            samples: Chunked::default(),
-            reference: Chunked::default(),
+            samples: for_drive(DRIVE_SAMPLES_PER_S),
+            reference: for_drive(DRIVE_EPOCHS_PER_S),
             out_of_order: 0,
             next_sample: 0,
             ref_cursor: 0,
-            matches: Vec::new(),
-            dist: Vec::new(),
+            matches: for_drive(DRIVE_SAMPLES_PER_S),
+            dist: for_drive(DRIVE_SAMPLES_PER_S),
             path_anchor: None,
             turn_integ: None,
             turn_last: (0.0, 0.0),
@@ -208,6 +155,7 @@ impl LiveCalibration {
                 initial.track_width,
             ],
             se: [None; 3],
+            relinearised: 0,
             finished: false,
         }
     }
@@ -238,7 +186,7 @@ impl LiveCalibration {
     pub fn update(&mut self) {
         self.match_new(false);
         let closed = self.close_blocks(false);
-        let redone = self.relinearise(RELINEARISE_LIVE, RELINEARISE_PER_UPDATE);
+        let redone = self.relinearise(RELINEARISE, RELINEARISE_PER_UPDATE);
         // The estimate changes only with the sums; its errors (a pass over the
         // sub-trajectories) are computed again when one is added.
         if closed + redone > 0 {
@@ -441,8 +389,7 @@ impl LiveCalibration {
             .iter()
             .map(|&(i, k)| (i - s0, k - r0))
             .collect();
-        let (samples, reference) = (self.samples.copy(s0, s1), self.reference.copy(r0, r1));
-        let run = Run::new(&samples, &reference, local);
+        let run = Run::new(&self.samples[s0..=s1], &self.reference[r0..=r1], local);
         let (la, lb) = (a - lo, b - lo);
         let guess = guess.unwrap_or_else(|| run.heading_guess(la));
         let params = self.params();
@@ -586,6 +533,7 @@ impl LiveCalibration {
                 done += 1;
             }
         }
+        self.relinearised += done;
         done
     }
 
@@ -687,6 +635,29 @@ mod tests {
     fn live_equals_batch_whatever_the_chunks() {
         for (seed, chunk) in [(2, 1), (3, 7), (4, 97), (5, 333), (6, 50)] {
             check_equals_batch(PathKind::Random, 60.0, seed, chunk);
+        }
+    }
+
+    /// After the drive, every sub-trajectory's linearisation point is within [`RELINEARISE`]
+    /// standard errors of the estimate; during it, relinearisations stay a few per
+    /// sub-trajectory (a threshold inside the estimate's wander redoes them all, again and
+    /// again).
+    #[test]
+    fn relinearisation_reaches_the_end_without_chasing_the_estimate() {
+        let (live, _) = live_of(PathKind::Random, 300.0, 7, 50);
+        let redone = live.relinearised;
+        let blocks = live.blocks.len();
+        assert!(blocks >= 25, "{blocks} sub-trajectories");
+        assert!(
+            redone <= 3 * blocks,
+            "{redone} relinearisations of {blocks}"
+        );
+        let se = live.se.map(|v| v.unwrap());
+        for b in &live.blocks {
+            for ((x, at), se) in live.x.iter().zip(b.x).zip(se) {
+                let d = (at - x).abs() / se;
+                assert!(d <= RELINEARISE, "block {}..{}: {d} SE", b.a, b.b);
+            }
         }
     }
 

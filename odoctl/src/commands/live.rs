@@ -21,6 +21,7 @@ use crate::calib::live::{LiveCalibration, LiveEstimate, MIN_TURNING_DEG};
 use crate::calib::{WarmStart, SUBTRAJECTORY_LENGTH};
 use crate::cli::values::Targets;
 use crate::csvio::Sample;
+use crate::memory::{for_drive, DRIVE_LOG_BYTES_PER_S, DRIVE_SAMPLES_PER_S};
 use crate::reference::nmea::LogLines;
 use crate::reference::stream::NmeaStream;
 
@@ -196,7 +197,10 @@ impl LiveSession {
             next: Instant::now() + REFRESH,
             tty: std::io::stdout().is_terminal(),
             drawn: 0,
-            recording: (Vec::new(), Vec::new()),
+            recording: (
+                for_drive(DRIVE_SAMPLES_PER_S),
+                for_drive(DRIVE_LOG_BYTES_PER_S),
+            ),
             batch: BatchWorker::start(calibrate)?,
             slowest_update: Duration::ZERO,
         })

@@ -41,6 +41,7 @@ use odo_unit::timing::nmea::{days_from_civil, parse_sentence, NmeaError, TimeMes
 
 use super::geodetic::Geodetic;
 use super::{gps_time, Epoch, FixQuality, GeodeticLog, ReadReport};
+use crate::memory::{for_drive, DRIVE_EPOCHS_PER_S};
 use crate::text::{excerpt, excerpt_n, lines};
 
 /// `$` + body + `*hh`: the sentence with its checksum (XOR of the body's bytes).
@@ -135,8 +136,10 @@ pub struct LogLines {
 impl LogLines {
     /// An empty log named `file` in messages, with `leap_seconds` as [`parse`] takes them.
     pub fn new(file: &str, leap_seconds: Option<i32>) -> Self {
+        let mut reader = LogReader::new(file, leap_seconds);
+        reader.undated = for_drive(DRIVE_EPOCHS_PER_S);
         Self {
-            reader: LogReader::new(file, leap_seconds),
+            reader,
             scan: HdtScan::default(),
             lines: 0,
             bytes: 0,
