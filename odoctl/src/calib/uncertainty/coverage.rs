@@ -213,7 +213,7 @@ pub(crate) fn fit_coefficient(
             .collect::<Vec<_>>(),
     );
     let real = |v: f64| -> Result<f64> {
-        let ev = restarts.horizontal_memo(run, &at(v))?;
+        let ev = restarts.evaluate_memo(run, &at(v))?;
         let c = horizontal_coverage(&ev, ref_sigma, 1.0, 0);
         facts.borrow_mut().push((v, c));
         Ok(c)

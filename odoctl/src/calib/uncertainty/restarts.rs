@@ -10,7 +10,6 @@ use crate::calib::evaluation::Evaluation;
 use crate::calib::heading_fit::fit_restart_heading;
 use crate::calib::pipeline::cores;
 use crate::calib::run::{windows, Run};
-use crate::optim::norm2;
 
 /// The restarted sub-trajectories of the uncertainty fits: consecutive stretches of `window`
 /// metres, each started from the reference position with the heading minimising eq (16) over
@@ -22,7 +21,7 @@ pub struct Restarts {
     /// Restart headings (rad).
     pub headings: Vec<f64>,
     /// The last evaluations (see [`Restarts::evaluate_memo`]).
-    memo: RefCell<Vec<(ChassisParams, bool, Rc<Evaluation>)>>,
+    memo: RefCell<Vec<(ChassisParams, Rc<Evaluation>)>>,
 }
 
 /// Evaluations kept by [`Restarts::evaluate_memo`]: the two latest of a coefficient search
@@ -91,36 +90,23 @@ impl Restarts {
     /// and returned again for the same parameters (the fits of the coefficients evaluate the
     /// same parameters several times: the result, its coverages, the refits of delta).
     pub fn evaluate_memo(&self, run: &Run, p: &ChassisParams) -> Result<Rc<Evaluation>> {
-        self.memo_eval(run, p, true)
-    }
-
-    /// The horizontal errors and sigmas only (`horizontal`, `sigma_h`, `reference_sigma_h`;
-    /// the other columns may be empty), remembered with [`Restarts::evaluate_memo`]'s evaluations.
-    pub(crate) fn horizontal_memo(&self, run: &Run, p: &ChassisParams) -> Result<Rc<Evaluation>> {
-        self.memo_eval(run, p, false)
-    }
-
-    fn memo_eval(&self, run: &Run, p: &ChassisParams, full: bool) -> Result<Rc<Evaluation>> {
         let mut memo = self.memo.borrow_mut();
-        if let Some(i) = memo.iter().position(|(q, f, _)| q == p && (*f || !full)) {
+        if let Some(i) = memo.iter().position(|(q, _)| q == p) {
             let hit = memo.remove(i);
-            let ev = Rc::clone(&hit.2);
+            let ev = Rc::clone(&hit.1);
             memo.push(hit);
             return Ok(ev);
         }
         // Reuse the buffers of the oldest evaluation when nobody holds it any more.
         let mut ev = if memo.len() >= MEMO_EVALUATIONS {
-            Rc::try_unwrap(memo.remove(0).2).unwrap_or_default()
+            Rc::try_unwrap(memo.remove(0).1).unwrap_or_default()
         } else {
             Evaluation::default()
         };
         drop(memo);
-        self.evaluate_parts(run, p, &mut ev, full)?;
+        self.evaluate_into(run, p, &mut ev)?;
         let ev = Rc::new(ev);
-        let mut memo = self.memo.borrow_mut();
-        // A full evaluation replaces a horizontal one of the same parameters.
-        memo.retain(|(q, _, _)| q != p);
-        memo.push((*p, full, Rc::clone(&ev)));
+        self.memo.borrow_mut().push((*p, Rc::clone(&ev)));
         Ok(ev)
     }
 
@@ -133,8 +119,8 @@ impl Restarts {
             .borrow()
             .iter()
             .rev()
-            .filter(|(q, _, _)| family(q))
-            .map(|(q, _, ev)| (*q, Rc::clone(ev)))
+            .filter(|(q, _)| family(q))
+            .map(|(q, ev)| (*q, Rc::clone(ev)))
             .collect()
     }
 
@@ -150,18 +136,6 @@ impl Restarts {
     /// The sub-trajectories are evaluated on all cores (independent, appended in order: the
     /// same evaluation as one after the other).
     pub fn evaluate_into(&self, run: &Run, p: &ChassisParams, ev: &mut Evaluation) -> Result<()> {
-        self.evaluate_parts(run, p, ev, true)
-    }
-
-    /// [`Restarts::evaluate_into`], with only `horizontal`, `sigma_h` and `reference_sigma_h`
-    /// filled when not `full` (what the coefficient searches need: a fraction of the memory traffic).
-    fn evaluate_parts(
-        &self,
-        run: &Run,
-        p: &ChassisParams,
-        ev: &mut Evaluation,
-        full: bool,
-    ) -> Result<()> {
         ev.clear();
         let threads = cores().min(self.windows.len()).max(1);
         let chunk = self.windows.len().div_ceil(threads);
@@ -172,32 +146,14 @@ impl Restarts {
             .collect();
         let (first, rest) = jobs.split_first().expect("at least one sub-trajectory");
         let reserve = |ev: &mut Evaluation, wins: &[(usize, usize)]| {
-            let n = wins.iter().map(|(a, b)| b - a).sum();
-            if full {
-                ev.reserve(n);
-            } else {
-                ev.horizontal.reserve(n);
-                ev.sigma_h.reserve(n);
-                ev.reference_sigma_h.reserve(n);
-            }
+            ev.reserve(wins.iter().map(|(a, b)| b - a).sum());
         };
         // Room for every part's rows, which are appended to `ev`'s own.
         reserve(ev, &self.windows);
         let evaluate = |ev: &mut Evaluation, (wins, heads): (&[(usize, usize)], &[f64])| {
             reserve(ev, wins);
             for (&(a, b), &h) in wins.iter().zip(heads) {
-                if full {
-                    ev.extend(run, p, a, b, h, false)?;
-                } else {
-                    run.integrate(p, a, b, h, |k, integ| {
-                        let (ox, oy) = run.observed(&integ.pose(), h);
-                        let r = run.reference_at(k);
-                        ev.horizontal.push(norm2(ox - r.x, oy - r.y));
-                        ev.sigma_h.push(f64::from(integ.sigma().horizontal()));
-                        ev.reference_sigma_h.push(r.sigma_h);
-                    })
-                    .map_err(|e| anyhow!("parameters: {e}"))?;
-                }
+                ev.extend(run, p, a, b, h, false)?;
             }
             Ok::<_, anyhow::Error>(())
         };
