@@ -55,10 +55,17 @@ pub const DRIVE_LOG_BYTES_PER_S: usize = 6_000;
 /// of them and is above [`MMAP_THRESHOLD`], so glibc maps it on its own. Its pages are
 /// touched only as written, and it grows, if ever, by remapping them. A vector in the heap
 /// copies all it holds whenever its capacity doubles: milliseconds at a few megabytes, inside
-/// one live update.
+/// one live update. Where the address space is refused (strict overcommit), the capacity is
+/// the mmap threshold's alone.
 pub fn for_drive<T>(per_second: usize) -> Vec<T> {
-    let size = std::mem::size_of::<T>().max(1);
-    Vec::with_capacity((per_second * DRIVE_RESERVED_S).max(MMAP_THRESHOLD / size + 1))
+    let mapped = MMAP_THRESHOLD / std::mem::size_of::<T>().max(1) + 1;
+    let mut v = Vec::new();
+    if v.try_reserve_exact(per_second.saturating_mul(DRIVE_RESERVED_S).max(mapped))
+        .is_err()
+    {
+        v.reserve_exact(mapped);
+    }
+    v
 }
 
 #[cfg(test)]
@@ -77,6 +84,8 @@ mod tests {
         assert_eq!(for_drive::<[u8; 152]>(50).capacity(), 50 * DRIVE_RESERVED_S);
         assert_eq!(for_drive::<u8>(4_000).capacity(), 4_000 * DRIVE_RESERVED_S);
         assert!(for_drive::<()>(50).is_empty());
+        // More than the address space: the mmap threshold's capacity.
+        assert!(bytes(&for_drive::<[u8; 1024]>(usize::MAX)) > MMAP_THRESHOLD);
     }
 
     #[test]
