@@ -341,21 +341,19 @@ fn print_section(samples: &[Sample], f: &Fed, end: &End, process: (Duration, Agr
     );
     println!("then the fit's update (`LiveCalibration::update`: matching, a sub-trajectory");
     println!("closed about every 20 s, relinearisations, the estimate and its jackknife when they");
-    println!(
-        "changed). The CPU time is the updating thread's own (`CLOCK_THREAD_CPUTIME_ID`), its"
-    );
-    println!(
-        "wait for a core the time it was runnable on a run queue (/proc/thread-self/schedstat):"
-    );
-    println!("the rest of an update's wall time went to others (the background");
+    println!("changed). An update's wall time is the updating thread's own CPU time");
+    println!("(`CLOCK_THREAD_CPUTIME_ID`) and its wait for a core, runnable on a run queue while");
+    println!("others ran (/proc/thread-self/schedstat): the background batch, the machine's other");
     match f.stolen {
-        Some(share) => println!(
-            "batch, other processes, the hypervisor, which took {:.2} % of the machine's CPU time",
-            share * 100.0
-        ),
-        None => println!("batch, other processes, the hypervisor"),
+        Some(share) => {
+            println!(
+                "processes and kernel threads; the hypervisor took {:.2} % of the machine's CPU",
+                share * 100.0
+            );
+            println!("time during the drive (steal in /proc/stat).");
+        }
+        None => println!("processes and kernel threads."),
     }
-    println!("during the drive: steal in /proc/stat).");
     println!();
     print_end(end, process);
 }
