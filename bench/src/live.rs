@@ -134,8 +134,9 @@ struct Cost {
     waited: Option<Duration>,
 }
 
-/// What the drive's feed leaves: the cost of each update, the live fit, the streaming reader, the background batch, the
-/// rows and the log handed on, the log's lines read as they came.
+/// What the drive's feed leaves: the cost of each update, the live fit, the streaming
+/// reader, the background batch, the rows and the log handed on, the log's lines read as
+/// they came.
 struct Fed {
     costs: Vec<Cost>,
     /// The share of the machine's CPU time stolen by the hypervisor during the drive.

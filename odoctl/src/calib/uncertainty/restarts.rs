@@ -132,7 +132,7 @@ impl Restarts {
     }
 
     /// [`Restarts::evaluate`] into `ev` (cleared first, its buffers reused: the coverage
-    /// bisections evaluate the same sub-trajectories dozens of times).
+    /// searches evaluate the same sub-trajectories several times).
     /// The sub-trajectories are evaluated on all cores (independent, appended in order: the
     /// same evaluation as one after the other).
     pub fn evaluate_into(&self, run: &Run, p: &ChassisParams, ev: &mut Evaluation) -> Result<()> {
