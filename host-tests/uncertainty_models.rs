@@ -470,3 +470,84 @@ fn turning_correlation_zero_or_tiny_is_the_white_model() {
     // Straight: the opposite-phase slip adds nothing in either form.
     assert_eq!(run(2.0, 400), run(0.0, 400));
 }
+
+/// The uncertainty replayed over one integration's step geometries
+/// (`Integrator::step_geometry`, then `PoseUncertainty::step`) is the integrator's own, bit
+/// for bit, at any coefficients of either model: the geometries are recorded at other
+/// coefficients than those replayed, and an over-range sample is skipped by both.
+#[test]
+fn replayed_uncertainty_is_the_integrators() {
+    use odo_unit::odometry::{GeometryUncertainty, PoseUncertainty};
+    let base = ChassisParams::DESIGNED;
+    let mut counts = path(PI * base.left_diameter / f64::from(base.ticks_per_rev));
+    // A counter misread: one sample over range, then the path goes on from it.
+    counts.insert(1500, [1 << 20, 0]);
+    let geometry = GeometryUncertainty {
+        left_diameter_se: 3e-6,
+        right_diameter_se: 4e-6,
+        track_width_se: 4e-5,
+        diameters_correlation: 0.3,
+        left_track_correlation: -0.2,
+        right_track_correlation: 0.1,
+    };
+    let cases = [
+        ChassisParams {
+            delta_left: 2e-6,
+            delta_right: 3e-6,
+            delta_diff: 1e-6,
+            ..base
+        },
+        ChassisParams {
+            uncertainty_model: UncertaintyModel::Covariance,
+            kappa_left: 2e-6,
+            kappa_right: 3e-6,
+            kappa_diff: 1e-5,
+            geometry_uncertainty: geometry,
+            ..base
+        },
+        ChassisParams {
+            uncertainty_model: UncertaintyModel::Covariance,
+            kappa_left: 1e-6,
+            kappa_diff: 2e-5,
+            kappa_diff_corr: 0.5,
+            ..base
+        },
+    ];
+    let start = Pose {
+        x: 1.0,
+        y: -2.0,
+        heading: 0.3,
+    };
+    let mut recorder = Integrator::new(&base, WheelCounts::default(), start).unwrap();
+    let mut geometries = Vec::new();
+    let mut total = [0i64; 2];
+    for d in &counts {
+        total = [total[0] + d[0], total[1] + d[1]];
+        let c = WheelCounts {
+            left: total[0],
+            right: total[1],
+        };
+        geometries.push(recorder.step_geometry(c, IndexRefs::default()));
+    }
+    assert!(geometries[1500].0.overrange && geometries[1500].1.is_none());
+    for p in cases {
+        let mut integ = Integrator::new(&p, WheelCounts::default(), start).unwrap();
+        let mut replay = PoseUncertainty::new(&p);
+        let mut total = [0i64; 2];
+        for (d, (status, g)) in counts.iter().zip(&geometries) {
+            total = [total[0] + d[0], total[1] + d[1]];
+            let c = WheelCounts {
+                left: total[0],
+                right: total[1],
+            };
+            assert_eq!(integ.step(c, IndexRefs::default()), *status);
+            if let Some(g) = g {
+                replay.step(g);
+            }
+            assert_eq!(replay.sigma(), integ.sigma(), "{p:?}");
+            assert_eq!(replay.heading_covariance(), integ.heading_covariance());
+        }
+        assert!(integ.sigma().horizontal() > 0.0);
+        assert_eq!(integ.pose(), recorder.pose());
+    }
+}

@@ -33,11 +33,9 @@
 //! starting point and the step reports [`StepStatus::overrange`]. Such a sample is a fault
 //! (a counter misread, or a chassis spinning faster than any sampling rate can follow).
 
-use super::params::{ChassisParams, ParamError, UncertaintyModel};
+use super::params::{ChassisParams, ParamError};
 use super::trig;
-use super::uncertainty::{
-    CovarianceUncertainty, PaperUncertainty, StepGeometry, StepJacobian, UncertaintyCoefficients,
-};
+use super::uncertainty::{PoseSigma, PoseUncertainty, StepGeometry};
 use super::wheel::{WheelModel, DISTANCE_SCALE};
 use crate::bytes::Text;
 use crate::decimal::Dec;
@@ -124,27 +122,6 @@ impl core::fmt::Display for PoseRangeError {
     }
 }
 
-/// The uncertainty of a pose: standard uncertainties of x and y (metres) and heading
-/// (radians), and the x-y covariance (m^2; zero for the paper's model, which has none).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct PoseSigma {
-    /// sigma of x, metres.
-    pub x: f32,
-    /// sigma of y, metres.
-    pub y: f32,
-    /// sigma of heading, radians.
-    pub heading: f32,
-    /// Covariance of x and y, m^2 (covariance model only).
-    pub cov_xy: f32,
-}
-
-impl PoseSigma {
-    /// The horizontal uncertainty `sigma_h = sqrt(sigma_x^2 + sigma_y^2)`, metres.
-    pub fn horizontal(&self) -> f32 {
-        trig::hypot(self.x, self.y)
-    }
-}
-
 /// Absolute increment counts `Gamma_1` (left) and `Gamma_2` (right), increments.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct WheelCounts {
@@ -199,15 +176,13 @@ pub struct Integrator {
     inv_track: f32,
     /// Radians per 2^32 binary-angle units (2^-32 turn), f32.
     rad_per_binary: f32,
-    coefficients: UncertaintyCoefficients,
     counts: WheelCounts,
     x: i64,
     y: i64,
     heading: u64,
     turns: i64,
     periodic: [Option<PeriodicCache>; 2],
-    paper: PaperUncertainty,
-    covariance: CovarianceUncertainty,
+    uncertainty: PoseUncertainty,
 }
 
 impl Integrator {
@@ -238,15 +213,13 @@ impl Integrator {
             c: [0.0; 2],
             inv_track: 0.0,
             rad_per_binary: (trig::RAD_PER_BINARY * 4_294_967_296.0) as f32,
-            coefficients: UncertaintyCoefficients::default(),
             counts,
             x: 0,
             y: 0,
             heading: 0,
             turns: 0,
             periodic: [None; 2],
-            paper: PaperUncertainty::default(),
-            covariance: CovarianceUncertainty::default(),
+            uncertainty: PoseUncertainty::new(params),
         };
         s.derive_constants();
         s.reset_pose(pose);
@@ -268,16 +241,7 @@ impl Integrator {
         }
         self.heading_per_metre = per_metre as f32;
         self.inv_track = (1.0 / p.track_width) as f32;
-        self.coefficients = UncertaintyCoefficients {
-            delta: [p.delta_left, p.delta_right],
-            delta_diff: p.delta_diff,
-            kappa: [p.kappa_left, p.kappa_right],
-            kappa_diff: p.kappa_diff,
-            turn_decay: 0.0,
-            turn_rate_variance: 0.0,
-            geometry: p.geometry_uncertainty.relative_covariance(p),
-        }
-        .with_turning_correlation(p.kappa_diff_corr);
+        self.uncertainty.set_params(p);
         self.periodic = [None; 2];
     }
 
@@ -303,8 +267,7 @@ impl Integrator {
         let (turns, frac) = radians_to_binary(pose.heading);
         self.turns = turns;
         self.heading = frac;
-        self.paper = PaperUncertainty::default();
-        self.covariance = CovarianceUncertainty::default();
+        self.uncertainty.reset();
     }
 
     /// Takes the counts as the new starting point without integrating the motion since the
@@ -340,35 +303,13 @@ impl Integrator {
 
     /// The current uncertainty, from the model selected by `uncertainty_model`.
     pub fn sigma(&self) -> PoseSigma {
-        match self.params.uncertainty_model {
-            UncertaintyModel::Paper => {
-                let (x, y, heading) = self.paper.sigmas();
-                PoseSigma {
-                    x,
-                    y,
-                    heading,
-                    cov_xy: 0.0,
-                }
-            }
-            UncertaintyModel::Covariance => {
-                let (x, y, heading, cov_xy) = self.covariance.sigmas();
-                PoseSigma {
-                    x,
-                    y,
-                    heading,
-                    cov_xy,
-                }
-            }
-        }
+        self.uncertainty.sigma()
     }
 
     /// The position-heading covariances `(cov(x, alpha), cov(y, alpha))`, m rad: carried by
     /// the covariance model; zero for the paper's model, which has no correlation terms.
     pub fn heading_covariance(&self) -> (f32, f32) {
-        match self.params.uncertainty_model {
-            UncertaintyModel::Paper => (0.0, 0.0),
-            UncertaintyModel::Covariance => self.covariance.heading_terms(),
-        }
+        self.uncertainty.heading_covariance()
     }
 
     /// The change of wheel `i`'s periodic distance term between `before` and `now`, if its
@@ -402,12 +343,26 @@ impl Integrator {
     /// propagates the uncertainty (eqs 19-28). `index` holds the counts latched at each
     /// wheel's last index pulse, which reference the per-angle wheel functions.
     pub fn step(&mut self, counts: WheelCounts, index: IndexRefs) -> StepStatus {
-        let (status, motion) = self.advance(counts, index);
-        let Some(m) = motion else {
-            return status;
-        };
+        let (status, geometry) = self.step_geometry(counts, index);
         // Uncertainty, eqs (19)-(28), or the covariance model.
-        let geometry = StepGeometry {
+        if let Some(g) = geometry {
+            self.uncertainty.step(&g);
+        }
+        status
+    }
+
+    /// The pose part of [`Integrator::step`] (bit for bit the same pose), with the geometry
+    /// its uncertainty step reads, which it leaves to the caller: for host tools that replay
+    /// the uncertainty of one integration at other coefficients ([`PoseUncertainty::step`]).
+    /// The geometry is `None` when the sample was not integrated.
+    #[inline(always)]
+    pub fn step_geometry(
+        &mut self,
+        counts: WheelCounts,
+        index: IndexRefs,
+    ) -> (StepStatus, Option<StepGeometry>) {
+        let (status, motion) = self.advance(counts, index);
+        let geometry = motion.map(|m| StepGeometry {
             abs_counts: [
                 m.counts[0].unsigned_abs() as f32,
                 m.counts[1].unsigned_abs() as f32,
@@ -420,16 +375,8 @@ impl Integrator {
             sin: trig::q30_to_f32(m.step.sin),
             cos: trig::q30_to_f32(m.step.cos),
             inv_track: self.inv_track,
-        };
-        let jacobian = StepJacobian::of(&geometry);
-        match self.params.uncertainty_model {
-            UncertaintyModel::Paper => self.paper.step(&self.coefficients, &geometry, &jacobian),
-            UncertaintyModel::Covariance => {
-                self.covariance
-                    .step(&self.coefficients, &geometry, &jacobian)
-            }
-        }
-        status
+        });
+        (status, geometry)
     }
 
     /// The pose part of [`Integrator::step`] alone (eqs 1-15, bit for bit the same pose),

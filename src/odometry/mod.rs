@@ -17,5 +17,6 @@ pub mod wheel;
 pub use encoder::CounterExtender;
 pub use index::{extend_near, IndexCheck, IndexTracker};
 pub use integrator::{
-    IndexRefs, Integrator, Pose, PoseRangeError, PoseSigma, PoseStep, StepStatus, WheelCounts,
+    IndexRefs, Integrator, Pose, PoseRangeError, PoseStep, StepStatus, WheelCounts,
 };
+pub use uncertainty::{PoseSigma, PoseUncertainty};

@@ -188,6 +188,25 @@ impl ChassisParams {
     /// Largest accepted magnitude of one wheel-function coefficient (relative radius).
     pub const MAX_HARMONIC: f32 = 0.05;
 
+    /// These parameters with the uncertainty models' (`delta_*`, `kappa_*`,
+    /// `uncertainty_model`, `geometry_uncertainty`) set to the designed ones: two parameter
+    /// sets integrate the same poses, bit for bit, when their pose parts are equal.
+    pub fn pose_part(&self) -> Self {
+        let d = Self::DESIGNED;
+        Self {
+            delta_left: d.delta_left,
+            delta_right: d.delta_right,
+            delta_diff: d.delta_diff,
+            uncertainty_model: d.uncertainty_model,
+            kappa_left: d.kappa_left,
+            kappa_right: d.kappa_right,
+            kappa_diff: d.kappa_diff,
+            kappa_diff_corr: d.kappa_diff_corr,
+            geometry_uncertainty: d.geometry_uncertainty,
+            ..*self
+        }
+    }
+
     /// Checks every parameter against its documented range; the first offending key is
     /// named in the error.
     pub fn validate(&self) -> Result<(), ParamError> {

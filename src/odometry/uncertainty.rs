@@ -33,6 +33,7 @@
 //! All sums run in f32 with Kahan compensation ([`CompensatedSum`]), so a sigma that grows by
 //! tiny steps over hours keeps full f32 accuracy instead of stalling on rounding.
 
+use super::params::{ChassisParams, UncertaintyModel};
 use super::trig;
 
 /// A Kahan-compensated f32 accumulator.
@@ -172,6 +173,20 @@ pub struct UncertaintyCoefficients {
 pub const MIN_TURN_CORRELATION: f32 = 1.0e-3;
 
 impl UncertaintyCoefficients {
+    /// The coefficients of `p` (validated), as the integrator uses them.
+    pub fn of(p: &ChassisParams) -> Self {
+        Self {
+            delta: [p.delta_left, p.delta_right],
+            delta_diff: p.delta_diff,
+            kappa: [p.kappa_left, p.kappa_right],
+            kappa_diff: p.kappa_diff,
+            turn_decay: 0.0,
+            turn_rate_variance: 0.0,
+            geometry: p.geometry_uncertainty.relative_covariance(p),
+        }
+        .with_turning_correlation(p.kappa_diff_corr)
+    }
+
     /// These coefficients with opposite-phase slip of correlation length `corr`
     /// (`kappa_diff_corr`, m of `|ds_1 - ds_2|`): Gauss-Markov from
     /// [`MIN_TURN_CORRELATION`] on, white below (0 included).
@@ -373,5 +388,104 @@ impl CovarianceUncertainty {
     pub fn heading_terms(&self) -> (f32, f32) {
         let [_, _, _, _, gxa, gya] = self.geometry_terms();
         (self.xa.value() + gxa, self.ya.value() + gya)
+    }
+}
+
+/// The uncertainty of a pose: standard uncertainties of x and y (metres) and heading
+/// (radians), and the x-y covariance (m^2; zero for the paper's model, which has none).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PoseSigma {
+    /// sigma of x, metres.
+    pub x: f32,
+    /// sigma of y, metres.
+    pub y: f32,
+    /// sigma of heading, radians.
+    pub heading: f32,
+    /// Covariance of x and y, m^2 (covariance model only).
+    pub cov_xy: f32,
+}
+
+impl PoseSigma {
+    /// The horizontal uncertainty `sigma_h = sqrt(sigma_x^2 + sigma_y^2)`, metres.
+    pub fn horizontal(&self) -> f32 {
+        trig::hypot(self.x, self.y)
+    }
+}
+
+/// The uncertainty of the model that `uncertainty_model` selects, stepped one sample's
+/// [`StepGeometry`] at a time: the integrator's own, or replayed by a host tool over the
+/// geometries of one integration at other coefficients (the same sigmas, bit for bit).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PoseUncertainty {
+    model: UncertaintyModel,
+    coefficients: UncertaintyCoefficients,
+    paper: PaperUncertainty,
+    covariance: CovarianceUncertainty,
+}
+
+impl PoseUncertainty {
+    /// Zero uncertainty, with the model and coefficients of `p` (validated).
+    pub fn new(p: &ChassisParams) -> Self {
+        Self {
+            model: p.uncertainty_model,
+            coefficients: UncertaintyCoefficients::of(p),
+            paper: PaperUncertainty::default(),
+            covariance: CovarianceUncertainty::default(),
+        }
+    }
+
+    /// Takes the model and coefficients of `p` (validated), keeping the uncertainty so far.
+    pub fn set_params(&mut self, p: &ChassisParams) {
+        self.model = p.uncertainty_model;
+        self.coefficients = UncertaintyCoefficients::of(p);
+    }
+
+    /// Zeroes the uncertainty, keeping the model and coefficients.
+    pub fn reset(&mut self) {
+        self.paper = PaperUncertainty::default();
+        self.covariance = CovarianceUncertainty::default();
+    }
+
+    /// Propagates one integrated sample of geometry `g`.
+    #[inline]
+    pub fn step(&mut self, g: &StepGeometry) {
+        let jacobian = StepJacobian::of(g);
+        match self.model {
+            UncertaintyModel::Paper => self.paper.step(&self.coefficients, g, &jacobian),
+            UncertaintyModel::Covariance => self.covariance.step(&self.coefficients, g, &jacobian),
+        }
+    }
+
+    /// The current uncertainty.
+    pub fn sigma(&self) -> PoseSigma {
+        match self.model {
+            UncertaintyModel::Paper => {
+                let (x, y, heading) = self.paper.sigmas();
+                PoseSigma {
+                    x,
+                    y,
+                    heading,
+                    cov_xy: 0.0,
+                }
+            }
+            UncertaintyModel::Covariance => {
+                let (x, y, heading, cov_xy) = self.covariance.sigmas();
+                PoseSigma {
+                    x,
+                    y,
+                    heading,
+                    cov_xy,
+                }
+            }
+        }
+    }
+
+    /// The position-heading covariances `(cov(x, alpha), cov(y, alpha))`, m rad: carried by
+    /// the covariance model; zero for the paper's model, which has no correlation terms.
+    pub fn heading_covariance(&self) -> (f32, f32) {
+        match self.model {
+            UncertaintyModel::Paper => (0.0, 0.0),
+            UncertaintyModel::Covariance => self.covariance.heading_terms(),
+        }
     }
 }

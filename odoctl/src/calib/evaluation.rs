@@ -1,7 +1,8 @@
 //! Errors and predicted uncertainty along a run (`validate`, and the uncertainty fits).
 
 use anyhow::{anyhow, Result};
-use odo_unit::odometry::ChassisParams;
+use odo_unit::odometry::uncertainty::StepGeometry;
+use odo_unit::odometry::{ChassisParams, Integrator, PoseSigma, PoseUncertainty};
 
 use crate::optim::norm2;
 use crate::stats::wrap_angle;
@@ -9,7 +10,7 @@ use crate::stats::wrap_angle;
 use super::run::Run;
 
 /// Errors and predicted uncertainty along a run.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Default)]
 pub struct Evaluation {
     /// Match indices evaluated.
     pub k: Vec<usize>,
@@ -45,6 +46,32 @@ pub struct Evaluation {
     /// The reference epoch's own horizontal RMS sigma `hypot(sigma_east, sigma_north)` (m),
     /// where its log gives one (GST, `.pos` `sdn`/`sde`, a `sigma_h` column).
     pub reference_sigma_h: Vec<Option<f64>>,
+}
+
+impl Clone for Evaluation {
+    fn clone(&self) -> Self {
+        let mut c = Self::default();
+        c.clone_from(self);
+        c
+    }
+
+    /// Copies every column into `self`'s allocations.
+    fn clone_from(&mut self, source: &Self) {
+        self.k.clone_from(&source.k);
+        self.t.clone_from(&source.t);
+        self.dist.clone_from(&source.dist);
+        self.odo.clone_from(&source.odo);
+        self.reference.clone_from(&source.reference);
+        self.horizontal.clone_from(&source.horizontal);
+        self.sigma_h.clone_from(&source.sigma_h);
+        self.heading.clone_from(&source.heading);
+        self.heading_err.clone_from(&source.heading_err);
+        self.sigma_heading.clone_from(&source.sigma_heading);
+        self.heading_change_err
+            .clone_from(&source.heading_change_err);
+        self.start_headings.clone_from(&source.start_headings);
+        self.reference_sigma_h.clone_from(&source.reference_sigma_h);
+    }
 }
 
 impl Evaluation {
@@ -143,28 +170,70 @@ impl Evaluation {
     ) -> Result<()> {
         let mut rows = Vec::with_capacity(b - a);
         run.integrate(params, a, b, heading0, |k, integ| {
-            let p = integ.pose();
-            let s = integ.sigma();
-            rows.push((
-                k,
-                run.observed(&p, heading0),
-                p.heading,
-                f64::from(s.horizontal()),
-                f64::from(s.heading),
-            ));
+            rows.push(Row::at(run, k, integ, heading0, integ.sigma()));
         })
         .map_err(|e| anyhow!("parameters: {e}"))?;
+        self.extend_rows(run, a, heading0, include_start, rows);
+        Ok(())
+    }
+
+    /// [`Evaluation::extend`] without the start point, with each integrated sample's step
+    /// geometry appended to `record.geometries` and, for each row appended, how many there
+    /// are by its match to `record.steps`: what [`UncertaintyRecord::replay`] needs to give
+    /// the sigmas at other coefficients.
+    pub fn extend_recording(
+        &mut self,
+        run: &Run,
+        params: &ChassisParams,
+        (a, b): (usize, usize),
+        heading0: f64,
+        record: &mut UncertaintyRecord,
+    ) -> Result<()> {
+        let mut rows = Vec::with_capacity(b - a);
+        let UncertaintyRecord {
+            geometries,
+            steps,
+            windows,
+        } = record;
+        let first = geometries.len();
+        run.integrate_geometry(params, (a, b), heading0, geometries, |k, integ, u, n| {
+            steps.push(n - first);
+            rows.push(Row::at(run, k, integ, heading0, u.sigma()));
+        })
+        .map_err(|e| anyhow!("parameters: {e}"))?;
+        windows.push((rows.len(), geometries.len() - first));
+        self.extend_rows(run, a, heading0, false, rows);
+        Ok(())
+    }
+
+    /// The rows of a restart at `a` with `heading0` appended (the start point first with
+    /// `include_start`).
+    fn extend_rows(
+        &mut self,
+        run: &Run,
+        a: usize,
+        heading0: f64,
+        include_start: bool,
+        rows: Vec<Row>,
+    ) {
         let start = run
-            .start_heading(a, |k| rows.get(k - a - 1).map(|r| r.2 - heading0))
+            .start_heading(a, |k| rows.get(k - a - 1).map(|r| r.heading - heading0))
             .map(|(h, n)| (heading0, h, n));
         self.reserve(rows.len() + usize::from(include_start));
         if include_start {
             self.push(run, a, run.anchor(a), heading0, 0.0, 0.0, start);
         }
-        for (k, xy, h, sh, sa) in rows {
-            self.push(run, k, xy, h, sh, sa, start);
+        for r in rows {
+            self.push(
+                run,
+                r.k,
+                r.odo,
+                r.heading,
+                r.sigma_h,
+                r.sigma_heading,
+                start,
+            );
         }
-        Ok(())
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -211,6 +280,78 @@ impl Evaluation {
             .zip(&self.sigma_heading)
             .filter_map(|(e, s)| e.map(|e| (e, *s)))
             .unzip()
+    }
+}
+
+/// One match's row as the integration leaves it.
+struct Row {
+    k: usize,
+    odo: (f64, f64),
+    heading: f64,
+    sigma_h: f64,
+    sigma_heading: f64,
+}
+
+impl Row {
+    /// The row of match `k` of `run`, restarted with `heading0`, at `integ`'s pose and the
+    /// uncertainty `sigma`.
+    fn at(run: &Run, k: usize, integ: &Integrator, heading0: f64, sigma: PoseSigma) -> Self {
+        let p = integ.pose();
+        Self {
+            k,
+            odo: run.observed(&p, heading0),
+            heading: p.heading,
+            sigma_h: f64::from(sigma.horizontal()),
+            sigma_heading: f64::from(sigma.heading),
+        }
+    }
+}
+
+/// The step geometries of restarted stretches evaluated one after the other
+/// ([`Evaluation::extend_recording`]): the sigmas of their evaluation at any other
+/// coefficients, bit for bit, without integrating the pose again ([`UncertaintyRecord::replay`]).
+#[derive(Debug, Clone, Default)]
+pub struct UncertaintyRecord {
+    /// Every integrated sample's geometry, stretch after stretch.
+    geometries: Vec<StepGeometry>,
+    /// For each row, the geometries of its stretch up to its match.
+    steps: Vec<usize>,
+    /// For each stretch, its rows and its geometries.
+    windows: Vec<(usize, usize)>,
+}
+
+impl UncertaintyRecord {
+    /// Reserves room for `samples` more geometries and `rows` more rows.
+    pub fn reserve(&mut self, samples: usize, rows: usize) {
+        self.geometries.reserve_exact(samples);
+        self.steps.reserve_exact(rows);
+    }
+
+    /// The rows recorded.
+    pub fn rows(&self) -> usize {
+        self.steps.len()
+    }
+
+    /// The horizontal and heading sigmas (m, rad) of every recorded row at the coefficients of
+    /// `params` (validated; its geometry that of the recording), into `sigma_h` and
+    /// `sigma_heading` ([`UncertaintyRecord::rows`] long).
+    pub fn replay(&self, params: &ChassisParams, sigma_h: &mut [f64], sigma_heading: &mut [f64]) {
+        let (mut g, mut r) = (0, 0);
+        for &(rows, geometries) in &self.windows {
+            let stretch = &self.geometries[g..g + geometries];
+            let mut uncertainty = PoseUncertainty::new(params);
+            let mut done = 0;
+            for i in r..r + rows {
+                for step in &stretch[done..self.steps[i]] {
+                    uncertainty.step(step);
+                }
+                done = self.steps[i];
+                let s = uncertainty.sigma();
+                sigma_h[i] = f64::from(s.horizontal());
+                sigma_heading[i] = f64::from(s.heading);
+            }
+            (g, r) = (g + geometries, r + rows);
+        }
     }
 }
 

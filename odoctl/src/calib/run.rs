@@ -2,7 +2,8 @@
 //! the start of a stretch, and the core integrator run along it.
 
 use anyhow::Result;
-use odo_unit::odometry::{ChassisParams, Integrator, ParamError, Pose, PoseStep};
+use odo_unit::odometry::uncertainty::StepGeometry;
+use odo_unit::odometry::{ChassisParams, Integrator, ParamError, Pose, PoseStep, PoseUncertainty};
 
 use crate::csvio::{RefPoint, Sample};
 use crate::optim::{self, NormalAccumulator, Objective};
@@ -246,6 +247,35 @@ impl<'a> Run<'a> {
             },
             |k, integ, _| visit(k, integ),
         )
+    }
+
+    /// [`Run::integrate`] with the uncertainty stepped beside the integrator (a
+    /// [`PoseUncertainty`] of `params`: the integrator's own sigmas, bit for bit) and each
+    /// integrated sample's step geometry appended to `geometries`: `visit(k, &integrator,
+    /// &uncertainty, geometries.len())` at every match `k` in `a+1..=b`.
+    pub fn integrate_geometry(
+        &self,
+        params: &ChassisParams,
+        (a, b): (usize, usize),
+        heading0: f64,
+        geometries: &mut Vec<StepGeometry>,
+        mut visit: impl FnMut(usize, &Integrator, &PoseUncertainty, usize),
+    ) -> Result<(), ParamError> {
+        let mut integ = self.start(params, a, heading0)?;
+        let mut uncertainty = PoseUncertainty::new(params);
+        let mut k = a + 1;
+        for i in self.matches[a].0 + 1..=self.matches[b].0 {
+            let s = &self.samples[i];
+            if let (_, Some(g)) = integ.step_geometry(counts(s), index_refs(s)) {
+                uncertainty.step(&g);
+                geometries.push(g);
+            }
+            if k <= b && self.matches[k].0 == i {
+                visit(k, &integ, &uncertainty, geometries.len());
+                k += 1;
+            }
+        }
+        Ok(())
     }
 
     /// [`Run::integrate_pose`] with the pose's derivatives with respect to the geometry

@@ -6,7 +6,7 @@ use std::rc::Rc;
 use anyhow::{anyhow, bail, Result};
 use odo_unit::odometry::ChassisParams;
 
-use crate::calib::evaluation::Evaluation;
+use crate::calib::evaluation::{Evaluation, UncertaintyRecord};
 use crate::calib::heading_fit::fit_restart_heading;
 use crate::calib::pipeline::cores;
 use crate::calib::run::{windows, Run};
@@ -22,6 +22,20 @@ pub struct Restarts {
     pub headings: Vec<f64>,
     /// The last evaluations (see [`Restarts::evaluate_memo`]).
     memo: RefCell<Vec<(ChassisParams, Rc<Evaluation>)>>,
+    /// The last integrated evaluation with its step geometries, which give the sigmas at
+    /// other coefficients of the same geometry ([`Restarts::evaluate_into`]).
+    recorded: RefCell<Option<Recorded>>,
+}
+
+/// An integrated evaluation of the restarts and what replays its sigmas.
+#[derive(Debug, Clone)]
+struct Recorded {
+    /// The parameters it integrated.
+    params: ChassisParams,
+    /// Its evaluation.
+    evaluation: Evaluation,
+    /// Its step geometries, a record for each part evaluated on a core of its own, in order.
+    parts: Vec<UncertaintyRecord>,
 }
 
 /// Evaluations kept by [`Restarts::evaluate_memo`]: the two latest of a coefficient search
@@ -83,6 +97,7 @@ impl Restarts {
             windows: wins,
             headings,
             memo: RefCell::default(),
+            recorded: RefCell::default(),
         })
     }
 
@@ -132,10 +147,42 @@ impl Restarts {
     }
 
     /// [`Restarts::evaluate`] into `ev` (cleared first, its buffers reused: the coverage
-    /// searches evaluate the same sub-trajectories several times).
-    /// The sub-trajectories are evaluated on all cores (independent, appended in order: the
-    /// same evaluation as one after the other).
+    /// searches evaluate the same sub-trajectories several times). Parameters that differ from
+    /// the last integrated ones in the uncertainty's coefficients alone (the same
+    /// [`ChassisParams::pose_part`]) have the same poses and errors: their sigmas are replayed
+    /// from that integration's step geometries ([`UncertaintyRecord::replay`]), the same
+    /// sigmas bit for bit at a fraction of the cost. Otherwise the sub-trajectories are
+    /// integrated on all cores (independent, appended in order: the same evaluation as one
+    /// after the other), and their step geometries recorded.
     pub fn evaluate_into(&self, run: &Run, p: &ChassisParams, ev: &mut Evaluation) -> Result<()> {
+        p.validate().map_err(|e| anyhow!("parameters: {e}"))?;
+        if let Some(r) = self
+            .recorded
+            .borrow()
+            .as_ref()
+            .filter(|r| r.params.pose_part() == p.pose_part())
+        {
+            ev.clone_from(&r.evaluation);
+            replay(&r.parts, p, ev);
+            return Ok(());
+        }
+        let parts = self.integrate_into(run, p, ev)?;
+        *self.recorded.borrow_mut() = Some(Recorded {
+            params: *p,
+            evaluation: ev.clone(),
+            parts,
+        });
+        Ok(())
+    }
+
+    /// The integration of [`Restarts::evaluate_into`]: the evaluation into `ev`, with the
+    /// step geometries of each core's part.
+    fn integrate_into(
+        &self,
+        run: &Run,
+        p: &ChassisParams,
+        ev: &mut Evaluation,
+    ) -> Result<Vec<UncertaintyRecord>> {
         ev.clear();
         let threads = cores().min(self.windows.len()).max(1);
         let chunk = self.windows.len().div_ceil(threads);
@@ -152,33 +199,58 @@ impl Restarts {
         reserve(ev, &self.windows);
         let evaluate = |ev: &mut Evaluation, (wins, heads): (&[(usize, usize)], &[f64])| {
             reserve(ev, wins);
+            let mut record = UncertaintyRecord::default();
+            let samples = wins
+                .iter()
+                .map(|&(a, b)| run.matches[b].0 - run.matches[a].0);
+            record.reserve(samples.sum(), wins.iter().map(|(a, b)| b - a).sum());
             for (&(a, b), &h) in wins.iter().zip(heads) {
-                ev.extend(run, p, a, b, h, false)?;
+                ev.extend_recording(run, p, (a, b), h, &mut record)?;
             }
-            Ok::<_, anyhow::Error>(())
+            Ok::<_, anyhow::Error>(record)
         };
-        let parts = std::thread::scope(|scope| {
+        std::thread::scope(|scope| {
             let spawned: Vec<_> = rest
                 .iter()
                 .map(|&job| {
                     scope.spawn(move || {
                         let mut part = Evaluation::default();
-                        evaluate(&mut part, job).map(|()| part)
+                        evaluate(&mut part, job).map(|r| (part, r))
                     })
                 })
                 .collect();
-            let own = evaluate(ev, *first);
-            let parts = spawned
-                .into_iter()
-                .map(|j| j.join().expect("evaluation panicked"))
-                .collect::<Result<Vec<_>>>();
-            own.and(parts)
-        })?;
-        for mut part in parts {
-            ev.append(&mut part);
-        }
-        Ok(())
+            let own = evaluate(ev, *first)?;
+            let mut records = vec![own];
+            for j in spawned {
+                let (mut part, record) = j.join().expect("evaluation panicked")?;
+                ev.append(&mut part);
+                records.push(record);
+            }
+            Ok(records)
+        })
     }
+}
+
+/// The sigmas of `ev` (the evaluation the `parts` were recorded with) at the coefficients of
+/// `p`, each part's on a core of its own.
+fn replay(parts: &[UncertaintyRecord], p: &ChassisParams, ev: &mut Evaluation) {
+    let (mut sigma_h, mut sigma_heading) = (&mut ev.sigma_h[..], &mut ev.sigma_heading[..]);
+    std::thread::scope(|scope| {
+        let mut own = None;
+        for (i, part) in parts.iter().enumerate() {
+            let (h, rest_h) = std::mem::take(&mut sigma_h).split_at_mut(part.rows());
+            let (a, rest_a) = std::mem::take(&mut sigma_heading).split_at_mut(part.rows());
+            (sigma_h, sigma_heading) = (rest_h, rest_a);
+            if i == 0 {
+                own = Some((part, h, a));
+            } else {
+                scope.spawn(move || part.replay(p, h, a));
+            }
+        }
+        if let Some((part, h, a)) = own {
+            part.replay(p, h, a);
+        }
+    });
 }
 
 #[cfg(test)]
@@ -188,6 +260,19 @@ mod tests {
     use crate::calib::testing::sim;
     use crate::csvio::match_times;
     use crate::simulate::{default_truth, PathKind};
+    use odo_unit::odometry::UncertaintyModel;
+
+    impl Restarts {
+        /// Restarts of these windows and headings, nothing evaluated yet.
+        fn with_headings_fitted(windows: Vec<(usize, usize)>, headings: Vec<f64>) -> Self {
+            Self {
+                windows,
+                headings,
+                memo: RefCell::default(),
+                recorded: RefCell::default(),
+            }
+        }
+    }
 
     /// Restarts from the whole-run heading fit's headings (its integration at the heading
     /// found) are the restarts that integrate their own from that heading; headings of
@@ -206,5 +291,72 @@ mod tests {
         let given = Restarts::with_headings(&run, &g, &w.headings, 10.0).unwrap();
         assert_eq!((own.windows, own.headings), (given.windows, given.headings));
         assert!(Restarts::with_headings(&run, &g, &w.headings[1..], 10.0).is_err());
+    }
+
+    /// Every column of two evaluations, for equality.
+    fn columns(ev: &Evaluation) -> String {
+        format!("{ev:?}")
+    }
+
+    /// Evaluations at other coefficients of the same geometry, either model, are replayed
+    /// from the last integration's step geometries, and they are the evaluations that
+    /// integrate, bit for bit; another geometry is integrated (and recorded) again, and
+    /// parameters out of range are refused on either path.
+    #[test]
+    fn replayed_evaluations_are_the_integrated_ones() {
+        let s = sim(PathKind::Random, 150.0, 6);
+        let run = Run::new(
+            &s.samples,
+            &s.reference,
+            match_times(&s.samples, &s.reference),
+        );
+        let p = default_truth();
+        let r = Restarts::new(&run, &p, run.heading_guess(0), 10.0).unwrap();
+        let fresh = |q: &ChassisParams| {
+            let f = Restarts::with_headings_fitted(r.windows.clone(), r.headings.clone());
+            columns(&f.evaluate(&run, q).unwrap())
+        };
+        let recorded = |r: &Restarts| r.recorded.borrow().as_ref().map(|x| x.params);
+        assert_eq!(columns(&r.evaluate(&run, &p).unwrap()), fresh(&p));
+        assert_eq!(recorded(&r), Some(p));
+        let others = [
+            ChassisParams {
+                delta_left: p.delta_left * 3.0,
+                delta_diff: 2e-7,
+                ..p
+            },
+            ChassisParams {
+                uncertainty_model: UncertaintyModel::Covariance,
+                kappa_left: 1e-6,
+                kappa_right: 2e-6,
+                kappa_diff: 1e-5,
+                kappa_diff_corr: 0.5,
+                ..p
+            },
+        ];
+        for q in others {
+            let replayed = columns(&r.evaluate(&run, &q).unwrap());
+            assert_eq!(replayed, fresh(&q));
+            assert_ne!(replayed, fresh(&p));
+            assert_eq!(recorded(&r), Some(p), "integrated again");
+        }
+        let wider = ChassisParams {
+            track_width: p.track_width * 1.001,
+            ..p
+        };
+        assert_eq!(columns(&r.evaluate(&run, &wider).unwrap()), fresh(&wider));
+        assert_eq!(recorded(&r), Some(wider));
+        for bad in [
+            ChassisParams {
+                delta_left: -1.0,
+                ..wider
+            },
+            ChassisParams {
+                track_width: -1.0,
+                ..p
+            },
+        ] {
+            assert!(r.evaluate(&run, &bad).is_err());
+        }
     }
 }
