@@ -196,9 +196,15 @@ impl Calibration {
             likelihood: self
                 .uncertainty
                 .iter()
-                .find(|u| u.criterion == UncertaintyCriterion::Likelihood)
-                .map(|u| u.searches.clone())
-                .unwrap_or_default(),
+                .filter(|u| u.criterion == UncertaintyCriterion::Likelihood)
+                .take(1)
+                .flat_map(|u| u.searches.iter().copied())
+                .chain(
+                    self.refinement
+                        .iter()
+                        .flat_map(|r| r.searches.iter().copied()),
+                )
+                .collect(),
         })
     }
 }
@@ -441,8 +447,8 @@ fn fit_subtrajectory_phase(
                 run,
                 &s,
                 o.antenna,
-                o.reference_sigma,
-                o.reference_heading_sigma,
+                (o.reference_sigma, o.reference_heading_sigma),
+                WarmStart::likelihood_searches(extras.warm),
             )?;
             timer.lap("filter refinement");
             extras.check()?;

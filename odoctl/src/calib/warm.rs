@@ -16,10 +16,11 @@
 //!   of two when the first sub-trajectory's is more than 0.01 rad from the result);
 //! - the coverage criterion's bisection takes the earlier coefficient as its first guess, and
 //!   its answer does not depend on the guess;
-//! - the covariance model's likelihood fit tries each of its one-dimensional searches first
-//!   within [`WARM_REACH`] (in `ln`) of where the earlier fit's same search ended, and
-//!   searches as a cold fit does when the optimum is not inside; the kappa and `kappa_diff` it
-//!   reports are polished to 1e-6 in `ln` whatever the start.
+//! - the likelihood's one-dimensional searches (the filter refinement's and the covariance
+//!   model's fit's) keep where the earlier fit's same search ended when it is still within
+//!   their tolerance of the optimum, else search within [`WARM_REACH`] (in `ln`) of it, and
+//!   as a cold fit does when the optimum is not inside; the kappa and `kappa_diff` the
+//!   covariance model's fit reports are polished to 1e-6 in `ln` whatever the start.
 //!
 //! [`WARM_REACH`]: super::filter::search::WARM_REACH
 
@@ -42,7 +43,8 @@ pub struct WarmStart {
     pub coefficients: Vec<(UncertaintyModel, f64)>,
     /// The whole run's start heading (rad).
     pub heading0: f64,
-    /// Where the covariance model's likelihood fit's searches ended.
+    /// Where the likelihood's searches ended: the filter refinement's and the covariance
+    /// model's likelihood fit's.
     pub likelihood: Vec<(Search, f64)>,
 }
 
@@ -55,7 +57,7 @@ impl WarmStart {
             .map(|&(_, v)| v)
     }
 
-    /// Where the likelihood fit's searches ended, for the next fit's (empty without a warm
+    /// Where the likelihood's searches ended, for the next fit's (empty without a warm
     /// start).
     pub fn likelihood_searches(warm: Option<&Self>) -> Vec<(Search, f64)> {
         warm.map(|w| w.likelihood.clone()).unwrap_or_default()

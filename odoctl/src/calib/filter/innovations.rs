@@ -294,16 +294,31 @@ impl Innovations {
         ref_heading_sigma: f64,
         block_length: f64,
     ) -> Result<Self> {
+        let sigmas = (ref_sigma, ref_heading_sigma);
+        let log = SearchLog::default();
+        Self::new_after(run, geometry, (heading0, sigmas, block_length), &log)
+    }
+
+    /// [`Innovations::new`] (`heading0`, the reference's sigmas and the block length in
+    /// `setup`) with the open-loop filter's kappa searched from where `log`'s earlier fit's
+    /// ended ([`Search::OpenLoop`]), and recorded there.
+    pub fn new_after(
+        run: &Run,
+        geometry: &ChassisParams,
+        (heading0, sigmas, block_length): (f64, (f64, f64), f64),
+        log: &SearchLog,
+    ) -> Result<Self> {
         let settings = Settings {
             heading0,
-            sigmas: (ref_sigma, ref_heading_sigma),
+            sigmas,
             block_length,
             span: None,
         };
         let path = OpenLoop::new(run, geometry, settings)?;
         let open_loop = Self::anchored(run, geometry, settings, &path, None)?;
         let (lo, hi) = slip_rate_range();
-        let kappa = open_loop.fit(lo, hi);
+        let nll = |k: f64| open_loop.nll(k, None, 0.0, None);
+        let kappa = log.largest(Search::OpenLoop, nll, lo, hi);
         open_loop.reanchored(run, geometry, &path, kappa)
     }
 

@@ -34,7 +34,7 @@ use odo_unit::odometry::ChassisParams;
 use crate::calib::antenna::{LeverArm, ANTENNA_FORWARD, ANTENNA_LEFT};
 use crate::calib::filter::innovations::{Innovations, Turning, OBSERVATION_BLOCK};
 use crate::calib::filter::search::{
-    largest_likelihood, posterior_mean, slip_rate_range, EVIDENCE_PER_PARAMETER,
+    posterior_mean, slip_rate_range, Search, SearchLog, EVIDENCE_PER_PARAMETER,
 };
 use crate::calib::run::Run;
 
@@ -75,6 +75,9 @@ pub struct FilterRefinement {
     /// takes it rather than building its own (its geometry states absorb the refinement's
     /// step).
     pub innovations: Option<std::sync::Arc<Innovations>>,
+    /// Where the likelihood's searches ended, where a later refinement of the same drive on
+    /// more data starts its own.
+    pub searches: Vec<(Search, f64)>,
 }
 
 impl FilterRefinement {
@@ -86,31 +89,30 @@ impl FilterRefinement {
 
 /// Refines `params` (a geometry estimate, e.g. the sub-trajectory fit's) by the filter's
 /// estimate (module documentation). `heading0` is the run's start heading (used without
-/// reference headings), the sigmas are the reference's (m, rad).
+/// reference headings), the sigmas are the reference's (m, rad). The likelihood's searches
+/// start where `log`'s earlier fit's ended, and are recorded there.
 pub fn refine_geometry(
     run: &Run,
     params: &ChassisParams,
     heading0: f64,
-    ref_sigma: f64,
-    ref_heading_sigma: f64,
+    sigmas: (f64, f64),
+    log: &SearchLog,
 ) -> Result<FilterRefinement> {
     let (lo, hi) = slip_rate_range();
-    let inn = Innovations::new(
-        run,
-        params,
-        heading0,
-        ref_sigma,
-        ref_heading_sigma,
-        OBSERVATION_BLOCK,
-    )?;
+    let inn = Innovations::new_after(run, params, (heading0, sigmas, OBSERVATION_BLOCK), log)?;
     // White slip; then whether the likelihood asks for opposite-phase slip when turning.
     let nll = |k: f64, t: Turning| inn.score_with(k, 0.0, t).nll;
     let white = |kappa_diff: f64| Turning {
         kappa_diff,
         corr: 0.0,
     };
-    let kappa = inn.fit(lo, hi);
-    let kd = largest_likelihood(|d| nll(kappa, white(d)), lo, hi);
+    let kappa = log.largest(Search::RefinedWhite, |k| nll(k, Turning::NONE), lo, hi);
+    let kd = log.largest(
+        Search::RefinedTurningWhite,
+        |d| nll(kappa, white(d)),
+        lo,
+        hi,
+    );
     let kappa_diff = if nll(kappa, white(kd)) + EVIDENCE_PER_PARAMETER < nll(kappa, Turning::NONE) {
         kd
     } else {
@@ -164,19 +166,21 @@ pub fn refine_geometry(
         observations: inn.observations,
         innovations: skipped.is_none().then(|| std::sync::Arc::new(inn)),
         skipped,
+        searches: Vec::new(),
     })
 }
 
 /// The filter's refinement of a sub-trajectory fit `s` ([`refine_geometry`]) with the
 /// reference's sigmas (m, rad), the run's lever arm the fit's; with a fitted lever arm
-/// (`antenna`) its share added to the covariance. Not run with the track width held; then
-/// `skipped` says why.
+/// (`antenna`) its share added to the covariance; the likelihood's searches from where
+/// `earlier`'s ended (an earlier refinement's of the same drive, [`FilterRefinement::searches`];
+/// empty: cold). Not run with the track width held; then `skipped` says why.
 pub fn refine_subtrajectory_fit(
     run: &Run,
     s: &SubtrajectoryFit,
     antenna: LeverArm,
-    ref_sigma: f64,
-    ref_heading_sigma: f64,
+    (ref_sigma, ref_heading_sigma): (f64, f64),
+    earlier: Vec<(Search, f64)>,
 ) -> Result<FilterRefinement> {
     if !s.track_estimated {
         return Ok(FilterRefinement {
@@ -188,12 +192,16 @@ pub fn refine_subtrajectory_fit(
             observations: 0,
             skipped: Some("the track width is held".to_string()),
             innovations: None,
+            searches: Vec::new(),
         });
     }
     // The start heading (the filter's without reference headings): the first
     // sub-trajectory's fitted one.
     let heading0 = s.blocks.first().map_or(0.0, |b| b.heading);
-    let mut r = refine_geometry(run, &s.params, heading0, ref_sigma, ref_heading_sigma)?;
+    let log = SearchLog::after(earlier);
+    let sigmas = (ref_sigma, ref_heading_sigma);
+    let mut r = refine_geometry(run, &s.params, heading0, sigmas, &log)?;
+    r.searches = log.ended();
     if r.skipped.is_none() && antenna.fitted() {
         add_lever_arm_share(run, s, heading0, (ref_sigma, ref_heading_sigma), &mut r)?;
     }
@@ -257,4 +265,54 @@ fn add_lever_arm_share(
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calib::geometry::subtrajectory::{fit_subtrajectories, SubtrajectoryOptions};
+    use crate::calib::testing::sim;
+    use crate::csvio::match_times;
+    use crate::simulate::PathKind;
+
+    /// A refinement records where its three likelihood searches ended; one started from
+    /// those ends refines the geometry as the cold one does, to far within its standard
+    /// errors, and ends its searches within their tolerance of the cold ones.
+    #[test]
+    fn a_warm_refinement_is_the_cold_one() {
+        let s = sim(PathKind::Random, 400.0, 8);
+        let run = Run::new(
+            &s.samples,
+            &s.reference,
+            match_times(&s.samples, &s.reference),
+        );
+        let start = ChassisParams::DESIGNED;
+        let fit = fit_subtrajectories(&run, &start, SubtrajectoryOptions::default()).unwrap();
+        let refine = |earlier| {
+            refine_subtrajectory_fit(&run, &fit, LeverArm::default(), (0.01, 0.01), earlier)
+                .unwrap()
+        };
+        let cold = refine(Vec::new());
+        assert!(cold.skipped.is_none(), "{:?}", cold.skipped);
+        let names: Vec<Search> = cold.searches.iter().map(|s| s.0).collect();
+        assert_eq!(
+            names,
+            [
+                Search::OpenLoop,
+                Search::RefinedWhite,
+                Search::RefinedTurningWhite
+            ]
+        );
+        let warm = refine(cold.searches.clone());
+        let lengths = |p: &ChassisParams| [p.left_diameter, p.right_diameter, p.track_width];
+        let (w, c) = (lengths(&warm.params), lengths(&cold.params));
+        for (i, se) in cold.std_errors().iter().enumerate() {
+            let d = (w[i] - c[i]).abs();
+            assert!(d <= 1e-3 * se, "{i}: {d:e} of {se:e}");
+        }
+        for (w, c) in warm.searches.iter().zip(&cold.searches) {
+            assert_eq!(w.0, c.0);
+            assert!((w.1 / c.1).ln().abs() <= 2e-3, "{w:?} {c:?}");
+        }
+    }
 }
