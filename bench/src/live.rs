@@ -328,7 +328,7 @@ fn print_section(samples: &[Sample], f: &Fed, end: &End, process: (Duration, Agr
     println!(
         "its own thread (nice 19) beside the updates, each run from where the one before left its"
     );
-    println!("searches; at the drive's end the run under way is cancelled at its next phase.");
+    println!("searches; at the drive's end the run under way is cancelled (inside its phases).");
     println!();
     print_costs(&f.costs);
     println!(

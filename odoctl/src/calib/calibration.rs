@@ -32,7 +32,7 @@ use super::uncertainty::coverage::fit_uncertainty_on;
 use super::uncertainty::delta_diff::{fit_delta_diff, DiffOptions};
 use super::uncertainty::likelihood::fit_kappa_filter;
 use super::uncertainty::restarts::Restarts;
-use super::warm::{Extras, WarmStart};
+use super::warm::{cancel_this_thread_on, this_thread_cancel, Extras, WarmStart};
 
 /// How the diameters and the track width are estimated.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
@@ -470,7 +470,9 @@ fn fit_subtrajectory_phase(
             };
             let (initial, mode) = (*initial, o.delta_mode);
             let earlier = WarmStart::likelihood_searches(extras.warm);
+            let cancel = this_thread_cancel();
             std::thread::spawn(move || {
+                cancel_this_thread_on(cancel);
                 fit_kappa_filter(&innovations, &p, &initial, mode, earlier).0
             })
         });
@@ -531,8 +533,10 @@ impl UncertaintyPhase<'_> {
         let mut evaluated = None;
         std::thread::scope(|scope| -> Result<()> {
             let wanted = filter_wanted && models.contains(&UncertaintyModel::Covariance);
+            let cancel = this_thread_cancel();
             let mut filter = wanted.then(|| {
                 scope.spawn(move || {
+                    cancel_this_thread_on(cancel);
                     let u = match early_filter {
                         Some(early) => early
                             .join()

@@ -1,7 +1,8 @@
 //! What a calibration takes beside its options in `record --calibrate` ([`Extras`]): a warm
 //! start from an earlier calibration of the same drive on less data ([`WarmStart`]: the last
 //! background batch's, for the next batch and for the final calibration), and a flag that
-//! cancels it between its phases (the background batch's at the drive's end).
+//! cancels it between its phases (the background batch's at the drive's end). The same flag
+//! set as its thread's ([`cancel_this_thread_on`]) ends it inside its phases too.
 //!
 //! A warm start moves where the searches start, never what they look for:
 //! - the sub-trajectory fit starts from the earlier fit's shared unknowns and its
@@ -24,7 +25,9 @@
 //!
 //! [`WARM_REACH`]: super::filter::search::WARM_REACH
 
+use std::cell::RefCell;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 
 use anyhow::{bail, Result};
 use odo_unit::odometry::UncertaintyModel;
@@ -75,18 +78,76 @@ pub struct Extras<'a> {
 }
 
 impl Extras<'_> {
-    /// An error once the cancel flag is set.
+    /// An error once the cancel flag (or this thread's, [`this_thread_cancelled`]) is set.
     pub fn check(&self) -> Result<()> {
-        if self.cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
+        if self.cancel.is_some_and(|c| c.load(Ordering::Relaxed)) || this_thread_cancelled() {
             bail!("the calibration was cancelled");
         }
         Ok(())
     }
 }
 
+thread_local! {
+    /// The flag that cancels this thread's calibrations inside their phases.
+    static CANCEL: RefCell<Option<Arc<AtomicBool>>> = const { RefCell::new(None) };
+}
+
+/// Makes `flag` cancel the calibrations this thread runs from now on (none: no flag) inside
+/// their phases as well as between them: once it is set, an evaluation of the restarted
+/// sub-trajectories and a pass of the filter's preparation end with an error, and a score of
+/// the filter's likelihood is NaN without running the filter (a result no search keeps), so
+/// that a cancelled background batch leaves the cores within milliseconds. A thread that a
+/// calibration starts for its own work takes the flag over ([`this_thread_cancel`]).
+pub fn cancel_this_thread_on(flag: Option<Arc<AtomicBool>>) {
+    CANCEL.with(|c| *c.borrow_mut() = flag);
+}
+
+/// This thread's cancel flag ([`cancel_this_thread_on`]).
+pub fn this_thread_cancel() -> Option<Arc<AtomicBool>> {
+    CANCEL.with(|c| c.borrow().clone())
+}
+
+/// Whether this thread's cancel flag is set.
+pub fn this_thread_cancelled() -> bool {
+    CANCEL.with(|c| {
+        c.borrow()
+            .as_ref()
+            .is_some_and(|f| f.load(Ordering::Relaxed))
+    })
+}
+
+/// An error once this thread's cancel flag is set.
+pub fn check_this_thread() -> Result<()> {
+    if this_thread_cancelled() {
+        bail!("the calibration was cancelled");
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The thread's flag cancels this thread's calibrations, not another's.
+    #[test]
+    fn the_threads_flag_cancels_its_calibrations_alone() {
+        let flag = Arc::new(AtomicBool::new(false));
+        cancel_this_thread_on(Some(Arc::clone(&flag)));
+        assert!(Extras::default().check().is_ok() && check_this_thread().is_ok());
+        flag.store(true, Ordering::Relaxed);
+        assert!(Extras::default().check().is_err() && check_this_thread().is_err());
+        assert!(std::thread::spawn(this_thread_cancelled)
+            .join()
+            .is_ok_and(|c| !c));
+        let taken = this_thread_cancel();
+        let other = std::thread::spawn(move || {
+            cancel_this_thread_on(taken);
+            this_thread_cancelled()
+        });
+        assert!(other.join().is_ok_and(|c| c));
+        cancel_this_thread_on(None);
+        assert!(check_this_thread().is_ok());
+    }
 
     #[test]
     fn a_set_flag_cancels() {

@@ -6,7 +6,8 @@
 //! ([`WarmStart`]), and keeps the latest result and warm start (the final calibration's).
 //! Nothing it does is printed; a batch that fails (too little data yet) is counted and the
 //! next one tried. At the drive's end ([`BatchWorker::stop`]) the batch under way is cancelled
-//! at its next phase, so that it leaves the cores to the final calibration.
+//! (its thread's flag, `calib::warm::cancel_this_thread_on`: inside its phases, within
+//! milliseconds), so that it leaves the cores to the final calibration.
 
 use std::borrow::Cow;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -19,6 +20,7 @@ use odo_unit::odometry::ChassisParams;
 
 use super::calibrate::{calibration_with, parse_command_line, Inputs};
 use super::reference_options;
+use crate::calib::warm::cancel_this_thread_on;
 use crate::calib::{Extras, WarmStart};
 use crate::csvio::Sample;
 
@@ -115,8 +117,8 @@ impl BatchWorker {
         slot.as_ref().and_then(|(_, w)| w.clone())
     }
 
-    /// No batch starts after this, and the one under way ends at its next phase (a thread
-    /// it started for the covariance model's kappa ends on its own, at its low priority).
+    /// No batch starts after this, and the one under way ends within milliseconds (its
+    /// threads' cancel flag, module documentation).
     pub fn stop(&mut self) {
         self.stopped.store(true, Ordering::Relaxed);
         self.tx = None;
@@ -131,8 +133,9 @@ impl Drop for BatchWorker {
 
 /// The thread: waits for data, takes in all that has come, calibrates, keeps the result;
 /// ends when `stopped` is set or the sender is gone.
-fn work(args: &[String], rx: &Receiver<Chunk>, slot: &Slot, stopped: &AtomicBool) {
+fn work(args: &[String], rx: &Receiver<Chunk>, slot: &Slot, stopped: &Arc<AtomicBool>) {
     lowest_priority();
+    cancel_this_thread_on(Some(Arc::clone(stopped)));
     let Ok(a) = parse_command_line(args) else {
         return;
     };

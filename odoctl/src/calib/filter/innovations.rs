@@ -52,6 +52,7 @@ use odo_unit::odometry::{ChassisParams, Pose};
 use crate::calib::antenna::{antenna_offset, observed_point};
 use crate::calib::pipeline::cores;
 use crate::calib::run::Run;
+use crate::calib::warm::{check_this_thread, this_thread_cancelled};
 use crate::replay::{counts, index_refs};
 use crate::stats::{median, wrap_angle};
 
@@ -315,10 +316,12 @@ impl Innovations {
             span: None,
         };
         let path = OpenLoop::new(run, geometry, settings)?;
+        check_this_thread()?;
         let open_loop = Self::anchored(run, geometry, settings, &path, None)?;
         let (lo, hi) = slip_rate_range();
         let nll = |k: f64| open_loop.nll(k, None, 0.0, None);
         let kappa = log.largest(Search::OpenLoop, nll, lo, hi);
+        check_this_thread()?;
         open_loop.reanchored(run, geometry, &path, kappa)
     }
 
@@ -492,6 +495,9 @@ impl Innovations {
     /// [`Innovations::filter`], pushing the pose error's estimate after each observation to
     /// `track` when given.
     fn filter_tracked(&self, slip: SlipModel, track: Option<&mut Vec<[f64; 3]>>) -> FilterScore {
+        if this_thread_cancelled() {
+            return FilterScore::cancelled();
+        }
         FilterRun {
             composed: &self.composed,
             obs: &self.obs,

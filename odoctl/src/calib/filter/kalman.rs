@@ -55,6 +55,20 @@ pub struct FilterScore {
     pub heading_var: f64,
 }
 
+impl FilterScore {
+    /// The score of a filter not run (its thread's calibration cancelled): NaN throughout.
+    pub(super) fn cancelled() -> Self {
+        Self {
+            nll: f64::NAN,
+            horizontal: (f64::NAN, f64::NAN),
+            heading: (f64::NAN, f64::NAN),
+            geometry: [f64::NAN; 3],
+            geometry_cov: [[f64::NAN; 3]; 3],
+            heading_var: f64::NAN,
+        }
+    }
+}
+
 /// The slip the filter is run with: white or Gauss-Markov, the latter's blocks composed.
 #[derive(Clone, Copy)]
 pub(super) struct SlipModel<'a> {

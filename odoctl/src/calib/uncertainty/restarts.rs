@@ -10,6 +10,7 @@ use crate::calib::evaluation::{Evaluation, UncertaintyRecord};
 use crate::calib::heading_fit::fit_restart_heading;
 use crate::calib::pipeline::cores;
 use crate::calib::run::{windows, Run};
+use crate::calib::warm::check_this_thread;
 
 /// The restarted sub-trajectories of the uncertainty fits: consecutive stretches of `window`
 /// metres, each started from the reference position with the heading minimising eq (16) over
@@ -155,6 +156,7 @@ impl Restarts {
     /// integrated on all cores (independent, appended in order: the same evaluation as one
     /// after the other), and their step geometries recorded.
     pub fn evaluate_into(&self, run: &Run, p: &ChassisParams, ev: &mut Evaluation) -> Result<()> {
+        check_this_thread()?;
         p.validate().map_err(|e| anyhow!("parameters: {e}"))?;
         if let Some(r) = self
             .recorded
