@@ -36,7 +36,7 @@ pub fn run(a: &RecordArgs) -> Result<ExitCode> {
         duration: a.duration,
         count: a.count,
     };
-    let code = record(
+    let mut code = record(
         (&a.port.port, a.port.baud),
         &a.out,
         a.raw.as_deref(),
@@ -45,7 +45,11 @@ pub fn run(a: &RecordArgs) -> Result<ExitCode> {
         live.as_mut(),
     )?;
     if let Some(session) = &mut live {
-        final_calibration(a, session)?;
+        let calibrated = final_calibration(a, session)?;
+        // The recording's own failure comes first.
+        if code == ExitCode::SUCCESS {
+            code = calibrated;
+        }
     }
     if let Some(m) = &a.mcap {
         let params = (a.params.config.as_deref(), a.params.sets.as_slice());
@@ -61,7 +65,7 @@ pub fn run(a: &RecordArgs) -> Result<ExitCode> {
 /// started from the latest background batch's warm start. The log's epochs are dated and
 /// the calibration runs on a thread beside the live fit's last update; its report follows
 /// the live estimate.
-fn final_calibration(a: &RecordArgs, session: &mut LiveSession) -> Result<()> {
+fn final_calibration(a: &RecordArgs, session: &mut LiveSession) -> Result<ExitCode> {
     use super::calibrate::Recorded;
     use super::calibrate::{calibrate_inputs, parse_command_line, read_inputs, run_calibrated};
     let ended = Instant::now();
@@ -92,13 +96,13 @@ fn final_calibration(a: &RecordArgs, session: &mut LiveSession) -> Result<()> {
         args[1..].join(" ")
     );
     let done = done.map_err(|_| anyhow::anyhow!("the final calibration panicked"))??;
-    run_calibrated(&c, done)?;
+    let code = run_calibrated(&c, done)?;
     crate::outln!(
         "final calibration printed {:.3} s after the drive's end (slowest live update {:.1} ms)",
         ended.elapsed().as_secs_f64(),
         session.slowest_update.as_secs_f64() * 1e3
     );
-    Ok(())
+    Ok(code)
 }
 
 /// The `odoctl calibrate` command line of the final calibration: `--samples OUT` with
