@@ -59,7 +59,7 @@ use crate::stats::{median, wrap_angle};
 use super::blocks::{Composed, GaussMarkovBlock, StepTerms, PARALLEL_STEPS};
 use super::kalman::{FilterRun, FilterScore, Obs, SlipModel};
 use super::search::{
-    best_over_grid, largest_likelihood, polish, posterior_mean, slip_rate_range, Search, SearchLog,
+    best_over_grid, polish, posterior_mean, slip_rate_range, Search, SearchLog,
     EVIDENCE_PER_PARAMETER,
 };
 
@@ -523,13 +523,8 @@ impl Innovations {
         .nll
     }
 
-    /// The kappa of white slip of the largest likelihood in `[lo, hi]`.
-    pub fn fit(&self, lo: f64, hi: f64) -> f64 {
-        largest_likelihood(|k| self.nll(k, None, 0.0, None), lo, hi)
-    }
-
     /// The long-range kappa and the slip correlation length (0: white) of the largest
-    /// likelihood: the white-slip fit ([`Innovations::fit`]), then the profile over the
+    /// likelihood: the white-slip fit ([`Search::White`]), then the profile over the
     /// correlation grid; the white fit is kept unless correlated slip raises the likelihood by
     /// more than [`EVIDENCE_PER_PARAMETER`] (it has one parameter more). Without that test a
     /// correlation length the data cannot tell won on nearly every run, and its long-range
