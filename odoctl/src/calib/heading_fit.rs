@@ -220,8 +220,7 @@ mod tests {
     use super::*;
     use crate::calib::geometry::paper::heading_errors;
     use crate::calib::run::windows;
-    use crate::calib::testing::sim;
-    use crate::csvio::match_times;
+    use crate::calib::testing::{run_of, sim};
     use crate::optim::norm2;
     use crate::simulate::{default_truth, PathKind};
 
@@ -233,11 +232,7 @@ mod tests {
     #[test]
     fn whole_run_heading_figures_are_the_integrated_ones() {
         let s = sim(PathKind::Random, 200.0, 5);
-        let mut run = Run::new(
-            &s.samples,
-            &s.reference,
-            match_times(&s.samples, &s.reference),
-        );
+        let mut run = run_of(&s);
         let p = default_truth();
         for (antenna, off) in [((0.0, 0.0), 0.001), ((0.3, -0.1), 0.2)] {
             run.antenna = antenna;
@@ -271,11 +266,7 @@ mod tests {
     #[test]
     fn restart_heading_by_rotation_matches_the_integrating_fit() {
         let s = sim(PathKind::Estimation, 70.0, 9);
-        let run = Run::new(
-            &s.samples,
-            &s.reference,
-            match_times(&s.samples, &s.reference),
-        );
+        let run = run_of(&s);
         let p = default_truth();
         let wins = windows(&run, 10.0, 3);
         assert!(wins.len() >= 6);

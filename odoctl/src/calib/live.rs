@@ -547,8 +547,7 @@ impl LiveCalibration {
 mod tests {
     use super::*;
     use crate::calib::geometry::subtrajectory::{fit_subtrajectories, SubtrajectoryOptions};
-    use crate::calib::testing::sim;
-    use crate::csvio::match_times;
+    use crate::calib::testing::{run_of, sim};
     use crate::simulate::PathKind;
 
     /// Feeds a simulated drive in chunks of `chunk` samples (the reference points up to the
@@ -584,11 +583,7 @@ mod tests {
     /// data to within a tenth of its standard errors, with standard errors within 10 %.
     fn check_equals_batch(kind: PathKind, length: f64, seed: u64, chunk: usize) {
         let (live, s) = live_of(kind, length, seed, chunk);
-        let run = Run::new(
-            &s.samples,
-            &s.reference,
-            match_times(&s.samples, &s.reference),
-        );
+        let run = run_of(&s);
         assert_eq!(live.matches, run.matches);
         assert_eq!(live.dist, run.dist);
         let batch = fit_subtrajectories(

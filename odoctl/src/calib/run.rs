@@ -555,8 +555,7 @@ mod tests {
     use super::*;
     use crate::calib::pipeline::PIPELINE_CHUNK;
     use crate::calib::sensitivity::with_geometry;
-    use crate::calib::testing::sim;
-    use crate::csvio::match_times;
+    use crate::calib::testing::{run_of, sim};
     use crate::simulate::{default_truth, PathKind};
 
     /// The analytic Jacobian of the residuals against central differences of the core
@@ -618,11 +617,7 @@ mod tests {
             ..ChassisParams::DESIGNED
         };
         for s in [&est, &val] {
-            let run = Run::new(
-                &s.samples,
-                &s.reference,
-                match_times(&s.samples, &s.reference),
-            );
+            let run = run_of(s);
             let last = run.len() - 1;
             for p in [default_truth(), wavy, poor] {
                 check_jacobian(&run, &p, 0.31, 0, last);
@@ -642,11 +637,7 @@ mod tests {
             row.left += 1 << 20;
             row.right += 1 << 20;
         }
-        let run = Run::new(
-            &s.samples,
-            &s.reference,
-            match_times(&s.samples, &s.reference),
-        );
+        let run = run_of(&s);
         let last = run.len() - 1;
         let mut p = default_truth();
         p.left_wheel.cos[0] = 0.001;
@@ -669,11 +660,7 @@ mod tests {
     #[test]
     fn residuals_with_jacobian_keeps_the_integrators_residuals() {
         let s = sim(PathKind::Estimation, 10.0, 5);
-        let run = Run::new(
-            &s.samples,
-            &s.reference,
-            match_times(&s.samples, &s.reference),
-        );
+        let run = run_of(&s);
         let last = run.len() - 1;
         let p = default_truth();
         let (mut plain, mut with, mut jac) = (Vec::new(), Vec::new(), Vec::new());

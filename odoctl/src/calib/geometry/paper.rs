@@ -661,8 +661,7 @@ fn formal_errors(acc: &NormalAccumulator, idx: &[usize], n: usize) -> (Vec<Optio
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::calib::testing::sim;
-    use crate::csvio::match_times;
+    use crate::calib::testing::{run_of, sim};
     use crate::simulate::{default_truth, PathKind};
 
     /// The start heading's two standard errors from one integration are those of the two
@@ -671,11 +670,7 @@ mod tests {
     fn heading_errors_are_those_of_the_two_functions() {
         for length in [30.0, 400.0] {
             let s = sim(PathKind::Random, length, 3);
-            let run = Run::new(
-                &s.samples,
-                &s.reference,
-                match_times(&s.samples, &s.reference),
-            );
+            let run = run_of(&s);
             let (p, last, h0) = (default_truth(), run.len() - 1, run.heading_guess(0));
             let free = [false, false, false, true];
             let formal = standard_errors(&run, &p, 0, last, h0, free).and_then(|(e, _)| e[3]);
@@ -689,11 +684,7 @@ mod tests {
     #[test]
     fn standard_errors_and_the_track_width_warning() {
         let s = sim(PathKind::Estimation, 30.0, 6);
-        let run = Run::new(
-            &s.samples,
-            &s.reference,
-            match_times(&s.samples, &s.reference),
-        );
+        let run = run_of(&s);
         let last = run.len() - 1;
         let fit = fit_geometry(
             &run,

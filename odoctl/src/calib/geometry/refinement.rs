@@ -271,8 +271,7 @@ fn add_lever_arm_share(
 mod tests {
     use super::*;
     use crate::calib::geometry::subtrajectory::{fit_subtrajectories, SubtrajectoryOptions};
-    use crate::calib::testing::sim;
-    use crate::csvio::match_times;
+    use crate::calib::testing::{run_of, sim};
     use crate::simulate::PathKind;
 
     /// A refinement records where its three likelihood searches ended; one started from
@@ -281,11 +280,7 @@ mod tests {
     #[test]
     fn a_warm_refinement_is_the_cold_one() {
         let s = sim(PathKind::Random, 400.0, 8);
-        let run = Run::new(
-            &s.samples,
-            &s.reference,
-            match_times(&s.samples, &s.reference),
-        );
+        let run = run_of(&s);
         let start = ChassisParams::DESIGNED;
         let fit = fit_subtrajectories(&run, &start, SubtrajectoryOptions::default()).unwrap();
         let refine = |earlier| {

@@ -1008,6 +1008,7 @@ impl SharedProblem<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::calib::testing::run_of;
     use crate::csvio::match_times;
     use crate::simulate::{self, default_truth, PathKind, Segment, SimOptions, SimSettings};
 
@@ -1047,11 +1048,7 @@ mod tests {
             default_truth(),
             SimSettings::default(),
         );
-        let run = Run::new(
-            &s.samples,
-            &s.reference,
-            match_times(&s.samples, &s.reference),
-        );
+        let run = run_of(&s);
         let start = ChassisParams {
             track_width: 0.7,
             ..default_truth()

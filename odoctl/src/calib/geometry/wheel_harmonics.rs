@@ -436,6 +436,7 @@ fn mul(a: &[f64], b: &[f64], n: usize) -> Vec<f64> {
 mod tests {
     use super::*;
     use crate::calib::geometry::paper::{fit_geometry, GeomOptions};
+    use crate::calib::testing::run_of;
     use crate::csvio::match_times;
     use crate::simulate::{default_truth, simulate_path, PathKind, SimRun, SimSettings};
     use indicatif::ProgressBar;
@@ -551,11 +552,7 @@ mod tests {
         let e = fit(&s, 1).unwrap_err().to_string();
         assert!(e.contains("index latches"), "{e}");
         let s = sim(60.0, 1, default_truth());
-        let run = Run::new(
-            &s.samples,
-            &s.reference,
-            match_times(&s.samples, &s.reference),
-        );
+        let run = run_of(&s);
         let e = fit_harmonics(&run, &default_truth(), 0.3, 4, 5.0)
             .unwrap_err()
             .to_string();

@@ -296,7 +296,7 @@ impl<'a> RatioSearch<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::csvio::match_times;
+    use crate::calib::testing::run_of;
     use crate::simulate::{self, default_truth, PathKind, SimSettings};
 
     /// The ratio search finds the plain joint bisection's `delta_diff` (delta refitted by
@@ -313,11 +313,7 @@ mod tests {
                 ..Default::default()
             };
             let s = simulate::simulate_path(PathKind::Estimation, 70.0, default_truth(), settings);
-            let run = Run::new(
-                &s.samples,
-                &s.reference,
-                match_times(&s.samples, &s.reference),
-            );
+            let run = run_of(&s);
             let base = ChassisParams {
                 uncertainty_model: UncertaintyModel::Paper,
                 ..default_truth()
