@@ -440,8 +440,7 @@ fn bracket_threshold(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::calib::testing::sim;
-    use crate::csvio::match_times;
+    use crate::calib::testing::{run_of, sim};
     use crate::simulate::{default_truth, PathKind};
 
     /// The coefficient fits (predicted bracket, then the bisection on known coverages) give
@@ -458,11 +457,7 @@ mod tests {
                     r.sigma_h = Some(0.02);
                 }
             }
-            let run = Run::new(
-                &s.samples,
-                &s.reference,
-                match_times(&s.samples, &s.reference),
-            );
+            let run = run_of(&s);
             let geometry = default_truth();
             let h0 = run.heading_guess(0);
             for (model, dd) in [
@@ -485,14 +480,13 @@ mod tests {
                     UncertaintyModel::Covariance => p.kappa_left,
                 };
                 for tol in [COEFFICIENT_LOG_TOL, DIFF_LOG_TOL] {
-                    let mut ev = Evaluation::default();
                     let (plain, _) = smallest_covering(
                         hi,
                         false,
                         tol,
                         |v| {
                             let p = set_coefficient(&g, DeltaMode::Equal, &g, v);
-                            restarts.evaluate_into(&run, &p, &mut ev)?;
+                            let ev = restarts.evaluate(&run, &p)?;
                             Ok(horizontal_coverage(&ev, 0.008, 1.0, 0))
                         },
                         &ProgressBar::hidden(),

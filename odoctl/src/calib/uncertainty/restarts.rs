@@ -24,17 +24,17 @@ pub struct Restarts {
     /// The last evaluations (see [`Restarts::evaluate_memo`]).
     memo: RefCell<Vec<(ChassisParams, Rc<Evaluation>)>>,
     /// The last integrated evaluation with its step geometries, which give the sigmas at
-    /// other coefficients of the same geometry ([`Restarts::evaluate_into`]).
+    /// other coefficients of the same geometry ([`Restarts::evaluate_reusing`]).
     recorded: RefCell<Option<Recorded>>,
 }
 
 /// An integrated evaluation of the restarts and what replays its sigmas.
 #[derive(Debug, Clone)]
 struct Recorded {
-    /// The parameters it integrated.
-    params: ChassisParams,
+    /// The pose part ([`ChassisParams::pose_part`]) of the parameters it integrated.
+    pose: ChassisParams,
     /// Its evaluation.
-    evaluation: Evaluation,
+    evaluation: Rc<Evaluation>,
     /// Its step geometries, a record for each part evaluated on a core of its own, in order.
     parts: Vec<UncertaintyRecord>,
 }
@@ -114,14 +114,13 @@ impl Restarts {
             return Ok(ev);
         }
         // Reuse the buffers of the oldest evaluation when nobody holds it any more.
-        let mut ev = if memo.len() >= MEMO_EVALUATIONS {
+        let buffers = if memo.len() >= MEMO_EVALUATIONS {
             Rc::try_unwrap(memo.remove(0).1).unwrap_or_default()
         } else {
             Evaluation::default()
         };
         drop(memo);
-        self.evaluate_into(run, p, &mut ev)?;
-        let ev = Rc::new(ev);
+        let ev = self.evaluate_reusing(run, p, buffers)?;
         self.memo.borrow_mut().push((*p, Rc::clone(&ev)));
         Ok(ev)
     }
@@ -142,42 +141,43 @@ impl Restarts {
 
     /// Errors and sigmas at every match after each restart (restart points excluded).
     pub fn evaluate(&self, run: &Run, p: &ChassisParams) -> Result<Evaluation> {
-        let mut ev = Evaluation::default();
-        self.evaluate_into(run, p, &mut ev)?;
-        Ok(ev)
+        let ev = self.evaluate_reusing(run, p, Evaluation::default())?;
+        Ok(Rc::try_unwrap(ev).unwrap_or_else(|shared| (*shared).clone()))
     }
 
-    /// [`Restarts::evaluate`] into `ev` (cleared first, its buffers reused: the coverage
-    /// searches evaluate the same sub-trajectories several times). Parameters that differ from
-    /// the last integrated ones in the uncertainty's coefficients alone (the same
+    /// [`Restarts::evaluate`] into `buffers` (cleared first, their allocations reused: the
+    /// coverage searches evaluate the same sub-trajectories several times). Parameters that
+    /// differ from the last integrated ones in the uncertainty's coefficients alone (the same
     /// [`ChassisParams::pose_part`]) have the same poses and errors: their sigmas are replayed
     /// from that integration's step geometries ([`UncertaintyRecord::replay`]), the same
     /// sigmas bit for bit at a fraction of the cost. Otherwise the sub-trajectories are
     /// integrated on all cores (independent, appended in order: the same evaluation as one
-    /// after the other), and their step geometries recorded.
-    pub fn evaluate_into(&self, run: &Run, p: &ChassisParams, ev: &mut Evaluation) -> Result<()> {
+    /// after the other), and the evaluation is kept with their step geometries.
+    fn evaluate_reusing(
+        &self,
+        run: &Run,
+        p: &ChassisParams,
+        mut buffers: Evaluation,
+    ) -> Result<Rc<Evaluation>> {
         check_this_thread()?;
         p.validate().map_err(|e| anyhow!("parameters: {e}"))?;
-        if let Some(r) = self
-            .recorded
-            .borrow()
-            .as_ref()
-            .filter(|r| r.params.pose_part() == p.pose_part())
-        {
-            ev.clone_from(&r.evaluation);
-            replay(&r.parts, p, ev);
-            return Ok(());
+        let pose = p.pose_part();
+        if let Some(r) = self.recorded.borrow().as_ref().filter(|r| r.pose == pose) {
+            buffers.clone_from(&r.evaluation);
+            replay(&r.parts, p, &mut buffers);
+            return Ok(Rc::new(buffers));
         }
-        let parts = self.integrate_into(run, p, ev)?;
+        let parts = self.integrate_into(run, p, &mut buffers)?;
+        let evaluation = Rc::new(buffers);
         *self.recorded.borrow_mut() = Some(Recorded {
-            params: *p,
-            evaluation: ev.clone(),
+            pose,
+            evaluation: Rc::clone(&evaluation),
             parts,
         });
-        Ok(())
+        Ok(evaluation)
     }
 
-    /// The integration of [`Restarts::evaluate_into`]: the evaluation into `ev`, with the
+    /// The integration of [`Restarts::evaluate_reusing`]: the evaluation into `ev`, with the
     /// step geometries of each core's part.
     fn integrate_into(
         &self,
@@ -194,18 +194,17 @@ impl Restarts {
             .zip(self.headings.chunks(chunk))
             .collect();
         let (first, rest) = jobs.split_first().expect("at least one sub-trajectory");
-        let reserve = |ev: &mut Evaluation, wins: &[(usize, usize)]| {
-            ev.reserve(wins.iter().map(|(a, b)| b - a).sum());
-        };
+        let rows = |wins: &[(usize, usize)]| wins.iter().map(|(a, b)| b - a).sum();
         // Room for every part's rows, which are appended to `ev`'s own.
-        reserve(ev, &self.windows);
+        ev.reserve(rows(&self.windows));
         let evaluate = |ev: &mut Evaluation, (wins, heads): (&[(usize, usize)], &[f64])| {
-            reserve(ev, wins);
+            let rows = rows(wins);
+            ev.reserve(rows);
             let mut record = UncertaintyRecord::default();
             let samples = wins
                 .iter()
                 .map(|&(a, b)| run.matches[b].0 - run.matches[a].0);
-            record.reserve(samples.sum(), wins.iter().map(|(a, b)| b - a).sum());
+            record.reserve(samples.sum(), rows);
             for (&(a, b), &h) in wins.iter().zip(heads) {
                 ev.extend_recording(run, p, (a, b), h, &mut record)?;
             }
@@ -259,8 +258,7 @@ fn replay(parts: &[UncertaintyRecord], p: &ChassisParams, ev: &mut Evaluation) {
 mod tests {
     use super::*;
     use crate::calib::heading_fit::fit_whole_run_heading;
-    use crate::calib::testing::sim;
-    use crate::csvio::match_times;
+    use crate::calib::testing::{run_of, sim};
     use crate::simulate::{default_truth, PathKind};
     use odo_unit::odometry::UncertaintyModel;
 
@@ -282,11 +280,7 @@ mod tests {
     #[test]
     fn restarts_from_the_whole_run_headings_are_the_restarts_that_integrate() {
         let s = sim(PathKind::Random, 120.0, 4);
-        let run = Run::new(
-            &s.samples,
-            &s.reference,
-            match_times(&s.samples, &s.reference),
-        );
+        let run = run_of(&s);
         let g = default_truth();
         let w = fit_whole_run_heading(&run, &g, run.heading_guess(0) + 0.05, 10.0).unwrap();
         let own = Restarts::new(&run, &g, w.heading0, 10.0).unwrap();
@@ -307,20 +301,21 @@ mod tests {
     #[test]
     fn replayed_evaluations_are_the_integrated_ones() {
         let s = sim(PathKind::Random, 150.0, 6);
-        let run = Run::new(
-            &s.samples,
-            &s.reference,
-            match_times(&s.samples, &s.reference),
-        );
+        let run = run_of(&s);
         let p = default_truth();
         let r = Restarts::new(&run, &p, run.heading_guess(0), 10.0).unwrap();
         let fresh = |q: &ChassisParams| {
             let f = Restarts::with_headings_fitted(r.windows.clone(), r.headings.clone());
             columns(&f.evaluate(&run, q).unwrap())
         };
-        let recorded = |r: &Restarts| r.recorded.borrow().as_ref().map(|x| x.params);
+        // The pose part and the evaluation (its allocation) of the last integration.
+        let recorded = |r: &Restarts| {
+            let kept = r.recorded.borrow();
+            kept.as_ref().map(|x| (x.pose, Rc::as_ptr(&x.evaluation)))
+        };
         assert_eq!(columns(&r.evaluate(&run, &p).unwrap()), fresh(&p));
-        assert_eq!(recorded(&r), Some(p));
+        let integrated = recorded(&r);
+        assert_eq!(integrated.map(|(pose, _)| pose), Some(p.pose_part()));
         let others = [
             ChassisParams {
                 delta_left: p.delta_left * 3.0,
@@ -340,14 +335,14 @@ mod tests {
             let replayed = columns(&r.evaluate(&run, &q).unwrap());
             assert_eq!(replayed, fresh(&q));
             assert_ne!(replayed, fresh(&p));
-            assert_eq!(recorded(&r), Some(p), "integrated again");
+            assert_eq!(recorded(&r), integrated, "integrated again");
         }
         let wider = ChassisParams {
             track_width: p.track_width * 1.001,
             ..p
         };
         assert_eq!(columns(&r.evaluate(&run, &wider).unwrap()), fresh(&wider));
-        assert_eq!(recorded(&r), Some(wider));
+        assert_eq!(recorded(&r).map(|(pose, _)| pose), Some(wider.pose_part()));
         for bad in [
             ChassisParams {
                 delta_left: -1.0,
