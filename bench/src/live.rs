@@ -326,7 +326,7 @@ fn print_section(samples: &[Sample], f: &Fed, end: &End, process: (Duration, Agr
         "the background batch calibration, which runs the final's calibration again and again on"
     );
     println!(
-        "its own thread (nice 19) beside the updates, each run from where the one before left its"
+        "its own thread (nice 19, off one core) beside the updates, each run from where the one before left its"
     );
     println!("searches; at the drive's end the run under way is cancelled (inside its phases).");
     println!();

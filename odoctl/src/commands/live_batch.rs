@@ -1,7 +1,7 @@
 //! `record --calibrate`'s batch calibration in the background: a thread of the lowest
-//! priority (nice 19 on Linux, so that the recording, the live updates and the final
-//! calibration come first) runs the batch calibration of the drive's end (`odoctl calibrate`
-//! with the same command line, [`calibration`]) again and again, each time on every row and
+//! priority, kept off one core (on Linux, [`to_the_background`]), so that the recording, the
+//! live updates and the final calibration come first, runs the batch calibration of the
+//! drive's end (`odoctl calibrate` with the same command line, [`calibration`]) again and again, each time on every row and
 //! sentence handed to it by its start, each from where the one before left its searches
 //! ([`WarmStart`]), and keeps the latest result and warm start (the final calibration's).
 //! Nothing it does is printed; a batch that fails (too little data yet) is counted and the
@@ -20,6 +20,8 @@ use odo_unit::odometry::ChassisParams;
 
 use super::calibrate::{calibration_with, parse_command_line, Inputs};
 use super::reference_options;
+#[cfg(target_os = "linux")]
+use crate::calib::pipeline::cores;
 use crate::calib::warm::cancel_this_thread_on;
 use crate::calib::{Extras, WarmStart};
 use crate::csvio::Sample;
@@ -134,7 +136,7 @@ impl Drop for BatchWorker {
 /// The thread: waits for data, takes in all that has come, calibrates, keeps the result;
 /// ends when `stopped` is set or the sender is gone.
 fn work(args: &[String], rx: &Receiver<Chunk>, slot: &Slot, stopped: &Arc<AtomicBool>) {
-    lowest_priority();
+    to_the_background();
     cancel_this_thread_on(Some(Arc::clone(stopped)));
     let Ok(a) = parse_command_line(args) else {
         return;
@@ -261,15 +263,35 @@ fn compare_tables(a: &toml::Table, b: &toml::Table, path: &str, out: &mut Agreem
     }
 }
 
-/// Lowers the calling thread (and the threads it starts) to nice 19 on Linux, where the
-/// nice value is a thread's; elsewhere nothing.
-fn lowest_priority() {
+/// Moves the calling thread (and the threads it starts, which inherit both) to the
+/// background on Linux: off one of the cores it may run on, so that a live update finds a core
+/// the batch does not hold, and to nice 19. [`cores`] is asked first, so that the
+/// calibration's parallel parts keep the process's count. Elsewhere nothing.
+///
+/// Not the idle scheduling class (`SCHED_IDLE`): the scheduler counts a core that runs only
+/// such threads as idle and wakes an update there, where it measurably waited a scheduler
+/// tick (4 ms) for a core more often than beside a nice 19 thread.
+fn to_the_background() {
     #[cfg(target_os = "linux")]
     {
-        // Note(unsafe): gettid and setpriority take no pointers and change only this
-        // thread's scheduling weight; a failure leaves the priority as it was.
+        let all = cores();
+        let size = std::mem::size_of::<libc::cpu_set_t>();
+        // Note(unsafe): the affinity calls read and write one cpu_set_t of `size` bytes on
+        // this stack frame; gettid and setpriority take no pointers. Each changes only this thread's scheduling (pid 0,
+        // the thread's id); a failure leaves it as it was.
         #[allow(unsafe_code)]
         unsafe {
+            let mut set: libc::cpu_set_t = std::mem::zeroed();
+            if all > 1
+                && libc::sched_getaffinity(0, size, &mut set) == 0
+                && libc::CPU_COUNT(&set) > 1
+            {
+                let setsize = libc::CPU_SETSIZE as usize;
+                if let Some(c) = (0..setsize).find(|&c| libc::CPU_ISSET(c, &set)) {
+                    libc::CPU_CLR(c, &mut set);
+                    libc::sched_setaffinity(0, size, &set);
+                }
+            }
             let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
             libc::setpriority(libc::PRIO_PROCESS, tid, 19);
         }
@@ -279,6 +301,46 @@ fn lowest_priority() {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The cores a thread may run on, and its nice value.
+    #[cfg(target_os = "linux")]
+    fn scheduling() -> (i32, i32) {
+        let size = std::mem::size_of::<libc::cpu_set_t>();
+        // Note(unsafe): reads this thread's affinity into one cpu_set_t on this stack frame;
+        // gettid and getpriority take no pointers.
+        #[allow(unsafe_code)]
+        unsafe {
+            let mut set: libc::cpu_set_t = std::mem::zeroed();
+            assert_eq!(libc::sched_getaffinity(0, size, &mut set), 0);
+            let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
+            (
+                libc::CPU_COUNT(&set),
+                libc::getpriority(libc::PRIO_PROCESS, tid),
+            )
+        }
+    }
+
+    /// The background thread gives up one core (of several) and takes nice 19; its threads
+    /// inherit both, the thread that started it keeps its own.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn the_batch_thread_leaves_a_core() {
+        let before = scheduling();
+        let (own, child) = std::thread::spawn(|| {
+            to_the_background();
+            (scheduling(), std::thread::spawn(scheduling).join().unwrap())
+        })
+        .join()
+        .unwrap();
+        let expected = if before.0 > 1 && cores() > 1 {
+            before.0 - 1
+        } else {
+            before.0
+        };
+        assert_eq!(own, (expected, 19));
+        assert_eq!(child, own);
+        assert_eq!(scheduling(), before);
+    }
     use crate::reference::simulated::{drive_with_sentences, ReceiverSim};
     use crate::simulate::{default_truth, simulate_path, PathKind, SimSettings};
 
