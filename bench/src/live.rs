@@ -326,9 +326,12 @@ fn print_section(samples: &[Sample], f: &Fed, end: &End, process: (Duration, Agr
         "the background batch calibration, which runs the final's calibration again and again on"
     );
     println!(
-        "its own thread (nice 19, off one core) beside the updates, each run from where the one before left its"
+        "its own thread (nice 19, off one core) beside the updates, each run from where the one"
     );
-    println!("searches; at the drive's end the run under way is cancelled (inside its phases).");
+    println!(
+        "before left its searches; at the drive's end the run under way is cancelled at its next"
+    );
+    println!("check (docs/CALIBRATION.md).");
     println!();
     print_costs(&f.costs);
     println!(

@@ -96,8 +96,10 @@ thread_local! {
 /// their phases as well as between them: once it is set, an evaluation of the restarted
 /// sub-trajectories and a pass of the filter's preparation end with an error, and a score of
 /// the filter's likelihood is NaN without running the filter (a result no search keeps), so
-/// that a cancelled background batch leaves the cores within milliseconds. A thread that a
-/// calibration starts for its own work takes the flag over ([`this_thread_cancel`]).
+/// that a cancelled background batch leaves the filter's and the uncertainty fits' work
+/// within milliseconds (the reading of its inputs and the sub-trajectory fit are not
+/// checked inside). A thread that a calibration starts for its own work takes the flag over
+/// ([`this_thread_cancel`]).
 pub fn cancel_this_thread_on(flag: Option<Arc<AtomicBool>>) {
     CANCEL.with(|c| *c.borrow_mut() = flag);
 }

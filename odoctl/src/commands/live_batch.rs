@@ -1,13 +1,15 @@
 //! `record --calibrate`'s batch calibration in the background: a thread of the lowest
 //! priority, kept off one core (on Linux, [`to_the_background`]), so that the recording, the
 //! live updates and the final calibration come first, runs the batch calibration of the
-//! drive's end (`odoctl calibrate` with the same command line, [`calibration`]) again and again, each time on every row and
-//! sentence handed to it by its start, each from where the one before left its searches
-//! ([`WarmStart`]), and keeps the latest result and warm start (the final calibration's).
-//! Nothing it does is printed; a batch that fails (too little data yet) is counted and the
-//! next one tried. At the drive's end ([`BatchWorker::stop`]) the batch under way is cancelled
-//! (its thread's flag, `calib::warm::cancel_this_thread_on`: inside its phases, within
-//! milliseconds), so that it leaves the cores to the final calibration.
+//! drive's end (`odoctl calibrate` with the same command line, [`calibration`]) again and
+//! again, each time on every row and sentence handed to it by its start, each from where the
+//! one before left its searches ([`WarmStart`]), and keeps the latest result and warm start
+//! (the final calibration's). Nothing it does is printed; a batch that fails (too little data
+//! yet) is counted and the next one tried. At the drive's end ([`BatchWorker::stop`]) the batch
+//! under way is cancelled (its thread's flag, `calib::warm::cancel_this_thread_on`) at its next
+//! check: between its phases and inside the filter's and the uncertainty fits'. Its reading of
+//! the log and its sub-trajectory fit run to their end, tenths of a second on the one core
+//! it keeps at nice 19 (docs/CALIBRATION.md).
 
 use std::borrow::Cow;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -119,8 +121,8 @@ impl BatchWorker {
         slot.as_ref().and_then(|(_, w)| w.clone())
     }
 
-    /// No batch starts after this, and the one under way ends within milliseconds (its
-    /// threads' cancel flag, module documentation).
+    /// No batch starts after this, and the one under way ends at its next check of its
+    /// threads' cancel flag (module documentation); this does not wait for it.
     pub fn stop(&mut self) {
         self.stopped.store(true, Ordering::Relaxed);
         self.tx = None;
@@ -277,8 +279,8 @@ fn to_the_background() {
         let all = cores();
         let size = std::mem::size_of::<libc::cpu_set_t>();
         // Note(unsafe): the affinity calls read and write one cpu_set_t of `size` bytes on
-        // this stack frame; gettid and setpriority take no pointers. Each changes only this thread's scheduling (pid 0,
-        // the thread's id); a failure leaves it as it was.
+        // this stack frame; gettid and setpriority take no pointers. Each changes only this
+        // thread's scheduling (pid 0, the thread's id); a failure leaves it as it was.
         #[allow(unsafe_code)]
         unsafe {
             let mut set: libc::cpu_set_t = std::mem::zeroed();
