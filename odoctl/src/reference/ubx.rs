@@ -251,7 +251,7 @@ pub fn message_name(class: u8, id: u8) -> String {
 /// UBX log (NMEA sentences in it are then skipped).
 pub fn sniff(bytes: &[u8]) -> bool {
     let mut from = 0;
-    while let Some(i) = bytes[from..].windows(2).position(|w| w == SYNC) {
+    while let Some(i) = memchr::memmem::find(&bytes[from..], &SYNC) {
         let at = from + i;
         if let (
             Piece::Ubx {

@@ -42,6 +42,8 @@
 //! [`observed_point`]: crate::calib::antenna::observed_point
 //! [`cluster_sandwich`]: super::covariance::cluster_sandwich
 
+use std::cell::OnceCell;
+
 use anyhow::{anyhow, bail, Result};
 use odo_unit::odometry::ChassisParams;
 
@@ -51,6 +53,7 @@ use crate::calib::antenna::{
 use crate::calib::heading_fit::RESTART_TURN_EXACT;
 use crate::calib::pipeline::cores;
 use crate::calib::run::{windows, Run};
+use crate::calib::warm::check_this_thread;
 use crate::optim::{self, NormalAccumulator, Objective};
 
 use super::covariance::{cluster_jackknife, diagonal_std_errors, independent, inverse};
@@ -658,6 +661,7 @@ pub fn fit_subtrajectories_from(
         antenna0: opts.antenna.value(),
         cols: shared_columns(track_estimated, turned, &opts)?,
         blocks,
+        fingerprints: OnceCell::new(),
     };
     let minimum = problem.minimise(opts.max_iter, warm)?;
     problem.result(minimum, track_estimated, turned)
@@ -718,6 +722,8 @@ struct SharedProblem<'a> {
     antenna0: (f64, f64),
     cols: Vec<usize>,
     blocks: Vec<(usize, usize)>,
+    /// The fingerprints of the blocks' data ([`block_data`]), once asked for.
+    fingerprints: OnceCell<Vec<u64>>,
 }
 
 /// The minimum [`SharedProblem::minimise`] reached: the shared unknowns, the cost (m^2), the
@@ -733,6 +739,23 @@ struct Minimum {
 }
 
 impl SharedProblem<'_> {
+    /// The fingerprint of each block's data ([`block_data`]), spread over the cores.
+    fn fingerprints(&self) -> &[u64] {
+        self.fingerprints.get_or_init(|| {
+            let chunk = self.blocks.len().div_ceil(cores()).max(1);
+            std::thread::scope(|scope| {
+                let jobs: Vec<_> = (self.blocks.chunks(chunk))
+                    .map(|bl| {
+                        scope.spawn(|| bl.iter().map(|&ab| block_data(self.run, ab)).collect())
+                    })
+                    .collect();
+                jobs.into_iter()
+                    .flat_map(|j| -> Vec<u64> { j.join().expect("fingerprint panicked") })
+                    .collect()
+            })
+        })
+    }
+
     /// The parameters and lever arm at the shared unknowns `x`.
     fn at(&self, x: &[f64]) -> (ChassisParams, (f64, f64)) {
         unpack(self.start, self.antenna0, &self.cols, x)
@@ -798,9 +821,9 @@ impl SharedProblem<'_> {
         let mut evals: Vec<Option<BlockEval>> = Vec::with_capacity(self.blocks.len());
         let mut headings = Vec::with_capacity(self.blocks.len());
         let (mut fresh, mut fresh_headings) = (Vec::new(), Vec::new());
-        for &ab in &self.blocks {
+        for (&ab, &data) in self.blocks.iter().zip(self.fingerprints()) {
             match kept.get(&ab) {
-                Some(&(g, d, e)) if d == block_data(self.run, ab) => {
+                Some(&(g, d, e)) if d == data => {
                     evals.push(Some(e.clone()));
                     headings.push(g);
                 }
@@ -891,6 +914,7 @@ impl SharedProblem<'_> {
                     })
                     .collect();
                 evaluations += 1;
+                check_this_thread()?;
                 if let Some(trial) = self.eval(&xn, &hn) {
                     let c: f64 = trial.iter().map(|e| e.cost).sum();
                     if c < cost {
@@ -972,7 +996,8 @@ impl SharedProblem<'_> {
             cols: cols.clone(),
             x,
             blocks: (self.blocks.iter().zip(guesses).zip(evals.iter()))
-                .map(|((&ab, g), e)| (ab, g, block_data(self.run, ab), e.clone()))
+                .zip(self.fingerprints())
+                .map(|(((&ab, g), e), &d)| (ab, g, d, e.clone()))
                 .collect(),
         };
         Ok(SubtrajectoryFit {
