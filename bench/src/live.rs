@@ -218,6 +218,8 @@ fn feed(rows: &[Sample], sentences: &[(usize, String)], args: &[String]) -> Fed 
 /// live fit's last update and to the final calibration printed and written; the refined
 /// live estimate then, with its batch.
 struct End {
+    /// From the drive's end to the background batch's thread ended.
+    batch_stopped: Duration,
     last_update: Duration,
     final_printed: Duration,
     refined: Option<([f64; 3], BatchResult)>,
@@ -268,6 +270,7 @@ fn drive_end(f: &mut Fed, args: &[String], report: &Path) -> End {
         ..
     } = f;
     batch.stop();
+    let batch_stopped = ended.elapsed();
     let warm = batch.warm_start();
     let (done, last_update) = std::thread::scope(|scope| {
         let calibrating = scope.spawn(|| {
@@ -290,6 +293,7 @@ fn drive_end(f: &mut Fed, args: &[String], report: &Path) -> End {
     let done = done.expect("the recording's inputs");
     stdout_to(report, || run_calibrated(&c, done)).expect("the final calibration");
     End {
+        batch_stopped,
         last_update,
         final_printed: ended.elapsed(),
         refined,
@@ -331,7 +335,7 @@ fn print_section(samples: &[Sample], f: &Fed, end: &End, process: (Duration, Agr
     println!(
         "before left its searches; at the drive's end the run under way is cancelled at its next"
     );
-    println!("check (docs/CALIBRATION.md).");
+    println!("check and its thread waited for (docs/CALIBRATION.md).");
     println!();
     print_costs(&f.costs);
     println!(
@@ -423,7 +427,11 @@ fn print_end(end: &End, (process, g): (Duration, Agreement)) {
     println!("| at the drive's end (from the last sample and sentence taken in) | wall time |");
     println!("| --- | ---: |");
     println!(
-        "| the live fit's last update (relinearised to the end) | {} ms |",
+        "| the background batch stopped (the run under way cancelled at its next check, its thread ended) | {} ms |",
+        number(ms(end.batch_stopped))
+    );
+    println!(
+        "| the live fit's last update (relinearised to the end, after the batch stopped) | {} ms |",
         number(ms(end.last_update))
     );
     println!(

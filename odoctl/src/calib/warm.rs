@@ -94,12 +94,11 @@ thread_local! {
 
 /// Makes `flag` cancel the calibrations this thread runs from now on (none: no flag) inside
 /// their phases as well as between them: once it is set, an evaluation of the restarted
-/// sub-trajectories and a pass of the filter's preparation end with an error, and a score of
-/// the filter's likelihood is NaN without running the filter (a result no search keeps), so
-/// that a cancelled background batch leaves the filter's and the uncertainty fits' work
-/// within milliseconds (the reading of its inputs and the sub-trajectory fit are not
-/// checked inside). A thread that a calibration starts for its own work takes the flag over
-/// ([`this_thread_cancel`]).
+/// sub-trajectories, of the sub-trajectories (the sub-trajectory fit's trial steps) and a
+/// pass of the filter's preparation end with an error, and a score of the filter's likelihood
+/// is NaN without running the filter (a result no search keeps). What runs between two
+/// checks (a few integrations of the drive at most) runs to its end. A thread that a calibration
+/// starts for its own work takes the flag over ([`this_thread_cancel`]).
 pub fn cancel_this_thread_on(flag: Option<Arc<AtomicBool>>) {
     CANCEL.with(|c| *c.borrow_mut() = flag);
 }

@@ -268,7 +268,7 @@ impl LiveSession {
     }
 
     /// Stops the background batch (the drive ended): none starts after it, the one under
-    /// way is cancelled.
+    /// way is cancelled, its thread waited for.
     pub fn stop_batch(&mut self) {
         self.batch.stop();
     }

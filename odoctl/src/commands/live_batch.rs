@@ -4,17 +4,18 @@
 //! drive's end (`odoctl calibrate` with the same command line, [`calibration`]) again and
 //! again, each time on every row and sentence handed to it by its start, each from where the
 //! one before left its searches ([`WarmStart`]), and keeps the latest result and warm start
-//! (the final calibration's). Nothing it does is printed; a batch that fails (too little data
-//! yet) is counted and the next one tried. At the drive's end ([`BatchWorker::stop`]) the batch
-//! under way is cancelled (its thread's flag, `calib::warm::cancel_this_thread_on`) at its next
-//! check: between its phases and inside the filter's and the uncertainty fits'. Its reading of
-//! the log and its sub-trajectory fit run to their end, tenths of a second on the one core
-//! it keeps at nice 19 (docs/CALIBRATION.md).
+//! (the final calibration's). The log's lines are read as they are handed on ([`LogLines`]),
+//! so that a batch dates the epochs but does not read the whole log again. Nothing it does
+//! is printed; a batch that fails (too little data yet) is counted and the next one tried. At
+//! the drive's end ([`BatchWorker::stop`]) the batch under way is cancelled (its thread's
+//! flag, `calib::warm::cancel_this_thread_on`) at its next check, between its phases and
+//! inside its fits, and the thread is waited for (docs/CALIBRATION.md).
 
 use std::borrow::Cow;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{channel, Receiver, Sender};
 use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use anyhow::Result;
@@ -27,6 +28,7 @@ use crate::calib::pipeline::cores;
 use crate::calib::warm::cancel_this_thread_on;
 use crate::calib::{Extras, WarmStart};
 use crate::csvio::Sample;
+use crate::reference::nmea::LogLines;
 
 /// The latest batch calibration of the drive so far.
 #[derive(Debug, Clone, Copy)]
@@ -70,6 +72,8 @@ pub struct BatchWorker {
     stopped: Arc<AtomicBool>,
     /// Rows and log bytes handed on so far.
     sent: (usize, usize),
+    /// The thread, until it is stopped.
+    thread: Option<JoinHandle<()>>,
 }
 
 impl BatchWorker {
@@ -83,7 +87,7 @@ impl BatchWorker {
         let slot = Arc::clone(&latest);
         let stopped = Arc::new(AtomicBool::new(false));
         let stop = Arc::clone(&stopped);
-        std::thread::Builder::new()
+        let thread = std::thread::Builder::new()
             .name("batch calibration".into())
             .spawn(move || work(&args, &rx, &slot, &stop))?;
         Ok(Self {
@@ -91,6 +95,7 @@ impl BatchWorker {
             latest,
             stopped,
             sent: (0, 0),
+            thread: Some(thread),
         })
     }
 
@@ -122,10 +127,15 @@ impl BatchWorker {
     }
 
     /// No batch starts after this, and the one under way ends at its next check of its
-    /// threads' cancel flag (module documentation); this does not wait for it.
+    /// threads' cancel flag (module documentation); waits for the thread to end, so that
+    /// nothing of it runs beside what follows and its freed memory is there for it.
     pub fn stop(&mut self) {
         self.stopped.store(true, Ordering::Relaxed);
         self.tx = None;
+        if let Some(t) = self.thread.take() {
+            // A batch that panicked left no result: the latest stays.
+            let _ = t.join();
+        }
     }
 }
 
@@ -135,6 +145,45 @@ impl Drop for BatchWorker {
     }
 }
 
+/// What the thread has been handed: the rows, the log's bytes and its lines read as they
+/// came (a batch pays for the dating of the epochs only, not for a reading of the whole log).
+struct Received {
+    samples: Vec<Sample>,
+    nmea: Vec<u8>,
+    lines: LogLines,
+    /// Bytes of `nmea` given to `lines` (up to the last CR LF).
+    read: usize,
+}
+
+impl Received {
+    /// Nothing yet, the log read with `leap_seconds` as the reference options give them.
+    fn new(leap_seconds: Option<i32>) -> Self {
+        Self {
+            samples: Vec::new(),
+            nmea: Vec::new(),
+            lines: LogLines::new(LOG_NAME, leap_seconds),
+            read: 0,
+        }
+    }
+
+    /// Takes in `chunk`: its rows, its bytes, and each line its bytes complete.
+    fn take(&mut self, (samples, bytes): Chunk) {
+        self.samples.extend(samples);
+        self.nmea.extend(bytes);
+        while let Some(n) = memchr::memmem::find(&self.nmea[self.read..], b"\r\n") {
+            let line = &self.nmea[self.read..self.read + n];
+            // A line that is not UTF-8 is left out: the finish then reads the log whole.
+            if let Ok(text) = std::str::from_utf8(line) {
+                self.lines.line(text);
+            }
+            self.read += n + 2;
+        }
+    }
+}
+
+/// The log's name in a batch's messages.
+const LOG_NAME: &str = "live";
+
 /// The thread: waits for data, takes in all that has come, calibrates, keeps the result;
 /// ends when `stopped` is set or the sender is gone.
 fn work(args: &[String], rx: &Receiver<Chunk>, slot: &Slot, stopped: &Arc<AtomicBool>) {
@@ -143,13 +192,15 @@ fn work(args: &[String], rx: &Receiver<Chunk>, slot: &Slot, stopped: &Arc<Atomic
     let Ok(a) = parse_command_line(args) else {
         return;
     };
-    let (mut samples, mut nmea) = (Vec::new(), Vec::new());
+    let Ok(o) = reference_options(&a.reference_input) else {
+        return;
+    };
+    let mut received = Received::new(o.leap_seconds);
     let (mut done, mut failed) = (0, 0);
     let mut warm = None;
     while let Ok(first) = rx.recv() {
-        for (s, b) in std::iter::once(first).chain(rx.try_iter()) {
-            samples.extend(s);
-            nmea.extend(b);
+        for chunk in std::iter::once(first).chain(rx.try_iter()) {
+            received.take(chunk);
         }
         if stopped.load(Ordering::Relaxed) {
             return;
@@ -159,7 +210,7 @@ fn work(args: &[String], rx: &Receiver<Chunk>, slot: &Slot, stopped: &Arc<Atomic
             warm: warm.as_ref(),
             cancel: Some(stopped),
         };
-        match batch(&a, &samples, &nmea, extras) {
+        match batch(&a, &received, extras) {
             Ok((mut r, w)) => {
                 done += 1;
                 r.took = started.elapsed();
@@ -173,18 +224,22 @@ fn work(args: &[String], rx: &Receiver<Chunk>, slot: &Slot, stopped: &Arc<Atomic
     }
 }
 
-/// One batch calibration of `samples` against the NMEA log `nmea`, as `a` asks, with
-/// `extras`; with the warm start it leaves.
+/// One batch calibration of what was `received`, as `a` asks, with `extras`; with the warm
+/// start it leaves.
 fn batch(
     a: &crate::cli::CalibrateArgs,
-    samples: &[Sample],
-    nmea: &[u8],
+    received: &Received,
     extras: Extras,
 ) -> Result<(BatchResult, Option<WarmStart>)> {
+    let samples = &received.samples;
     let until = samples.last().map_or(f64::NAN, |s| s.t);
-    let source = crate::reference::parse("live", nmea, &reference_options(&a.reference_input)?)?;
+    let o = reference_options(&a.reference_input)?;
+    let lines = received.lines.clone();
+    let source = crate::reference::parse_read(LOG_NAME, &received.nmea, lines, &o)?;
+    extras.check()?;
     let inputs = Inputs::of(&source, Cow::Borrowed(samples))?;
-    let names = ("samples".to_string(), "live".to_string());
+    extras.check()?;
+    let names = ("samples".to_string(), LOG_NAME.to_string());
     let (c, _, _) = calibration_with(a, &inputs, &names, extras)?;
     let geometry = |p: &ChassisParams| [p.left_diameter, p.right_diameter, p.track_width];
     let result = BatchResult {
@@ -365,6 +420,57 @@ mod tests {
         assert_eq!(different, ["fit.z", "n"]);
     }
 
+    /// The log handed on in chunks cut anywhere (inside a line, inside a CR LF) reads as the
+    /// whole log does, a line that is not UTF-8 among them.
+    #[test]
+    fn the_log_handed_on_in_pieces_reads_as_the_whole() {
+        let settings = SimSettings {
+            rate: 10.0,
+            seed: 3,
+            ..Default::default()
+        };
+        let sim = simulate_path(PathKind::Estimation, 20.0, default_truth(), settings);
+        let (_, sentences) = drive_with_sentences(sim, &ReceiverSim::default(), 18).unwrap();
+        let mut log: Vec<u8> = sentences
+            .iter()
+            .flat_map(|(_, s)| format!("{s}\r\n").into_bytes())
+            .collect();
+        let args = ["odoctl", "calibrate", "--samples", "x.csv"].map(String::from);
+        let o = reference_options(&parse_command_line(&args).unwrap().reference_input).unwrap();
+        let whole = |log: &[u8]| crate::reference::parse(LOG_NAME, log, &o).unwrap();
+        for binary in [false, true] {
+            if binary {
+                let at = log.len() / 3;
+                let at = at + log[at..].windows(2).position(|w| w == b"\r\n").unwrap() + 2;
+                log.splice(at..at, b"\xb5\x62\x01\r\n".iter().copied());
+            }
+            let mut received = Received::new(None);
+            let mut cut = 0;
+            for (k, step) in [1, 7, 80, 81, 1000, 2, 3].iter().cycle().enumerate() {
+                let end = (cut + step).min(log.len());
+                received.take((Vec::new(), log[cut..end].to_vec()));
+                cut = end;
+                if k % 50 == 0 || cut == log.len() {
+                    let so_far = crate::reference::parse_read(
+                        LOG_NAME,
+                        &received.nmea,
+                        received.lines.clone(),
+                        &o,
+                    );
+                    let want = crate::reference::parse(LOG_NAME, &log[..cut], &o);
+                    assert_eq!(so_far.ok(), want.ok(), "{binary} at {cut}");
+                }
+                if cut == log.len() {
+                    break;
+                }
+            }
+            assert_eq!(received.read, log.len());
+            let read = received.lines.clone();
+            let got = crate::reference::parse_read(LOG_NAME, &received.nmea, read, &o).unwrap();
+            assert_eq!(got, whole(&log));
+        }
+    }
+
     #[test]
     fn batch_is_the_calibration_of_what_it_was_given() {
         let settings = SimSettings {
@@ -395,7 +501,9 @@ mod tests {
             }
         };
         let a = parse_command_line(&args).unwrap();
-        let (want, _) = batch(&a, &samples, log.as_bytes(), Extras::default()).unwrap();
+        let mut all = Received::new(None);
+        all.take((samples.clone(), log.clone().into_bytes()));
+        let (want, _) = batch(&a, &all, Extras::default()).unwrap();
         for i in 0..3 {
             let se = want.std_errors[i].unwrap();
             let near = |x: f64, y: f64| (x - y).abs() <= 0.01 * se;
@@ -418,6 +526,6 @@ mod tests {
             warm: None,
             cancel: Some(&cancelled),
         };
-        assert!(batch(&a, &samples, log.as_bytes(), extras).is_err());
+        assert!(batch(&a, &all, extras).is_err());
     }
 }

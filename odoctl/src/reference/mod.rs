@@ -510,19 +510,30 @@ pub fn load_read(
     read: nmea::LogLines,
     o: &ReferenceOptions,
 ) -> Result<Reference> {
-    let Ok(text) = std::str::from_utf8(bytes) else {
-        return load_bytes(path, bytes, o);
-    };
-    if o.format.unwrap_or_else(|| detect_format(bytes, text)) != Format::Nmea {
-        return load_bytes(path, bytes, o);
-    }
-    let file = path.display().to_string();
-    let log = read.finish(&file, text, o.leap_seconds)?;
-    let r = Reference::from_log(&file, Format::Nmea, log, o)?;
+    let r = parse_read(&path.display().to_string(), bytes, read, o)?;
     for w in &r.report.read.warnings {
         eprintln!("warning: {w}");
     }
     Ok(r)
+}
+
+/// [`parse`] of an NMEA log whose lines `read` has read as they were appended to `bytes`
+/// ([`nmea::LogLines`]): the same reference, with only the dating of the epochs left to do.
+/// Another format is read whole.
+pub fn parse_read(
+    file: &str,
+    bytes: &[u8],
+    read: nmea::LogLines,
+    o: &ReferenceOptions,
+) -> Result<Reference> {
+    let Ok(text) = std::str::from_utf8(bytes) else {
+        return parse(file, bytes, o);
+    };
+    if o.format.unwrap_or_else(|| detect_format(bytes, text)) != Format::Nmea {
+        return parse(file, bytes, o);
+    }
+    let log = read.finish(file, text, o.leap_seconds)?;
+    Reference::from_log(file, Format::Nmea, log, o)
 }
 
 /// Parses a reference file's content; `file` names it in messages.

@@ -51,6 +51,7 @@ pub fn with_checksum(body: &str) -> String {
 }
 
 /// A GGA before dating.
+#[derive(Clone)]
 struct Undated {
     sod: f64,
     position: Geodetic,
@@ -121,7 +122,8 @@ pub fn parse(file: &str, text: &str, leap_seconds: Option<i32>) -> Result<Geodet
 /// [`parse`], so that at the end only the dating of the epochs is left. HDT is read as sent
 /// last in each epoch; a log whose ends show HDT sent first, a line with a line end inside
 /// it, or a text that is not the lines given, is read again whole at the end
-/// ([`LogLines::finish`]).
+/// ([`LogLines::finish`]). A clone is the log so far, to be finished while this one reads on.
+#[derive(Clone)]
 pub struct LogLines {
     reader: LogReader,
     scan: HdtScan,
@@ -237,7 +239,7 @@ fn hdt_order(text: &str) -> HdtOrder {
 
 /// [`hdt_order`] line by line: the checksum-valid sentences' talkers, and the HDT and timed
 /// sentences (GGA, RMC, ZDA, GST with a time) as (type, time of day) in their order.
-#[derive(Default)]
+#[derive(Clone, Default)]
 struct HdtScan {
     talkers: std::collections::BTreeMap<String, usize>,
     /// The type of the first HDT or timed sentence.
@@ -350,6 +352,7 @@ fn checksum_ok(s: &str) -> bool {
 
 /// A log being read: the GGA epochs so far, the date sentences, and the GST and HDT
 /// sentences waiting for their epoch.
+#[derive(Clone)]
 struct LogReader {
     /// The log's name in messages.
     file: Arc<str>,
