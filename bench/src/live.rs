@@ -244,18 +244,17 @@ fn cold_final(f: &Fed, sentences: &[(usize, String)], csv: &Path, dir: &Path) ->
         samples: &f.rows,
         nmea: &f.log,
         lines,
-        warm: None,
     };
     let read = read_inputs(&c, Some(recorded)).expect("the recording's inputs");
     stdout_to(&dir.join("cold.txt"), || run_read(&c, read)).expect("the cold final");
     started.elapsed()
 }
 
-/// The drive's end of `f`, as `record` meets it: the background batch stopped, the live
-/// fit's last update and, on a thread beside it, the dating of the log's epochs and the
-/// final calibration `args` in this process on the rows and the log in memory from the
-/// latest background batch's warm start; then its report printed (sent to `report`) and its
-/// result written.
+/// The drive's end of `f`, as `record` meets it: the background batch cancelled, the log's
+/// epochs dated while it ends, then (its thread ended) the live fit's last update and, on a
+/// thread beside it, the final calibration `args` in this process on the rows and the log
+/// in memory from the latest background batch's warm start; then its report printed (sent to
+/// `report`) and its result written.
 fn drive_end(f: &mut Fed, args: &[String], report: &Path) -> End {
     let ended = Instant::now();
     let last_t = f.rows[f.rows.len() - 1].t;
@@ -269,18 +268,22 @@ fn drive_end(f: &mut Fed, args: &[String], report: &Path) -> End {
         lines,
         ..
     } = f;
+    batch.cancel();
+    let recorded = Recorded {
+        samples: rows,
+        nmea: log,
+        lines: lines.take().expect("the log's lines"),
+    };
+    let read = read_inputs(&c, Some(recorded));
     batch.stop();
     let batch_stopped = ended.elapsed();
     let warm = batch.warm_start();
     let (done, last_update) = std::thread::scope(|scope| {
         let calibrating = scope.spawn(|| {
-            let recorded = Recorded {
-                samples: rows,
-                nmea: log,
-                lines: lines.take().expect("the log's lines"),
-                warm,
-            };
-            read_inputs(&c, Some(recorded)).map(|read| calibrate_inputs(&c, read))
+            read.map(|mut read| {
+                read.start_from(warm);
+                calibrate_inputs(&c, read)
+            })
         });
         for p in stream.take((rows[0].t, last_t), true) {
             live.push_reference(p);
@@ -427,7 +430,7 @@ fn print_end(end: &End, (process, g): (Duration, Agreement)) {
     println!("| at the drive's end (from the last sample and sentence taken in) | wall time |");
     println!("| --- | ---: |");
     println!(
-        "| the background batch stopped (the run under way cancelled at its next check, its thread ended) | {} ms |",
+        "| the background batch stopped (cancelled, the log's epochs dated while the run under way ends at its next check, its thread ended) | {} ms |",
         number(ms(end.batch_stopped))
     );
     println!(

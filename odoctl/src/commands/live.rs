@@ -267,8 +267,13 @@ impl LiveSession {
         (!rows.is_empty()).then_some((rows, log, lines))
     }
 
-    /// Stops the background batch (the drive ended): none starts after it, the one under
-    /// way is cancelled, its thread waited for.
+    /// Cancels the background batch (the drive ended): none starts after it, the one under
+    /// way ends at its next check; does not wait for it ([`LiveSession::stop_batch`] does).
+    pub fn cancel_batch(&mut self) {
+        self.batch.cancel();
+    }
+
+    /// Stops the background batch: cancelled, its thread waited for.
     pub fn stop_batch(&mut self) {
         self.batch.stop();
     }

@@ -127,11 +127,17 @@ impl BatchWorker {
     }
 
     /// No batch starts after this, and the one under way ends at its next check of its
-    /// threads' cancel flag (module documentation); waits for the thread to end, so that
-    /// nothing of it runs beside what follows and its freed memory is there for it.
-    pub fn stop(&mut self) {
+    /// threads' cancel flag (module documentation); does not wait for it ([`BatchWorker::stop`]
+    /// does).
+    pub fn cancel(&mut self) {
         self.stopped.store(true, Ordering::Relaxed);
         self.tx = None;
+    }
+
+    /// [`BatchWorker::cancel`], then waits for the thread to end, so that nothing of it runs
+    /// beside what follows and its freed memory is there for the next thread to take.
+    pub fn stop(&mut self) {
+        self.cancel();
         if let Some(t) = self.thread.take() {
             // A batch that panicked left no result: the latest stays.
             let _ = t.join();

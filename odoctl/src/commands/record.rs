@@ -62,30 +62,34 @@ pub fn run(a: &RecordArgs) -> Result<ExitCode> {
 /// to `--result`: `odoctl calibrate --samples OUT` (the NMEA log beside it as the reference)
 /// with `--config` as `--initial` and the `--set`s, run on the rows and sentences the
 /// session kept as written to the two files (the files are not read again), its searches
-/// started from the latest background batch's warm start. The log's epochs are dated and
-/// the calibration runs on a thread beside the live fit's last update; its report follows
-/// the live estimate.
+/// started from the latest background batch's warm start. The background batch is cancelled
+/// and, while it ends, the log's epochs are dated; once its thread has ended, the calibration
+/// runs on a thread beside the live fit's last update; its report follows the live estimate.
 fn final_calibration(a: &RecordArgs, session: &mut LiveSession) -> Result<ExitCode> {
     use super::calibrate::Recorded;
     use super::calibrate::{calibrate_inputs, parse_command_line, read_inputs, run_calibrated};
     let ended = Instant::now();
     let args = calibrate_args(a, true);
     let c = parse_command_line(&args)?;
-    session.stop_batch();
-    let warm = session.warm_start();
+    session.cancel_batch();
     let (rows, log, lines) = match session.take_recording() {
         Some((rows, log, lines)) => (rows, log, Some(lines)),
         None => (Vec::new(), Vec::new(), None),
     };
+    let recorded = lines.map(|lines| Recorded {
+        samples: &rows,
+        nmea: &log,
+        lines,
+    });
+    let read = read_inputs(&c, recorded);
+    session.stop_batch();
+    let warm = session.warm_start();
     let done = std::thread::scope(|scope| {
         let calibrating = scope.spawn(|| {
-            let recorded = lines.map(|lines| Recorded {
-                samples: &rows,
-                nmea: &log,
-                lines,
-                warm,
-            });
-            read_inputs(&c, recorded).map(|read| calibrate_inputs(&c, read))
+            read.map(|mut read| {
+                read.start_from(warm);
+                calibrate_inputs(&c, read)
+            })
         });
         session.finish();
         calibrating.join()

@@ -653,18 +653,39 @@ pub fn fit_subtrajectories_from(
     let blocks = cut_run(run, start, &opts)?;
     let last = run.len() - 1;
     let h0 = run.heading_guess(0);
-    let turned = turning(run, start, 0, last, h0);
-    let track_estimated = turned >= opts.min_turning;
-    let problem = SharedProblem {
-        run,
-        start,
-        antenna0: opts.antenna.value(),
-        cols: shared_columns(track_estimated, turned, &opts)?,
-        blocks,
-        fingerprints: OnceCell::new(),
+    let problem = |track_estimated: bool, turned: f64| -> Result<SharedProblem> {
+        Ok(SharedProblem {
+            run,
+            start,
+            antenna0: opts.antenna.value(),
+            cols: shared_columns(track_estimated, turned, &opts)?,
+            blocks: blocks.clone(),
+            fingerprints: OnceCell::new(),
+        })
     };
-    let minimum = problem.minimise(opts.max_iter, warm)?;
-    problem.result(minimum, track_estimated, turned)
+    // From a warm start that estimated the track width, the fit runs with it estimated while
+    // the turning that decides it is integrated beside; again when the turning says otherwise.
+    let speculated = warm.is_some_and(|w| w.last.cols.contains(&2));
+    let (turned, early) = std::thread::scope(|scope| {
+        let turned = scope.spawn(|| turning(run, start, 0, last, h0));
+        let early = speculated.then(|| {
+            let p = problem(true, f64::NAN)?;
+            let minimum = p.minimise(opts.max_iter, warm)?;
+            Ok::<_, anyhow::Error>((p, minimum))
+        });
+        (
+            turned.join().expect("the turning's integration panicked"),
+            early,
+        )
+    });
+    let track_estimated = turned >= opts.min_turning;
+    if let (Some(early), true) = (early, track_estimated) {
+        let (p, minimum) = early?;
+        return p.result(minimum, track_estimated, turned);
+    }
+    let p = problem(track_estimated, turned)?;
+    let minimum = p.minimise(opts.max_iter, warm)?;
+    p.result(minimum, track_estimated, turned)
 }
 
 /// The sub-trajectories of `opts.cuts`; at least two, else an error.
@@ -1196,10 +1217,26 @@ mod tests {
         assert_eq!(again.std_errors, cold.std_errors);
         let bad = SubtrajectoryStart {
             geometry: [-1.0, 0.26, 0.56],
-            ..warm
+            ..warm.clone()
         };
         let fallback = fit_subtrajectories_from(&run, &start, opts, Some(&bad)).unwrap();
         assert_eq!(values(&fallback), values(&cold));
+        // A warm start that estimated the track width, on a run that turned too little for
+        // it (here: a turning threshold above the run's): the track width is held, as cold.
+        let held = SubtrajectoryOptions {
+            min_turning: 1e9,
+            ..opts
+        };
+        let cold = fit_subtrajectories(&run, &start, held).unwrap();
+        let hot = fit_subtrajectories_from(&run, &start, held, Some(&warm)).unwrap();
+        assert!(!cold.track_estimated && !hot.track_estimated);
+        assert_eq!(hot.params.track_width, start.track_width);
+        assert_eq!(hot.turning, cold.turning);
+        for i in 0..2 {
+            let se = cold.std_errors[i].unwrap();
+            let d = (values(&hot)[i] - values(&cold)[i]).abs() / se;
+            assert!(d < 0.01, "unknown {i}: {d} SE apart");
+        }
     }
 
     /// First match `a <= b` whose path distance to match `b` is at most `length`.

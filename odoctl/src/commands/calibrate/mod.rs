@@ -108,15 +108,12 @@ pub struct Recorded<'r> {
     /// Its lines read as they were appended (named as the log beside `--samples`, with the
     /// reference options' leap seconds; else it is read whole).
     pub lines: LogLines,
-    /// Where an earlier calibration of the recording's first part left the searches (the
-    /// last background batch's, [`WarmStart`]).
-    pub warm: Option<WarmStart>,
 }
 
 /// `odoctl calibrate`, with the recording's files taken from `recorded` when given and the
 /// reference is the recording's own NMEA log: the same result, printed and written, as
-/// from the files (its searches started from `recorded`'s warm start, when it has one: the
-/// same to their tolerances). [`read_inputs`], then [`run_read`].
+/// from the files. [`read_inputs`], then [`run_read`] ([`ReadInputs::start_from`] between
+/// them starts the searches from a warm start: the same result to their tolerances).
 pub fn run_from(a: &CalibrateArgs, recorded: Option<Recorded>) -> Result<ExitCode> {
     run_read(a, read_inputs(a, recorded)?)
 }
@@ -129,22 +126,27 @@ pub struct ReadInputs<'r> {
     source: Reference,
     inputs: Inputs<'r>,
     /// Where the calibration's searches start (a recording's warm start; else none).
-    pub warm: Option<WarmStart>,
+    warm: Option<WarmStart>,
+}
+
+impl ReadInputs<'_> {
+    /// Starts the calibration's searches from `warm` (where a calibration of the recording's
+    /// first part left them) when the reference is the recording's own log; else from the
+    /// initial estimate.
+    pub fn start_from(&mut self, warm: Option<WarmStart>) {
+        self.warm = warm.filter(|_| self.own);
+    }
 }
 
 /// The inputs of [`run_from`]: the recording in memory (`recorded`, when the reference is
 /// its own NMEA log: the epochs dated), else the files; prints nothing.
 pub fn read_inputs<'r>(
     a: &CalibrateArgs,
-    mut recorded: Option<Recorded<'r>>,
+    recorded: Option<Recorded<'r>>,
 ) -> Result<ReadInputs<'r>> {
     let started = Instant::now();
     let timer = calib::PhaseTimer::new();
     let (reference_path, own) = resolve_reference(&a.samples, a.reference.as_deref())?;
-    let warm = recorded
-        .as_mut()
-        .and_then(|r| r.warm.take())
-        .filter(|_| own);
     let (samples, source) = match recorded.filter(|_| own) {
         Some(r) => {
             let o = reference_options(&a.reference_input)?;
@@ -164,7 +166,7 @@ pub fn read_inputs<'r>(
         own,
         source,
         inputs,
-        warm,
+        warm: None,
     })
 }
 
