@@ -835,22 +835,15 @@ impl OpenLoop {
         let mut integ = run
             .start(geometry, 0, h0)
             .map_err(|e| anyhow!("parameters: {e}"))?;
-        let w = geometry.track_width;
         let first = run.matches[0].0;
         let last = run.matches[run.len() - 1].0;
         let mut poses = Vec::with_capacity(last - first + 1);
-        let mut rolled = Vec::with_capacity(last - first + 1);
-        let mut prev = integ.pose();
-        poses.push(prev);
-        rolled.push([0.0; 3]);
+        poses.push(integ.pose());
         for s in &run.samples[first + 1..=last] {
             let _ = integ.step_pose(counts(s), index_refs(s));
-            let p = integ.pose();
-            let [s1, s2] = wheel_distances(prev, p, w);
-            poses.push(p);
-            rolled.push([s1.abs(), s2.abs(), (s1 - s2).abs()]);
-            prev = p;
+            poses.push(integ.pose());
         }
+        let rolled = rolled_distances(&poses, geometry.track_width);
         Ok(Self {
             first,
             poses,
@@ -858,6 +851,35 @@ impl OpenLoop {
             start_variances: (pos_var0, heading_var0),
         })
     }
+}
+
+/// What each wheel and their difference rolled from each of `poses` to the next on a track
+/// `w` (m; zero for the first); with two cores and at least [`PARALLEL_STEPS`] poses, the
+/// second half on another thread (the same results).
+fn rolled_distances(poses: &[Pose], w: f64) -> Vec<[f64; 3]> {
+    let rolled = |pairs: &[Pose]| -> Vec<[f64; 3]> {
+        pairs
+            .windows(2)
+            .map(|ab| {
+                let [s1, s2] = wheel_distances(ab[0], ab[1], w);
+                [s1.abs(), s2.abs(), (s1 - s2).abs()]
+            })
+            .collect()
+    };
+    let mut out = Vec::with_capacity(poses.len());
+    out.push([0.0; 3]);
+    if cores() < 2 || poses.len() < PARALLEL_STEPS {
+        out.extend(rolled(poses));
+        return out;
+    }
+    // The halves share the pose between them.
+    let half = poses.len() / 2;
+    std::thread::scope(|scope| {
+        let second = scope.spawn(|| rolled(&poses[half - 1..]));
+        out.extend(rolled(&poses[..half]));
+        out.extend(second.join().expect("the rolled distances panicked"));
+    });
+    out
 }
 
 /// Each of `steps`' terms on a track `w` (m); with two cores and at least
@@ -950,6 +972,30 @@ mod tests {
     /// The span of [`position_span`] at the boundaries: the whole block (`None`) where the
     /// averaged noise stays above a tenth of the slip's along-track variance over a block,
     /// one epoch at no noise, the balance between (m).
+    /// The rolled distances of a long path split between two threads are those of one pass.
+    #[test]
+    fn rolled_distances_in_halves_are_one_pass() {
+        let n = PARALLEL_STEPS + 7;
+        let poses: Vec<Pose> = (0..n)
+            .map(|k| {
+                let t = k as f64 * 1e-3;
+                Pose {
+                    x: (3.0 * t).sin() * 5.0,
+                    y: t * 2.0,
+                    heading: (t * 0.7).cos(),
+                }
+            })
+            .collect();
+        let w = 0.5656;
+        let got = rolled_distances(&poses, w);
+        assert_eq!(got.len(), n);
+        assert_eq!(got[0], [0.0; 3]);
+        for k in 1..n {
+            let [s1, s2] = wheel_distances(poses[k - 1], poses[k], w);
+            assert_eq!(got[k], [s1.abs(), s2.abs(), (s1 - s2).abs()], "at {k}");
+        }
+    }
+
     #[test]
     fn the_averaging_span_shortens_only_against_a_precise_reference() {
         let sim = slipping_run(3);
