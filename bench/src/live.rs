@@ -333,12 +333,12 @@ fn print_section(samples: &[Sample], f: &Fed, end: &End, process: (Duration, Agr
         "the background batch calibration, which runs the final's calibration again and again on"
     );
     println!(
-        "its own thread (nice 19, off one core) beside the updates, each run from where the one"
+        "its own thread (nice 19, off one core, a 0.1 ms time slice) beside the updates, each run"
     );
     println!(
-        "before left its searches; at the drive's end the run under way is cancelled at its next"
+        "from where the one before left its searches; at the drive's end the run under way is"
     );
-    println!("check and its thread waited for (docs/CALIBRATION.md).");
+    println!("cancelled at its next check and its thread waited for (docs/CALIBRATION.md).");
     println!();
     print_costs(&f.costs);
     println!(
