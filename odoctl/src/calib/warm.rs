@@ -97,8 +97,8 @@ thread_local! {
 /// sub-trajectories, of the sub-trajectories (the sub-trajectory fit's trial steps) and a
 /// pass of the filter's preparation end with an error, and a score of the filter's likelihood
 /// is NaN without running the filter (a result no search keeps). What runs between two
-/// checks (a few integrations of the drive at most) runs to its end. A thread that a calibration
-/// starts for its own work takes the flag over ([`this_thread_cancel`]).
+/// checks (a few integrations of the drive at most) runs to its end. A thread that a
+/// calibration starts for its own work takes the flag over ([`this_thread_cancel`]).
 pub fn cancel_this_thread_on(flag: Option<Arc<AtomicBool>>) {
     CANCEL.with(|c| *c.borrow_mut() = flag);
 }

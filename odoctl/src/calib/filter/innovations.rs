@@ -854,47 +854,36 @@ impl OpenLoop {
 }
 
 /// What each wheel and their difference rolled from each of `poses` to the next on a track
-/// `w` (m; zero for the first); with two cores and at least [`PARALLEL_STEPS`] poses, the
-/// second half on another thread (the same results).
+/// `w` (m; zero for the first), [`in_halves`].
 fn rolled_distances(poses: &[Pose], w: f64) -> Vec<[f64; 3]> {
-    let rolled = |pairs: &[Pose]| -> Vec<[f64; 3]> {
-        pairs
-            .windows(2)
-            .map(|ab| {
-                let [s1, s2] = wheel_distances(ab[0], ab[1], w);
-                [s1.abs(), s2.abs(), (s1 - s2).abs()]
-            })
-            .collect()
-    };
     let mut out = Vec::with_capacity(poses.len());
     out.push([0.0; 3]);
-    if cores() < 2 || poses.len() < PARALLEL_STEPS {
-        out.extend(rolled(poses));
-        return out;
-    }
-    // The halves share the pose between them.
-    let half = poses.len() / 2;
-    std::thread::scope(|scope| {
-        let second = scope.spawn(|| rolled(&poses[half - 1..]));
-        out.extend(rolled(&poses[..half]));
-        out.extend(second.join().expect("the rolled distances panicked"));
-    });
+    out.extend(in_halves(poses.len().saturating_sub(1), |k| {
+        let [s1, s2] = wheel_distances(poses[k], poses[k + 1], w);
+        [s1.abs(), s2.abs(), (s1 - s2).abs()]
+    }));
     out
 }
 
-/// Each of `steps`' terms on a track `w` (m); with two cores and at least
-/// [`PARALLEL_STEPS`] steps, the second half on another thread (the same results).
+/// Each of `steps`' terms on a track `w` (m), [`in_halves`].
 fn step_terms(steps: &[Step], w: f64) -> Vec<StepTerms> {
-    if cores() < 2 || steps.len() < PARALLEL_STEPS {
-        return steps.iter().map(|st| st.terms(w)).collect();
+    in_halves(steps.len(), |k| steps[k].terms(w))
+}
+
+/// `item(k)` for `k` in `0..n`, in order; with two cores and at least [`PARALLEL_STEPS`]
+/// items, the second half on another thread (the same results).
+fn in_halves<T: Send>(n: usize, item: impl Fn(usize) -> T + Sync) -> Vec<T> {
+    if cores() < 2 || n < PARALLEL_STEPS {
+        return (0..n).map(item).collect();
     }
-    let (early, late) = steps.split_at(steps.len() / 2);
+    let half = n / 2;
+    let item = &item;
     std::thread::scope(|scope| {
-        let second = scope.spawn(|| late.iter().map(|st| st.terms(w)).collect::<Vec<_>>());
-        let mut terms: Vec<StepTerms> = Vec::with_capacity(steps.len());
-        terms.extend(early.iter().map(|st| st.terms(w)));
-        terms.extend(second.join().expect("a step's terms panicked"));
-        terms
+        let second = scope.spawn(move || (half..n).map(item).collect::<Vec<_>>());
+        let mut out: Vec<T> = Vec::with_capacity(n);
+        out.extend((0..half).map(item));
+        out.extend(second.join().expect("a half's items panicked"));
+        out
     })
 }
 
@@ -969,9 +958,6 @@ mod tests {
         )
     }
 
-    /// The span of [`position_span`] at the boundaries: the whole block (`None`) where the
-    /// averaged noise stays above a tenth of the slip's along-track variance over a block,
-    /// one epoch at no noise, the balance between (m).
     /// The rolled distances of a long path split between two threads are those of one pass.
     #[test]
     fn rolled_distances_in_halves_are_one_pass() {
@@ -996,6 +982,9 @@ mod tests {
         }
     }
 
+    /// The span of [`position_span`] at the boundaries: the whole block (`None`) where the
+    /// averaged noise stays above a tenth of the slip's along-track variance over a block,
+    /// one epoch at no noise, the balance between (m).
     #[test]
     fn the_averaging_span_shortens_only_against_a_precise_reference() {
         let sim = slipping_run(3);
