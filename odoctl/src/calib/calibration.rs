@@ -748,8 +748,9 @@ fn whole_run_summary(
     let guess = warm.unwrap_or_else(|| s.blocks.first().map_or(0.0, |b| b.heading));
     let params = refinement.map_or(s.params, |r| r.params);
     // One integration (two when it turns by more than 0.01 rad), the path turned about its
-    // start: the heading a re-integrating fit would find, eq (16) there and the heading's
-    // errors with the geometry held (it is fitted with the geometry held).
+    // start: the heading a re-integrating fit would find, eq (16) there, the headings at the
+    // matches and the heading's errors with the geometry held (it is fitted with the geometry
+    // held).
     let WholeRunHeading {
         heading0,
         cost,
