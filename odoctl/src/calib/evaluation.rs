@@ -355,6 +355,39 @@ impl UncertaintyRecord {
     }
 }
 
+impl UncertaintyRecord {
+    /// The horizontal and heading sigmas (m, rad) of [`UncertaintyRecord::replay`] at the rows
+    /// `wanted` picks (this record's row indices), `visit(row, (sigma_h, sigma_heading))` in
+    /// the order of the rows: only the stretches holding a picked row are replayed, each up
+    /// to its last one.
+    pub fn replay_rows(
+        &self,
+        params: &ChassisParams,
+        wanted: impl Fn(usize) -> bool,
+        mut visit: impl FnMut(usize, (f64, f64)),
+    ) {
+        let (mut g, mut r) = (0, 0);
+        for &(rows, geometries) in &self.windows {
+            if let Some(last) = (r..r + rows).rev().find(|&i| wanted(i)) {
+                let stretch = &self.geometries[g..g + geometries];
+                let mut uncertainty = PoseUncertainty::new(params);
+                let mut done = 0;
+                for i in r..=last {
+                    for step in &stretch[done..self.steps[i]] {
+                        uncertainty.step(step);
+                    }
+                    done = self.steps[i];
+                    if wanted(i) {
+                        let s = uncertainty.sigma();
+                        visit(i, (f64::from(s.horizontal()), f64::from(s.heading)));
+                    }
+                }
+            }
+            (g, r) = (g + geometries, r + rows);
+        }
+    }
+}
+
 /// Evaluation of the whole run from match 0.
 pub fn evaluate(run: &Run, params: &ChassisParams, heading0: f64) -> Result<Evaluation> {
     let mut ev = Evaluation::default();

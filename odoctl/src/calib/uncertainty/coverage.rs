@@ -4,13 +4,15 @@
 //! coverage of the same band that the `delta_diff` fit uses.
 
 use std::cell::RefCell;
+use std::rc::Rc;
 
-use anyhow::Result;
+use anyhow::{anyhow, Result};
 use indicatif::ProgressBar;
 use odo_unit::odometry::{ChassisParams, UncertaintyModel};
 
 use crate::calib::evaluation::Evaluation;
 use crate::calib::run::Run;
+use crate::calib::warm::check_this_thread;
 use crate::optim::norm2;
 
 use super::coefficients::{set_coefficient, DeltaMode, UncertaintyCriterion, UncertaintyFit};
@@ -19,17 +21,103 @@ use super::restarts::Restarts;
 /// Nominal coverage of a 1-sigma band of a normal distribution.
 pub const ONE_SIGMA_COVERAGE: f64 = 0.682_689_492;
 
+/// A band whose coverage the uncertainty fits count: horizontal or heading-change, widened by
+/// the reference's noise.
+#[derive(Debug, Clone, Copy)]
+pub(crate) enum Band {
+    /// `e <= k sqrt(sigma_h^2 + sigma_ref^2)` at every point, `sigma_ref` the epoch's own
+    /// horizontal RMS sigma where its log gives one, else this (m, horizontal RMS).
+    Horizontal(f64),
+    /// `|e| <= k sqrt(sigma_heading^2 + (1 + 1/n) sigma^2)` where the reference has a
+    /// heading, `e` the error of the heading change since the stretch's start
+    /// ([`Evaluation::heading_change_err`]; the reference noise, this (rad), enters at the
+    /// point and, averaged over `n` headings, at the start).
+    Heading(f64),
+}
+
+impl Band {
+    /// Whether point `i` of `ev` lies inside the band of `k` sigmas, at the sigmas `(sigma_h,
+    /// sigma_heading)` (m, rad) rather than its own; `None` when it does not count (no
+    /// heading).
+    fn inside(
+        self,
+        ev: &Evaluation,
+        i: usize,
+        k: f64,
+        (sigma_h, sigma_heading): (f64, f64),
+    ) -> Option<bool> {
+        match self {
+            Band::Horizontal(ref_sigma) => {
+                Some(ev.horizontal[i] <= k * sigma_h.hypot(reference_sigma_at(ev, i, ref_sigma)))
+            }
+            Band::Heading(ref_heading_sigma) => ev.heading_change_err[i].map(|e| {
+                let m = ev.start_headings[i].max(1) as f64;
+                e.abs() <= k * norm2(sigma_heading, ref_heading_sigma * (1.0 + 1.0 / m).sqrt())
+            }),
+        }
+    }
+
+    /// Point `i`'s squared error and the squared reference noise its band adds, `(e^2, r^2)`:
+    /// inside at `k` sigmas when `e^2 <= k^2 (sigma^2 + r^2)`, `sigma` its sigma in the band
+    /// ([`Band::sigma`]); `None` when it does not count.
+    fn squares(self, ev: &Evaluation, i: usize) -> Option<(f64, f64)> {
+        match self {
+            Band::Horizontal(ref_sigma) => {
+                let (e, r) = (ev.horizontal[i], reference_sigma_at(ev, i, ref_sigma));
+                Some((e * e, r * r))
+            }
+            Band::Heading(ref_heading_sigma) => ev.heading_change_err[i].map(|e| {
+                let m = ev.start_headings[i].max(1) as f64;
+                (
+                    e * e,
+                    ref_heading_sigma * ref_heading_sigma * (1.0 + 1.0 / m),
+                )
+            }),
+        }
+    }
+
+    /// Point `i`'s sigma in the band: horizontal (m) or heading (rad).
+    fn sigma(self, ev: &Evaluation, i: usize) -> f64 {
+        match self {
+            Band::Horizontal(_) => ev.sigma_h[i],
+            Band::Heading(_) => ev.sigma_heading[i],
+        }
+    }
+
+    /// The coverage of `inside` points of `counted` over `points`: the share of all points
+    /// (horizontal), of the counted ones (heading; NaN without any).
+    fn share(self, inside: usize, counted: usize, points: usize) -> f64 {
+        match self {
+            Band::Horizontal(_) => inside as f64 / points.max(1) as f64,
+            Band::Heading(_) if counted == 0 => f64::NAN,
+            Band::Heading(_) => inside as f64 / counted as f64,
+        }
+    }
+
+    /// The coverage of the band of `k` sigmas over the points `from..` of `ev`.
+    pub(crate) fn coverage(self, ev: &Evaluation, k: f64, from: usize) -> f64 {
+        let (mut counted, mut inside) = (0, 0);
+        let points = match self {
+            Band::Horizontal(_) => ev.horizontal.len(),
+            Band::Heading(_) => ev.heading_change_err.len(),
+        };
+        let sigma = |v: &[f64], i: usize| v.get(i).copied().unwrap_or(f64::NAN);
+        for i in from..points {
+            let sigmas = (sigma(&ev.sigma_h, i), sigma(&ev.sigma_heading, i));
+            if let Some(yes) = self.inside(ev, i, k, sigmas) {
+                counted += 1;
+                inside += usize::from(yes);
+            }
+        }
+        self.share(inside, counted, ev.horizontal.len().saturating_sub(from))
+    }
+}
+
 /// Coverage of the horizontal `k`-sigma band widened by the reference noise, over the points
 /// `from..`: the fraction with `e <= k sqrt(sigma_h^2 + sigma_ref^2)`, `sigma_ref` the epoch's
 /// own horizontal RMS sigma where its log gives one, else `ref_sigma` (m, horizontal RMS).
 pub fn horizontal_coverage(ev: &Evaluation, ref_sigma: f64, k: f64, from: usize) -> f64 {
-    let points = ev.horizontal.len().saturating_sub(from);
-    let inside = (from..ev.horizontal.len())
-        .filter(|&i| {
-            ev.horizontal[i] <= k * ev.sigma_h[i].hypot(reference_sigma_at(ev, i, ref_sigma))
-        })
-        .count();
-    inside as f64 / points.max(1) as f64
+    Band::Horizontal(ref_sigma).coverage(ev, k, from)
 }
 
 /// The reference's horizontal RMS noise (m) at point `i`: the epoch's own sigma, else
@@ -48,25 +136,103 @@ pub fn reference_sigma_at(ev: &Evaluation, i: usize, ref_sigma: f64) -> f64 {
 /// since the stretch's start ([`Evaluation::heading_change_err`]; the reference noise enters
 /// at the point and, averaged over `n` headings, at the start); NaN without any.
 pub fn heading_coverage(ev: &Evaluation, ref_heading_sigma: f64, k: f64, from: usize) -> f64 {
-    let (mut n, mut inside) = (0usize, 0usize);
-    for i in from..ev.heading_change_err.len() {
-        if let Some(e) = ev.heading_change_err[i] {
-            let m = ev.start_headings[i].max(1) as f64;
-            let band = norm2(
-                ev.sigma_heading[i],
-                ref_heading_sigma * (1.0 + 1.0 / m).sqrt(),
-            );
-            n += 1;
-            if e.abs() <= k * band {
-                inside += 1;
+    Band::Heading(ref_heading_sigma).coverage(ev, k, from)
+}
+
+/// Relative change of a point's sigmas inside which [`scaled_coverage`] replays the point
+/// rather than deciding it from the scaled sigmas: the two differ by the f32 rounding of the
+/// uncertainty's steps, about 1e-7 of the sigma.
+const SCALED_SIGMA_MARGIN: f64 = 1e-4;
+
+/// The coverage of `band` at `k` sigmas over every point of the restarts' evaluation at `p`
+/// ([`Band::coverage`]): [`scaled_coverage`] where it applies, else of the evaluation
+/// ([`Restarts::evaluate_memo`]).
+pub(crate) fn coverage_at(
+    run: &Run,
+    restarts: &Restarts,
+    p: &ChassisParams,
+    band: Band,
+    k: f64,
+) -> Result<f64> {
+    match scaled_coverage(restarts, p, band, k)? {
+        Some(c) => Ok(c),
+        None => Ok(band.coverage(&*restarts.evaluate_memo(run, p)?, k, 0)),
+    }
+}
+
+/// The restarts' last integration ([`Restarts::recorded_for`]: its parameters and evaluation)
+/// when it integrated `p`'s pose part, both with the paper's model, `delta_diff` zero and both
+/// deltas in one ratio `lambda` to `p`'s: the model is then homogeneous in the deltas, and each
+/// point's sigmas at `p` are that integration's times `lambda` (but for the rounding).
+pub(crate) fn homogeneous_record(
+    restarts: &Restarts,
+    p: &ChassisParams,
+) -> Option<(ChassisParams, Rc<Evaluation>)> {
+    let (q, ev) = restarts.recorded_for(p)?;
+    let paper = |m: &ChassisParams| {
+        m.uncertainty_model == UncertaintyModel::Paper
+            && m.delta_diff == 0.0
+            && m.delta_left > 0.0
+            && m.delta_right > 0.0
+    };
+    let lambda = f64::from(p.delta_left) / f64::from(q.delta_left);
+    let lambda_right = f64::from(p.delta_right) / f64::from(q.delta_right);
+    (paper(p) && paper(&q) && (lambda / lambda_right - 1.0).abs() <= 1e-6).then_some((q, ev))
+}
+
+/// [`coverage_at`] without replaying the evaluation whole, from the restarts'
+/// [`homogeneous_record`] with `p`. A point whose decision a change of its sigmas by
+/// [`SCALED_SIGMA_MARGIN`] of them cannot turn is decided from those; only the
+/// sub-trajectories holding the others are replayed ([`Restarts::replay_rows`]), and those
+/// points are decided from their replayed sigmas: the coverage of the evaluation at `p`.
+/// `None` when the restarts hold no such integration.
+fn scaled_coverage(
+    restarts: &Restarts,
+    p: &ChassisParams,
+    band: Band,
+    k: f64,
+) -> Result<Option<f64>> {
+    check_this_thread()?;
+    p.validate().map_err(|e| anyhow!("parameters: {e}"))?;
+    let Some((q, ev)) = homogeneous_record(restarts, p) else {
+        return Ok(None);
+    };
+    let lambda = f64::from(p.delta_left) / f64::from(q.delta_left);
+    let (mut counted, mut inside) = (0, 0);
+    let k2 = k * k;
+    // Compared in squares, each side widened by far more than the few units in the last
+    // place by which they differ from the band's own comparison.
+    let (low, high) = (
+        lambda * (1.0 - SCALED_SIGMA_MARGIN),
+        lambda * (1.0 + SCALED_SIGMA_MARGIN),
+    );
+    let undecided: Vec<bool> = (0..ev.horizontal.len())
+        .map(|i| {
+            let Some((e2, r2)) = band.squares(&ev, i) else {
+                return false;
+            };
+            let sigma = band.sigma(&ev, i);
+            if e2 <= k2 * ((sigma * low).powi(2) + r2) * (1.0 - 1e-9) {
+                (counted, inside) = (counted + 1, inside + 1);
+                false
+            } else if e2 > k2 * ((sigma * high).powi(2) + r2) * (1.0 + 1e-9) {
+                counted += 1;
+                false
+            } else {
+                true
             }
+        })
+        .collect();
+    let Some(replayed) = restarts.replay_rows(p, &undecided) else {
+        return Ok(None);
+    };
+    for (i, sigmas) in replayed {
+        if let Some(yes) = band.inside(&ev, i, k, sigmas) {
+            counted += 1;
+            inside += usize::from(yes);
         }
     }
-    if n == 0 {
-        f64::NAN
-    } else {
-        inside as f64 / n as f64
-    }
+    Ok(Some(band.share(inside, counted, ev.horizontal.len())))
 }
 
 /// Number of points `from..` with a heading-change error.
@@ -213,8 +379,8 @@ pub(crate) fn fit_coefficient(
             .collect::<Vec<_>>(),
     );
     let real = |v: f64| -> Result<f64> {
-        let ev = restarts.evaluate_memo(run, &at(v))?;
-        let c = horizontal_coverage(&ev, ref_sigma, 1.0, 0);
+        let p = at(v);
+        let c = coverage_at(run, restarts, &p, Band::Horizontal(ref_sigma), 1.0)?;
         facts.borrow_mut().push((v, c));
         Ok(c)
     };
@@ -253,15 +419,15 @@ pub(crate) fn fit_coefficient(
         }
     });
     let params = at(value);
-    let ev = restarts.evaluate_memo(run, &params)?;
+    let coverage = |k| coverage_at(run, restarts, &params, Band::Horizontal(ref_sigma), k);
     Ok(UncertaintyFit {
         model: geometry.uncertainty_model,
         params,
         keys,
         windows: restarts.windows.len(),
-        points: ev.horizontal.len(),
-        coverage1: horizontal_coverage(&ev, ref_sigma, 1.0, 0),
-        coverage3: horizontal_coverage(&ev, ref_sigma, 3.0, 0),
+        points: restarts.points(),
+        coverage1: coverage(1.0)?,
+        coverage3: coverage(3.0)?,
         warning,
         diff: None,
         criterion: UncertaintyCriterion::Coverage,
@@ -509,6 +675,73 @@ mod tests {
                         "seed {seed} {model:?} delta_diff {dd} width {tol}: fast {a:e}, plain {b:e}"
                     );
                 }
+            }
+        }
+    }
+
+    /// The coverages counted from the restarts' integration scaled, with the points it cannot
+    /// decide replayed ([`scaled_coverage`]), are those of the whole evaluation: horizontal and
+    /// heading, at 1 and 3 sigma, at deltas around where the horizontal 1-sigma coverage
+    /// crosses 68.27 % (most points near their thresholds there) and further off; with and
+    /// without epochs' own sigmas, both deltas equal and in another ratio. Other coefficients
+    /// than the deltas, or a `delta_diff`, are not scaled.
+    #[test]
+    fn scaled_coverages_are_the_evaluations() {
+        for (seed, own_sigma, right) in [(4, false, 1.0f32), (5, true, 1.3)] {
+            let mut s = sim(PathKind::Random, 150.0, seed);
+            if own_sigma {
+                for r in s.reference.iter_mut().step_by(3) {
+                    r.sigma_h = Some(0.02);
+                }
+            }
+            let run = run_of(&s);
+            let initial = ChassisParams {
+                delta_right: default_truth().delta_left * right,
+                ..default_truth()
+            };
+            let restarts = Restarts::new(&run, &initial, run.heading_guess(0), 10.0).unwrap();
+            let fit = fit_coefficient(
+                &run,
+                &restarts,
+                &initial,
+                &initial,
+                0.008,
+                DeltaMode::KeepRatio,
+                COEFFICIENT_LOG_TOL,
+                &ProgressBar::hidden(),
+            )
+            .unwrap();
+            let threshold = f64::from(fit.params.delta_left);
+            let bands = [Band::Horizontal(0.008), Band::Heading(0.5f64.to_radians())];
+            for f in [1.0, 1.000_01, 0.999_99, 1.001, 0.999, 1.1, 0.9, 3.0, 0.2] {
+                let p = set_coefficient(&initial, DeltaMode::KeepRatio, &initial, threshold * f);
+                assert!(homogeneous_record(&restarts, &p).is_some());
+                let ev = restarts.evaluate(&run, &p).unwrap();
+                for band in bands {
+                    for k in [1.0, 3.0] {
+                        let scaled = scaled_coverage(&restarts, &p, band, k).unwrap().unwrap();
+                        let whole = band.coverage(&ev, k, 0);
+                        assert!(whole.is_finite());
+                        assert_eq!(
+                            scaled.to_bits(),
+                            whole.to_bits(),
+                            "seed {seed} at {f} of the threshold, {band:?} {k}: {scaled} {whole}"
+                        );
+                    }
+                }
+            }
+            let p = set_coefficient(&initial, DeltaMode::KeepRatio, &initial, threshold);
+            for other in [
+                ChassisParams {
+                    delta_diff: 1e-8,
+                    ..p
+                },
+                ChassisParams {
+                    uncertainty_model: UncertaintyModel::Covariance,
+                    ..p
+                },
+            ] {
+                assert!(homogeneous_record(&restarts, &other).is_none());
             }
         }
     }

@@ -9,8 +9,9 @@ use crate::optim::norm2;
 
 use super::coefficients::{set_coefficient, DeltaMode, DiffFit, UncertaintyFit};
 use super::coverage::{
-    covering_rank, fit_coefficient, heading_coverage, heading_points, horizontal_coverage,
-    reference_sigma_at, smallest_covering, DIFF_LOG_TOL, ONE_SIGMA_COVERAGE,
+    coverage_at, covering_rank, fit_coefficient, heading_points, homogeneous_record,
+    horizontal_coverage, reference_sigma_at, smallest_covering, Band, DIFF_LOG_TOL,
+    ONE_SIGMA_COVERAGE,
 };
 use super::restarts::Restarts;
 
@@ -53,21 +54,19 @@ pub fn fit_delta_diff(
     if horizontal.model != UncertaintyModel::Paper {
         return Ok(horizontal);
     }
-    let ev = restarts.evaluate_memo(run, &horizontal.params)?;
-    let points = heading_points(&ev, 0);
+    let points = heading_points(&*restarts.pose_evaluation(run, &horizontal.params)?, 0);
     if points == 0 {
         return Ok(horizontal);
     }
-    let cover = |p: &ChassisParams, k: f64| -> Result<f64> {
-        let ev = restarts.evaluate_memo(run, p)?;
-        Ok(heading_coverage(&ev, o.ref_heading_sigma, k, 0))
+    let cover = |p: &ChassisParams, k: f64| {
+        coverage_at(run, restarts, p, Band::Heading(o.ref_heading_sigma), k)
     };
     let with = with_delta_diff;
     let initial_dd = f64::from(horizontal.params.delta_diff);
     let delta_before = f64::from(horizontal.params.delta_left);
     let before = (
-        heading_coverage(&ev, o.ref_heading_sigma, 1.0, 0),
-        heading_coverage(&ev, o.ref_heading_sigma, 3.0, 0),
+        cover(&horizontal.params, 1.0)?,
+        cover(&horizontal.params, 3.0)?,
     );
     let mut fit = horizontal;
     let mut warning = None;
@@ -197,7 +196,12 @@ impl<'a> RatioSearch<'a> {
             &set_coefficient(&self.base, self.o.mode, self.initial, d0),
             r * d0,
         );
-        let ev = self.restarts.evaluate_memo(self.run, &p)?;
+        // At ratio 0, the restarts' integration of the horizontal fit's geometry serves when
+        // its sigmas scale to these.
+        let (ev, d0) = match homogeneous_record(self.restarts, &p).filter(|_| r == 0.0) {
+            Some((q, ev)) => (ev, f64::from(q.delta_left)),
+            None => (self.restarts.evaluate_memo(self.run, &p)?, d0),
+        };
         // Each point's smallest delta inside the widened band: |e| <= hypot(s delta / d0, rho).
         let mut need: Vec<f64> = (0..ev.horizontal.len())
             .map(|i| {
@@ -297,6 +301,7 @@ impl<'a> RatioSearch<'a> {
 mod tests {
     use super::*;
     use crate::calib::testing::run_of;
+    use crate::calib::uncertainty::coverage::heading_coverage;
     use crate::simulate::{self, default_truth, PathKind, SimSettings};
 
     /// The ratio search finds the plain joint bisection's `delta_diff` (delta refitted by

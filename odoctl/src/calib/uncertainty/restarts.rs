@@ -31,7 +31,9 @@ pub struct Restarts {
 /// An integrated evaluation of the restarts and what replays its sigmas.
 #[derive(Debug, Clone)]
 struct Recorded {
-    /// The pose part ([`ChassisParams::pose_part`]) of the parameters it integrated.
+    /// The parameters it integrated.
+    params: ChassisParams,
+    /// Their pose part ([`ChassisParams::pose_part`]).
     pose: ChassisParams,
     /// Its evaluation.
     evaluation: Rc<Evaluation>,
@@ -139,6 +141,56 @@ impl Restarts {
             .collect()
     }
 
+    /// The points of an evaluation: every match after each restart.
+    pub fn points(&self) -> usize {
+        self.windows.iter().map(|(a, b)| b - a).sum()
+    }
+
+    /// An evaluation whose poses and errors are those at `p` (its sigmas those of other
+    /// coefficients, maybe): the last integrated one when it integrated the pose part of `p`,
+    /// else [`Restarts::evaluate_memo`].
+    pub fn pose_evaluation(&self, run: &Run, p: &ChassisParams) -> Result<Rc<Evaluation>> {
+        match self.recorded_for(p) {
+            Some((_, ev)) => Ok(ev),
+            None => self.evaluate_memo(run, p),
+        }
+    }
+
+    /// The last integrated evaluation, when it integrated the pose part of `p`: the
+    /// parameters it integrated and the evaluation (whose poses and errors are those of `p`).
+    pub(crate) fn recorded_for(
+        &self,
+        p: &ChassisParams,
+    ) -> Option<(ChassisParams, Rc<Evaluation>)> {
+        let pose = p.pose_part();
+        self.recorded
+            .borrow()
+            .as_ref()
+            .filter(|r| r.pose == pose)
+            .map(|r| (r.params, Rc::clone(&r.evaluation)))
+    }
+
+    /// The horizontal and heading sigmas (m, rad) at `p` of the evaluation's rows that `wanted`
+    /// picks, in the order of the rows, replayed from the last integrated evaluation (which must have
+    /// integrated the pose part of `p`, [`Restarts::recorded_for`]): only the sub-trajectories
+    /// holding a picked row are replayed; `None` without such an evaluation.
+    pub(crate) fn replay_rows(
+        &self,
+        p: &ChassisParams,
+        wanted: &[bool],
+    ) -> Option<Vec<(usize, (f64, f64))>> {
+        let recorded = self.recorded.borrow();
+        let r = recorded.as_ref().filter(|r| r.pose == p.pose_part())?;
+        let mut out = Vec::new();
+        let mut offset = 0;
+        for part in &r.parts {
+            let rows = &wanted[offset..offset + part.rows()];
+            part.replay_rows(p, |i| rows[i], |i, s| out.push((offset + i, s)));
+            offset += part.rows();
+        }
+        Some(out)
+    }
+
     /// Errors and sigmas at every match after each restart (restart points excluded).
     pub fn evaluate(&self, run: &Run, p: &ChassisParams) -> Result<Evaluation> {
         let ev = self.evaluate_reusing(run, p, Evaluation::default())?;
@@ -170,6 +222,7 @@ impl Restarts {
         let parts = self.integrate_into(run, p, &mut buffers)?;
         let evaluation = Rc::new(buffers);
         *self.recorded.borrow_mut() = Some(Recorded {
+            params: *p,
             pose,
             evaluation: Rc::clone(&evaluation),
             parts,
