@@ -61,7 +61,11 @@ pub fn leap_seconds_for(days: i64, given: Option<i32>) -> i32 {
 
 /// The warning for a UTC day past [`LEAP_TABLE_VALID_UNTIL`] read with the table, `None`
 /// when the table covers it or the leap seconds are `given`; `at` names the place (`FILE:LINE`).
-pub fn leap_table_warning(at: &str, days: i64, given: Option<i32>) -> Option<String> {
+pub fn leap_table_warning(
+    at: impl std::fmt::Display,
+    days: i64,
+    given: Option<i32>,
+) -> Option<String> {
     if given.is_some() || leap_table_covers(days) {
         return None;
     }

@@ -698,10 +698,10 @@ fn date_epochs(
             days += 1;
         }
         if report.warnings.is_empty() {
-            let at = format!("{file}:{}", u.line);
+            let at = format_args!("{file}:{}", u.line);
             report
                 .warnings
-                .extend(gps_time::leap_table_warning(&at, days, leap_seconds));
+                .extend(gps_time::leap_table_warning(at, days, leap_seconds));
         }
         let leap = gps_time::leap_seconds_for(days, leap_seconds);
         let gps_time = match gps_time::utc_to_gps(days, u.sod, leap) {

@@ -211,7 +211,7 @@ pub fn parse(file: &str, text: &str, leap_seconds: Option<i32>) -> Result<Geodet
                     let (days, _) =
                         gps_time::gps_to_utc(e.gps_time, gps_time::DEFAULT_LEAP_SECONDS);
                     report.warnings.extend(gps_time::leap_table_warning(
-                        &format!("{file}:{line}"),
+                        format_args!("{file}:{line}"),
                         days,
                         leap_seconds,
                     ));
