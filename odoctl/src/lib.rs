@@ -20,6 +20,7 @@ macro_rules! outln {
 }
 
 pub mod calib;
+pub mod cancel;
 pub mod cli;
 pub mod commands;
 pub mod config;

@@ -32,7 +32,8 @@ use super::uncertainty::coverage::fit_uncertainty_on;
 use super::uncertainty::delta_diff::{fit_delta_diff, DiffOptions};
 use super::uncertainty::likelihood::fit_kappa_filter;
 use super::uncertainty::restarts::Restarts;
-use super::warm::{cancel_this_thread_on, this_thread_cancel, Extras, WarmStart};
+use super::warm::{Extras, WarmStart};
+use crate::cancel::{cancel_this_thread_on, this_thread_cancel};
 
 /// How the diameters and the track width are estimated.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]

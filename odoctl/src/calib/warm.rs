@@ -4,6 +4,8 @@
 //! cancels it between its phases (the background batch's at the drive's end). The same flag
 //! set as its thread's ([`cancel_this_thread_on`]) ends it inside its phases too.
 //!
+//! [`cancel_this_thread_on`]: crate::cancel::cancel_this_thread_on
+//!
 //! A warm start moves where the searches start, never what they look for:
 //! - the sub-trajectory fit starts from the earlier fit's shared unknowns and its
 //!   sub-trajectories' fitted start headings (matched by their first match: the drive is cut
@@ -25,12 +27,12 @@
 //!
 //! [`WARM_REACH`]: super::filter::search::WARM_REACH
 
-use std::cell::RefCell;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
 
 use anyhow::{bail, Result};
 use odo_unit::odometry::UncertaintyModel;
+
+use crate::cancel::this_thread_cancelled;
 
 use super::filter::search::Search;
 use super::geometry::subtrajectory::SubtrajectoryStart;
@@ -87,67 +89,23 @@ impl Extras<'_> {
     }
 }
 
-thread_local! {
-    /// The flag that cancels this thread's calibrations inside their phases.
-    static CANCEL: RefCell<Option<Arc<AtomicBool>>> = const { RefCell::new(None) };
-}
-
-/// Makes `flag` cancel the calibrations this thread runs from now on (none: no flag) inside
-/// their phases as well as between them: once it is set, an evaluation of the restarted
-/// sub-trajectories, of the sub-trajectories (the sub-trajectory fit's trial steps) and a
-/// pass of the filter's preparation end with an error, and a score of the filter's likelihood
-/// is NaN without running the filter (a result no search keeps). What runs between two
-/// checks (a few integrations of the drive at most) runs to its end. A thread that a
-/// calibration starts for its own work takes the flag over ([`this_thread_cancel`]).
-pub fn cancel_this_thread_on(flag: Option<Arc<AtomicBool>>) {
-    CANCEL.with(|c| *c.borrow_mut() = flag);
-}
-
-/// This thread's cancel flag ([`cancel_this_thread_on`]).
-pub fn this_thread_cancel() -> Option<Arc<AtomicBool>> {
-    CANCEL.with(|c| c.borrow().clone())
-}
-
-/// Whether this thread's cancel flag is set.
-pub fn this_thread_cancelled() -> bool {
-    CANCEL.with(|c| {
-        c.borrow()
-            .as_ref()
-            .is_some_and(|f| f.load(Ordering::Relaxed))
-    })
-}
-
-/// An error once this thread's cancel flag is set.
-pub fn check_this_thread() -> Result<()> {
-    if this_thread_cancelled() {
-        bail!("the calibration was cancelled");
-    }
-    Ok(())
-}
-
 #[cfg(test)]
 mod tests {
-    use super::*;
+    use std::sync::Arc;
 
-    /// The thread's flag cancels this thread's calibrations, not another's.
+    use super::*;
+    use crate::cancel::cancel_this_thread_on;
+
+    /// The thread's flag cancels its calibrations between their phases too.
     #[test]
-    fn the_threads_flag_cancels_its_calibrations_alone() {
+    fn the_threads_flag_cancels_between_phases() {
         let flag = Arc::new(AtomicBool::new(false));
         cancel_this_thread_on(Some(Arc::clone(&flag)));
-        assert!(Extras::default().check().is_ok() && check_this_thread().is_ok());
+        assert!(Extras::default().check().is_ok());
         flag.store(true, Ordering::Relaxed);
-        assert!(Extras::default().check().is_err() && check_this_thread().is_err());
-        assert!(std::thread::spawn(this_thread_cancelled)
-            .join()
-            .is_ok_and(|c| !c));
-        let taken = this_thread_cancel();
-        let other = std::thread::spawn(move || {
-            cancel_this_thread_on(taken);
-            this_thread_cancelled()
-        });
-        assert!(other.join().is_ok_and(|c| c));
+        assert!(Extras::default().check().is_err());
         cancel_this_thread_on(None);
-        assert!(check_this_thread().is_ok());
+        assert!(Extras::default().check().is_ok());
     }
 
     #[test]

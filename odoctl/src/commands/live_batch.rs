@@ -8,8 +8,9 @@
 //! so that a batch dates the epochs but does not read the whole log again. Nothing it does
 //! is printed; a batch that fails (too little data yet) is counted and the next one tried. At
 //! the drive's end ([`BatchWorker::stop`]) the batch under way is cancelled (its thread's
-//! flag, `calib::warm::cancel_this_thread_on`) at its next check, between its phases and
-//! inside its fits, and the thread is waited for (docs/CALIBRATION.md).
+//! flag, `cancel::cancel_this_thread_on`) at its next check, between its phases and
+//! inside its fits and its reading of the log, and the thread is waited for
+//! (docs/CALIBRATION.md).
 
 use std::borrow::Cow;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -25,8 +26,8 @@ use super::calibrate::{calibration_with, parse_command_line, Inputs};
 use super::reference_options;
 #[cfg(target_os = "linux")]
 use crate::calib::pipeline::cores;
-use crate::calib::warm::cancel_this_thread_on;
 use crate::calib::{Extras, WarmStart};
+use crate::cancel::cancel_this_thread_on;
 use crate::csvio::Sample;
 use crate::reference::nmea::LogLines;
 
@@ -240,6 +241,7 @@ fn batch(
     let samples = &received.samples;
     let until = samples.last().map_or(f64::NAN, |s| s.t);
     let o = reference_options(&a.reference_input)?;
+    extras.check()?;
     let lines = received.lines.clone();
     let source = crate::reference::parse_read(LOG_NAME, &received.nmea, lines, &o)?;
     extras.check()?;
@@ -510,6 +512,38 @@ mod tests {
             let got = crate::reference::parse_read(LOG_NAME, &received.nmea, read, &o).unwrap();
             assert_eq!(got, whole(&log));
         }
+    }
+
+    /// The thread's cancel flag ends a reading of the log (the batch's first step) with an
+    /// error, and leaves other threads' readings alone.
+    #[test]
+    fn the_threads_flag_ends_the_logs_reading() {
+        let settings = SimSettings {
+            rate: 10.0,
+            seed: 4,
+            ..Default::default()
+        };
+        let sim = simulate_path(PathKind::Estimation, 20.0, default_truth(), settings);
+        let (_, sentences) = drive_with_sentences(sim, &ReceiverSim::default(), 18).unwrap();
+        let log: Vec<u8> = sentences
+            .iter()
+            .flat_map(|(_, s)| format!("{s}\r\n").into_bytes())
+            .collect();
+        let args = ["odoctl", "calibrate", "--samples", "x.csv"].map(String::from);
+        let o = reference_options(&parse_command_line(&args).unwrap().reference_input).unwrap();
+        let mut received = Received::new(None);
+        received.take((Vec::new(), log.clone()));
+        let read = || crate::reference::parse_read(LOG_NAME, &log, received.lines.clone(), &o);
+        let flag = Arc::new(AtomicBool::new(true));
+        cancel_this_thread_on(Some(Arc::clone(&flag)));
+        let cancelled = read().unwrap_err().to_string();
+        assert!(cancelled.contains("cancelled"), "{cancelled}");
+        assert!(std::thread::scope(|s| s.spawn(read).join().unwrap()).is_ok());
+        cancel_this_thread_on(None);
+        assert_eq!(
+            read().unwrap(),
+            crate::reference::parse(LOG_NAME, &log, &o).unwrap()
+        );
     }
 
     #[test]

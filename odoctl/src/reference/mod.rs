@@ -33,6 +33,7 @@ use std::path::Path;
 
 use anyhow::{anyhow, bail, Context, Result};
 
+use crate::cancel::check_this_thread;
 use crate::csvio::{self, RefPoint, Sample};
 use geodetic::{Geodetic, LocalFrame};
 
@@ -720,9 +721,10 @@ impl Reference {
         }
         let (origin, origin_epochs) = choose_origin(&used, o.origin);
         let frame = LocalFrame::new(origin);
-        let epochs: Vec<LocalEpoch> = used
-            .iter()
-            .map(|e| {
+        let mut epochs: Vec<LocalEpoch> = Vec::with_capacity(used.len());
+        for chunk in used.chunks(nmea::CANCEL_CHECK_EPOCHS) {
+            check_this_thread()?;
+            epochs.extend(chunk.iter().map(|e| {
                 let [x, y, up] = frame.to_enu(&e.position);
                 LocalEpoch {
                     t: e.gps_time,
@@ -734,8 +736,8 @@ impl Reference {
                     fix: e.fix,
                     line: e.line,
                 }
-            })
-            .collect();
+            }));
+        }
         let leap_seconds = o.leap_seconds.unwrap_or_else(|| {
             epochs.first().map_or(gps_time::DEFAULT_LEAP_SECONDS, |e| {
                 gps_time::leap_seconds_at_gps(e.t)

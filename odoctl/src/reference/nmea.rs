@@ -41,6 +41,7 @@ use odo_unit::timing::nmea::{days_from_civil, parse_sentence, NmeaError, TimeMes
 
 use super::geodetic::Geodetic;
 use super::{gps_time, Epoch, FixQuality, GeodeticLog, ReadReport};
+use crate::cancel::check_this_thread;
 use crate::memory::{for_drive, DRIVE_EPOCHS_PER_S};
 use crate::text::{excerpt, excerpt_n, lines};
 
@@ -656,6 +657,9 @@ impl LogReader {
     }
 }
 
+/// Epochs dated (or converted) between two checks of the thread's cancel flag.
+pub(crate) const CANCEL_CHECK_EPOCHS: usize = 4096;
+
 /// Dates the GGA epochs (see the module doc), converts to GPS time and drops epochs before
 /// the GPS epoch and epochs whose time is not after the previous one's (a repeat of the same
 /// time gives the epoch kept the HDT or GST that went with it), counting them.
@@ -678,7 +682,10 @@ fn date_epochs(
     };
     let mut out: Vec<Epoch> = Vec::with_capacity(undated.len());
     let mut prev: Option<DateMark> = None;
-    for u in undated {
+    for (n, u) in undated.into_iter().enumerate() {
+        if n % CANCEL_CHECK_EPOCHS == 0 {
+            check_this_thread()?;
+        }
         let mark = match (u.date.map(|k| dates[k]), prev) {
             (Some(d), Some(p)) => {
                 if d.line > p.line {

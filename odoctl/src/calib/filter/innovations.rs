@@ -52,7 +52,7 @@ use odo_unit::odometry::{ChassisParams, Pose};
 use crate::calib::antenna::{antenna_offset, observed_point};
 use crate::calib::pipeline::cores;
 use crate::calib::run::Run;
-use crate::calib::warm::{check_this_thread, this_thread_cancelled};
+use crate::cancel::{check_this_thread, this_thread_cancelled};
 use crate::replay::{counts, index_refs};
 use crate::stats::{median, wrap_angle};
 

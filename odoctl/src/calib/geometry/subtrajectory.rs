@@ -53,7 +53,7 @@ use crate::calib::antenna::{
 use crate::calib::heading_fit::RESTART_TURN_EXACT;
 use crate::calib::pipeline::cores;
 use crate::calib::run::{windows, Run};
-use crate::calib::warm::check_this_thread;
+use crate::cancel::check_this_thread;
 use crate::optim::{self, NormalAccumulator, Objective};
 
 use super::covariance::{cluster_jackknife, diagonal_std_errors, independent, inverse};

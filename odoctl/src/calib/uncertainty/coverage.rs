@@ -12,7 +12,7 @@ use odo_unit::odometry::{ChassisParams, UncertaintyModel};
 
 use crate::calib::evaluation::Evaluation;
 use crate::calib::run::Run;
-use crate::calib::warm::check_this_thread;
+use crate::cancel::check_this_thread;
 use crate::optim::norm2;
 
 use super::coefficients::{set_coefficient, DeltaMode, UncertaintyCriterion, UncertaintyFit};

@@ -10,7 +10,7 @@ use crate::calib::evaluation::{Evaluation, UncertaintyRecord};
 use crate::calib::heading_fit::fit_restart_heading;
 use crate::calib::pipeline::cores;
 use crate::calib::run::{windows, Run};
-use crate::calib::warm::check_this_thread;
+use crate::cancel::check_this_thread;
 
 /// The restarted sub-trajectories of the uncertainty fits: consecutive stretches of `window`
 /// metres, each started from the reference position with the heading minimising eq (16) over
