@@ -301,7 +301,7 @@ pub fn calibrate_with(
         && models.contains(&UncertaintyModel::Covariance)
         && o.criterion == UncertaintyCriterion::Likelihood;
     let GeometryPhase {
-        geometry,
+        mut geometry,
         subtrajectories,
         refinement,
         early_filter,
@@ -347,6 +347,12 @@ pub fn calibrate_with(
         None => evaluate(&run, &params, geometry.heading0)?,
     };
     timer.lap("final evaluation");
+    if harmonics.is_none() {
+        // Eq (16) at the reported start as a replay from there gives it: the final
+        // evaluation's horizontal errors after the start (the whole-run heading's fit gives it
+        // from its path turned to that start, to the integrator's arithmetic noise).
+        geometry.cost = evaluation.horizontal.iter().skip(1).sum();
+    }
     let windows = stability_study(&run, &geometry, initial, o)?;
     Ok(Calibration {
         params,
