@@ -202,8 +202,9 @@ impl Composed {
                     let rho = (-self.decay[k][kind] / corr).exp();
                     // The noise entering after step k moves the block's end by `z`.
                     let w = (1.0 - rho * rho) / (2.0 * corr);
+                    // The upper triangle; the lower is its mirror.
                     for i in 0..4 {
-                        for j in 0..4 {
+                        for j in i..4 {
                             q[i][j] += w * z[i] * z[j];
                         }
                     }
@@ -214,6 +215,11 @@ impl Composed {
                         c[2] + rho * z[2],
                         rho * z[3],
                     ];
+                }
+                for i in 1..4 {
+                    for j in 0..i {
+                        q[i][j] = q[j][i];
+                    }
                 }
                 GaussMarkovBlock { z, q }
             })
