@@ -463,23 +463,30 @@ mod tests {
         assert_eq!(different, ["fit.z", "n"]);
     }
 
-    /// The log handed on in chunks cut anywhere (inside a line, inside a CR LF) reads as the
-    /// whole log does, a line that is not UTF-8 among them.
-    #[test]
-    fn the_log_handed_on_in_pieces_reads_as_the_whole() {
+    /// The NMEA log (CR LF lines) of a simulated 20 m drive with a 10 Hz receiver (`seed`),
+    /// and the reference options of a plain `calibrate`.
+    fn simulated_log(seed: u64) -> (Vec<u8>, crate::reference::ReferenceOptions) {
         let settings = SimSettings {
             rate: 10.0,
-            seed: 3,
+            seed,
             ..Default::default()
         };
         let sim = simulate_path(PathKind::Estimation, 20.0, default_truth(), settings);
         let (_, sentences) = drive_with_sentences(sim, &ReceiverSim::default(), 18).unwrap();
-        let mut log: Vec<u8> = sentences
+        let log = sentences
             .iter()
             .flat_map(|(_, s)| format!("{s}\r\n").into_bytes())
             .collect();
         let args = ["odoctl", "calibrate", "--samples", "x.csv"].map(String::from);
         let o = reference_options(&parse_command_line(&args).unwrap().reference_input).unwrap();
+        (log, o)
+    }
+
+    /// The log handed on in chunks cut anywhere (inside a line, inside a CR LF) reads as the
+    /// whole log does, a line that is not UTF-8 among them.
+    #[test]
+    fn the_log_handed_on_in_pieces_reads_as_the_whole() {
+        let (mut log, o) = simulated_log(3);
         let whole = |log: &[u8]| crate::reference::parse(LOG_NAME, log, &o).unwrap();
         for binary in [false, true] {
             if binary {
@@ -518,19 +525,7 @@ mod tests {
     /// error, and leaves other threads' readings alone.
     #[test]
     fn the_threads_flag_ends_the_logs_reading() {
-        let settings = SimSettings {
-            rate: 10.0,
-            seed: 4,
-            ..Default::default()
-        };
-        let sim = simulate_path(PathKind::Estimation, 20.0, default_truth(), settings);
-        let (_, sentences) = drive_with_sentences(sim, &ReceiverSim::default(), 18).unwrap();
-        let log: Vec<u8> = sentences
-            .iter()
-            .flat_map(|(_, s)| format!("{s}\r\n").into_bytes())
-            .collect();
-        let args = ["odoctl", "calibrate", "--samples", "x.csv"].map(String::from);
-        let o = reference_options(&parse_command_line(&args).unwrap().reference_input).unwrap();
+        let (log, o) = simulated_log(4);
         let mut received = Received::new(None);
         received.take((Vec::new(), log.clone()));
         let read = || crate::reference::parse_read(LOG_NAME, &log, received.lines.clone(), &o);
