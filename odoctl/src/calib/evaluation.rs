@@ -336,26 +336,15 @@ impl UncertaintyRecord {
     /// `params` (validated; its geometry that of the recording), into `sigma_h` and
     /// `sigma_heading` ([`UncertaintyRecord::rows`] long).
     pub fn replay(&self, params: &ChassisParams, sigma_h: &mut [f64], sigma_heading: &mut [f64]) {
-        let (mut g, mut r) = (0, 0);
-        for &(rows, geometries) in &self.windows {
-            let stretch = &self.geometries[g..g + geometries];
-            let mut uncertainty = PoseUncertainty::new(params);
-            let mut done = 0;
-            for i in r..r + rows {
-                for step in &stretch[done..self.steps[i]] {
-                    uncertainty.step(step);
-                }
-                done = self.steps[i];
-                let s = uncertainty.sigma();
-                sigma_h[i] = f64::from(s.horizontal());
-                sigma_heading[i] = f64::from(s.heading);
-            }
-            (g, r) = (g + geometries, r + rows);
-        }
+        self.replay_rows(
+            params,
+            |_| true,
+            |i, (h, a)| {
+                (sigma_h[i], sigma_heading[i]) = (h, a);
+            },
+        );
     }
-}
 
-impl UncertaintyRecord {
     /// The horizontal and heading sigmas (m, rad) of [`UncertaintyRecord::replay`] at the rows
     /// `wanted` picks (this record's row indices), `visit(row, (sigma_h, sigma_heading))` in
     /// the order of the rows: only the stretches holding a picked row are replayed, each up

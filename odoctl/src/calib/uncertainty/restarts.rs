@@ -170,10 +170,10 @@ impl Restarts {
             .map(|r| (r.params, Rc::clone(&r.evaluation)))
     }
 
-    /// The horizontal and heading sigmas (m, rad) at `p` of the evaluation's rows that `wanted`
-    /// picks, in the order of the rows, replayed from the last integrated evaluation (which must have
-    /// integrated the pose part of `p`, [`Restarts::recorded_for`]): only the sub-trajectories
-    /// holding a picked row are replayed; `None` without such an evaluation.
+    /// The horizontal and heading sigmas (m, rad) at `p` of the evaluation's rows that
+    /// `wanted` picks, in the order of the rows, replayed from the last integrated evaluation
+    /// (which must have integrated the pose part of `p`, [`Restarts::recorded_for`]): only the
+    /// sub-trajectories holding a picked row are replayed; `None` without such an evaluation.
     pub(crate) fn replay_rows(
         &self,
         p: &ChassisParams,
