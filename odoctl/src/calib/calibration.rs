@@ -22,7 +22,7 @@ use super::geometry::subtrajectory::{
 };
 use super::geometry::turning::track_width_warning;
 use super::geometry::wheel_harmonics::{fit_harmonics, HarmonicsFit, HARMONICS_SEGMENT};
-use super::heading_fit::{fit_whole_run_heading, WholeRunHeading};
+use super::heading_fit::{fit_whole_run_heading, RunPath, WholeRunHeading};
 use super::run::Run;
 use super::studies::stability::{windows_study, WindowEstimate, WindowStart};
 use super::uncertainty::coefficients::{
@@ -305,7 +305,7 @@ pub fn calibrate_with(
         subtrajectories,
         refinement,
         early_filter,
-        headings,
+        path,
     } = fit_geometry_phase(&mut run, initial, o, (filter_wanted, extras), &timer)?;
     extras.check()?;
     run.antenna = geometry.antenna;
@@ -331,7 +331,7 @@ pub fn calibrate_with(
             run: &run,
             heading0: geometry.heading0,
             // Integrated at the geometry: the wheel functions change the path.
-            headings: headings.as_deref().filter(|_| harmonics.is_none()),
+            path: path.as_ref().filter(|_| harmonics.is_none()),
             initial,
             o,
             timer: &timer,
@@ -377,9 +377,9 @@ struct GeometryPhase {
     /// The covariance model's kappa, fitted on a thread of its own from the applied
     /// refinement's filter when the likelihood criterion wants it.
     early_filter: Option<JoinHandle<UncertaintyFit>>,
-    /// The odometry's heading at each match, integrated at the geometry from its start
-    /// heading (rad), when the method integrated it.
-    headings: Option<Vec<f64>>,
+    /// The odometry at each match, integrated at the geometry from its start heading, when
+    /// the method integrated it.
+    path: Option<RunPath>,
 }
 
 /// The geometry of [`calibrate`] by `o.method`; the run's lever arm becomes the fit's.
@@ -415,7 +415,7 @@ fn fit_geometry_phase(
                 subtrajectories: None,
                 refinement: None,
                 early_filter: None,
-                headings: None,
+                path: None,
             })
         }
         Method::Subtrajectory => fit_subtrajectory_phase(run, initial, o, wanted, timer),
@@ -483,14 +483,14 @@ fn fit_subtrajectory_phase(
                 fit_kappa_filter(&innovations, &p, &initial, mode, earlier).0
             })
         });
-    let (g, headings) = whole_run_summary(run, &s, applied, extras.warm.map(|w| w.heading0))?;
+    let (g, path) = whole_run_summary(run, &s, applied, extras.warm.map(|w| w.heading0))?;
     timer.lap("whole-run heading");
     Ok(GeometryPhase {
         geometry: g,
         subtrajectories: Some(s),
         refinement,
         early_filter,
-        headings: Some(headings),
+        path: Some(path),
     })
 }
 
@@ -502,8 +502,8 @@ type Evaluated = (ChassisParams, Evaluation);
 struct UncertaintyPhase<'a> {
     run: &'a Run<'a>,
     heading0: f64,
-    /// The odometry's heading at each match from `heading0`, when integrated already (rad).
-    headings: Option<&'a [f64]>,
+    /// The odometry at each match from `heading0`, when integrated already.
+    path: Option<&'a RunPath>,
     initial: &'a ChassisParams,
     o: &'a CalibrationOptions,
     timer: &'a PhaseTimer,
@@ -585,8 +585,8 @@ impl UncertaintyPhase<'_> {
                 let restarts = match &mut restarts {
                     Some(r) => &*r,
                     None => {
-                        let r = match self.headings {
-                            Some(h) => Restarts::with_headings(run, params, h, o.delta_window)?,
+                        let r = match self.path {
+                            Some(path) => Restarts::along(run, params, path, o.delta_window)?,
                             None => Restarts::new(run, params, heading0, o.delta_window)?,
                         };
                         self.timer.lap("restart headings");
@@ -743,14 +743,14 @@ fn fitted_models(o: &CalibrationOptions, initial: &ChassisParams) -> Vec<Uncerta
 /// sub-trajectory's), eq (16) there, and the sub-trajectory fit's robust errors (the
 /// heading's own, with the geometry held, over stretches of the sub-trajectory length). With
 /// an applied `refinement`, its geometry and standard errors. The heading's search starts
-/// from `warm` (an earlier calibration's of the same drive) when given. With the odometry's
-/// heading at each match from the start heading found (rad).
+/// from `warm` (an earlier calibration's of the same drive) when given. With the odometry at
+/// each match from the start heading found.
 fn whole_run_summary(
     run: &Run,
     s: &SubtrajectoryFit,
     refinement: Option<&FilterRefinement>,
     warm: Option<f64>,
-) -> Result<(GeomFit, Vec<f64>)> {
+) -> Result<(GeomFit, RunPath)> {
     let last = run.len() - 1;
     let guess = warm.unwrap_or_else(|| s.blocks.first().map_or(0.0, |b| b.heading));
     let params = refinement.map_or(s.params, |r| r.params);
@@ -761,7 +761,7 @@ fn whole_run_summary(
     let WholeRunHeading {
         heading0,
         cost,
-        headings,
+        path,
         errors: (formal, clustered),
     } = fit_whole_run_heading(run, &params, guess, SUBTRAJECTORY_LENGTH)?;
     let mut se = s.std_errors;
@@ -803,7 +803,7 @@ fn whole_run_summary(
             &robust,
         ),
     };
-    Ok((g, headings))
+    Ok((g, path))
 }
 
 /// Wall time of each calibration phase, and the CPU time the process spent in it on all its

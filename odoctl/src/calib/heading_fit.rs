@@ -63,7 +63,40 @@ pub fn fit_restart_heading(
     b: usize,
     guess: f64,
 ) -> Result<f64> {
-    Ok(TurnedPath::fit(run, params, a, b, guess, None)?.heading)
+    let mut t = TurnedPath::starting(run, a, b, guess);
+    t.integrate(run, params, (a, b), None)?;
+    Ok(t.fit(run, params, (a, b), None)?.heading)
+}
+
+/// [`fit_restart_heading`] over `a..=b` from `path`'s heading at `a`, its first integration
+/// being `path` itself (`params`' odometry over the run): integrated from the anchor at `a` with
+/// that heading, the odometry moves as `path` does from `a` on (the integrator's positions are
+/// fixed-point, so the same steps move them by the same amounts wherever they start). Only a
+/// heading found more than [`RESTART_TURN_EXACT`] away is refined by an integration.
+pub fn fit_restart_heading_along(
+    run: &Run,
+    params: &ChassisParams,
+    path: &RunPath,
+    (a, b): (usize, usize),
+) -> Result<f64> {
+    let mut t = TurnedPath::starting(run, a, b, path.headings[a]);
+    let [ax, ay] = path.points[a];
+    for k in a + 1..=b {
+        let [px, py] = path.points[k];
+        let r = run.reference_at(k);
+        t.path
+            .push([px - ax, py - ay, r.x - t.start.0, r.y - t.start.1]);
+    }
+    Ok(t.fit(run, params, (a, b), None)?.heading)
+}
+
+/// The odometry at every match of a run, integrated from its start (rad, m).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct RunPath {
+    /// The heading at every match (rad).
+    pub headings: Vec<f64>,
+    /// The observed point at every match ([`Run::observed`]), relative to the start (m).
+    pub points: Vec<[f64; 2]>,
 }
 
 /// The path of [`fit_restart_heading`]'s last integration and the heading it found.
@@ -80,27 +113,35 @@ struct TurnedPath {
 }
 
 impl TurnedPath {
-    /// [`fit_restart_heading`] over `a..=b` from `guess`; the odometry's heading at each match
-    /// after the start in the last integration (at `at`) left in `headings` when given (rad).
-    fn fit(
-        run: &Run,
-        params: &ChassisParams,
-        a: usize,
-        b: usize,
-        guess: f64,
-        mut headings: Option<&mut Vec<f64>>,
-    ) -> Result<Self> {
-        let mut t = Self {
+    /// A path over `a..=b` at the heading `guess` (rad), nothing integrated yet.
+    fn starting(run: &Run, a: usize, b: usize, guess: f64) -> Self {
+        Self {
             heading: guess,
             at: guess,
             start: run.anchor(a),
             path: Vec::with_capacity(b - a),
-        };
+        }
+    }
+
+    /// [`fit_restart_heading`] over `a..=b` from this path (integrated at `at`), integrating
+    /// again when the heading found is more than [`RESTART_TURN_EXACT`] from it; the
+    /// odometry's heading at each match after the start in that integration left in
+    /// `headings` when given (rad).
+    fn fit(
+        mut self,
+        run: &Run,
+        params: &ChassisParams,
+        (a, b): (usize, usize),
+        mut headings: Option<&mut Vec<f64>>,
+    ) -> Result<Self> {
+        let t = &mut self;
         for pass in 0..RESTART_PASSES {
-            if let Some(h) = headings.as_deref_mut() {
-                h.clear();
+            if pass > 0 {
+                if let Some(h) = headings.as_deref_mut() {
+                    h.clear();
+                }
+                t.integrate(run, params, (a, b), headings.as_deref_mut())?;
             }
-            t.integrate(run, params, (a, b), headings.as_deref_mut())?;
             let at = t.at;
             // The first pass starts from the turn of the least squares (where `sum r . R(phi)
             // d` is largest: one pass over the path), which is near the norms' least; a
@@ -147,7 +188,7 @@ impl TurnedPath {
                 break;
             }
         }
-        Ok(t)
+        Ok(self)
     }
 
     /// Integrates `params` over `a..=b` from the heading found so far, which becomes `at`;
@@ -200,15 +241,16 @@ pub struct WholeRunHeading {
     pub heading0: f64,
     /// Eq (16) there (m).
     pub cost: f64,
-    /// The odometry's heading at every match, `heading0` at the first (rad).
-    pub headings: Vec<f64>,
+    /// The odometry at every match from `heading0`: its heading (`heading0` at the first)
+    /// and observed point.
+    pub path: RunPath,
     /// The start heading's formal and cluster-robust standard errors (rad), the geometry
     /// held ([`HeadingErrors`]).
     pub errors: (Option<f64>, Option<f64>),
 }
 
 /// [`fit_restart_heading`] over the whole run from `guess`, and what the path at the heading
-/// found gives: eq (16) there, the odometry's heading at each match and the heading's
+/// found gives: eq (16) there, the odometry at each match ([`RunPath`]) and the heading's
 /// standard errors (stretches of `length` m for the cluster-robust one), whose rows are the
 /// turn's derivative `(y - y0, -(x - x0))`: what the forward sensitivity gives, to the
 /// integrator's rounding. That path is the fit's last integration turned about the start to
@@ -224,7 +266,9 @@ pub fn fit_whole_run_heading(
 ) -> Result<WholeRunHeading> {
     let last = run.len() - 1;
     let mut integrated = Vec::with_capacity(run.len());
-    let mut t = TurnedPath::fit(run, params, 0, last, guess, Some(&mut integrated))?;
+    let mut t = TurnedPath::starting(run, 0, last, guess);
+    t.integrate(run, params, (0, last), Some(&mut integrated))?;
+    let mut t = t.fit(run, params, (0, last), Some(&mut integrated))?;
     let phi = if (t.heading - t.at).abs() > RESTART_TURN_EXACT {
         integrated.clear();
         t.integrate(run, params, (0, last), Some(&mut integrated))?;
@@ -236,10 +280,13 @@ pub fn fit_whole_run_heading(
     headings.push(t.heading);
     headings.extend(integrated.iter().map(|h| h + phi));
     let mut residuals = Vec::with_capacity(2 * t.path.len());
+    let mut points = Vec::with_capacity(run.len());
+    points.push([0.0; 2]);
     let mut errors = HeadingErrors::new(run.dist[0], length);
     for (i, &[dx, dy, rx, ry]) in t.path.iter().enumerate() {
         let r = (dx - rx, dy - ry);
         residuals.extend([r.0, r.1]);
+        points.push([dx, dy]);
         errors.add(run.dist[i + 1], r, dy, -dx);
     }
     if residuals.iter().any(|v| !v.is_finite()) {
@@ -248,7 +295,7 @@ pub fn fit_whole_run_heading(
     Ok(WholeRunHeading {
         heading0: t.heading,
         cost: optim::objective(Objective::SumOfNorms, &residuals),
-        headings,
+        path: RunPath { headings, points },
         errors: errors.finish(),
     })
 }
@@ -283,15 +330,26 @@ mod tests {
             );
             let cost = run.eq16(&p, 0, last, w.heading0).unwrap();
             assert!((w.cost - cost).abs() <= 2e-7 * cost, "{} {cost}", w.cost);
+            let (x0, y0) = run.anchor(0);
             let mut headings = vec![w.heading0];
+            let mut points = vec![[0.0; 2]];
             run.integrate_pose(&p, 0, last, w.heading0, |_, integ| {
-                headings.push(integ.pose().heading)
+                let (x, y) = run.observed(&integ.pose(), w.heading0);
+                headings.push(integ.pose().heading);
+                points.push([x - x0, y - y0]);
             })
             .unwrap();
-            assert_eq!(headings.len(), w.headings.len());
-            for (h, wh) in headings.iter().zip(&w.headings) {
+            assert_eq!(headings.len(), w.path.headings.len());
+            for (h, wh) in headings.iter().zip(&w.path.headings) {
                 assert!((h - wh).abs() < 1e-12, "{h} {wh}");
             }
+            assert_eq!(points.len(), w.path.points.len());
+            let far = points
+                .iter()
+                .zip(&w.path.points)
+                .map(|(a, b)| norm2(a[0] - b[0], a[1] - b[1]))
+                .fold(0.0, f64::max);
+            assert!(far < 1e-7, "{far:e} m");
             let (formal, clustered) = heading_errors(&run, &p, w.heading0, 10.0);
             let near =
                 |a: Option<f64>, b: Option<f64>| (a.unwrap() / b.unwrap() - 1.0).abs() < 1e-6;

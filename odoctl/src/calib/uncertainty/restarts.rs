@@ -7,7 +7,7 @@ use anyhow::{anyhow, bail, Result};
 use odo_unit::odometry::ChassisParams;
 
 use crate::calib::evaluation::{Evaluation, UncertaintyRecord};
-use crate::calib::heading_fit::fit_restart_heading;
+use crate::calib::heading_fit::{fit_restart_heading, fit_restart_heading_along, RunPath};
 use crate::calib::pipeline::cores;
 use crate::calib::run::{windows, Run};
 use crate::cancel::check_this_thread;
@@ -56,37 +56,52 @@ impl Restarts {
             full.push(integ.pose().heading)
         })
         .map_err(|e| anyhow!("parameters: {e}"))?;
-        Self::with_headings(run, geometry, &full, window)
+        Self::fitted(run, window, |a, b| {
+            fit_restart_heading(run, geometry, a, b, full[a])
+        })
     }
 
-    /// [`Restarts::new`] with the full-run odometry's headings at each match already
-    /// integrated (`full`, [`fit_whole_run_heading`]).
+    /// [`Restarts::new`] from the full-run odometry already integrated (`path`,
+    /// [`fit_whole_run_heading`]): each sub-trajectory's first path is `path`'s stretch
+    /// ([`fit_restart_heading_along`]), not an integration of its own.
     ///
     /// [`fit_whole_run_heading`]: crate::calib::heading_fit::fit_whole_run_heading
-    pub fn with_headings(
+    pub fn along(run: &Run, geometry: &ChassisParams, path: &RunPath, window: f64) -> Result<Self> {
+        let n = run.len();
+        if path.headings.len() != n || path.points.len() != n {
+            bail!(
+                "a path of {} headings and {} points for a run of {n} matches",
+                path.headings.len(),
+                path.points.len()
+            );
+        }
+        Self::fitted(run, window, |a, b| {
+            fit_restart_heading_along(run, geometry, path, (a, b))
+        })
+    }
+
+    /// The sub-trajectories of `window` m of the run, each restart heading by `fit(a, b)`.
+    fn fitted(
         run: &Run,
-        geometry: &ChassisParams,
-        full: &[f64],
         window: f64,
+        fit: impl Fn(usize, usize) -> Result<f64> + Sync,
     ) -> Result<Self> {
         let wins = windows(run, window, 3);
         if wins.is_empty() {
             bail!("the run is too short for the uncertainty fit (no sub-trajectory of {window} m with 3 points)");
         }
-        if full.len() != run.len() {
-            bail!("{} headings for a run of {} matches", full.len(), run.len());
-        }
         // The sub-trajectories' fits are independent: spread over the cores (the same fits,
         // in the same order of results, as one after the other).
         let threads = cores().min(wins.len());
         let chunk = wins.len().div_ceil(threads.max(1));
+        let fit = &fit;
         let headings = std::thread::scope(|scope| {
             let jobs: Vec<_> = wins
                 .chunks(chunk)
                 .map(|part| {
                     scope.spawn(move || {
                         part.iter()
-                            .map(|&(a, b)| fit_restart_heading(run, geometry, a, b, full[a]))
+                            .map(|&(a, b)| fit(a, b))
                             .collect::<Result<Vec<f64>>>()
                     })
                 })
@@ -327,22 +342,27 @@ mod tests {
         }
     }
 
-    /// Restarts from the whole-run heading fit's headings (its path at the heading found) are
-    /// the restarts that integrate their own from that heading, to the restart fits'
-    /// convergence (1e-9 rad); headings of another run are refused.
+    /// Restarts along the whole-run heading fit's path (at the heading found) are the
+    /// restarts that integrate their own from that heading, to the restart fits' convergence
+    /// (1e-9 rad), with a lever arm too; a path of another run is refused.
     #[test]
-    fn restarts_from_the_whole_run_headings_are_the_restarts_that_integrate() {
+    fn restarts_along_the_whole_run_path_are_the_restarts_that_integrate() {
         let s = sim(PathKind::Random, 120.0, 4);
-        let run = run_of(&s);
+        let mut run = run_of(&s);
         let g = default_truth();
-        let w = fit_whole_run_heading(&run, &g, run.heading_guess(0) + 0.05, 10.0).unwrap();
-        let own = Restarts::new(&run, &g, w.heading0, 10.0).unwrap();
-        let given = Restarts::with_headings(&run, &g, &w.headings, 10.0).unwrap();
-        assert_eq!(own.windows, given.windows);
-        for (o, g) in own.headings.iter().zip(&given.headings) {
-            assert!((o - g).abs() < 1e-9, "{o} {g}");
+        for antenna in [(0.0, 0.0), (0.3, -0.1)] {
+            run.antenna = antenna;
+            let w = fit_whole_run_heading(&run, &g, run.heading_guess(0) + 0.05, 10.0).unwrap();
+            let own = Restarts::new(&run, &g, w.heading0, 10.0).unwrap();
+            let along = Restarts::along(&run, &g, &w.path, 10.0).unwrap();
+            assert_eq!(own.windows, along.windows);
+            for (o, a) in own.headings.iter().zip(&along.headings) {
+                assert!((o - a).abs() < 1e-9, "{o} {a}");
+            }
+            let mut short = w.path.clone();
+            short.points.pop();
+            assert!(Restarts::along(&run, &g, &short, 10.0).is_err());
         }
-        assert!(Restarts::with_headings(&run, &g, &w.headings[1..], 10.0).is_err());
     }
 
     /// Every column of two evaluations, for equality.
