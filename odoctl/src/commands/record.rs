@@ -63,8 +63,9 @@ pub fn run(a: &RecordArgs) -> Result<ExitCode> {
 /// with `--config` as `--initial` and the `--set`s, run on the rows and sentences the
 /// session kept as written to the two files (the files are not read again), its searches
 /// started from the latest background batch's warm start. The background batch is cancelled
-/// and, while it ends, the log's epochs are dated; once its thread has ended, the calibration
-/// runs on a thread beside the live fit's last update; its report follows the live estimate.
+/// (it ends at its next check, on the lowest priority, and is waited for after the final);
+/// the log's epochs are dated, then the calibration runs on a thread beside the live fit's
+/// last update; its report follows the live estimate.
 fn final_calibration(a: &RecordArgs, session: &mut LiveSession) -> Result<ExitCode> {
     use super::calibrate::Recorded;
     use super::calibrate::{calibrate_inputs, parse_command_line, read_inputs, run_calibrated};
@@ -82,7 +83,7 @@ fn final_calibration(a: &RecordArgs, session: &mut LiveSession) -> Result<ExitCo
         lines,
     });
     let read = read_inputs(&c, recorded);
-    session.stop_batch();
+    // The cancelled batch ends at its next check, on the lowest priority: not waited for.
     let warm = session.warm_start();
     let done = std::thread::scope(|scope| {
         let calibrating = scope.spawn(|| {
@@ -106,6 +107,7 @@ fn final_calibration(a: &RecordArgs, session: &mut LiveSession) -> Result<ExitCo
         ended.elapsed().as_secs_f64(),
         session.slowest_update.as_secs_f64() * 1e3
     );
+    session.stop_batch();
     Ok(code)
 }
 
