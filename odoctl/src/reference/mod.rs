@@ -74,38 +74,74 @@ impl fmt::Display for Format {
 /// white space is TUM (`#` lines passed over); anything else is taken as CSV (whose own parser
 /// then names what is wrong). MCAP is recognised by its magic bytes ([`detect_format`]).
 pub fn detect(text: &str) -> Format {
-    for line in crate::text::lines(text)
-        .map(|(_, l)| l.trim())
-        .filter(|l| !l.is_empty() && !l.starts_with('#'))
-        .take(50)
-    {
-        if tum::is_pose_line(line) {
-            return Format::Tum;
-        }
-        if is_rtklib_header(line) {
-            return Format::Rtklib;
-        }
-        if let Some(i) = line.find('$') {
-            let s = &line[i + 1..];
-            let address = s.split(',').next().unwrap_or("");
-            if address.len() >= 3
-                && address.bytes().all(|b| b.is_ascii_alphanumeric())
-                && s.contains('*')
-            {
-                return Format::Nmea;
-            }
-        }
-        let tokens: Vec<&str> = line.split_whitespace().collect();
-        if tokens.len() >= 14 {
-            let first = tokens[0];
-            let calendar = first.len() == 10 && first.as_bytes()[4] == b'/';
-            let week = first.parse::<u32>().is_ok() && tokens[1].parse::<f64>().is_ok();
-            if calendar || week {
-                return Format::Rtklib;
-            }
+    let mut d = TextFormat::default();
+    for (_, line) in crate::text::lines(text) {
+        if d.line(line) {
+            break;
         }
     }
-    Format::Csv
+    d.format()
+}
+
+/// Lines [`detect`] looks at (trimmed, neither empty nor a comment) for a format.
+const DETECT_LINES: usize = 50;
+
+/// [`detect`] line by line: the format of the first of [`DETECT_LINES`] lines (trimmed,
+/// neither empty nor a comment) that tells one, else CSV.
+#[derive(Debug, Clone, Default)]
+pub struct TextFormat {
+    looked: usize,
+    found: Option<Format>,
+}
+
+impl TextFormat {
+    /// Looks at the next line (without its line end); true once the format is decided.
+    pub fn line(&mut self, raw: &str) -> bool {
+        if self.found.is_some() || self.looked >= DETECT_LINES {
+            return true;
+        }
+        let line = raw.trim();
+        if !line.is_empty() && !line.starts_with('#') {
+            self.looked += 1;
+            self.found = line_format(line);
+        }
+        self.found.is_some() || self.looked >= DETECT_LINES
+    }
+
+    /// The format of the lines looked at.
+    pub fn format(&self) -> Format {
+        self.found.unwrap_or(Format::Csv)
+    }
+}
+
+/// The format a line (trimmed, neither empty nor a comment) tells, if any.
+fn line_format(line: &str) -> Option<Format> {
+    if tum::is_pose_line(line) {
+        return Some(Format::Tum);
+    }
+    if is_rtklib_header(line) {
+        return Some(Format::Rtklib);
+    }
+    if let Some(i) = line.find('$') {
+        let s = &line[i + 1..];
+        let address = s.split(',').next().unwrap_or("");
+        if address.len() >= 3
+            && address.bytes().all(|b| b.is_ascii_alphanumeric())
+            && s.contains('*')
+        {
+            return Some(Format::Nmea);
+        }
+    }
+    let tokens: Vec<&str> = line.split_whitespace().collect();
+    if tokens.len() >= 14 {
+        let first = tokens[0];
+        let calendar = first.len() == 10 && first.as_bytes()[4] == b'/';
+        let week = first.parse::<u32>().is_ok() && tokens[1].parse::<f64>().is_ok();
+        if calendar || week {
+            return Some(Format::Rtklib);
+        }
+    }
+    None
 }
 
 /// Recognises the format of a file's bytes (`text`: the same as text): MCAP by its magic,
@@ -520,20 +556,25 @@ pub fn load_read(
 
 /// [`parse`] of an NMEA log whose lines `read` has read as they were appended to `bytes`
 /// ([`nmea::LogLines`]): the same reference, with only the dating of the epochs left to do.
-/// Another format is read whole.
+/// When `read` took every byte (as text), neither they nor their format are read again
+/// ([`nmea::LogLines::format`]). Another format is read whole.
 pub fn parse_read(
     file: &str,
     bytes: &[u8],
     read: nmea::LogLines,
     o: &ReferenceOptions,
 ) -> Result<Reference> {
-    let Ok(text) = std::str::from_utf8(bytes) else {
-        return parse(file, bytes, o);
+    let format = match o.format.or_else(|| read.format(bytes)) {
+        Some(f) => f,
+        None => match std::str::from_utf8(bytes) {
+            Ok(text) => detect_format(bytes, text),
+            Err(_) => return parse(file, bytes, o),
+        },
     };
-    if o.format.unwrap_or_else(|| detect_format(bytes, text)) != Format::Nmea {
+    if format != Format::Nmea {
         return parse(file, bytes, o);
     }
-    let log = read.finish(file, text, o.leap_seconds)?;
+    let log = read.finish(file, bytes, o.leap_seconds)?;
     Reference::from_log(file, Format::Nmea, log, o)
 }
 

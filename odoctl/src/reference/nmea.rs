@@ -40,7 +40,9 @@ use chrono::Timelike;
 use odo_unit::timing::nmea::{days_from_civil, parse_sentence, NmeaError, TimeMessage};
 
 use super::geodetic::Geodetic;
-use super::{gps_time, Epoch, FixQuality, GeodeticLog, ReadReport};
+use super::{
+    gps_time, mcap_pose, ubx, Epoch, FixQuality, Format, GeodeticLog, ReadReport, TextFormat,
+};
 use crate::cancel::check_this_thread;
 use crate::memory::{for_drive, DRIVE_EPOCHS_PER_S};
 use crate::text::{excerpt, excerpt_n, lines};
@@ -134,6 +136,10 @@ pub struct LogLines {
     bytes: usize,
     /// Read again whole at the end.
     whole: bool,
+    /// The format of the lines given ([`super::detect`] as they come).
+    format: TextFormat,
+    /// A line given holds the first byte of a UBX frame's sync (0xB5).
+    sync: bool,
 }
 
 impl LogLines {
@@ -147,6 +153,8 @@ impl LogLines {
             lines: 0,
             bytes: 0,
             whole: false,
+            format: TextFormat::default(),
+            sync: false,
         }
     }
 
@@ -158,20 +166,42 @@ impl LogLines {
         }
         self.lines += 1;
         self.bytes += raw.len() + 2;
+        self.format.line(raw);
+        self.sync |= memchr::memchr(ubx::SYNC[0], raw.as_bytes()).is_some();
         self.scan.line(raw);
         self.reader.line(self.lines, raw);
     }
 
-    /// What [`parse`]`(file, text, leap_seconds)` gives, where `text` is the lines given,
-    /// each with CR LF (a text of another length is read whole).
-    pub fn finish(self, file: &str, text: &str, leap_seconds: Option<i32>) -> Result<GeodeticLog> {
-        let given = !self.whole
+    /// Whether `bytes` are the lines given, each with CR LF, as far as their length tells:
+    /// then every byte is in a line given as text, or its line end.
+    fn took(&self, bytes: &[u8]) -> bool {
+        !self.whole && bytes.len() == self.bytes
+    }
+
+    /// The format [`super::detect_format`] finds in `bytes` when they are the lines given
+    /// ([`LogLines::finish`] takes them as such), known without reading them again: text (it
+    /// was given as text), no MCAP magic (not text) and, where no line holds 0xB5, no UBX
+    /// frame, so [`super::detect`]'s format of the lines as they came; `None` otherwise.
+    pub fn format(&self, bytes: &[u8]) -> Option<Format> {
+        (self.took(bytes) && !self.sync && !bytes.starts_with(mcap_pose::MAGIC))
+            .then(|| self.format.format())
+    }
+
+    /// What [`parse`]`(file, text, leap_seconds)` gives, where `text` is `bytes` (the lines
+    /// given, each with CR LF; bytes of another length are read whole, as UTF-8 where they
+    /// are, [`String::from_utf8_lossy`]).
+    pub fn finish(
+        self,
+        file: &str,
+        bytes: &[u8],
+        leap_seconds: Option<i32>,
+    ) -> Result<GeodeticLog> {
+        let given = self.took(bytes)
             && *self.reader.file == *file
-            && self.reader.leap_seconds == leap_seconds
-            && text.len() == self.bytes;
+            && self.reader.leap_seconds == leap_seconds;
         let order = self.scan.finish();
         if !given || order.leads {
-            return parse(file, text, leap_seconds);
+            return parse(file, &String::from_utf8_lossy(bytes), leap_seconds);
         }
         let mut reader = self.reader;
         // As parse puts them: the order's note first.
@@ -1227,7 +1257,8 @@ mod tests {
 
     /// A log read line by line as it grows ([`LogLines`]) gives what [`parse`] gives of it
     /// whole: HDT sent last, first (read again whole), undecided, none; corrupt lines;
-    /// another name or leap seconds, or another text (read again whole).
+    /// another name or leap seconds, or another text (read again whole). Its format is
+    /// known from the lines when they are the text and none holds a UBX sync's first byte.
     #[test]
     fn log_read_as_it_grows_is_the_whole_logs() {
         let ordered = ordered_log(true, 4);
@@ -1252,17 +1283,42 @@ mod tests {
                 text.push_str("\r\n");
             }
             let whole = parse("g.nmea", &text, Some(18));
-            let got = grown.finish("g.nmea", &text, Some(18));
+            assert_eq!(grown.format(text.as_bytes()), Some(Format::Nmea), "log {k}");
+            let got = grown.finish("g.nmea", text.as_bytes(), Some(18));
             assert_eq!(format!("{:?}", got), format!("{:?}", whole), "log {k}");
         }
         let other = noon_log(1, 2, 2026);
         for (file, leap) in [("o.nmea", None), ("g.nmea", Some(18)), ("g.nmea", None)] {
             let mut grown = LogLines::new("g.nmea", None);
             grown.line(&gga("GP", "120000.10", "4912.0", "N", "01636.0", "E", 4));
+            assert_eq!(grown.format(other.as_bytes()), None);
             assert_eq!(
-                grown.finish(file, &other, leap).unwrap(),
+                grown.finish(file, other.as_bytes(), leap).unwrap(),
                 parse(file, &other, leap).unwrap()
             );
+        }
+    }
+
+    /// The format of the lines given is [`super::detect_format`]'s of their text, or unknown
+    /// where a line holds 0xB5 (a UBX sync's first byte, here inside a UTF-8 'µ').
+    #[test]
+    fn log_lines_know_their_format() {
+        let formats = [
+            ("x,y\r\n1,2\r\n", Some(Format::Csv)),
+            ("% program : RTKPOST\r\n", Some(Format::Rtklib)),
+            ("\r\n# c\r\n$GPZDA,1*00\r\n", Some(Format::Nmea)),
+            ("$GPTXT,µ*00\r\n", None),
+        ];
+        for (text, format) in formats {
+            let mut grown = LogLines::new("f", None);
+            for raw in text.split_terminator("\r\n") {
+                grown.line(raw);
+            }
+            assert_eq!(grown.format(text.as_bytes()), format, "{text:?}");
+            if let Some(f) = format {
+                assert_eq!(f, super::super::detect_format(text.as_bytes(), text));
+            }
+            assert_eq!(grown.format(&text.as_bytes()[1..]), None, "{text:?}");
         }
     }
 
