@@ -250,11 +250,11 @@ fn cold_final(f: &Fed, sentences: &[(usize, String)], csv: &Path, dir: &Path) ->
     started.elapsed()
 }
 
-/// The drive's end of `f`, as `record` meets it: the background batch cancelled (not waited
-/// for), the log's epochs dated, then the live fit's last update and, on a thread beside it,
-/// the final calibration `args` in this process on the rows and the log in memory from the
-/// latest background batch's warm start; then its report printed (sent to `report`) and its
-/// result written, and the batch's thread waited for.
+/// The drive's end of `f`, as `record` meets it: the background batch cancelled, the log's
+/// epochs dated while it ends, then (its thread ended) the live fit's last update and, on a
+/// thread beside it, the final calibration `args` in this process on the rows and the log
+/// in memory from the latest background batch's warm start; then its report printed (sent to
+/// `report`) and its result written.
 fn drive_end(f: &mut Fed, args: &[String], report: &Path) -> End {
     let ended = Instant::now();
     let last_t = f.rows[f.rows.len() - 1].t;
@@ -275,6 +275,8 @@ fn drive_end(f: &mut Fed, args: &[String], report: &Path) -> End {
         lines: lines.take().expect("the log's lines"),
     };
     let read = read_inputs(&c, Some(recorded));
+    batch.stop();
+    let batch_stopped = ended.elapsed();
     let warm = batch.warm_start();
     let (done, last_update) = std::thread::scope(|scope| {
         let calibrating = scope.spawn(|| {
@@ -293,15 +295,10 @@ fn drive_end(f: &mut Fed, args: &[String], report: &Path) -> End {
     let refined = batch.latest().map(|b| (refined(&live.estimate(), &b), b));
     let done = done.expect("the recording's inputs");
     stdout_to(report, || run_calibrated(&c, done)).expect("the final calibration");
-    let final_printed = ended.elapsed();
-    batch.stop();
-    let batch_stopped = batch
-        .ended()
-        .map_or(Duration::ZERO, |t| t.saturating_duration_since(ended));
     End {
         batch_stopped,
         last_update,
-        final_printed,
+        final_printed: ended.elapsed(),
         refined,
         last_t,
         cold: Duration::ZERO,
@@ -341,9 +338,7 @@ fn print_section(samples: &[Sample], f: &Fed, end: &End, process: (Duration, Agr
     println!(
         "from where the one before left its searches; at the drive's end the run under way is"
     );
-    println!(
-        "cancelled, ends at its next check and is waited for after the final (docs/CALIBRATION.md)."
-    );
+    println!("cancelled at its next check and its thread waited for (docs/CALIBRATION.md).");
     println!();
     print_costs(&f.costs);
     println!(
@@ -435,11 +430,11 @@ fn print_end(end: &End, (process, g): (Duration, Agreement)) {
     println!("| at the drive's end (from the last sample and sentence taken in) | wall time |");
     println!("| --- | ---: |");
     println!(
-        "| the background batch's thread ended (cancelled; the run under way ends at its next check, on the lowest priority, beside the final, which does not wait for it) | {} ms |",
+        "| the background batch stopped (cancelled, the log's epochs dated while the run under way ends at its next check, its thread ended) | {} ms |",
         number(ms(end.batch_stopped))
     );
     println!(
-        "| the live fit's last update (relinearised to the end, beside the final calibration) | {} ms |",
+        "| the live fit's last update (relinearised to the end, after the batch stopped) | {} ms |",
         number(ms(end.last_update))
     );
     println!(

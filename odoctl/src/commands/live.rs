@@ -245,7 +245,7 @@ impl LiveSession {
             self.live.push_reference(p);
         }
         if end {
-            self.batch.cancel();
+            self.batch.stop();
             self.live.finish();
         } else {
             self.batch.feed(&self.recording.0, &self.recording.1);

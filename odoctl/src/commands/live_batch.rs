@@ -7,16 +7,15 @@
 //! (the final calibration's). The log's lines are read as they are handed on ([`LogLines`]),
 //! so that a batch dates the epochs but does not read the whole log again. Nothing it does
 //! is printed; a batch that fails (too little data yet) is counted and the next one tried. At
-//! the drive's end ([`BatchWorker::cancel`]) the batch under way is cancelled (its thread's
+//! the drive's end ([`BatchWorker::stop`]) the batch under way is cancelled (its thread's
 //! flag, `cancel::cancel_this_thread_on`) at its next check, between its phases and
-//! inside its fits and its reading of the log; the final calibration does not wait for it
-//! (it runs at the lowest priority), and the thread is waited for after the final
-//! ([`BatchWorker::stop`]; docs/CALIBRATION.md).
+//! inside its fits and its reading of the log, and the thread is waited for
+//! (docs/CALIBRATION.md).
 
 use std::borrow::Cow;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{channel, Receiver, Sender};
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
@@ -76,8 +75,6 @@ pub struct BatchWorker {
     sent: (usize, usize),
     /// The thread, until it is stopped.
     thread: Option<JoinHandle<()>>,
-    /// When the thread ended.
-    ended: Arc<OnceLock<Instant>>,
 }
 
 impl BatchWorker {
@@ -91,21 +88,15 @@ impl BatchWorker {
         let slot = Arc::clone(&latest);
         let stopped = Arc::new(AtomicBool::new(false));
         let stop = Arc::clone(&stopped);
-        let ended = Arc::new(OnceLock::new());
-        let end = Arc::clone(&ended);
         let thread = std::thread::Builder::new()
             .name("batch calibration".into())
-            .spawn(move || {
-                work(&args, &rx, &slot, &stop);
-                let _ = end.set(Instant::now());
-            })?;
+            .spawn(move || work(&args, &rx, &slot, &stop))?;
         Ok(Self {
             tx: Some(tx),
             latest,
             stopped,
             sent: (0, 0),
             thread: Some(thread),
-            ended,
         })
     }
 
@@ -144,12 +135,8 @@ impl BatchWorker {
         self.tx = None;
     }
 
-    /// When the thread ended, once it has.
-    pub fn ended(&self) -> Option<Instant> {
-        self.ended.get().copied()
-    }
-
-    /// [`BatchWorker::cancel`], then waits for the thread to end.
+    /// [`BatchWorker::cancel`], then waits for the thread to end, so that nothing of it runs
+    /// beside what follows and its freed memory is there for the next thread to take.
     pub fn stop(&mut self) {
         self.cancel();
         if let Some(t) = self.thread.take() {

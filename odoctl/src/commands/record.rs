@@ -63,9 +63,8 @@ pub fn run(a: &RecordArgs) -> Result<ExitCode> {
 /// with `--config` as `--initial` and the `--set`s, run on the rows and sentences the
 /// session kept as written to the two files (the files are not read again), its searches
 /// started from the latest background batch's warm start. The background batch is cancelled
-/// (it ends at its next check, on the lowest priority, and is waited for after the final);
-/// the log's epochs are dated, then the calibration runs on a thread beside the live fit's
-/// last update; its report follows the live estimate.
+/// and, while it ends, the log's epochs are dated; once its thread has ended, the calibration
+/// runs on a thread beside the live fit's last update; its report follows the live estimate.
 fn final_calibration(a: &RecordArgs, session: &mut LiveSession) -> Result<ExitCode> {
     use super::calibrate::Recorded;
     use super::calibrate::{calibrate_inputs, parse_command_line, read_inputs, run_calibrated};
@@ -83,7 +82,7 @@ fn final_calibration(a: &RecordArgs, session: &mut LiveSession) -> Result<ExitCo
         lines,
     });
     let read = read_inputs(&c, recorded);
-    // The cancelled batch ends at its next check, on the lowest priority: not waited for.
+    session.stop_batch();
     let warm = session.warm_start();
     let done = std::thread::scope(|scope| {
         let calibrating = scope.spawn(|| {
@@ -107,7 +106,6 @@ fn final_calibration(a: &RecordArgs, session: &mut LiveSession) -> Result<ExitCo
         ended.elapsed().as_secs_f64(),
         session.slowest_update.as_secs_f64() * 1e3
     );
-    session.stop_batch();
     Ok(code)
 }
 
