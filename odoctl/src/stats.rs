@@ -72,17 +72,53 @@ pub fn summarize(values: &[f64]) -> Summary {
         0.0
     };
     let rms = (values.iter().map(|v| v * v).sum::<f64>() / n as f64).sqrt();
-    let mut sorted = values.to_vec();
-    sorted.sort_by(f64::total_cmp);
+    let mut order = values.to_vec();
+    let extreme = |pick: fn(f64, f64) -> f64| order.iter().copied().reduce(pick);
+    let (min, max) = (extreme(min_total), extreme(max_total));
     Summary {
         n,
         mean,
         std: var.sqrt(),
         rms,
-        min: sorted[0],
-        median: quantile_sorted(&sorted, 0.5),
-        p95: quantile_sorted(&sorted, 0.95),
-        max: sorted[n - 1],
+        min: min.unwrap_or(f64::NAN),
+        median: quantile_selected(&mut order, 0.5),
+        p95: quantile_selected(&mut order, 0.95),
+        max: max.unwrap_or(f64::NAN),
+    }
+}
+
+/// The smaller of two values in [`f64::total_cmp`]'s order.
+fn min_total(a: f64, b: f64) -> f64 {
+    if b.total_cmp(&a).is_lt() {
+        b
+    } else {
+        a
+    }
+}
+
+/// The larger of two values in [`f64::total_cmp`]'s order.
+fn max_total(a: f64, b: f64) -> f64 {
+    if b.total_cmp(&a).is_gt() {
+        b
+    } else {
+        a
+    }
+}
+
+/// [`quantile_sorted`] of `values` sorted by [`f64::total_cmp`], from the two order
+/// statistics it reads (selected, not sorted: linear time), reordering `values`.
+pub fn quantile_selected(values: &mut [f64], q: f64) -> f64 {
+    let n = values.len();
+    if n == 0 {
+        return f64::NAN;
+    }
+    let pos = q.clamp(0.0, 1.0) * (n - 1) as f64;
+    let i = pos.floor() as usize;
+    let frac = pos - i as f64;
+    let (_, &mut at, above) = values.select_nth_unstable_by(i, f64::total_cmp);
+    match above.iter().copied().reduce(min_total) {
+        Some(next) => at + frac * (next - at),
+        None => at,
     }
 }
 
@@ -129,6 +165,41 @@ mod tests {
         // Tabulated 99 % quantiles: 10 -> 23.21, 30 -> 50.89.
         for (k, q) in [(10.0, 23.21), (30.0, 50.89)] {
             assert!((chi2_quantile_99(k) - q).abs() < 0.1, "{k}");
+        }
+    }
+
+    /// The selected quantiles, minimum and maximum are the sorted values' to the bit: ties,
+    /// signed zeros, infinities, one value, every quantile step.
+    #[test]
+    fn selected_quantiles_are_the_sorted_ones() {
+        let mut x = 0x2545_f491_4f6c_dd1d_u64;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        let special = [0.0, -0.0, 1.0, 1.0, f64::INFINITY, f64::NEG_INFINITY, -2.5];
+        for n in [1, 2, 3, 7, 100, 1001] {
+            let values: Vec<f64> = (0..n)
+                .map(|_| match next() % 4 {
+                    0 => special[(next() % special.len() as u64) as usize],
+                    _ => (next() % 2000) as f64 / 7.0 - 140.0,
+                })
+                .collect();
+            let mut sorted = values.clone();
+            sorted.sort_by(f64::total_cmp);
+            for q in [0.0, 0.1, 0.5, 0.95, 0.999, 1.0] {
+                let mut v = values.clone();
+                let (a, b) = (quantile_selected(&mut v, q), quantile_sorted(&sorted, q));
+                assert!(
+                    a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()),
+                    "{n} {q}"
+                );
+            }
+            let s = summarize(&values);
+            assert_eq!(s.min.to_bits(), sorted[0].to_bits());
+            assert_eq!(s.max.to_bits(), sorted[n - 1].to_bits());
         }
     }
 
