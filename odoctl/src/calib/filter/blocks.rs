@@ -70,15 +70,22 @@ pub struct GaussMarkovBlock {
     pub q: [[f64; 4]; 4],
 }
 
+/// One step of one Gauss-Markov state, as its composition reads it.
+#[derive(Debug, Clone, Copy, Default)]
+struct RateStep {
+    /// `M_k` times the step's column of the rate.
+    column: [f64; 3],
+    /// The distance over which the rate decays in the step (m).
+    decay: f64,
+}
+
 /// The run's blocks composed.
 #[derive(Debug, Clone, Default)]
 pub struct Composed {
     /// One per observation.
     pub blocks: Vec<BlockBase>,
-    /// Per step: `M_k` times the step's column of wheel 1's, wheel 2's and the opposite-phase
-    /// rate.
-    columns: Vec<[[f64; 3]; 3]>,
-    decay: Vec<[f64; 3]>,
+    /// Per Gauss-Markov state (wheel 1's, wheel 2's and the opposite-phase rate), per step.
+    rates: [Vec<RateStep>; 3],
 }
 
 /// `M v` for `M = I + (r_x, r_y, 0) e_3^T`.
@@ -117,12 +124,12 @@ fn add3(a: &mut Mat3, b: &Mat3) {
 pub const PARALLEL_STEPS: usize = 20_000;
 
 /// The blocks ending at `ends` (the first starting at step `first`) composed from `steps`,
-/// each step's columns written to `columns[k - first]`.
+/// each step's rate steps written to `rates[kind][k - first]`.
 fn compose(
     steps: &[StepTerms],
     ends: &[usize],
     mut first: usize,
-    columns: &mut [[[f64; 3]; 3]],
+    rates: [&mut [RateStep]; 3],
 ) -> Vec<BlockBase> {
     let offset = first;
     let mut blocks = Vec::with_capacity(ends.len());
@@ -151,7 +158,13 @@ fn compose(
             }
             add3(&mut b.qw, &carry_cov(r, &s.qw));
             add3(&mut b.qt, &carry_cov(r, &s.qt));
-            columns[k - offset] = [cols[0], cols[1], carry(r, s.turn)];
+            let columns = [cols[0], cols[1], carry(r, s.turn)];
+            for (kind, column) in columns.into_iter().enumerate() {
+                rates[kind][k - offset] = RateStep {
+                    column,
+                    decay: s.decay[kind],
+                };
+            }
             r[0] += s.m[0];
             r[1] += s.m[1];
         }
@@ -168,47 +181,52 @@ impl Composed {
     /// cores and at least [`PARALLEL_STEPS`] steps, the first half of them is composed on
     /// this thread and the second on another (the same results).
     pub fn new(steps: &[StepTerms], ends: &[usize]) -> Self {
-        let mut columns = vec![[[0.0; 3]; 3]; steps.len()];
+        let mut rates: [Vec<RateStep>; 3] =
+            std::array::from_fn(|_| vec![RateStep::default(); steps.len()]);
         let half = ends.len() / 2;
         let blocks = if cores() > 1 && steps.len() >= PARALLEL_STEPS && half > 0 {
             let at = ends[half - 1];
-            let (early, late) = columns.split_at_mut(at);
+            let [r0, r1, r2] = &mut rates;
+            let ((e0, l0), (e1, l1), (e2, l2)) = (
+                r0.split_at_mut(at),
+                r1.split_at_mut(at),
+                r2.split_at_mut(at),
+            );
             std::thread::scope(|scope| {
-                let second = scope.spawn(|| compose(steps, &ends[half..], at, late));
-                let mut blocks = compose(steps, &ends[..half], 0, early);
+                let second = scope.spawn(|| compose(steps, &ends[half..], at, [l0, l1, l2]));
+                let mut blocks = compose(steps, &ends[..half], 0, [e0, e1, e2]);
                 blocks.extend(second.join().expect("composing the blocks panicked"));
                 blocks
             })
         } else {
-            compose(steps, ends, 0, &mut columns)
+            let [r0, r1, r2] = &mut rates;
+            compose(steps, ends, 0, [r0, r1, r2])
         };
-        Self {
-            blocks,
-            columns,
-            decay: steps.iter().map(|s| s.decay).collect(),
-        }
+        Self { blocks, rates }
     }
 
     /// Gauss-Markov state `kind` (0, 1: wheel 1, 2 slip; 2: opposite-phase) of correlation
     /// length `corr` (m, > 0) and stationary variance `1 / (2 corr)` (per unit kappa)
     /// composed over each block.
     pub fn gauss_markov(&self, kind: usize, corr: f64) -> Vec<GaussMarkovBlock> {
+        let rates = &self.rates[kind];
+        let (per_length, variance) = (-1.0 / corr, 0.5 / corr);
         self.blocks
             .iter()
             .map(|b| {
                 let mut z = [0.0, 0.0, 0.0, 1.0];
                 let mut q = [[0.0; 4]; 4];
-                for k in (b.first..b.end).rev() {
-                    let rho = (-self.decay[k][kind] / corr).exp();
-                    // The noise entering after step k moves the block's end by `z`.
-                    let w = (1.0 - rho * rho) / (2.0 * corr);
+                for step in rates[b.first..b.end].iter().rev() {
+                    let rho = (step.decay * per_length).exp();
+                    // The noise entering after the step moves the block's end by `z`.
+                    let w = (1.0 - rho * rho) * variance;
                     // The upper triangle; the lower is its mirror.
                     for i in 0..4 {
                         for j in i..4 {
                             q[i][j] += w * z[i] * z[j];
                         }
                     }
-                    let c = self.columns[k][kind];
+                    let c = step.column;
                     z = [
                         c[0] + rho * z[0],
                         c[1] + rho * z[1],
@@ -250,11 +268,12 @@ mod tests {
             .collect();
         let ends: Vec<usize> = (1..=steps.len() / 10).map(|k| 10 * k + k % 3).collect();
         let two = Composed::new(&steps, &ends);
-        let mut columns = vec![[[0.0; 3]; 3]; steps.len()];
+        let mut rates: [Vec<RateStep>; 3] =
+            std::array::from_fn(|_| vec![RateStep::default(); steps.len()]);
+        let [r0, r1, r2] = &mut rates;
         let one = Composed {
-            blocks: compose(&steps, &ends, 0, &mut columns),
-            columns,
-            decay: steps.iter().map(|s| s.decay).collect(),
+            blocks: compose(&steps, &ends, 0, [r0, r1, r2]),
+            rates,
         };
         assert_eq!(format!("{two:?}"), format!("{one:?}"));
     }
