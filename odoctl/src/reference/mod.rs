@@ -540,7 +540,7 @@ pub fn load_bytes(path: &Path, bytes: &[u8], o: &ReferenceOptions) -> Result<Ref
 
 /// [`load_bytes`] of an NMEA log whose lines `read` has read as they were appended to
 /// `bytes` ([`nmea::LogLines`]): the same reference and warnings, with only the dating of
-/// the epochs left to do. Another format is read whole.
+/// the last epochs left to do. Another format is read whole.
 pub fn load_read(
     path: &Path,
     bytes: &[u8],
@@ -555,7 +555,8 @@ pub fn load_read(
 }
 
 /// [`parse`] of an NMEA log whose lines `read` has read as they were appended to `bytes`
-/// ([`nmea::LogLines`]): the same reference, with only the dating of the epochs left to do.
+/// ([`nmea::LogLines`]): the same reference, with only the dating of the last epochs left to
+/// do.
 /// When `read` took every byte (as text), neither they nor their format are read again
 /// ([`nmea::LogLines::format`]). Another format is read whole.
 pub fn parse_read(

@@ -40,39 +40,19 @@ use chrono::Timelike;
 use odo_unit::timing::nmea::{days_from_civil, parse_sentence, NmeaError, TimeMessage};
 
 use super::geodetic::Geodetic;
-use super::{
-    gps_time, mcap_pose, ubx, Epoch, FixQuality, Format, GeodeticLog, ReadReport, TextFormat,
-};
-use crate::cancel::check_this_thread;
+use super::{gps_time, mcap_pose, ubx, FixQuality, Format, GeodeticLog, ReadReport, TextFormat};
 use crate::memory::{for_drive, DRIVE_EPOCHS_PER_S};
 use crate::text::{excerpt, excerpt_n, lines};
+
+mod dating;
+
+pub(crate) use dating::CANCEL_CHECK_EPOCHS;
+use dating::{DateMark, Dating, Undated};
 
 /// `$` + body + `*hh`: the sentence with its checksum (XOR of the body's bytes).
 pub fn with_checksum(body: &str) -> String {
     let sum = body.bytes().fold(0u8, |a, b| a ^ b);
     format!("${body}*{sum:02X}")
-}
-
-/// A GGA before dating.
-#[derive(Clone)]
-struct Undated {
-    sod: f64,
-    position: Geodetic,
-    fix: FixQuality,
-    heading: Option<f64>,
-    /// Standard deviations north, east, up (m), from the GST of the same time.
-    sigma_north_east_up: Option<[f64; 3]>,
-    line: usize,
-    /// The last date sentence before it (index into the dates).
-    date: Option<usize>,
-}
-
-/// A date sentence: (days since 1970-01-01, seconds of the day, line).
-#[derive(Clone, Copy)]
-struct DateMark {
-    days: i64,
-    sod: f64,
-    line: usize,
 }
 
 /// The key of a time of day for matching GST to GGA: milliseconds.
@@ -122,7 +102,8 @@ pub fn parse(file: &str, text: &str, leap_seconds: Option<i32>) -> Result<Geodet
 }
 
 /// An NMEA log read as it grows, line by line (`record --calibrate`), by the reader of
-/// [`parse`], so that at the end only the dating of the epochs is left. HDT is read as sent
+/// [`parse`], so that at the end only the dating of its last epochs is left: an epoch is
+/// dated once no later sentence can change it and a date sentence has come. HDT is read as sent
 /// last in each epoch; a log whose ends show HDT sent first, a line with a line end inside
 /// it, or a text that is not the lines given, is read again whole at the end
 /// ([`LogLines::finish`]). A clone is the log so far, to be finished while this one reads on.
@@ -147,6 +128,7 @@ impl LogLines {
     pub fn new(file: &str, leap_seconds: Option<i32>) -> Self {
         let mut reader = LogReader::new(file, leap_seconds);
         reader.undated = for_drive(DRIVE_EPOCHS_PER_S);
+        reader.dating.epochs = for_drive(DRIVE_EPOCHS_PER_S);
         Self {
             reader,
             scan: HdtScan::default(),
@@ -170,6 +152,7 @@ impl LogLines {
         self.sync |= memchr::memchr(ubx::SYNC[0], raw.as_bytes()).is_some();
         self.scan.line(raw);
         self.reader.line(self.lines, raw);
+        self.reader.date_settled();
     }
 
     /// Whether `bytes` are the lines given, each with CR LF, as far as their length tells:
@@ -392,6 +375,8 @@ struct LogReader {
     report: ReadReport,
     undated: Vec<Undated>,
     dates: Vec<DateMark>,
+    /// The epochs of `undated` dated so far.
+    dating: Dating,
     /// GSTs that came before their GGA: (time of day in ms, sigmas).
     pending_gst: Vec<(i64, [f64; 3])>,
     /// The epoch an HDT would belong to (the last GGA, until an HDT takes it).
@@ -412,6 +397,7 @@ impl LogReader {
             report: ReadReport::default(),
             undated: Vec::new(),
             dates: Vec::new(),
+            dating: Dating::default(),
             pending_gst: Vec::new(),
             hdt_target: None,
             epoch_time: None,
@@ -657,7 +643,7 @@ impl LogReader {
         let key = ms(seconds_of_day(t));
         self.epoch_time = Some(key);
         self.report.used("GST");
-        let recent = self.undated.len().saturating_sub(20);
+        let recent = self.undated.len().saturating_sub(GST_REACH);
         match self.undated[recent..]
             .iter_mut()
             .rev()
@@ -665,12 +651,27 @@ impl LogReader {
         {
             Some(u) => u.sigma_north_east_up = Some(sigma),
             None => {
-                if self.pending_gst.len() >= 20 {
+                if self.pending_gst.len() >= GST_REACH {
                     self.pending_gst.remove(0);
                 }
                 self.pending_gst.push((key, sigma));
             }
         }
+    }
+
+    /// Dates the epochs that no later sentence can change any more (all but the last
+    /// [`GST_REACH`]) and are not dated yet, once there is a date sentence (their dates are
+    /// then known): what [`LogReader::finish`] would do with them, done as the log is read.
+    /// An error (a cancel) leaves them for later.
+    fn date_settled(&mut self) {
+        let settled = self.undated.len().saturating_sub(GST_REACH);
+        if self.dates.is_empty() || settled < self.dating.done + DATED_TOGETHER {
+            return;
+        }
+        let (file, leap) = (Arc::clone(&self.file), self.leap_seconds);
+        let _ = self
+            .dating
+            .date(&file, &self.undated[..settled], &self.dates, leap);
     }
 
     /// The dated epochs in GPS time, once every line is read.
@@ -679,7 +680,19 @@ impl LogReader {
         let pending = self.pending_hdt.take();
         self.drop_hdt(pending);
         let mut report = self.report;
-        let epochs = date_epochs(&file, self.undated, &self.dates, leap_seconds, &mut report)?;
+        if !self.undated.is_empty() && self.dates.is_empty() {
+            bail!(
+                "{file}: no date: {} GGA epochs but no RMC (status A) or ZDA sentence to date \
+                 them (GGA carries only the time of day); {report}",
+                self.undated.len()
+            );
+        }
+        if self.dating.leap_seconds != leap_seconds {
+            self.dating = Dating::default();
+        }
+        self.dating
+            .date(&file, &self.undated, &self.dates, leap_seconds)?;
+        let epochs = self.dating.finish(&mut report);
         if epochs.is_empty() {
             bail!("{file}: no usable position (no GGA with a position): {report}");
         }
@@ -687,97 +700,12 @@ impl LogReader {
     }
 }
 
-/// Epochs dated (or converted) between two checks of the thread's cancel flag.
-pub(crate) const CANCEL_CHECK_EPOCHS: usize = 4096;
+/// Epochs of a log that no later sentence changes: all but the last [`GST_REACH`] (a GST
+/// finds its GGA among them; an HDT, the last).
+const GST_REACH: usize = 20;
 
-/// Dates the GGA epochs (see the module doc), converts to GPS time and drops epochs before
-/// the GPS epoch and epochs whose time is not after the previous one's (a repeat of the same
-/// time gives the epoch kept the HDT or GST that went with it), counting them.
-fn date_epochs(
-    file: &str,
-    undated: Vec<Undated>,
-    dates: &[DateMark],
-    leap_seconds: Option<i32>,
-    report: &mut ReadReport,
-) -> Result<Vec<Epoch>> {
-    if undated.is_empty() {
-        return Ok(Vec::new());
-    }
-    let Some(first_date) = dates.first().copied() else {
-        bail!(
-            "{file}: no date: {} GGA epochs but no RMC (status A) or ZDA sentence to date them \
-             (GGA carries only the time of day); {report}",
-            undated.len()
-        );
-    };
-    let mut out: Vec<Epoch> = Vec::with_capacity(undated.len());
-    let mut prev: Option<DateMark> = None;
-    for (n, u) in undated.into_iter().enumerate() {
-        if n % CANCEL_CHECK_EPOCHS == 0 {
-            check_this_thread()?;
-        }
-        let mark = match (u.date.map(|k| dates[k]), prev) {
-            (Some(d), Some(p)) => {
-                if d.line > p.line {
-                    d
-                } else {
-                    p
-                }
-            }
-            (Some(d), None) => d,
-            (None, Some(p)) => p,
-            (None, None) => first_date,
-        };
-        let mut days = mark.days;
-        if u.sod - mark.sod > 43_200.0 {
-            days -= 1;
-        } else if mark.sod - u.sod > 43_200.0 {
-            days += 1;
-        }
-        if report.warnings.is_empty() {
-            let at = format_args!("{file}:{}", u.line);
-            report
-                .warnings
-                .extend(gps_time::leap_table_warning(at, days, leap_seconds));
-        }
-        let leap = gps_time::leap_seconds_for(days, leap_seconds);
-        let gps_time = match gps_time::utc_to_gps(days, u.sod, leap) {
-            Ok(t) => t,
-            Err(e) => {
-                report.unusable(format!("{file}:{}: GGA: {e}: skipped", u.line));
-                continue;
-            }
-        };
-        prev = Some(DateMark {
-            days,
-            sod: u.sod,
-            line: u.line,
-        });
-        if let Some(last) = out.last_mut() {
-            if gps_time <= last.gps_time {
-                report.unusable(format!(
-                    "{file}:{}: GGA time is not after the previous epoch's (line {}): skipped",
-                    u.line, last.line
-                ));
-                // A repeated GGA of the same epoch may have taken its HDT or GST.
-                if gps_time == last.gps_time {
-                    last.heading = last.heading.or(u.heading);
-                    last.sigma_north_east_up = last.sigma_north_east_up.or(u.sigma_north_east_up);
-                }
-                continue;
-            }
-        }
-        out.push(Epoch {
-            gps_time,
-            position: u.position,
-            heading: u.heading,
-            sigma_north_east_up: u.sigma_north_east_up,
-            fix: u.fix,
-            line: u.line,
-        });
-    }
-    Ok(out)
-}
+/// Settled epochs [`LogReader::date_settled`] dates at a time.
+const DATED_TOGETHER: usize = 256;
 
 #[cfg(test)]
 mod tests {
@@ -1296,6 +1224,104 @@ mod tests {
                 grown.finish(file, other.as_bytes(), leap).unwrap(),
                 parse(file, &other, leap).unwrap()
             );
+        }
+    }
+
+    /// A log of `epochs` 10 Hz epochs from 23:59:00 UTC on `day`.`month`.`year` (over
+    /// midnight after 600), the first 5 before any date sentence, a ZDA every 10th epoch and
+    /// an RMC after every other epoch's GGA; each epoch's GST comes `k % 19` epochs late and
+    /// its HDT after its GGA; epoch 300 repeats 299's time and 400's time is in a leap second
+    /// (23:59:60, skipped).
+    fn long_log(epochs: usize, (day, month, year): (u32, u32, u32)) -> String {
+        let time = |k: usize| {
+            let t = 86_340.0 + 0.1 * k as f64;
+            let t = if k == 300 { 86_340.0 + 29.9 } else { t };
+            let s = t.rem_euclid(86_400.0);
+            let (h, m) = ((s / 3600.0) as u32, (s % 3600.0 / 60.0) as u32);
+            let sec = if k == 400 { 60.05 } else { s % 60.0 };
+            format!("{h:02}{m:02}{sec:05.2}")
+        };
+        let date = |k: usize| {
+            if 86_340.0 + 0.1 * k as f64 >= 86_400.0 {
+                day + 1
+            } else {
+                day
+            }
+        };
+        let mut out = Vec::new();
+        let mut late: Vec<(usize, String)> = Vec::new();
+        for k in 0..epochs {
+            let t = time(k);
+            if k >= 5 && k % 10 == 0 {
+                out.push(zda(&t, date(k), month, year));
+            }
+            out.push(gga("GN", &t, "4912.0", "N", "01636.0", "E", 4));
+            out.push(with_checksum(&format!("GNHDT,{}.0,T", k % 360)));
+            if k >= 5 && k % 2 == 1 {
+                out.push(with_checksum(&format!(
+                    "GNRMC,{t},A,4912.0,N,01636.0,E,0.0,0.0,{:02}{month:02}{:02},,,D",
+                    date(k),
+                    year % 100
+                )));
+            }
+            let gst = format!("GNGST,{t},0.5,0.02,0.01,30.0,0.0{},0.012,0.03", k % 10);
+            late.push((k + k % 19, with_checksum(&gst)));
+            late.retain(|(at, g)| {
+                let due = *at <= k;
+                if due {
+                    out.push(g.clone());
+                }
+                !due
+            });
+        }
+        out.join("\r\n")
+    }
+
+    /// A long log read as it grows ([`LogLines`], which dates its settled epochs as they
+    /// come) gives what [`parse`] gives of it whole: over midnight, with epochs before the
+    /// first date, late GSTs, a repeated epoch, a leap second, a date past the leap-second
+    /// table (its warning), with and without `--leap-seconds`.
+    #[test]
+    fn a_long_log_dated_as_it_grows_is_the_whole_log() {
+        for (date, leap) in [
+            ((27, 2, 2026), Some(18)),
+            ((27, 2, 2026), None),
+            ((29, 6, 2079), None),
+        ] {
+            let log = long_log(700, date);
+            let mut grown = LogLines::new("g.nmea", leap);
+            let mut text = String::new();
+            for (_, raw) in lines(&log) {
+                grown.line(raw);
+                text.push_str(raw);
+                text.push_str("\r\n");
+            }
+            assert!(
+                grown.reader.dating.done > 400,
+                "{date:?}: settled epochs dated as read"
+            );
+            let whole = parse("g.nmea", &text, leap).unwrap();
+            assert_eq!(whole.report.corrupt, 0, "{date:?}: {}", whole.report);
+            assert!(whole.report.unusable >= 2, "{date:?}: {}", whole.report);
+            assert!(whole
+                .report
+                .problems
+                .iter()
+                .any(|p| p.contains("not after")));
+            assert_eq!(whole.report.warnings.len(), usize::from(date.2 == 2079));
+            let with_gst = whole
+                .epochs
+                .iter()
+                .filter(|e| e.sigma_north_east_up.is_some())
+                .count();
+            assert!(
+                with_gst > 600,
+                "{date:?}: {with_gst} of {}: {}",
+                whole.epochs.len(),
+                whole.report
+            );
+            let got = grown.finish("g.nmea", text.as_bytes(), leap).unwrap();
+            assert_eq!(format!("{got:?}"), format!("{whole:?}"), "{date:?}");
         }
     }
 
