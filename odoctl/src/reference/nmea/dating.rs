@@ -41,20 +41,19 @@ pub(crate) const CANCEL_CHECK_EPOCHS: usize = 4096;
 pub(super) struct Dating {
     /// Epochs dated (dropped ones included).
     pub(super) done: usize,
-    /// The leap seconds it dated with (`--leap-seconds`; `None`: the table's).
-    pub(super) leap_seconds: Option<i32>,
     /// The date of the last epoch kept or dropped after its conversion.
-    pub(super) prev: Option<DateMark>,
+    prev: Option<DateMark>,
     /// The epochs kept.
     pub(super) epochs: Vec<Epoch>,
     /// Its unusable epochs and their first messages.
-    pub(super) report: ReadReport,
+    report: ReadReport,
     /// The first epoch's warning of a date past the leap-second table.
-    pub(super) warning: Option<String>,
+    warning: Option<String>,
 }
 
 impl Dating {
-    /// Dates `undated[self.done..]` by `dates` with `leap_seconds` (those it started with).
+    /// Dates `undated[self.done..]` by `dates` with `leap_seconds` (the log's: the same at
+    /// every call).
     /// Checks the thread's cancel flag every [`CANCEL_CHECK_EPOCHS`] epochs, before dating
     /// the next one: an error leaves the rest to date.
     pub(super) fn date(
@@ -67,11 +66,7 @@ impl Dating {
         let Some(&first_date) = dates.first() else {
             return Ok(());
         };
-        if self.done == 0 {
-            self.leap_seconds = leap_seconds;
-        }
         self.epochs.reserve(undated.len().saturating_sub(self.done));
-        let leap_given = self.leap_seconds;
         for (n, u) in undated.iter().enumerate().skip(self.done) {
             if n % CANCEL_CHECK_EPOCHS == 0 {
                 check_this_thread()?;
@@ -97,9 +92,9 @@ impl Dating {
             }
             if self.warning.is_none() {
                 let at = format_args!("{file}:{}", u.line);
-                self.warning = gps_time::leap_table_warning(at, days, leap_given);
+                self.warning = gps_time::leap_table_warning(at, days, leap_seconds);
             }
-            let leap = gps_time::leap_seconds_for(days, leap_given);
+            let leap = gps_time::leap_seconds_for(days, leap_seconds);
             let gps_time = match gps_time::utc_to_gps(days, u.sod, leap) {
                 Ok(t) => t,
                 Err(e) => {

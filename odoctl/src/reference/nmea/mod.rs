@@ -98,7 +98,7 @@ pub fn parse(file: &str, text: &str, leap_seconds: Option<i32>) -> Result<Geodet
     for (n, raw) in lines(text) {
         reader.line(n, raw);
     }
-    reader.finish(leap_seconds)
+    reader.finish()
 }
 
 /// An NMEA log read as it grows, line by line (`record --calibrate`), by the reader of
@@ -192,7 +192,7 @@ impl LogLines {
         notes.append(&mut reader.report.notes);
         reader.report.notes = notes;
         reader.report.talkers = order.talkers;
-        reader.finish(leap_seconds)
+        reader.finish()
     }
 }
 
@@ -370,7 +370,8 @@ fn checksum_ok(s: &str) -> bool {
 struct LogReader {
     /// The log's name in messages.
     file: Arc<str>,
-    /// GPS - UTC (s) when given, for the date sentences' check against the GPS epoch.
+    /// GPS - UTC (s) when given (`--leap-seconds`), for the date sentences' check against the
+    /// GPS epoch and the dating of every epoch; else each date's by the table.
     leap_seconds: Option<i32>,
     report: ReadReport,
     undated: Vec<Undated>,
@@ -675,7 +676,7 @@ impl LogReader {
     }
 
     /// The dated epochs in GPS time, once every line is read.
-    fn finish(mut self, leap_seconds: Option<i32>) -> Result<GeodeticLog> {
+    fn finish(mut self) -> Result<GeodeticLog> {
         let file = Arc::clone(&self.file);
         let pending = self.pending_hdt.take();
         self.drop_hdt(pending);
@@ -687,11 +688,8 @@ impl LogReader {
                 self.undated.len()
             );
         }
-        if self.dating.leap_seconds != leap_seconds {
-            self.dating = Dating::default();
-        }
         self.dating
-            .date(&file, &self.undated, &self.dates, leap_seconds)?;
+            .date(&file, &self.undated, &self.dates, self.leap_seconds)?;
         let epochs = self.dating.finish(&mut report);
         if epochs.is_empty() {
             bail!("{file}: no usable position (no GGA with a position): {report}");
